@@ -18,6 +18,7 @@ measured their own printer.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib.resources
 import os
 import tomllib
@@ -104,13 +105,24 @@ def _require(d: dict, key: str, where: str):
     return d[key]
 
 
-def load_profile(name_or_path: str | os.PathLike | None = None) -> Profile:
+def load_profile(name_or_path: "str | os.PathLike | Profile | None" = None) -> Profile:
     """Load a profile by name (shipped: ``paper``, ``component_example``) or from a TOML path."""
     if name_or_path is None:
         name_or_path = "paper"
     if isinstance(name_or_path, Profile):
         return name_or_path
     s = str(name_or_path)
+    if not os.path.exists(s):
+        return _load_shipped(s)
+    return _load_profile_file(s)
+
+
+@functools.lru_cache(maxsize=None)
+def _load_shipped(name: str) -> Profile:
+    return _load_profile_file(name)
+
+
+def _load_profile_file(s: str) -> Profile:
     if os.path.exists(s):
         path = s
         with open(s, "rb") as f:

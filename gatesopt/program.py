@@ -81,6 +81,11 @@ class Program:
                                 # file's own enable/disable instructions; a step on an axis enables
                                 # its motor (as every firmware does) and it stays on
 
+    # --- one entry per source line (n_lines) ------------------------------------------------------
+    line_letter: np.ndarray     # uint8: ASCII of the line's command letter ('G', 'M', 'T', 'S'), 64 ('@')
+                                # for an extended command word (SET_VELOCITY_LIMIT ...), 0 if none
+    line_number: np.ndarray     # float32: the command's number (G1 -> 1.0, M104 -> 104.0), NaN if none
+
     # --- per program ------------------------------------------------------------------------------
     feature_names: tuple[str, ...] = ()
     layer_z_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))  # float64 (n_layers,): print Z of each layer
@@ -128,6 +133,10 @@ class Program:
         home = self.kind == Kind.HOME
         moving[home, :3] = True
         return moving
+
+    def is_command(self, letter: str, number: float) -> np.ndarray:
+        """(n_lines,) bool: lines whose command is ``letter`` ``number`` (e.g. ``("M", 104)``)."""
+        return (self.line_letter == ord(letter)) & (self.line_number == number)
 
     def line_text(self, i: int) -> str:
         """Line ``i`` (0-based) with its line ending, as in the file."""

@@ -1,0 +1,11 @@
+"""gatesopt: an optimization-centric solver library for 3D-printer G-code.
+
+parse -> Program -> problem -> formulation -> solution -> emit -> verify. See README.md.
+"""
+from .errors import GatesoptError, GcodeError
+from .parse import parse
+from .program import AXES, Kind, Program
+from . import energy
+
+__all__ = ["parse", "Program", "Kind", "AXES", "energy", "GatesoptError", "GcodeError"]
+__version__ = "0.1.0"

@@ -1,0 +1,513 @@
+"""The compiled core of the parser: one sequential pass over the bytes of a G-code file.
+
+A per-line Python loop parses ~300 k lines/s; this numba kernel tokenizes every line and resolves
+the modal state (G90/G91, M82/M83, G92, G20/G21, F, fan, temperatures, motor enables) in the
+same pass, writing one row per timed step into preallocated arrays. It knows nothing about
+files, layers or errors as text: it returns an error code and the line, and ``parse.py`` turns
+that into a message.
+
+Modal semantics follow Marlin 2.x (gcode.h ``set_relative_mode`` clears the E mode bits, so
+G90/G91 switch E too), or Klipper's gcode_move.py when ``klipper`` is set (G90/G91 leave the
+M82/M83 E mode alone).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# error codes (parse.py maps them to messages)
+OK = 0
+ERR_BAD_NUMBER = 1      # a word's number does not parse (X1.2.3, X-, Xnan)
+ERR_MISSING_NUMBER = 2  # an axis word without a number on a motion line
+ERR_ABSURD = 3          # coordinate beyond ABSURD_MM
+ERR_BAD_FEED = 4        # F <= 0
+ERR_ARC = 5             # G2/G3 without I/J or R, or R too small for the chord
+
+ABSURD_MM = 100000.0    # 100 m: no printer has this; a coordinate beyond it is corrupt input
+
+# Kind values (kept equal to program.Kind)
+K_TRAVEL, K_EXTRUDE, K_RETRACT, K_UNRETRACT, K_Z_ONLY, K_ARC, K_DWELL, K_WAIT, K_HOME, K_MOTOR = range(10)
+
+# letters we care about, index = ord(c) - 65
+_A = 65
+LX, LY, LZ, LE, LF = 23, 24, 25, 4, 5
+LI, LJ, LR, LP, LS = 8, 9, 17, 15, 18
+LT = 19
+
+EXT = 64        # '@': line starts with an extended (Klipper-style) command word
+SET_STEPPER_ENABLE = np.frombuffer(b"SET_STEPPER_ENABLE", dtype=np.uint8)
+STEPPER_ = np.frombuffer(b"STEPPER=STEPPER_", dtype=np.uint8)
+ENABLE_ = np.frombuffer(b"ENABLE=", dtype=np.uint8)
+
+
+@njit(cache=True, inline="always")
+def _is_letter(c):
+    return (65 <= c <= 90) or (97 <= c <= 122)
+
+
+@njit(cache=True, inline="always")
+def _upper(c):
+    return c - 32 if 97 <= c <= 122 else c
+
+
+@njit(cache=True)
+def _match_upper(buf, i, end, pat):
+    """buf[i:i+len(pat)] equals pat, case-insensitively."""
+    n = pat.shape[0]
+    if i + n > end:
+        return False
+    for k in range(n):
+        if _upper(buf[i + k]) != pat[k]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _parse_words(buf, a, b, present, value, bad, placeholder):
+    """Tokenize buf[a:b] (one line, no line ending). Fills present/value/bad per letter.
+
+    Returns (cmd_letter, cmd_number, first_word_pos, lenient_stop) where cmd_letter is the
+    upper-case ASCII code of the first word's letter (0 if none, EXT for an extended command).
+    ``bad[k]`` marks a letter whose number failed to parse.
+    """
+    placeholder[0] = False
+    for k in range(26):
+        present[k] = False
+        value[k] = np.nan
+        bad[k] = False
+    i = a
+    # skip blanks
+    while i < b and (buf[i] == 32 or buf[i] == 9):
+        i += 1
+    # line number N123
+    if i < b and (buf[i] == 78 or buf[i] == 110) and i + 1 < b and 48 <= buf[i + 1] <= 57:
+        i += 1
+        while i < b and 48 <= buf[i] <= 57:
+            i += 1
+    cmd_letter = 0
+    cmd_number = np.nan
+    first = True
+    first_pos = -1
+    while i < b:
+        c = buf[i]
+        if c == 32 or c == 9 or c == 13:
+            i += 1
+            continue
+        if c == 59:             # ';' comment to end of line
+            break
+        if c == 42:             # '*' checksum
+            break
+        if c == 40:             # '(' comment to ')'
+            while i < b and buf[i] != 41:
+                i += 1
+            i += 1
+            continue
+        if c == 34:             # '"' quoted string: stop (string parameters, M486 A"..", M117)
+            break
+        if not _is_letter(c):
+            # stray character: mark as trouble on the previous word if any, stop
+            if first:
+                cmd_letter = 0
+            return cmd_letter, cmd_number, first_pos, True
+        L = _upper(c)
+        if first and i + 1 < b and (_is_letter(buf[i + 1]) or buf[i + 1] == 95):
+            # extended command word (SET_VELOCITY_LIMIT, EXCLUDE_OBJECT_START, ...)
+            return EXT, np.nan, i, True
+        i += 1
+        # number: [+-]digits[.digits]
+        j = i
+        neg = False
+        if j < b and (buf[j] == 45 or buf[j] == 43):
+            neg = buf[j] == 45
+            j += 1
+        ip = 0.0
+        nd = 0
+        while j < b and 48 <= buf[j] <= 57:
+            ip = ip * 10.0 + (buf[j] - 48)
+            nd += 1
+            j += 1
+        if j < b and buf[j] == 46:
+            j += 1
+            scale = 0.1
+            while j < b and 48 <= buf[j] <= 57:
+                ip += (buf[j] - 48) * scale
+                scale *= 0.1
+                nd += 1
+                j += 1
+        k = L - _A
+        if nd == 0 and j == i and j < b and buf[j] == 123 and not first:
+            # '{placeholder}' a slicer left unexpanded: Marlin's seenval() ignores a word without
+            # a valid value, so the word is dropped (parse.py warns)
+            while j < b and buf[j] != 125:
+                j += 1
+            i = j + 1
+            placeholder[0] = True
+            continue
+        if nd == 0:
+            if j > i:           # a sign or dot without digits
+                bad[k] = True
+            v = np.nan
+        else:
+            v = -ip if neg else ip
+        # what follows a number must end the word
+        if nd > 0 and j < b:
+            cj = buf[j]
+            if not (cj == 32 or cj == 9 or cj == 13 or cj == 59 or cj == 42 or cj == 40 or _is_letter(cj)):
+                bad[k] = True
+                # skip the rest of this malformed token
+                while j < b and not (buf[j] == 32 or buf[j] == 9 or buf[j] == 59):
+                    j += 1
+        if first:
+            cmd_letter = L
+            cmd_number = v
+            first_pos = i - 1
+            first = False
+        else:
+            present[k] = True
+            value[k] = v
+        i = j
+    return cmd_letter, cmd_number, first_pos, False
+
+
+@njit(cache=True)
+def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, default_feed_mm_s):
+    """One pass over all lines. Returns (error, error_line, error_letter, n_steps, arrays...)."""
+    n_lines = line_start.shape[0] - 1
+    nmax = n_lines
+    s_line = np.empty(nmax, np.int64)
+    s_kind = np.empty(nmax, np.int8)
+    s_start = np.empty((nmax, 4), np.float64)
+    s_end = np.empty((nmax, 4), np.float64)
+    s_feed = np.empty(nmax, np.float64)
+    s_len = np.empty(nmax, np.float64)
+    s_dur = np.empty(nmax, np.float64)
+    s_fan = np.empty(nmax, np.float32)
+    s_hot = np.empty(nmax, np.float32)
+    s_bed = np.empty(nmax, np.float32)
+    s_arc = np.empty((nmax, 2), np.float64)
+    s_ccw = np.zeros(nmax, np.bool_)
+    s_off = np.empty((nmax, 4), np.float64)
+    s_relxyz = np.empty(nmax, np.bool_)
+    s_rele = np.empty(nmax, np.bool_)
+    s_inch = np.empty(nmax, np.bool_)
+    s_en = np.empty((nmax, 4), np.bool_)
+    l_letter = np.zeros(n_lines, np.uint8)
+    l_number = np.full(n_lines, np.nan, np.float32)
+    l_flags = np.zeros(n_lines, np.uint8)      # bit 0: an unexpanded {placeholder} was dropped
+    placeholder = np.zeros(1, np.bool_)
+
+    # untrimmed: the caller slices the step arrays to [:n]
+    arrs = (s_line, s_kind, s_start, s_end, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
+            s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags)
+    present = np.zeros(26, np.bool_)
+    value = np.zeros(26, np.float64)
+    bad = np.zeros(26, np.bool_)
+    pos = np.zeros(4)
+    off = np.zeros(4)
+    tgt = np.zeros(4)
+    en = np.ones(4, np.bool_)
+    rel_xyz = False
+    rel_e = False
+    inch = False
+    feed = default_feed_mm_s
+    fan = 0.0
+    hot = 0.0
+    bed = 0.0
+    hot_reached = ambient_c
+    bed_reached = ambient_c
+    axis_letter = np.array([LX, LY, LZ, LE])
+    n = 0
+    for ln in range(n_lines):
+        a = line_start[ln]
+        b = line_start[ln + 1]
+        # strip the line ending
+        while b > a and (buf[b - 1] == 10 or buf[b - 1] == 13):
+            b -= 1
+        letter, number, fpos, lenient = _parse_words(buf, a, b, present, value, bad, placeholder)
+        if placeholder[0]:
+            l_flags[ln] |= 1
+        l_letter[ln] = letter
+        l_number[ln] = number
+        if letter == 0:
+            continue
+        scale = 25.4 if inch else 1.0
+        kind = -1
+        dur = 0.0
+        length = 0.0
+        cx = np.nan
+        cy = np.nan
+        ccw = False
+        if letter == EXT:
+            # Klipper extended commands: only SET_STEPPER_ENABLE matters to the model
+            if _match_upper(buf, fpos, b, SET_STEPPER_ENABLE):
+                i = fpos + SET_STEPPER_ENABLE.shape[0]
+                axis = -1
+                state = -1
+                while i < b:
+                    if _match_upper(buf, i, b, STEPPER_) and i + STEPPER_.shape[0] < b:
+                        ch = _upper(buf[i + STEPPER_.shape[0]])
+                        if ch == 88:
+                            axis = 0
+                        elif ch == 89:
+                            axis = 1
+                        elif ch == 90:
+                            axis = 2
+                        elif ch == 69:
+                            axis = 3
+                    if _match_upper(buf, i, b, ENABLE_) and i + ENABLE_.shape[0] < b:
+                        state = buf[i + ENABLE_.shape[0]] - 48
+                    i += 1
+                if axis >= 0 and (state == 0 or state == 1):
+                    en[axis] = state == 1
+                    kind = K_MOTOR
+            if kind < 0:
+                continue
+        elif letter == 71:  # G
+            g = number
+            if g == 0.0 or g == 1.0 or g == 2.0 or g == 3.0:
+                arc = g >= 2.0
+                any_axis = False
+                for q in range(4):
+                    k = axis_letter[q]
+                    if bad[k]:
+                        return ERR_BAD_NUMBER, ln, k, n, arrs
+                    if present[k]:
+                        if np.isnan(value[k]):
+                            return ERR_MISSING_NUMBER, ln, k, n, arrs
+                        any_axis = True
+                if bad[LF]:
+                    return ERR_BAD_NUMBER, ln, LF, n, arrs
+                if present[LF]:
+                    if np.isnan(value[LF]):
+                        return ERR_MISSING_NUMBER, ln, LF, n, arrs
+                    if value[LF] <= 0.0:
+                        return ERR_BAD_FEED, ln, LF, n, arrs
+                    feed = value[LF] * scale / 60.0
+                if not any_axis and not arc:
+                    continue
+                for q in range(4):
+                    k = axis_letter[q]
+                    if present[k]:
+                        v = value[k] * scale
+                        if abs(v) > ABSURD_MM:
+                            return ERR_ABSURD, ln, k, n, arrs
+                        rel = rel_e if q == 3 else rel_xyz
+                        tgt[q] = pos[q] + v if rel else v + off[q]
+                    else:
+                        tgt[q] = pos[q]
+                    if abs(tgt[q]) > ABSURD_MM:
+                        return ERR_ABSURD, ln, k, n, arrs
+                dx = tgt[0] - pos[0]
+                dy = tgt[1] - pos[1]
+                dz = tgt[2] - pos[2]
+                de = tgt[3] - pos[3]
+                if arc:
+                    ccw = g == 3.0
+                    for k in (LI, LJ, LR):
+                        if bad[k]:
+                            return ERR_BAD_NUMBER, ln, k, n, arrs
+                    if present[LI] or present[LJ]:
+                        ii = value[LI] * scale if present[LI] and not np.isnan(value[LI]) else 0.0
+                        jj = value[LJ] * scale if present[LJ] and not np.isnan(value[LJ]) else 0.0
+                        cx = pos[0] + ii
+                        cy = pos[1] + jj
+                    elif present[LR] and not np.isnan(value[LR]):
+                        r = value[LR] * scale
+                        d = math.hypot(dx, dy)
+                        if d == 0.0:
+                            return ERR_ARC, ln, LR, n, arrs
+                        h2 = r * r - 0.25 * d * d
+                        if h2 < -1e-6 * max(1.0, r * r):
+                            return ERR_ARC, ln, LR, n, arrs
+                        h = math.sqrt(max(h2, 0.0))
+                        # Marlin G2_G3.cpp: e = clockwise ^ (r < 0) ? -1 : 1
+                        e = -1.0 if ((not ccw) != (r < 0)) else 1.0
+                        sx = -dy / d
+                        sy = dx / d
+                        cx = 0.5 * (pos[0] + tgt[0]) + e * h * sx
+                        cy = 0.5 * (pos[1] + tgt[1]) + e * h * sy
+                    else:
+                        return ERR_ARC, ln, LI, n, arrs
+                    rad = math.hypot(pos[0] - cx, pos[1] - cy)
+                    a0 = math.atan2(pos[1] - cy, pos[0] - cx)
+                    a1 = math.atan2(tgt[1] - cy, tgt[0] - cx)
+                    sweep = (a1 - a0) if ccw else (a0 - a1)
+                    # same end point = full circle (Marlin: angular_travel == 0 -> 2*pi)
+                    if sweep <= 1e-9:
+                        sweep += 2.0 * math.pi
+                    length = math.hypot(rad * sweep, dz)
+                    kind = K_ARC
+                else:
+                    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    moved_xy = dx != 0.0 or dy != 0.0
+                    if de < 0.0:
+                        kind = K_RETRACT
+                    elif de > 0.0:
+                        kind = K_EXTRUDE if (moved_xy or dz != 0.0) else K_UNRETRACT
+                    else:
+                        kind = K_TRAVEL if (moved_xy or dz == 0.0) else K_Z_ONLY
+                if length == 0.0:
+                    length = abs(de)
+                dur = length / feed
+            elif g == 4.0:
+                if present[LP] and not np.isnan(value[LP]):
+                    dur = max(value[LP], 0.0) / 1000.0
+                elif present[LS] and not np.isnan(value[LS]):
+                    dur = max(value[LS], 0.0)
+                kind = K_DWELL
+                for q in range(4):
+                    tgt[q] = pos[q]
+            elif g == 28.0:
+                kind = K_HOME
+                dur = home_s
+                named = present[LX] or present[LY] or present[LZ]
+                for q in range(4):
+                    tgt[q] = pos[q]
+                for q in range(3):
+                    if (not named) or present[axis_letter[q]]:
+                        tgt[q] = 0.0
+                        off[q] = 0.0
+                        en[q] = True
+            elif g == 90.0:
+                rel_xyz = False
+                if not klipper:
+                    rel_e = False
+                continue
+            elif g == 91.0:
+                rel_xyz = True
+                if not klipper:
+                    rel_e = True
+                continue
+            elif g == 20.0:
+                inch = True
+                continue
+            elif g == 21.0:
+                inch = False
+                continue
+            elif g == 92.0:
+                anyg = False
+                for q in range(4):
+                    k = axis_letter[q]
+                    if bad[k]:
+                        return ERR_BAD_NUMBER, ln, k, n, arrs
+                    if present[k]:
+                        v = 0.0 if np.isnan(value[k]) else value[k] * scale
+                        off[q] = pos[q] - v
+                        anyg = True
+                if not anyg:  # G92 alone: all axes to zero (Marlin)
+                    for q in range(4):
+                        off[q] = pos[q]
+                continue
+            else:
+                continue
+        elif letter == 77:  # M
+            m = number
+            if m == 82.0:
+                rel_e = False
+                continue
+            elif m == 83.0:
+                rel_e = True
+                continue
+            elif m == 104.0 or m == 109.0:
+                t = value[LS] if present[LS] else (value[LR] if present[LR] else np.nan)
+                if not np.isnan(t):
+                    hot = t
+                if m == 109.0:
+                    target = hot
+                    dur = abs(target - hot_reached) / hot_rate if target > 0 else 0.0
+                    hot_reached = target if target > 0 else hot_reached
+                    kind = K_WAIT
+                    for q in range(4):
+                        tgt[q] = pos[q]
+                else:
+                    continue
+            elif m == 140.0 or m == 190.0:
+                t = value[LS] if present[LS] else (value[LR] if present[LR] else np.nan)
+                if not np.isnan(t):
+                    bed = t
+                if m == 190.0:
+                    target = bed
+                    dur = abs(target - bed_reached) / bed_rate if target > 0 else 0.0
+                    bed_reached = target if target > 0 else bed_reached
+                    kind = K_WAIT
+                    for q in range(4):
+                        tgt[q] = pos[q]
+                else:
+                    continue
+            elif m == 106.0:
+                # only the part-cooling fan (no P, or P0) counts
+                if present[LP] and not np.isnan(value[LP]) and value[LP] != 0.0:
+                    continue
+                s = value[LS] if present[LS] and not np.isnan(value[LS]) else 255.0
+                fan = min(max(s / 255.0, 0.0), 1.0)
+                continue
+            elif m == 107.0:
+                if present[LP] and not np.isnan(value[LP]) and value[LP] != 0.0:
+                    continue
+                fan = 0.0
+                continue
+            elif m == 17.0 or m == 18.0 or m == 84.0:
+                named = False
+                for q in range(4):
+                    if present[axis_letter[q]]:
+                        named = True
+                if not named and (present[LS] or present[LT]):
+                    continue  # M18 S<sec> / M84 S<sec>: idle timeout, not a disable
+                for q in range(4):
+                    if (not named) or present[axis_letter[q]]:
+                        en[q] = m == 17.0
+                kind = K_MOTOR
+                for q in range(4):
+                    tgt[q] = pos[q]
+            else:
+                continue
+        elif letter == 83:  # S-series (3DGates Table 3): S1 X = on, S0 X = off
+            if number == 0.0 or number == 1.0:
+                named = False
+                for q in range(4):
+                    if present[axis_letter[q]]:
+                        en[q] = number == 1.0
+                        named = True
+                if not named:
+                    continue
+                kind = K_MOTOR
+                for q in range(4):
+                    tgt[q] = pos[q]
+            else:
+                continue
+        else:
+            continue
+        if kind == K_MOTOR:
+            for q in range(4):
+                tgt[q] = pos[q]
+        # ---- write the step row
+        s_line[n] = ln
+        s_kind[n] = kind
+        for q in range(4):
+            s_start[n, q] = pos[q]
+            s_end[n, q] = tgt[q]
+            s_off[n, q] = off[q]
+        s_feed[n] = feed
+        s_len[n] = length
+        s_dur[n] = dur
+        s_fan[n] = fan
+        s_hot[n] = hot
+        s_bed[n] = bed
+        s_arc[n, 0] = cx
+        s_arc[n, 1] = cy
+        s_ccw[n] = ccw
+        s_relxyz[n] = rel_xyz
+        s_rele[n] = rel_e
+        s_inch[n] = inch
+        # a motor that steps is on (every firmware enables an axis to move it), and stays on
+        if kind <= K_ARC:
+            for q in range(4):
+                if tgt[q] != pos[q] or (kind == K_ARC and q < 2):
+                    en[q] = True
+        for q in range(4):
+            s_en[n, q] = en[q]
+            pos[q] = tgt[q]
+        n += 1
+    return OK, -1, -1, n, arrs

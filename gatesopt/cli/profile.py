@@ -1,0 +1,98 @@
+"""``gatesopt profile FILE``: energy and time of a print under the instruction-level model."""
+from __future__ import annotations
+
+import json
+import sys
+
+from ..energy import SECTORS, load_profile, profile
+from ..parse import parse
+
+
+def register(sub) -> None:
+    p = sub.add_parser("profile", help="energy and time of a G-code file (3DGates energy model)",
+                       description="Profile the energy and time of a G-code file (plain or .gz) with "
+                                   "the 3DGates instruction-level energy model.")
+    p.add_argument("file", help="G-code file (.gcode or .gcode.gz), or - for standard input")
+    p.add_argument("--profile", default="paper", metavar="NAME|TOML",
+                   help="energy profile: a shipped name (paper, component_example) or a TOML file "
+                        "(default: paper, the 3DGates tables)")
+    p.add_argument("--time-model", choices=("paper", "planner"), default="paper",
+                   help="paper: T = L/F (3DGates Eq. 2); planner: acceleration and junction limits")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--per-layer", action="store_true", help="add a table by layer")
+    p.add_argument("--plot", metavar="OUT.png",
+                   help="write energy over time (the paper's Fig. 4) and the energy-sector chart (Fig. 5)")
+    p.set_defaults(func=run)
+
+
+def _read(path: str):
+    if path == "-":
+        return parse(sys.stdin.buffer.read(), source="<stdin>")
+    return parse(path)
+
+
+def step_durations(program, time_model: str):
+    """Per-step durations under the chosen time model (the planner lives in gatesopt.planner)."""
+    if time_model == "paper":
+        return program.duration_s
+    from ..planner import durations  # the planner-accurate model (issue 5)
+    return durations(program, model=time_model)
+
+
+def run(args) -> int:
+    program = _read(args.file)
+    prof = load_profile(args.profile)
+    report = profile(program, prof, duration_s=step_durations(program, args.time_model))
+    for w in report.warnings:
+        print(f"gatesopt: warning: {w}", file=sys.stderr)
+    if args.plot:
+        from ..plot import plot_profile
+        plot_profile(report, args.plot)
+    if args.json:
+        d = report.to_dict(per_layer=args.per_layer)
+        d["time_model"] = args.time_model
+        json.dump(d, sys.stdout, indent=2)
+        print()
+        return 0
+    print(format_report(report, args.time_model))
+    if args.per_layer:
+        print()
+        print(format_layers(report))
+    if args.plot:
+        print(f"\nplot written to {args.plot}")
+    return 0
+
+
+def _hms(s: float) -> str:
+    s = int(round(s))
+    return f"{s // 3600}h{s // 60 % 60:02d}m{s % 60:02d}s"
+
+
+def format_report(r, time_model: str = "paper") -> str:
+    total = r.energy_j or 1.0
+    lines = [
+        f"file        {r.source}",
+        f"lines       {r.n_lines:,}   moves {r.n_moves:,}   timed steps {r.n_steps:,}",
+        f"layers      {r.n_layers:,}   (found by {r.layer_method})",
+        f"time        {r.time_s:,.1f} s ({_hms(r.time_s)})   model: {time_model}",
+        f"energy      {r.energy_j:,.0f} J = {r.energy_j / 3600:,.2f} Wh   "
+        f"mean power {r.mean_power_w:.2f} W   profile: {r.profile}",
+        "",
+        "energy sectors (3DGates Fig. 5)",
+    ]
+    for s in SECTORS:
+        v = r.sectors_j.get(s, 0.0)
+        name = f"{s} motor" if len(s) == 1 else s
+        lines.append(f"  {name:10s} {v / 3600:10.2f} Wh  {100 * v / total:5.1f} %")
+    lines.append("")
+    lines.append("by step kind        time s     energy Wh")
+    for k, t in r.by_kind_s.items():
+        lines.append(f"  {k:12s} {t:12,.1f} {r.by_kind_j[k] / 3600:12.2f}")
+    return "\n".join(lines)
+
+
+def format_layers(r) -> str:
+    out = ["layer     z mm      time s   energy J"]
+    for i, (z, t, e) in enumerate(zip(r.layer_z_mm, r.layer_time_s, r.layer_energy_j)):
+        out.append(f"{i:5d} {z:9.3f} {t:11.2f} {e:10.1f}")
+    return "\n".join(out)

@@ -1,0 +1,286 @@
+"""parse: G-code text -> Program. Modal state is resolved here, once, and nowhere else.
+
+The sequential work (tokenizing, modal state, one row per timed step) is the compiled kernel in
+``_scan.py``; this module reads the input, rejects what cannot be G-code with a one-line message
+naming file and line, and adds what regular expressions over the whole text find faster than a
+loop: layers (each slicer's own markers, or a Z-change fallback), feature types, header facts.
+"""
+from __future__ import annotations
+
+import gzip
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from . import _scan
+from .errors import GcodeError
+from .program import Kind, Program
+
+GZIP_MAGIC = b"\x1f\x8b"
+BGCODE_MAGIC = b"GCDE"      # PrusaSlicer 2.7+ binary G-code
+DEFAULT_FEED_MM_S = 25.0    # F1500: what Marlin-based slicers assume before the first F word
+
+_ERR_TEXT = {
+    _scan.ERR_BAD_NUMBER: "bad number for {L}",
+    _scan.ERR_MISSING_NUMBER: "{L} has no number",
+    _scan.ERR_ABSURD: "absurd coordinate for {L} (beyond {lim:g} mm)",
+    _scan.ERR_BAD_FEED: "feedrate F must be positive",
+    _scan.ERR_ARC: "arc needs I/J or an R that reaches the end point",
+}
+
+
+# ------------------------------------------------------------------------------------------------
+# input
+def read_input(path_or_text, source: str | None = None) -> tuple[bytes, str]:
+    """Bytes and a display name from a path, a ``.gz`` path, bytes, or G-code text."""
+    if isinstance(path_or_text, bytes):
+        data, name = path_or_text, source or "<bytes>"
+    elif isinstance(path_or_text, os.PathLike) or (
+            isinstance(path_or_text, str) and "\n" not in path_or_text and len(path_or_text) < 4096
+            and (os.path.exists(path_or_text) or re.search(r"\.(gcode|gco|g|nc|gz|bgcode)$", path_or_text, re.I))):
+        p = Path(path_or_text)
+        name = source or str(p)
+        try:
+            data = p.read_bytes()
+        except FileNotFoundError:
+            raise GcodeError(name, None, "no such file") from None
+        except IsADirectoryError:
+            raise GcodeError(name, None, "is a directory, not a G-code file") from None
+        except OSError as exc:
+            raise GcodeError(name, None, f"cannot read: {exc.strerror}") from None
+    elif isinstance(path_or_text, str):
+        data, name = path_or_text.encode("utf-8", "surrogateescape"), source or "<text>"
+    else:
+        raise TypeError(f"parse() takes a path, bytes or G-code text, not {type(path_or_text).__name__}")
+    if data[:2] == GZIP_MAGIC:
+        try:
+            data = gzip.decompress(data)
+        except (OSError, EOFError) as exc:
+            raise GcodeError(name, None, f"corrupt gzip file: {exc}") from None
+    return data, name
+
+
+def _check_bytes(data: bytes, name: str) -> list[str]:
+    """Reject what is not text G-code; return warnings for what is odd but usable."""
+    if data[:4] == BGCODE_MAGIC:
+        raise GcodeError(name, None, "binary G-code (.bgcode, 'GCDE' magic) is not supported: in "
+                         "PrusaSlicer turn off Printer Settings > General > Firmware > "
+                         "'Supports binary G-code' and export again")
+    if not data.strip():
+        raise GcodeError(name, None, "empty file: no G-code in it")
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        line = data.count(b"\n", 0, nul) + 1
+        raise GcodeError(name, line, "binary data (NUL byte): this is not a text G-code file")
+    warnings = []
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        # Kept byte-exact (surrogateescape); commands are ASCII, so only comments are affected.
+        warnings.append(f"{name}:{line}: bytes that are not UTF-8 (kept as they are)")
+    return warnings
+
+
+def _line_starts(arr: np.ndarray) -> np.ndarray:
+    nl = np.flatnonzero(arr == 10) + 1
+    starts = np.concatenate(([0], nl))
+    if starts[-1] != len(arr):
+        starts = np.concatenate((starts, [len(arr)]))
+    return starts.astype(np.int64)
+
+
+# ------------------------------------------------------------------------------------------------
+# layers and features
+# Each slicer's own layer markers, most specific first. All patterns are anchored on a literal
+# "\n;" (not on ^ with re.M): the regex engine then jumps between comment lines, 10x faster.
+LAYER_MARKERS = re.compile(
+    rb"\n(?:(?P<prusaslicer>;LAYER_CHANGE)"          # PrusaSlicer, SuperSlicer, Orca, Creality Print
+    rb"|(?P<bambu>; CHANGE_LAYER)"                    # Bambu Studio
+    rb"|(?P<cura>;LAYER:-?\d)"                        # Cura, ideaMaker
+    rb"|(?P<simplify3d>; layer \d+, Z = )"             # Simplify3D
+    rb"|(?P<slic3r>; move to next layer \()"          # Slic3r 1.x (verbose G-code)
+    rb"|(?P<kisslicer>; BEGIN_LAYER_OBJECT)"          # KISSlicer
+    rb"|(?P<comment>;[ \t]*[Ll]ayer[ _:]\d))")         # others that write '; layer 3'
+LAYER_PRIORITY = ("prusaslicer", "bambu", "cura", "simplify3d", "slic3r", "kisslicer", "comment")
+Z_COMMENTS = re.compile(rb"\n;[ \t]*(?:Z:|Z_HEIGHT:|layer \d+, Z = |BEGIN_LAYER_OBJECT z=)[ \t]*([-+]?\d*\.?\d+)")
+FEATURE_MARKERS = re.compile(rb"\n;[ \t]*(?:TYPE:|FEATURE:|feature )[ \t]*([^\r\n]*)")
+
+
+def _lines_of(offsets: np.ndarray, line_start: np.ndarray) -> np.ndarray:
+    return np.searchsorted(line_start, offsets, side="right") - 1
+
+
+def _find_layers(data: bytes, line_start, step_line, kind, start, end):
+    """Layer index per step, Z per layer, first line per layer, and the method used."""
+    n_steps = len(step_line)
+    extruding = (end[:, 3] > start[:, 3]) & ((kind == Kind.EXTRUDE) | (kind == Kind.ARC))
+    nl_data = b"\n" + data          # so that a marker on the first line is found too (offsets shift by one,
+                                    # so a match's start, the '\n', is the marker line's offset in data)
+    found: dict[str, list[int]] = {}
+    for m in LAYER_MARKERS.finditer(nl_data):
+        found.setdefault(m.lastgroup, []).append(m.start())   # = offset of the line in data
+    for name in LAYER_PRIORITY:
+        offs = found.get(name, [])
+        if not offs:
+            continue
+        marker_line = _lines_of(np.array(offs, np.int64), line_start)
+        layer = (np.searchsorted(marker_line, step_line, side="right") - 1).astype(np.int32)
+        # drop markers whose layer never extrudes at all? keep them: the slicer declared them.
+        n_layers = len(marker_line)
+        # Z per layer: the first extruding step's Z in that layer, else the marker's Z comment
+        z = np.full(n_layers, np.nan)
+        ext_layers = layer[extruding]
+        ext_z = end[extruding, 2]
+        valid = ext_layers >= 0
+        if valid.any():
+            first = np.unique(ext_layers[valid], return_index=True)
+            z[first[0]] = ext_z[valid][first[1]]
+        zc = [(m.start(), float(m.group(1))) for m in Z_COMMENTS.finditer(nl_data)]
+        if zc:
+            zl = _lines_of(np.array([o for o, _ in zc], np.int64), line_start)
+            zlayer = np.searchsorted(marker_line, zl, side="right") - 1
+            for li, zv in zip(zlayer, (v for _, v in zc)):
+                if li >= 0 and np.isnan(z[li]):
+                    z[li] = zv
+        return layer, z, marker_line.astype(np.int64), f"marker:{name}"
+    # Fallback: a new layer where an extruding step starts at a Z different from the previous
+    # extruding step's, and that Z was reached by a non-extruding move (a travel or a Z move).
+    # Z-hops come back down before extruding, so they make no layer; spiral vase mode raises Z
+    # while extruding, so it makes none either (the whole spiral is one layer: we do not invent
+    # per-revolution layers without a marker).
+    idx = np.flatnonzero(extruding)
+    if len(idx) == 0:
+        return np.full(n_steps, -1, np.int32), np.zeros(0), np.zeros(0, np.int64), "none"
+    zs = start[idx, 2]
+    prev_step_extruding = np.zeros(len(idx), bool)
+    prev_step_extruding[1:] = extruding[idx[1:] - 1]
+    new = np.ones(len(idx), bool)
+    new[1:] = (np.abs(np.diff(zs)) > 1e-6) & ~prev_step_extruding[1:]
+    layer_of_ext = np.cumsum(new) - 1
+    # each step belongs to the layer of the next extruding step (the layer change travel is the
+    # new layer's first step); steps after the last extrusion belong to the last layer
+    nxt = np.searchsorted(idx, np.arange(n_steps), side="left")
+    nxt = np.minimum(nxt, len(idx) - 1)
+    layer = layer_of_ext[nxt].astype(np.int32)
+    # steps before the first layer's first travel into it: keep them in layer 0 (start G-code)
+    z = zs[new]
+    first_step = idx[new]
+    # the layer starts at the first step after the previous layer's last extrusion
+    starts = np.empty(len(first_step), np.int64)
+    starts[0] = 0
+    if len(first_step) > 1:
+        prev_last = idx[np.flatnonzero(new)[1:] - 1]
+        starts[1:] = prev_last + 1
+    first_line = step_line[np.minimum(starts, n_steps - 1)]
+    return layer, z, first_line.astype(np.int64), "z-change"
+
+
+def _find_features(data: bytes, line_start, step_line):
+    ms = list(FEATURE_MARKERS.finditer(b"\n" + data))
+    if not ms:
+        return np.full(len(step_line), -1, np.int16), ()
+    names = [m.group(1).decode("utf-8", "replace").strip() for m in ms]
+    uniq = sorted(set(names), key=names.index)
+    code = {nm: i for i, nm in enumerate(uniq)}
+    mline = _lines_of(np.array([m.start() for m in ms], np.int64), line_start)
+    mcode = np.array([code[nm] for nm in names], np.int16)
+    j = np.searchsorted(mline, step_line, side="right") - 1
+    feature = np.where(j >= 0, mcode[np.maximum(j, 0)], -1).astype(np.int16)
+    return feature, tuple(uniq)
+
+
+_HEADER_PATTERNS = [
+    ("slicer", rb"^;\s*(?:generated by|Generated with|Sliced by)\s+([^\r\n]+)"),
+    ("slicer", rb"^; (?:Cura_SteamEngine|KISSlicer|ideaMaker|Kiri:Moto|IceSL)[^\r\n]*"),
+    ("flavor", rb"^;\s*(?:FLAVOR:|gcode_flavor\s*=\s*|firmware_type\s*=\s*)([^\r\n]+)"),
+    ("bed_shape", rb"^;\s*(?:bed_shape|printable_area)\s*=\s*([^\r\n]+)"),
+    ("estimated_time", rb"^;\s*estimated printing time(?: \(normal mode\))?\s*=\s*([^\r\n]+)"),
+    ("cura_time", rb"^;TIME:(\d+)"),
+]
+
+
+def _read_header(data: bytes) -> dict:
+    head = data[:200_000] + b"\n" + data[-400_000:]
+    out = {}
+    for key, pat in _HEADER_PATTERNS:
+        if key in out:
+            continue
+        m = re.search(pat, head, re.M)
+        if m:
+            txt = (m.group(1) if m.groups() else m.group(0)).decode("utf-8", "replace").strip()
+            out[key] = txt.lstrip("; ")
+    bed = out.get("bed_shape")
+    if bed:
+        try:
+            pts = np.array([[float(v) for v in p.split("x")] for p in bed.split(",")])
+            out["bed_min_mm"] = tuple(pts.min(axis=0).tolist())
+            out["bed_size_mm"] = tuple((pts.max(axis=0) - pts.min(axis=0)).tolist())
+        except ValueError:
+            pass
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | None = None) -> Program:
+    """Parse G-code (a path, a ``.gz`` path, bytes or text) into a lossless ``Program``.
+
+    ``time``: a ``gatesopt.energy.TimeAssumptions`` for durations the paper's T = L/F model
+    cannot give (heat-up waits, homing); default: the paper profile's. ``flavor``: "klipper"
+    to use Klipper's G90/G91 semantics; default: read from the file's header, else Marlin's.
+    Raises ``GcodeError`` (one line: ``file:line: text: reason``) for input that is not G-code.
+    """
+    from .energy import load_profile  # local: energy imports program, parse is imported by both
+
+    data, name = read_input(path_or_text, source)
+    warnings = _check_bytes(data, name)
+    if time is None:
+        time = load_profile("paper").time
+    buf = np.frombuffer(data, dtype=np.uint8)
+    line_start = _line_starts(buf)
+    header = _read_header(data)
+    fl = (flavor or header.get("flavor", "")).lower()
+    klipper = "klipper" in fl
+    err, err_line, err_letter, n, arrs = _scan.scan(
+        buf, line_start, klipper, time.hotend_heat_c_per_s, time.bed_heat_c_per_s,
+        time.ambient_c, time.home_s, DEFAULT_FEED_MM_S)
+    if err != _scan.OK:
+        text = data[line_start[err_line]:line_start[err_line + 1]].decode("utf-8", "replace")
+        letter = chr(err_letter + 65) if err_letter >= 0 else "?"
+        raise GcodeError(name, int(err_line) + 1,
+                         _ERR_TEXT[err].format(L=letter, lim=_scan.ABSURD_MM), text=text)
+    (s_line, s_kind, s_start, s_end, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
+     s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags) = arrs
+    ph = np.flatnonzero(l_flags & 1)
+    for ln in ph[:5]:
+        text = data[line_start[ln]:line_start[ln + 1]].decode("utf-8", "replace").strip()
+        warnings.append(f"{name}:{ln + 1}: {text[:60]}: unexpanded slicer placeholder ignored "
+                        "(as the firmware ignores a word without a value)")
+    if len(ph) > 5:
+        warnings.append(f"{name}: {len(ph) - 5} more lines with unexpanded placeholders")
+    s = slice(0, n)
+    step_line, kind, start, end = s_line[s], s_kind[s], s_start[s], s_end[s]
+    motion = kind <= Kind.ARC
+    if not motion.any():
+        raise GcodeError(name, None, "no moves: no G0/G1/G2/G3 line with a coordinate")
+    layer, layer_z, layer_line, method = _find_layers(data, line_start, step_line, kind, start, end)
+    feature, feature_names = _find_features(data, line_start, step_line)
+    crlf = data.count(b"\r\n")
+    line_ending = "\r\n" if crlf and crlf >= data.count(b"\n") // 2 else "\n"
+    if not (end[:, 3] > start[:, 3]).any():
+        warnings.append(f"{name}: no extrusion anywhere (E never increases)")
+    prog = Program(
+        source=name, data=data, line_start=line_start,
+        line=step_line, kind=kind, start_mm=start, end_mm=end, feed_mm_s=s_feed[s],
+        length_mm=s_len[s], duration_s=s_dur[s], layer=layer, feature=feature, fan=s_fan[s],
+        hotend_c=s_hot[s], bed_c=s_bed[s], arc_center_mm=s_arc[s], arc_ccw=s_ccw[s],
+        offset_mm=s_off[s], relative_xyz=s_relxyz[s], relative_e=s_rele[s], inch=s_inch[s],
+        enabled=s_en[s], feature_names=feature_names, layer_z_mm=layer_z, layer_line=layer_line,
+        layer_method=method, line_ending=line_ending, header=header, warnings=tuple(warnings),
+        line_letter=l_letter, line_number=l_number,
+    )
+    for a in (prog.line, prog.kind, prog.start_mm, prog.end_mm, prog.duration_s, prog.enabled):
+        a.flags.writeable = False
+    return prog
