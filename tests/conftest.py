@@ -1,0 +1,41 @@
+"""Shared fixtures: where the development corpus lives (../shared/instances beside the repo)."""
+from __future__ import annotations
+
+import csv
+import gzip
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_INSTANCES = REPO.parent / "shared" / "instances"
+PROJECT_INSTANCES = REPO / "instances"
+
+
+def shared_files() -> list[Path]:
+    """Every G-code file of ../shared/instances (empty when the corpus is absent)."""
+    if not (SHARED_INSTANCES / "MANIFEST.tsv").exists():
+        return []
+    return sorted(p for p in SHARED_INSTANCES.iterdir() if p.name.endswith((".gcode", ".gcode.gz")))
+
+
+def manifest() -> dict[str, dict]:
+    with open(SHARED_INSTANCES / "MANIFEST.tsv", newline="") as f:
+        return {r["file"]: r for r in csv.DictReader(f, delimiter="\t")}
+
+
+def read_bytes(path: Path) -> bytes:
+    raw = path.read_bytes()
+    return gzip.decompress(raw) if path.name.endswith(".gz") else raw
+
+
+needs_shared = pytest.mark.skipif(
+    not shared_files(), reason=f"development corpus not found at {SHARED_INSTANCES}")
+
+
+def shared_params():
+    """pytest params over the corpus, or one skipped param saying why."""
+    files = shared_files()
+    if not files:
+        return [pytest.param(None, marks=pytest.mark.skip(reason=f"no corpus at {SHARED_INSTANCES}"))]
+    return [pytest.param(p, id=p.name) for p in files]
