@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import ProfileError
 from .program import Kind, Program, X, Y
 
 SECTORS = ("X", "Y", "Z", "E", "heater", "fans", "idle")
@@ -87,7 +88,7 @@ class Profile:
             return _table_coefficients(self.params, program)
         if self.kind == "component":
             return _component_coefficients(self.params, program)
-        raise ValueError(f"{self.path or self.name}: unknown profile kind {self.kind!r}")
+        raise ProfileError(f"{self.path or self.name}: unknown profile kind {self.kind!r}")
 
     def motor_power_w(self) -> np.ndarray:
         """Representative per-motor power (travel class / holding), for reports."""
@@ -101,7 +102,7 @@ class Profile:
 
 def _require(d: dict, key: str, where: str):
     if key not in d:
-        raise ValueError(f"{where}: missing key {key!r}")
+        raise ProfileError(f"{where}: missing key {key!r}")
     return d[key]
 
 
@@ -132,13 +133,13 @@ def _load_profile_file(s: str) -> Profile:
         if not res.is_file():
             shipped = sorted(p.name[:-5] for p in importlib.resources.files("gatesopt.profiles").iterdir()
                              if p.name.endswith(".toml"))
-            raise ValueError(f"unknown energy profile {s!r}: not a file, and not one of {shipped}")
+            raise ProfileError(f"unknown energy profile {s!r}: not a file, and not one of {shipped}")
         path = str(res)
         raw = res.read_bytes()
     try:
         params = tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: not a valid TOML profile: {exc}") from None
+        raise ProfileError(f"{path}: not a valid TOML profile: {exc}") from None
     kind = _require(params, "kind", path)
     t = params.get("time", {})
     time = TimeAssumptions(**{k: float(v) for k, v in t.items() if k in TimeAssumptions.__dataclass_fields__})
@@ -150,9 +151,9 @@ def _load_profile_file(s: str) -> Profile:
         for key in ("base_w", "motor_w", "hotend_w", "bed_w", "fan_w"):
             _require(params, key, path)
         if len(params["motor_w"]) != 4:
-            raise ValueError(f"{path}: motor_w needs 4 values (X Y Z E)")
+            raise ProfileError(f"{path}: motor_w needs 4 values (X Y Z E)")
     else:
-        raise ValueError(f"{path}: kind must be 'table' or 'component', not {kind!r}")
+        raise ProfileError(f"{path}: kind must be 'table' or 'component', not {kind!r}")
     return prof
 
 

@@ -18,3 +18,7 @@ class GcodeError(GatesoptError, ValueError):
 
 class InfeasibleError(GatesoptError):
     """A problem has no feasible solution (e.g. the rotated print fits no bed)."""
+
+
+class ProfileError(GatesoptError, ValueError):
+    """A bad or unknown energy profile."""
