@@ -40,6 +40,10 @@ def test_synthetic_log_is_recovered():
         assert cal.params[k] == pytest.approx(v, rel=0.15, abs=1.0), k
     assert cal.rel_error < 0.05
     assert cal.energy_error < 0.03
+    # X and Y are switched off on the same line: only their sum is determined, and the fit says so
+    assert not cal.identifiable["motor_x_w"] and not cal.identifiable["motor_y_w"]
+    assert cal.params["motor_x_w"] + cal.params["motor_y_w"] == pytest.approx(9.0, rel=0.1)
+    assert cal.identifiable["motor_e_w"] and cal.identifiable["bed_w"]
 
 
 def test_fitted_profile_loads_and_predicts_the_log(tmp_path):
