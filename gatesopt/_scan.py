@@ -41,6 +41,134 @@ SET_STEPPER_ENABLE = np.frombuffer(b"SET_STEPPER_ENABLE", dtype=np.uint8)
 STEPPER_ = np.frombuffer(b"STEPPER=STEPPER_", dtype=np.uint8)
 ENABLE_ = np.frombuffer(b"ENABLE=", dtype=np.uint8)
 
+# Comment markers the slicers write (layers, Z, feature types). Found here, in the same pass, so the
+# Python side never scans the text again. Marker code bits: 0-2 layer marker kind (see LAYER_KINDS,
+# 1-based, in priority order), 8 = the line carries a Z, 16 = the line names a feature type.
+LAYER_KINDS = ("prusaslicer", "bambu", "cura", "simplify3d", "slic3r", "kisslicer", "comment")
+MK_Z = 8
+MK_FEATURE = 16
+P_LAYER_CHANGE = np.frombuffer(b";LAYER_CHANGE", dtype=np.uint8)      # PrusaSlicer, SuperSlicer, Orca
+P_CHANGE_LAYER = np.frombuffer(b"; CHANGE_LAYER", dtype=np.uint8)     # Bambu Studio
+P_LAYER_COLON = np.frombuffer(b";LAYER:", dtype=np.uint8)             # Cura, ideaMaker
+P_S3D = np.frombuffer(b"; layer ", dtype=np.uint8)                    # Simplify3D: '; layer 3, Z = 0.6'
+P_S3D_Z = np.frombuffer(b", Z = ", dtype=np.uint8)
+P_SLIC3R = np.frombuffer(b"; move to next layer (", dtype=np.uint8)   # Slic3r 1.x verbose
+P_KISS = np.frombuffer(b"; BEGIN_LAYER_OBJECT", dtype=np.uint8)       # KISSlicer: '... z=0.3'
+P_KISS_Z = np.frombuffer(b" z=", dtype=np.uint8)
+P_AYER = np.frombuffer(b"AYER", dtype=np.uint8)                        # ';layer 3' etc., any case
+P_Z = np.frombuffer(b"Z:", dtype=np.uint8)                            # ';Z:0.2'
+P_Z_HEIGHT = np.frombuffer(b"Z_HEIGHT:", dtype=np.uint8)              # '; Z_HEIGHT: 0.2'
+P_TYPE = np.frombuffer(b"TYPE:", dtype=np.uint8)                      # ';TYPE:Perimeter'
+P_FEATURE = np.frombuffer(b"FEATURE:", dtype=np.uint8)                # '; FEATURE: Outer wall'
+P_FEATURE_LC = np.frombuffer(b"feature ", dtype=np.uint8)             # '; feature inner perimeter'
+
+
+@njit(cache=True)
+def _match(buf, i, end, pat):
+    """buf[i:i+len(pat)] equals pat exactly."""
+    n = pat.shape[0]
+    if i + n > end:
+        return False
+    for k in range(n):
+        if buf[i + k] != pat[k]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _find(buf, i, end, pat):
+    """First position >= i of pat in buf[:end], or -1."""
+    n = pat.shape[0]
+    for j in range(i, end - n + 1):
+        if _match(buf, j, end, pat):
+            return j
+    return -1
+
+
+@njit(cache=True)
+def _number_at(buf, i, end):
+    """A decimal number starting at i (blanks skipped), NaN if none."""
+    while i < end and (buf[i] == 32 or buf[i] == 9):
+        i += 1
+    neg = False
+    if i < end and (buf[i] == 45 or buf[i] == 43):
+        neg = buf[i] == 45
+        i += 1
+    v = 0.0
+    nd = 0
+    while i < end and 48 <= buf[i] <= 57:
+        v = v * 10.0 + (buf[i] - 48)
+        nd += 1
+        i += 1
+    if i < end and buf[i] == 46:
+        i += 1
+        sc = 0.1
+        while i < end and 48 <= buf[i] <= 57:
+            v += (buf[i] - 48) * sc
+            sc *= 0.1
+            nd += 1
+            i += 1
+    if nd == 0:
+        return np.nan
+    return -v if neg else v
+
+
+@njit(cache=True)
+def _comment_marker(buf, i, b):
+    """Markers on a comment line starting at i (buf[i] == ';'). Returns (code, z, name_a, name_b)."""
+    code = 0
+    z = np.nan
+    na = -1
+    nb = -1
+    if _match(buf, i, b, P_LAYER_CHANGE):
+        code = 1
+    elif _match(buf, i, b, P_CHANGE_LAYER):
+        code = 2
+    elif _match(buf, i, b, P_LAYER_COLON) and i + 7 < b and (buf[i + 7] == 45 or 48 <= buf[i + 7] <= 57):
+        code = 3
+    elif _match(buf, i, b, P_S3D) and i + 8 < b and 48 <= buf[i + 8] <= 57:
+        code = 4
+        j = _find(buf, i + 8, b, P_S3D_Z)
+        if j >= 0:
+            z = _number_at(buf, j + P_S3D_Z.shape[0], b)
+    elif _match(buf, i, b, P_SLIC3R):
+        code = 5
+    elif _match(buf, i, b, P_KISS):
+        code = 6
+        j = _find(buf, i + P_KISS.shape[0], b, P_KISS_Z)
+        if j >= 0:
+            z = _number_at(buf, j + P_KISS_Z.shape[0], b)
+    j = i + 1
+    while j < b and (buf[j] == 32 or buf[j] == 9):
+        j += 1
+    if code == 0 and j + 5 < b and _upper(buf[j]) == 76 and _match_upper(buf, j + 1, b, P_AYER) \
+            and (buf[j + 5] == 32 or buf[j + 5] == 95 or buf[j + 5] == 58):
+        k = j + 6
+        while k < b and buf[k] == 32:
+            k += 1
+        if k < b and 48 <= buf[k] <= 57:
+            code = 7
+    if _match(buf, j, b, P_Z):
+        z = _number_at(buf, j + 2, b)
+    elif _match(buf, j, b, P_Z_HEIGHT):
+        z = _number_at(buf, j + P_Z_HEIGHT.shape[0], b)
+    if not np.isnan(z):
+        code |= MK_Z
+    if _match(buf, j, b, P_TYPE):
+        na = j + P_TYPE.shape[0]
+    elif _match(buf, j, b, P_FEATURE):
+        na = j + P_FEATURE.shape[0]
+    elif _match(buf, j, b, P_FEATURE_LC):
+        na = j + P_FEATURE_LC.shape[0]
+    if na >= 0:
+        while na < b and (buf[na] == 32 or buf[na] == 9):
+            na += 1
+        nb = b
+        while nb > na and (buf[nb - 1] == 32 or buf[nb - 1] == 9):
+            nb -= 1
+        code |= MK_FEATURE
+    return code, z, na, nb
+
 
 @njit(cache=True, inline="always")
 def _is_letter(c):
@@ -65,7 +193,7 @@ def _match_upper(buf, i, end, pat):
 
 
 @njit(cache=True)
-def _parse_words(buf, a, b, present, value, bad, placeholder):
+def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
     """Tokenize buf[a:b] (one line, no line ending). Fills present/value/bad per letter.
 
     Returns (cmd_letter, cmd_number, first_word_pos, lenient_stop) where cmd_letter is the
@@ -73,10 +201,14 @@ def _parse_words(buf, a, b, present, value, bad, placeholder):
     ``bad[k]`` marks a letter whose number failed to parse.
     """
     placeholder[0] = False
-    for k in range(26):
+    # reset only the letters the previous line set (touched[0] counts them, touched[1:] lists them):
+    # resetting all 3 x 26 slots on every line cost more than the rest of the tokenizer
+    for t in range(1, touched[0] + 1):
+        k = touched[t]
         present[k] = False
         value[k] = np.nan
         bad[k] = False
+    touched[0] = 0
     i = a
     # skip blanks
     while i < b and (buf[i] == 32 or buf[i] == 9):
@@ -137,6 +269,9 @@ def _parse_words(buf, a, b, present, value, bad, placeholder):
                 nd += 1
                 j += 1
         k = L - _A
+        if touched[0] < 26:
+            touched[0] += 1
+            touched[touched[0]] = k
         if nd == 0 and j == i and j < b and buf[j] == 123 and not first:
             # '{placeholder}' a slicer left unexpanded: Marlin's seenval() ignores a word without
             # a valid value, so the word is dropped (parse.py warns)
@@ -196,13 +331,22 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
     l_letter = np.zeros(n_lines, np.uint8)
     l_number = np.full(n_lines, np.nan, np.float32)
     l_flags = np.zeros(n_lines, np.uint8)      # bit 0: an unexpanded {placeholder} was dropped
+    # comment markers (grown by doubling): line, code bits, Z, feature-name byte span
+    mk_cap = 1024
+    mk_line = np.empty(mk_cap, np.int64)
+    mk_code = np.empty(mk_cap, np.int8)
+    mk_z = np.empty(mk_cap, np.float64)
+    mk_span = np.empty((mk_cap, 2), np.int64)
+    n_mk = 0
+    no_markers = (np.empty(0, np.int64), np.empty(0, np.int8), np.empty(0, np.float64), np.empty((0, 2), np.int64))
     placeholder = np.zeros(1, np.bool_)
+    touched = np.zeros(27, np.int64)
 
     # untrimmed: the caller slices the step arrays to [:n]
     arrs = (s_line, s_kind, s_start, s_end, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
             s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags)
     present = np.zeros(26, np.bool_)
-    value = np.zeros(26, np.float64)
+    value = np.full(26, np.nan)
     bad = np.zeros(26, np.bool_)
     pos = np.zeros(4)
     off = np.zeros(4)
@@ -225,7 +369,34 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
         # strip the line ending
         while b > a and (buf[b - 1] == 10 or buf[b - 1] == 13):
             b -= 1
-        letter, number, fpos, lenient = _parse_words(buf, a, b, present, value, bad, placeholder)
+        c0 = a
+        while c0 < b and (buf[c0] == 32 or buf[c0] == 9):
+            c0 += 1
+        if c0 < b and buf[c0] == 59:
+            code, zc, na, nb = _comment_marker(buf, c0, b)
+            if code != 0:
+                if n_mk == mk_cap:
+                    mk_cap *= 2
+                    t1 = np.empty(mk_cap, np.int64)
+                    t1[:n_mk] = mk_line[:n_mk]
+                    mk_line = t1
+                    t2 = np.empty(mk_cap, np.int8)
+                    t2[:n_mk] = mk_code[:n_mk]
+                    mk_code = t2
+                    t3 = np.empty(mk_cap, np.float64)
+                    t3[:n_mk] = mk_z[:n_mk]
+                    mk_z = t3
+                    t4 = np.empty((mk_cap, 2), np.int64)
+                    t4[:n_mk] = mk_span[:n_mk]
+                    mk_span = t4
+                mk_line[n_mk] = ln
+                mk_code[n_mk] = code
+                mk_z[n_mk] = zc
+                mk_span[n_mk, 0] = na
+                mk_span[n_mk, 1] = nb
+                n_mk += 1
+            continue
+        letter, number, fpos, lenient = _parse_words(buf, a, b, present, value, bad, placeholder, touched)
         if placeholder[0]:
             l_flags[ln] |= 1
         l_letter[ln] = letter
@@ -272,18 +443,18 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 for q in range(4):
                     k = axis_letter[q]
                     if bad[k]:
-                        return ERR_BAD_NUMBER, ln, k, n, arrs
+                        return ERR_BAD_NUMBER, ln, k, n, arrs, no_markers
                     if present[k]:
                         if np.isnan(value[k]):
-                            return ERR_MISSING_NUMBER, ln, k, n, arrs
+                            return ERR_MISSING_NUMBER, ln, k, n, arrs, no_markers
                         any_axis = True
                 if bad[LF]:
-                    return ERR_BAD_NUMBER, ln, LF, n, arrs
+                    return ERR_BAD_NUMBER, ln, LF, n, arrs, no_markers
                 if present[LF]:
                     if np.isnan(value[LF]):
-                        return ERR_MISSING_NUMBER, ln, LF, n, arrs
+                        return ERR_MISSING_NUMBER, ln, LF, n, arrs, no_markers
                     if value[LF] <= 0.0:
-                        return ERR_BAD_FEED, ln, LF, n, arrs
+                        return ERR_BAD_FEED, ln, LF, n, arrs, no_markers
                     feed = value[LF] * scale / 60.0
                 if not any_axis and not arc:
                     continue
@@ -292,13 +463,13 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                     if present[k]:
                         v = value[k] * scale
                         if abs(v) > ABSURD_MM:
-                            return ERR_ABSURD, ln, k, n, arrs
+                            return ERR_ABSURD, ln, k, n, arrs, no_markers
                         rel = rel_e if q == 3 else rel_xyz
                         tgt[q] = pos[q] + v if rel else v + off[q]
                     else:
                         tgt[q] = pos[q]
                     if abs(tgt[q]) > ABSURD_MM:
-                        return ERR_ABSURD, ln, k, n, arrs
+                        return ERR_ABSURD, ln, k, n, arrs, no_markers
                 dx = tgt[0] - pos[0]
                 dy = tgt[1] - pos[1]
                 dz = tgt[2] - pos[2]
@@ -307,7 +478,7 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                     ccw = g == 3.0
                     for k in (LI, LJ, LR):
                         if bad[k]:
-                            return ERR_BAD_NUMBER, ln, k, n, arrs
+                            return ERR_BAD_NUMBER, ln, k, n, arrs, no_markers
                     if present[LI] or present[LJ]:
                         ii = value[LI] * scale if present[LI] and not np.isnan(value[LI]) else 0.0
                         jj = value[LJ] * scale if present[LJ] and not np.isnan(value[LJ]) else 0.0
@@ -317,10 +488,10 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                         r = value[LR] * scale
                         d = math.hypot(dx, dy)
                         if d == 0.0:
-                            return ERR_ARC, ln, LR, n, arrs
+                            return ERR_ARC, ln, LR, n, arrs, no_markers
                         h2 = r * r - 0.25 * d * d
                         if h2 < -1e-6 * max(1.0, r * r):
-                            return ERR_ARC, ln, LR, n, arrs
+                            return ERR_ARC, ln, LR, n, arrs, no_markers
                         h = math.sqrt(max(h2, 0.0))
                         # Marlin G2_G3.cpp: e = clockwise ^ (r < 0) ? -1 : 1
                         e = -1.0 if ((not ccw) != (r < 0)) else 1.0
@@ -329,7 +500,7 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                         cx = 0.5 * (pos[0] + tgt[0]) + e * h * sx
                         cy = 0.5 * (pos[1] + tgt[1]) + e * h * sy
                     else:
-                        return ERR_ARC, ln, LI, n, arrs
+                        return ERR_ARC, ln, LI, n, arrs, no_markers
                     rad = math.hypot(pos[0] - cx, pos[1] - cy)
                     a0 = math.atan2(pos[1] - cy, pos[0] - cx)
                     a1 = math.atan2(tgt[1] - cy, tgt[0] - cx)
@@ -391,7 +562,7 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 for q in range(4):
                     k = axis_letter[q]
                     if bad[k]:
-                        return ERR_BAD_NUMBER, ln, k, n, arrs
+                        return ERR_BAD_NUMBER, ln, k, n, arrs, no_markers
                     if present[k]:
                         v = 0.0 if np.isnan(value[k]) else value[k] * scale
                         off[q] = pos[q] - v
@@ -510,4 +681,5 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
             s_en[n, q] = en[q]
             pos[q] = tgt[q]
         n += 1
-    return OK, -1, -1, n, arrs
+    markers = (mk_line[:n_mk].copy(), mk_code[:n_mk].copy(), mk_z[:n_mk].copy(), mk_span[:n_mk].copy())
+    return OK, -1, -1, n, arrs, markers

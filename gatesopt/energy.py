@@ -32,27 +32,72 @@ from .program import Kind, Program, X, Y
 SECTORS = ("X", "Y", "Z", "E", "heater", "fans", "idle")
 
 
+_BITS = np.array([1, 2, 4, 8], np.uint8)        # enable pattern of a step = sum of its motors' bits
+
+
+def enable_pattern(enable: np.ndarray) -> np.ndarray:
+    """(n,) uint8 in 0..15: bit m set when motor m (X Y Z E) is enabled."""
+    enable = np.asarray(enable, dtype=bool)
+    out = enable[:, 0].astype(np.uint8)
+    for m in range(1, 4):
+        out |= enable[:, m].astype(np.uint8) << m
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class PowerCoefficients:
-    """Per-step power coefficients (see module docstring). All arrays have one row per step."""
+    """Per-step power coefficients (see module docstring).
 
-    base_w: np.ndarray      # (n,) power no gating decision changes
-    motor_w: np.ndarray     # (n, 4) power each motor draws while enabled
-    xy_off_w: np.ndarray    # (n,) added when X and Y are both off (0 under the linear assumption)
-    heater_w: np.ndarray    # (n,) share of base_w attributed to heaters (energy-sector diagram)
-    fans_w: np.ndarray      # (n,) share of base_w attributed to fans; idle = base - heater - fans
+    Steps share a handful of *power classes* (travel, extrusion with or without the fan, dwell,
+    ...): ``cls[i]`` is step i's class and the ``*_by_cls`` tables hold one row per class, so a
+    print of a million steps carries one small int per step instead of nine floats. The per-step
+    views (``base_w``, ``motor_w``, ...) are computed on access.
+    """
+
+    cls: np.ndarray                 # (n,) int32: power class of each step
+    base_w_by_cls: np.ndarray       # (k,) power no gating decision changes
+    motor_w_by_cls: np.ndarray      # (k, 4) power each motor draws while enabled
+    xy_off_w_by_cls: np.ndarray     # (k,) added when X and Y are both off (0 under the linear assumption)
+    heater_w_by_cls: np.ndarray     # (k,) share of base attributed to heaters (energy-sector diagram)
+    fans_w_by_cls: np.ndarray       # (k,) share of base attributed to fans; idle = base - heater - fans
+
+    @property
+    def power_by_pattern_w(self) -> np.ndarray:
+        """(k, 16) power of each class under each enable pattern (see ``enable_pattern``)."""
+        bits = ((np.arange(16)[:, None] >> np.arange(4)) & 1).astype(float)      # (16, 4)
+        both_xy_off = (np.arange(16) & 3) == 0
+        return (self.base_w_by_cls[:, None] + self.motor_w_by_cls @ bits.T
+                + self.xy_off_w_by_cls[:, None] * both_xy_off[None, :])
+
+    @property
+    def base_w(self) -> np.ndarray:
+        return self.base_w_by_cls[self.cls]
+
+    @property
+    def motor_w(self) -> np.ndarray:
+        return self.motor_w_by_cls[self.cls]
+
+    @property
+    def xy_off_w(self) -> np.ndarray:
+        return self.xy_off_w_by_cls[self.cls]
+
+    @property
+    def heater_w(self) -> np.ndarray:
+        return self.heater_w_by_cls[self.cls]
+
+    @property
+    def fans_w(self) -> np.ndarray:
+        return self.fans_w_by_cls[self.cls]
 
     def take(self, rows: np.ndarray) -> "PowerCoefficients":
         """Coefficients for pieces of steps (a split step keeps its parent's coefficients)."""
-        return PowerCoefficients(self.base_w[rows], self.motor_w[rows], self.xy_off_w[rows],
-                                 self.heater_w[rows], self.fans_w[rows])
+        return dataclasses.replace(self, cls=self.cls[rows])
 
 
 def step_power_w(coeffs: PowerCoefficients, enable: np.ndarray) -> np.ndarray:
-    """P_i for each step given the (n, 4) motor-enable matrix."""
-    enable = np.asarray(enable, dtype=bool)
-    both_xy_off = ~enable[:, X] & ~enable[:, Y]
-    return coeffs.base_w + (coeffs.motor_w * enable).sum(axis=1) + both_xy_off * coeffs.xy_off_w
+    """P_i for each step given the (n, 4) motor-enable matrix:
+    ``base_w + sum_m enable_m * motor_w_m + [not X and not Y] * xy_off_w`` (docs/energy-model.md)."""
+    return coeffs.power_by_pattern_w[coeffs.cls, enable_pattern(enable)]
 
 
 def step_energy_j(duration_s: np.ndarray, coeffs: PowerCoefficients, enable: np.ndarray) -> np.ndarray:
@@ -157,77 +202,87 @@ def _load_profile_file(s: str) -> Profile:
     return prof
 
 
-def _classes(program: Program):
-    kind = program.kind
-    extruding = program.extruding
-    moving = np.isin(kind, (Kind.TRAVEL, Kind.EXTRUDE, Kind.RETRACT, Kind.UNRETRACT, Kind.Z_ONLY, Kind.ARC))
-    travel = moving & ~extruding
-    return extruding, travel
+# power classes of the table profile: (kind class) x (fan off, fan on) for the motion classes
+_T_TRAVEL, _T_EXTRUDE, _T_STALL, _T_DWELL, _T_WAIT, _T_HOME = 0, 2, 4, 6, 7, 8
+_TABLE_CLASS_OF_KIND = np.array([
+    _T_TRAVEL,      # TRAVEL
+    _T_EXTRUDE,     # EXTRUDE
+    _T_TRAVEL,      # RETRACT: no material deposited -> the G0-type power
+    _T_TRAVEL,      # UNRETRACT
+    _T_TRAVEL,      # Z_ONLY
+    _T_TRAVEL,      # ARC: extruding arcs are moved to _T_EXTRUDE below
+    _T_DWELL,       # DWELL
+    _T_WAIT,        # WAIT
+    _T_HOME,        # HOME
+    _T_STALL,       # MOTOR: a firmware stall at an enable/disable line
+], np.int32)
 
 
 def _table_coefficients(p: dict, program: Program) -> PowerCoefficients:
     """Paper tables -> coefficients. Reproduces Table 2/4 exactly for all-on and one-XY-gated."""
-    n = program.n_steps
     a = p["assumptions"]
     ctl = p.get("control", {})
     z_w, e_w, idle_w, fan_share_w = a["z_motor_w"], a["e_motor_w"], a["idle_w"], a["fan_w"]
-    if a.get("both_xy_gated", "linear") != "linear":
-        # a measured number: P(both XY off) given explicitly for each class
-        pass
-    base = np.zeros(n)
-    motor = np.zeros((n, 4))
-    xy_off = np.zeros(n)
-    heater = np.zeros(n)
-    fans = np.zeros(n)
-    extruding, travel = _classes(program)
+    k = 9
+    base = np.zeros(k)
+    motor = np.zeros((k, 4))
+    xy_off = np.zeros(k)
+    heater = np.zeros(k)
+    fans = np.zeros(k)
 
-    def fill(mask, cls):
+    def fill(c, cls):
         all_on, one_off = p[cls]["all_on_w"], p[cls]["one_xy_gated_w"]
         share = all_on - one_off                    # one XY motor's power (Table 4 vs Table 2)
         b = all_on - 2 * share - z_w - e_w          # what no motor decision changes
-        base[mask] = b
-        motor[mask] = (share, share, z_w, e_w)
-        both = p[cls].get("both_xy_gated_w")
-        if both is not None:                        # non-additive, measured
-            xy_off[mask] = both - (all_on - 2 * share)
-        # sector attribution of b: idle board, fan (when running), heater gets the rest
-        f = np.where(program.fan[mask] > 0, min(fan_share_w, max(b - idle_w, 0.0)), 0.0)
-        fans[mask] = f
-        heater[mask] = np.maximum(b - idle_w - f, 0.0)
+        for fan_on in (0, 1):
+            base[c + fan_on] = b
+            motor[c + fan_on] = (share, share, z_w, e_w)
+            both = p[cls].get("both_xy_gated_w")
+            if both is not None:                    # non-additive, measured
+                xy_off[c + fan_on] = both - (all_on - 2 * share)
+            # attribution of b: idle board, the fan when it runs, the heater gets the rest
+            f = min(fan_share_w, max(b - idle_w, 0.0)) if fan_on else 0.0
+            fans[c + fan_on] = f
+            heater[c + fan_on] = max(b - idle_w - f, 0.0)
 
-    fill(extruding, "extrude")
-    fill(travel, "travel")
-    stall_cls = a.get("stall_like", "extrude")
-    fill(program.kind == Kind.MOTOR, stall_cls)
-    kind = program.kind
-    dwell = kind == Kind.DWELL
-    base[dwell] = ctl.get("G4", idle_w)
-    wait = kind == Kind.WAIT
-    # M109 (hotend) vs M190 (bed): the parser marks bed waits with bed_c set by that line; we
-    # cannot tell them apart from the row alone, so both use the heat-up powers below.
-    wait_w = ctl.get("M109", 31.19)
-    base[wait] = wait_w
-    heater[wait] = wait_w - idle_w
-    home = kind == Kind.HOME
-    base[home] = ctl.get("G28", 20.84)
-    return PowerCoefficients(base, motor, xy_off, heater, fans)
+    fill(_T_TRAVEL, "travel")
+    fill(_T_EXTRUDE, "extrude")
+    fill(_T_STALL, a.get("stall_like", "extrude"))
+    base[_T_DWELL] = ctl.get("G4", idle_w)
+    # M109 and M190 waits: the heat-up power of Table 2's M109 (the UM2 Go has no heated bed)
+    base[_T_WAIT] = ctl.get("M109", 31.19)
+    heater[_T_WAIT] = base[_T_WAIT] - idle_w
+    base[_T_HOME] = ctl.get("G28", 20.84)
+    cls = _TABLE_CLASS_OF_KIND[program.kind]
+    cls[program.extruding] = _T_EXTRUDE
+    cls += ((program.fan > 0) & (cls < _T_DWELL)).astype(np.int32)
+    return PowerCoefficients(cls, base, motor, xy_off, heater, fans)
 
 
 def _component_coefficients(p: dict, program: Program) -> PowerCoefficients:
     """Component model: base + enabled motors + heaters at duty + fan at its duty."""
-    n = program.n_steps
-    hot_on = program.hotend_c > 0
-    bed_on = program.bed_c > 0
-    heater = (hot_on * p["hotend_w"] * p.get("hotend_hold_duty", 0.3)
-              + bed_on * p["bed_w"] * p.get("bed_hold_duty", 0.3)).astype(float)
-    wait = program.kind == Kind.WAIT
-    heater[wait] = p["hotend_w"] + bed_on[wait] * p["bed_w"]      # heating at full duty
-    fans = (program.fan * p["fan_w"]).astype(float)
-    stepping = program.steps_motor().sum(axis=1)
-    base = p["base_w"] + heater + fans + stepping * p.get("moving_extra_w", 0.0)
-    base = base + (program.kind == Kind.MOTOR) * p.get("stall_w", 0.0)
-    motor = np.broadcast_to(np.asarray(p["motor_w"], float), (n, 4)).copy()
-    return PowerCoefficients(base, motor, np.zeros(n), heater, fans)
+    fan_values, fan_idx = np.unique(program.fan, return_inverse=True)
+    wait = (program.kind == Kind.WAIT).astype(np.int64)
+    hot = (program.hotend_c > 0).astype(np.int64)
+    bed = (program.bed_c > 0).astype(np.int64)
+    motor_row = (program.kind == Kind.MOTOR).astype(np.int64)
+    nstep = program.steps_motor().sum(axis=1).astype(np.int64)
+    key = ((((fan_idx.astype(np.int64) * 2 + wait) * 2 + hot) * 2 + bed) * 2 + motor_row) * 5 + nstep
+    keys, cls = np.unique(key, return_inverse=True)
+    nstep_k, rest = keys % 5, keys // 5
+    motor_k, rest = rest % 2, rest // 2
+    bed_k, rest = rest % 2, rest // 2
+    hot_k, rest = rest % 2, rest // 2
+    wait_k, fan_k = rest % 2, fan_values[rest // 2].astype(float)
+    heater = np.where(wait_k == 1, p["hotend_w"] + bed_k * p["bed_w"],   # heating at full duty
+                      hot_k * p["hotend_w"] * p.get("hotend_hold_duty", 0.3)
+                      + bed_k * p["bed_w"] * p.get("bed_hold_duty", 0.3)).astype(float)
+    fans = fan_k * p["fan_w"]
+    base = (p["base_w"] + heater + fans + nstep_k * p.get("moving_extra_w", 0.0)
+            + motor_k * p.get("stall_w", 0.0))
+    k = len(keys)
+    motor = np.broadcast_to(np.asarray(p["motor_w"], float), (k, 4)).copy()
+    return PowerCoefficients(cls.astype(np.int32), base, motor, np.zeros(k), heater, fans)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -292,32 +347,32 @@ def profile(program: Program, profile: Profile | str | None = None, *, enable: n
     coeffs = prof.coefficients(program)
     enable = default_enable(program) if enable is None else np.asarray(enable, bool)
     dur = program.duration_s if duration_s is None else np.asarray(duration_s, float)
-    e = step_energy_j(dur, coeffs, enable)
-    motors = coeffs.motor_w * enable * dur[:, None]
-    both_off = (~enable[:, X] & ~enable[:, Y]) * coeffs.xy_off_w * dur
-    sectors = {
-        "X": float(motors[:, 0].sum()), "Y": float(motors[:, 1].sum()),
-        "Z": float(motors[:, 2].sum()), "E": float(motors[:, 3].sum()),
-        "heater": float((coeffs.heater_w * dur).sum()),
-        "fans": float((coeffs.fans_w * dur).sum()),
-    }
-    sectors["idle"] = float(((coeffs.base_w - coeffs.heater_w - coeffs.fans_w) * dur).sum() + both_off.sum())
-    by_kind_j, by_kind_s = {}, {}
-    for k in Kind:
-        m = program.kind == k
-        if m.any():
-            by_kind_j[k.name.lower()] = float(e[m].sum())
-            by_kind_s[k.name.lower()] = float(dur[m].sum())
-    nl = max(program.n_layers, 0)
-    lay = program.layer
-    valid = lay >= 0
-    layer_t = np.bincount(lay[valid], weights=dur[valid], minlength=nl)[:nl] if nl else np.zeros(0)
-    layer_e = np.bincount(lay[valid], weights=e[valid], minlength=nl)[:nl] if nl else np.zeros(0)
-    n_moves = int(np.isin(program.kind, (Kind.TRAVEL, Kind.EXTRUDE, Kind.RETRACT, Kind.UNRETRACT,
-                                         Kind.Z_ONLY, Kind.ARC)).sum())
+    pattern = enable_pattern(enable)
+    e = coeffs.power_by_pattern_w[coeffs.cls, pattern] * dur          # step_energy_j, one gather
+    # time spent in each (class, enable pattern): every sector is a small table product of it
+    k = len(coeffs.base_w_by_cls)
+    t_cp = np.bincount(coeffs.cls * 16 + pattern, weights=dur, minlength=16 * k).reshape(k, 16)
+    bits = ((np.arange(16)[:, None] >> np.arange(4)) & 1).astype(float)    # (16, 4)
+    motor_j = ((t_cp @ bits) * coeffs.motor_w_by_cls).sum(axis=0)         # (4,)
+    t_c = t_cp.sum(axis=1)
+    sectors = {"X": float(motor_j[0]), "Y": float(motor_j[1]), "Z": float(motor_j[2]), "E": float(motor_j[3]),
+               "heater": float(t_c @ coeffs.heater_w_by_cls), "fans": float(t_c @ coeffs.fans_w_by_cls)}
+    total = float(e.sum())
+    sectors["idle"] = total - sum(sectors.values())
+    nk = len(Kind)
+    kj = np.bincount(program.kind, weights=e, minlength=nk)
+    ks = np.bincount(program.kind, weights=dur, minlength=nk)
+    present = np.bincount(program.kind, minlength=nk) > 0
+    by_kind_j = {Kind(i).name.lower(): float(kj[i]) for i in range(nk) if present[i]}
+    by_kind_s = {Kind(i).name.lower(): float(ks[i]) for i in range(nk) if present[i]}
+    nl = program.n_layers
+    lay = program.layer.astype(np.int64) + 1           # layer -1 (before the first) -> bin 0
+    layer_t = np.bincount(lay, weights=dur, minlength=nl + 1)[1:nl + 1]
+    layer_e = np.bincount(lay, weights=e, minlength=nl + 1)[1:nl + 1]
+    n_moves = int(np.count_nonzero(program.kind <= Kind.ARC))
     return EnergyReport(
         source=program.source, profile=prof.name, n_lines=program.n_lines, n_steps=program.n_steps,
-        n_moves=n_moves, n_layers=program.n_layers, time_s=float(dur.sum()), energy_j=float(e.sum()),
+        n_moves=n_moves, n_layers=program.n_layers, time_s=float(dur.sum()), energy_j=total,
         sectors_j=sectors, by_kind_j=by_kind_j, by_kind_s=by_kind_s, layer_time_s=layer_t,
         layer_energy_j=layer_e, layer_z_mm=program.layer_z_mm, step_energy_j=e,
         step_end_s=np.cumsum(dur), layer_method=program.layer_method, warnings=program.warnings,

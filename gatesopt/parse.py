@@ -76,7 +76,8 @@ def _check_bytes(data: bytes, name: str) -> list[str]:
         raise GcodeError(name, line, "binary data (NUL byte): this is not a text G-code file")
     warnings = []
     try:
-        data.decode("utf-8")
+        if not data.isascii():          # isascii is a fast scan; decode only when it must
+            data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
         # Kept byte-exact (surrogateescape); commands are ASCII, so only comments are affected.
@@ -94,57 +95,38 @@ def _line_starts(arr: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------------------------------------------
 # layers and features
-# Each slicer's own layer markers, most specific first. All patterns are anchored on a literal
-# "\n;" (not on ^ with re.M): the regex engine then jumps between comment lines, 10x faster.
-LAYER_MARKERS = re.compile(
-    rb"\n(?:(?P<prusaslicer>;LAYER_CHANGE)"          # PrusaSlicer, SuperSlicer, Orca, Creality Print
-    rb"|(?P<bambu>; CHANGE_LAYER)"                    # Bambu Studio
-    rb"|(?P<cura>;LAYER:-?\d)"                        # Cura, ideaMaker
-    rb"|(?P<simplify3d>; layer \d+, Z = )"             # Simplify3D
-    rb"|(?P<slic3r>; move to next layer \()"          # Slic3r 1.x (verbose G-code)
-    rb"|(?P<kisslicer>; BEGIN_LAYER_OBJECT)"          # KISSlicer
-    rb"|(?P<comment>;[ \t]*[Ll]ayer[ _:]\d))")         # others that write '; layer 3'
-LAYER_PRIORITY = ("prusaslicer", "bambu", "cura", "simplify3d", "slic3r", "kisslicer", "comment")
-Z_COMMENTS = re.compile(rb"\n;[ \t]*(?:Z:|Z_HEIGHT:|layer \d+, Z = |BEGIN_LAYER_OBJECT z=)[ \t]*([-+]?\d*\.?\d+)")
-FEATURE_MARKERS = re.compile(rb"\n;[ \t]*(?:TYPE:|FEATURE:|feature )[ \t]*([^\r\n]*)")
+def _find_layers(markers, step_line, kind, start, end):
+    """Layer index per step, Z per layer, first line per layer, and the method used.
 
-
-def _lines_of(offsets: np.ndarray, line_start: np.ndarray) -> np.ndarray:
-    return np.searchsorted(line_start, offsets, side="right") - 1
-
-
-def _find_layers(data: bytes, line_start, step_line, kind, start, end):
-    """Layer index per step, Z per layer, first line per layer, and the method used."""
+    ``markers`` are the kernel's comment markers (line, code bits, Z, name span).
+    """
+    mk_line, mk_code, mk_z, _ = markers
     n_steps = len(step_line)
     extruding = (end[:, 3] > start[:, 3]) & ((kind == Kind.EXTRUDE) | (kind == Kind.ARC))
-    nl_data = b"\n" + data          # so that a marker on the first line is found too (offsets shift by one,
-                                    # so a match's start, the '\n', is the marker line's offset in data)
-    found: dict[str, list[int]] = {}
-    for m in LAYER_MARKERS.finditer(nl_data):
-        found.setdefault(m.lastgroup, []).append(m.start())   # = offset of the line in data
-    for name in LAYER_PRIORITY:
-        offs = found.get(name, [])
-        if not offs:
+    layer_kind = mk_code & 7
+    for k, name in enumerate(_scan.LAYER_KINDS, 1):        # each slicer's own markers, in priority
+        sel = layer_kind == k
+        if not sel.any():
             continue
-        marker_line = _lines_of(np.array(offs, np.int64), line_start)
+        marker_line = mk_line[sel]
         layer = (np.searchsorted(marker_line, step_line, side="right") - 1).astype(np.int32)
-        # drop markers whose layer never extrudes at all? keep them: the slicer declared them.
         n_layers = len(marker_line)
-        # Z per layer: the first extruding step's Z in that layer, else the marker's Z comment
+        # Z of a layer: the first Z comment at or after its marker and before the next marker
+        # (';Z:0.2' follows ';LAYER_CHANGE'), else the first extruding step's Z in it
         z = np.full(n_layers, np.nan)
+        has_z = (mk_code & _scan.MK_Z) != 0
+        if has_z.any():
+            zl = np.searchsorted(marker_line, mk_line[has_z], side="right") - 1
+            ok = zl >= 0
+            uniq, first = np.unique(zl[ok], return_index=True)
+            z[uniq] = mk_z[has_z][ok][first]
         ext_layers = layer[extruding]
         ext_z = end[extruding, 2]
         valid = ext_layers >= 0
         if valid.any():
-            first = np.unique(ext_layers[valid], return_index=True)
-            z[first[0]] = ext_z[valid][first[1]]
-        zc = [(m.start(), float(m.group(1))) for m in Z_COMMENTS.finditer(nl_data)]
-        if zc:
-            zl = _lines_of(np.array([o for o, _ in zc], np.int64), line_start)
-            zlayer = np.searchsorted(marker_line, zl, side="right") - 1
-            for li, zv in zip(zlayer, (v for _, v in zc)):
-                if li >= 0 and np.isnan(z[li]):
-                    z[li] = zv
+            uniq, first = np.unique(ext_layers[valid], return_index=True)
+            missing = np.isnan(z[uniq])
+            z[uniq[missing]] = ext_z[valid][first][missing]
         return layer, z, marker_line.astype(np.int64), f"marker:{name}"
     # Fallback: a new layer where an extruding step starts at a Z different from the previous
     # extruding step's, and that Z was reached by a non-extruding move (a travel or a Z move).
@@ -162,32 +144,28 @@ def _find_layers(data: bytes, line_start, step_line, kind, start, end):
     layer_of_ext = np.cumsum(new) - 1
     # each step belongs to the layer of the next extruding step (the layer change travel is the
     # new layer's first step); steps after the last extrusion belong to the last layer
-    nxt = np.searchsorted(idx, np.arange(n_steps), side="left")
-    nxt = np.minimum(nxt, len(idx) - 1)
+    nxt = np.minimum(np.searchsorted(idx, np.arange(n_steps), side="left"), len(idx) - 1)
     layer = layer_of_ext[nxt].astype(np.int32)
-    # steps before the first layer's first travel into it: keep them in layer 0 (start G-code)
     z = zs[new]
-    first_step = idx[new]
-    # the layer starts at the first step after the previous layer's last extrusion
-    starts = np.empty(len(first_step), np.int64)
-    starts[0] = 0
-    if len(first_step) > 1:
-        prev_last = idx[np.flatnonzero(new)[1:] - 1]
-        starts[1:] = prev_last + 1
+    # a layer starts at the first step after the previous layer's last extrusion
+    starts = np.zeros(int(new.sum()), np.int64)
+    if len(starts) > 1:
+        starts[1:] = idx[np.flatnonzero(new)[1:] - 1] + 1
     first_line = step_line[np.minimum(starts, n_steps - 1)]
     return layer, z, first_line.astype(np.int64), "z-change"
 
 
-def _find_features(data: bytes, line_start, step_line):
-    ms = list(FEATURE_MARKERS.finditer(b"\n" + data))
-    if not ms:
+def _find_features(data: bytes, markers, step_line):
+    """Feature type per step from ';TYPE:' / '; FEATURE:' / '; feature' comments."""
+    mk_line, mk_code, _, span = markers
+    sel = (mk_code & _scan.MK_FEATURE) != 0
+    if not sel.any():
         return np.full(len(step_line), -1, np.int16), ()
-    names = [m.group(1).decode("utf-8", "replace").strip() for m in ms]
-    uniq = sorted(set(names), key=names.index)
+    names = [data[a:b].decode("utf-8", "replace") for a, b in span[sel]]
+    uniq = list(dict.fromkeys(names))
     code = {nm: i for i, nm in enumerate(uniq)}
-    mline = _lines_of(np.array([m.start() for m in ms], np.int64), line_start)
     mcode = np.array([code[nm] for nm in names], np.int16)
-    j = np.searchsorted(mline, step_line, side="right") - 1
+    j = np.searchsorted(mk_line[sel], step_line, side="right") - 1
     feature = np.where(j >= 0, mcode[np.maximum(j, 0)], -1).astype(np.int16)
     return feature, tuple(uniq)
 
@@ -247,7 +225,7 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     header = _read_header(data)
     fl = (flavor or header.get("flavor", "")).lower()
     klipper = "klipper" in fl
-    err, err_line, err_letter, n, arrs = _scan.scan(
+    err, err_line, err_letter, n, arrs, markers = _scan.scan(
         buf, line_start, klipper, time.hotend_heat_c_per_s, time.bed_heat_c_per_s,
         time.ambient_c, time.home_s, DEFAULT_FEED_MM_S)
     if err != _scan.OK:
@@ -269,10 +247,11 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     motion = kind <= Kind.ARC
     if not motion.any():
         raise GcodeError(name, None, "no moves: no G0/G1/G2/G3 line with a coordinate")
-    layer, layer_z, layer_line, method = _find_layers(data, line_start, step_line, kind, start, end)
-    feature, feature_names = _find_features(data, line_start, step_line)
-    crlf = data.count(b"\r\n")
-    line_ending = "\r\n" if crlf and crlf >= data.count(b"\n") // 2 else "\n"
+    layer, layer_z, layer_line, method = _find_layers(markers, step_line, kind, start, end)
+    feature, feature_names = _find_features(data, markers, step_line)
+    head = data[:65536]                 # the line ending is the file's convention: its head tells
+    crlf = head.count(b"\r\n")
+    line_ending = "\r\n" if crlf and crlf >= head.count(b"\n") // 2 else "\n"
     if not (end[:, 3] > start[:, 3]).any():
         warnings.append(f"{name}: no extrusion anywhere (E never increases)")
     prog = Program(

@@ -114,6 +114,32 @@ def test_per_layer_sums_to_total_over_layered_steps():
 
 
 def test_power_coefficients_take_keeps_parent_rows():
-    c = PowerCoefficients(np.array([1.0, 2.0]), np.ones((2, 4)), np.zeros(2), np.zeros(2), np.zeros(2))
+    c = PowerCoefficients(np.array([0, 1], np.int32), np.array([1.0, 2.0]), np.ones((2, 4)), np.zeros(2),
+                          np.zeros(2), np.zeros(2))
     t = c.take(np.array([1, 1, 0]))
     assert t.base_w.tolist() == [2.0, 2.0, 1.0]
+    assert t.motor_w.shape == (3, 4)
+
+
+def test_power_by_enable_pattern_matches_the_formula():
+    p = parse("M83\nM106 S255\nG1 X10 E1 F600\nG1 X20 Y5\nG4 S1\n")
+    c = load_profile("paper").coefficients(p)
+    for pattern in range(16):
+        en = np.array([[(pattern >> m) & 1 for m in range(4)]] * p.n_steps, bool)
+        both_off = ~en[:, 0] & ~en[:, 1]
+        expect = c.base_w + (c.motor_w * en).sum(1) + both_off * c.xy_off_w
+        assert step_power_w(c, en) == pytest.approx(expect)
+
+
+def test_sectors_equal_a_direct_per_step_sum():
+    p = parse("M104 S200\nM83\nG1 X10 E1 F600\nM106 S255\nG1 X20 Y5 E1\nS0 Y\nG1 X30\nG4 S1\n")
+    for name in ("paper", "component_example"):
+        r = profile(p, name)
+        c = load_profile(name).coefficients(p)
+        en = p.enabled
+        d = p.duration_s
+        assert r.sectors_j["X"] == pytest.approx((c.motor_w[:, 0] * en[:, 0] * d).sum())
+        assert r.sectors_j["heater"] == pytest.approx((c.heater_w * d).sum())
+        assert r.sectors_j["fans"] == pytest.approx((c.fans_w * d).sum())
+        assert sum(r.sectors_j.values()) == pytest.approx(r.energy_j)
+        assert r.energy_j == pytest.approx(step_energy_j(d, c, en).sum())
