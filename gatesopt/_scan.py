@@ -307,14 +307,36 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
 
 
 @njit(cache=True)
+def line_starts(buf):
+    """Byte offset of each line's start, plus len(buf) at the end (no file-sized temporaries)."""
+    n = 0
+    for c in buf:
+        if c == 10:
+            n += 1
+    last_open = buf.shape[0] > 0 and buf[buf.shape[0] - 1] != 10
+    out = np.empty(n + 1 + (1 if last_open else 0), np.int64)
+    out[0] = 0
+    k = 1
+    for i in range(buf.shape[0]):
+        if buf[i] == 10:
+            out[k] = i + 1
+            k += 1
+    if last_open:
+        out[k] = buf.shape[0]
+    return out
+
+
+@njit(cache=True)
 def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, default_feed_mm_s):
     """One pass over all lines. Returns (error, error_line, error_letter, n_steps, arrays...)."""
     n_lines = line_start.shape[0] - 1
     nmax = n_lines
     s_line = np.empty(nmax, np.int64)
     s_kind = np.empty(nmax, np.int8)
-    s_start = np.empty((nmax, 4), np.float64)
-    s_end = np.empty((nmax, 4), np.float64)
+    # one position buffer: row 0 is the start position, row i+1 the end of step i, so that
+    # start_mm = s_pos[:-1] and end_mm = s_pos[1:] are two views of the same memory
+    s_pos = np.empty((nmax + 1, 4), np.float64)
+    s_pos[0, :] = 0.0
     s_feed = np.empty(nmax, np.float64)
     s_len = np.empty(nmax, np.float64)
     s_dur = np.empty(nmax, np.float64)
@@ -343,7 +365,7 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
     touched = np.zeros(27, np.int64)
 
     # untrimmed: the caller slices the step arrays to [:n]
-    arrs = (s_line, s_kind, s_start, s_end, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
+    arrs = (s_line, s_kind, s_pos, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
             s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags)
     present = np.zeros(26, np.bool_)
     value = np.full(26, np.nan)
@@ -657,8 +679,7 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
         s_line[n] = ln
         s_kind[n] = kind
         for q in range(4):
-            s_start[n, q] = pos[q]
-            s_end[n, q] = tgt[q]
+            s_pos[n + 1, q] = tgt[q]
             s_off[n, q] = off[q]
         s_feed[n] = feed
         s_len[n] = length

@@ -86,11 +86,7 @@ def _check_bytes(data: bytes, name: str) -> list[str]:
 
 
 def _line_starts(arr: np.ndarray) -> np.ndarray:
-    nl = np.flatnonzero(arr == 10) + 1
-    starts = np.concatenate(([0], nl))
-    if starts[-1] != len(arr):
-        starts = np.concatenate((starts, [len(arr)]))
-    return starts.astype(np.int64)
+    return _scan.line_starts(arr)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -233,7 +229,7 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
         letter = chr(err_letter + 65) if err_letter >= 0 else "?"
         raise GcodeError(name, int(err_line) + 1,
                          _ERR_TEXT[err].format(L=letter, lim=_scan.ABSURD_MM), text=text)
-    (s_line, s_kind, s_start, s_end, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
+    (s_line, s_kind, s_pos, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
      s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags) = arrs
     ph = np.flatnonzero(l_flags & 1)
     for ln in ph[:5]:
@@ -243,7 +239,8 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     if len(ph) > 5:
         warnings.append(f"{name}: {len(ph) - 5} more lines with unexpanded placeholders")
     s = slice(0, n)
-    step_line, kind, start, end = s_line[s], s_kind[s], s_start[s], s_end[s]
+    step_line, kind = s_line[s], s_kind[s]
+    start, end = s_pos[:n], s_pos[1:n + 1]     # views of one buffer: start of step i = end of step i-1
     motion = kind <= Kind.ARC
     if not motion.any():
         raise GcodeError(name, None, "no moves: no G0/G1/G2/G3 line with a coordinate")
