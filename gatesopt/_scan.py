@@ -37,6 +37,7 @@ LI, LJ, LR, LP, LS = 8, 9, 17, 15, 18
 LT = 19
 
 EXT = 64        # '@': line starts with an extended (Klipper-style) command word
+POW10 = 10.0 ** np.arange(40)
 SET_STEPPER_ENABLE = np.frombuffer(b"SET_STEPPER_ENABLE", dtype=np.uint8)
 STEPPER_ = np.frombuffer(b"STEPPER=STEPPER_", dtype=np.uint8)
 ENABLE_ = np.frombuffer(b"ENABLE=", dtype=np.uint8)
@@ -94,20 +95,25 @@ def _number_at(buf, i, end):
     if i < end and (buf[i] == 45 or buf[i] == 43):
         neg = buf[i] == 45
         i += 1
-    v = 0.0
+    mant = 0
     nd = 0
+    nfrac = 0
     while i < end and 48 <= buf[i] <= 57:
-        v = v * 10.0 + (buf[i] - 48)
-        nd += 1
+        if nd < 18:
+            mant = mant * 10 + (buf[i] - 48)
+            nd += 1
+        else:
+            nfrac -= 1
         i += 1
     if i < end and buf[i] == 46:
         i += 1
-        sc = 0.1
         while i < end and 48 <= buf[i] <= 57:
-            v += (buf[i] - 48) * sc
-            sc *= 0.1
-            nd += 1
+            if nd < 18:
+                mant = mant * 10 + (buf[i] - 48)
+                nd += 1
+                nfrac += 1
             i += 1
+    v = mant / POW10[nfrac] if nfrac >= 0 else mant * POW10[-nfrac]
     if nd == 0:
         return np.nan
     return -v if neg else v
@@ -248,26 +254,37 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
             # extended command word (SET_VELOCITY_LIMIT, EXCLUDE_OBJECT_START, ...)
             return EXT, np.nan, i, True
         i += 1
-        # number: [+-]digits[.digits]
+        # number: [+-]digits[.digits], as an integer mantissa divided once by a power of ten:
+        # for up to 15 significant digits that is the correctly rounded double, equal to float(text)
         j = i
         neg = False
         if j < b and (buf[j] == 45 or buf[j] == 43):
             neg = buf[j] == 45
             j += 1
-        ip = 0.0
+        mant = 0
         nd = 0
+        nfrac = 0
         while j < b and 48 <= buf[j] <= 57:
-            ip = ip * 10.0 + (buf[j] - 48)
-            nd += 1
+            if nd < 18:
+                mant = mant * 10 + (buf[j] - 48)
+                nd += 1
+            else:
+                nfrac -= 1          # digits beyond 18: scale up instead (absurd values anyway)
             j += 1
         if j < b and buf[j] == 46:
             j += 1
-            scale = 0.1
             while j < b and 48 <= buf[j] <= 57:
-                ip += (buf[j] - 48) * scale
-                scale *= 0.1
-                nd += 1
+                if nd < 18:
+                    mant = mant * 10 + (buf[j] - 48)
+                    nd += 1
+                    nfrac += 1
                 j += 1
+        if nfrac > 0:
+            ip = mant / POW10[nfrac]
+        elif nfrac < 0:
+            ip = mant * POW10[-nfrac]
+        else:
+            ip = float(mant)
         k = L - _A
         if touched[0] < 26:
             touched[0] += 1

@@ -69,3 +69,13 @@ def test_relative_and_absolute_e_agree(points, relative):
     r = parse("\n".join(relative_lines) + "\n")
     assert np.allclose(a.end_mm[:, E], r.end_mm[:, E], atol=1e-6)
     assert np.allclose(a.duration_s, r.duration_s)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 6).flatmap(lambda places: st.decimals(min_value=-99999, max_value=99999, places=places,
+                                                             allow_nan=False, allow_infinity=False)))
+def test_numbers_parse_exactly_like_python_float(d):
+    """The kernel's decimal parsing gives the correctly rounded double, as float(text) does."""
+    text = f"{d:f}"
+    p = parse(f"G1 X{text} F600\n")
+    assert p.end_mm[0, 0] == float(text)
