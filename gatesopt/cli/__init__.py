@@ -13,7 +13,7 @@ import sys
 from ..errors import GatesoptError
 
 # command modules, in the order ``gatesopt --help`` lists them
-COMMAND_MODULES = ("profile", "gating", "ordering", "verify", "calibrate")
+COMMAND_MODULES = ("profile", "gating", "ordering", "verify", "batch", "report", "calibrate")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,275 @@
+"""Corpus scale: every file through solve + verify, one result row per (file, formulation).
+
+The unit of work is ``process_file`` (a pure library call, picklable), so the same rows come from
+a local process pool or a Dask cluster (``run_batch(..., dask="tcp://...")``): nothing home-made
+for scheduling. The 3DGates paper evaluated 338 files / 71 M lines this way (Section 5.1).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import time
+import traceback
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import GatesoptError
+from .program import Kind, Program
+
+# columns of a result row, in CSV order; timing columns vary run to run (TIMING_COLUMNS)
+COLUMNS = (
+    "file", "formulation", "verified", "error", "slicer", "flavor", "infill_pattern", "lines", "layers",
+    "energy_before_j", "energy_after_j", "saving_pct", "time_before_s", "time_after_s", "added_time_pct",
+    "lines_before", "lines_after", "lines_added", "bytes_before", "bytes_after", "size_change_pct",
+    "rotation_deg", "status", "gap", "objective_j", "bound", "ordered", "travel_before_mm",
+    "travel_after_mm", "travel_reduction_pct", "max_curves_per_layer", "off_time_X_s", "off_time_Y_s",
+    "off_time_Z_s", "off_time_E_s", "max_snap_mm", "firmware", "findings", "output", "solve_s", "wall_s",
+)
+TIMING_COLUMNS = ("solve_s", "wall_s")
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """What every file gets (plain values, so the options travel to worker processes)."""
+
+    formulation: str = "dp"
+    firmware: str = "3dgates"
+    motors: tuple = ("X", "Y")
+    rotate: str = "auto"
+    start_ahead_s: float = 1.8e-3
+    end_late_s: float = 1.0e-3
+    max_added_time_pct: float | None = None
+    max_added_lines_pct: float | None = None
+    time_limit_s: float | None = 60.0
+    order: bool = True
+    gating: bool = True
+    profile: str = "paper"
+    write_dir: str | None = None        # write each verified output here (never an unverified one)
+
+
+def travel_mm(program: Program) -> float:
+    """XY length of all motion that deposits nothing (what curve ordering cuts)."""
+    moving = program.kind <= Kind.ARC
+    travel = moving & ~program.extruding
+    d = program.end_mm[travel, :2] - program.start_mm[travel, :2]
+    return float(np.hypot(d[:, 0], d[:, 1]).sum())
+
+
+def _infill_pattern(program: Program) -> str:
+    import re
+    head = program.data[:100_000] + program.data[-100_000:]
+    m = re.search(rb"(?:^|\n);[ \t]*(?:fill_pattern|sparse_infill_pattern|infill_pattern)[ \t]*=[ \t]*([\w-]+)", head)
+    if m:
+        return m.group(1).decode()
+    m = re.search(rb"infill_pattern = ([\w-]+)", head)      # Cura's ;SETTING_3 block
+    return m.group(1).decode() if m else ""
+
+
+def process_file(path: str, options: BatchOptions) -> dict:
+    """Solve + verify one file; a row of ``COLUMNS``. Never raises: errors become the ``error`` column."""
+    from .gating.pipeline import run
+    from .gating.problem import GatingOptions
+    from .parse import parse
+
+    t0 = time.perf_counter()
+    row = {c: "" for c in COLUMNS}
+    row.update(file=str(path), formulation=options.formulation, verified=False)
+    try:
+        program = parse(path)
+        row.update(slicer=program.header.get("slicer", ""), flavor=program.header.get("flavor", ""),
+                   infill_pattern=_infill_pattern(program), lines=program.n_lines, layers=program.n_layers)
+        gopts = GatingOptions.for_firmware(
+            options.firmware, motors=tuple(options.motors), rotate=options.rotate,
+            start_ahead_s=options.start_ahead_s, end_late_s=options.end_late_s,
+            max_added_time_pct=options.max_added_time_pct, max_added_lines_pct=options.max_added_lines_pct,
+            profile=options.profile)
+        res = run(program, gopts, formulation=options.formulation, time_limit_s=options.time_limit_s,
+                  order=options.order, gating=options.gating)
+        s = res.summary()
+        for k in COLUMNS:
+            if k in s and not isinstance(s[k], (dict, list)):
+                row[k] = s[k]
+        for m, v in (s.get("off_time_s") or {}).items():
+            row[f"off_time_{m}_s"] = v
+        row["findings"] = " | ".join(s.get("findings", []))[:2000]
+        row["verified"] = bool(s.get("verified"))
+        tb, ta = travel_mm(program), travel_mm(res.output)
+        row.update(travel_before_mm=tb, travel_after_mm=ta,
+                   travel_reduction_pct=100.0 * (1.0 - ta / tb) if tb > 0 else 0.0)
+        if options.write_dir and row["verified"]:
+            out = Path(options.write_dir) / (Path(path).name.removesuffix(".gz"))
+            out.parent.mkdir(parents=True, exist_ok=True)
+            tmp = out.with_name(out.name + f".tmp-{os.getpid()}")
+            tmp.write_text(res.text, encoding="utf-8", errors="surrogateescape", newline="")
+            os.replace(tmp, out)
+            row["output"] = str(out)
+    except GatesoptError as exc:
+        row["error"] = str(exc)
+    except Exception as exc:  # a bug must not stop the other files: report it in the row
+        frame = traceback.extract_tb(exc.__traceback__)[-1]
+        row["error"] = (f"internal error: {type(exc).__name__}: {exc} "
+                        f"(at {Path(frame.filename).name}:{frame.lineno}; please report it)")
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+# ------------------------------------------------------------------------------------------------
+def expand_paths(paths) -> list[str]:
+    """Files and folders (G-code files inside, sorted) to a list of files."""
+    out = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir():
+            out += sorted(str(q) for q in p.iterdir()
+                          if q.name.endswith((".gcode", ".gcode.gz", ".gco", ".g")) and q.is_file())
+        elif p.exists():
+            out.append(str(p))
+        else:
+            raise GatesoptError(f"{p}: no such file or folder")
+    return out
+
+
+def read_rows(path) -> list[dict]:
+    """Rows of an earlier results file (CSV or JSON), for --resume and for reports."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    if path.suffix == ".json":
+        return json.loads(path.read_text() or "[]")
+    with open(path, newline="") as f:
+        return [_typed(r) for r in csv.DictReader(f)]
+
+
+def _typed(row: dict) -> dict:
+    out = {}
+    for k, v in row.items():
+        if v in ("True", "False"):
+            out[k] = v == "True"
+        else:
+            try:
+                out[k] = float(v) if v not in ("", None) and k not in ("file", "formulation", "error", "slicer",
+                                                                        "flavor", "infill_pattern", "status",
+                                                                        "firmware", "findings", "output") else v
+            except ValueError:
+                out[k] = v
+    return out
+
+
+class ResultWriter:
+    """Appends rows as they arrive (CSV) or keeps them for one JSON write, so an interrupted batch
+    keeps what it finished and ``--resume`` can pick up."""
+
+    def __init__(self, path, resume_rows: list[dict]):
+        self.path = Path(path)
+        self.json = self.path.suffix == ".json"
+        self.rows = list(resume_rows)
+        if not self.json:
+            new = not (resume_rows and self.path.exists())
+            self.f = open(self.path, "a" if not new else "w", newline="")
+            self.w = csv.DictWriter(self.f, fieldnames=COLUMNS, extrasaction="ignore")
+            if new:
+                self.w.writeheader()
+                for r in resume_rows:
+                    self.w.writerow(r)
+
+    def add(self, row: dict):
+        self.rows.append(row)
+        if self.json:
+            tmp = self.path.with_name(self.path.name + ".tmp")
+            tmp.write_text(json.dumps(self.rows, indent=1, default=_json_default))
+            os.replace(tmp, self.path)
+        else:
+            self.w.writerow(row)
+            self.f.flush()
+
+    def close(self):
+        if not self.json:
+            self.f.close()
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    return str(o)
+
+
+def run_batch(paths, options: BatchOptions, *, out=None, jobs: int = 1, resume: bool = False,
+              dask: str | None = None, progress: bool = True, formulations: tuple | None = None) -> list[dict]:
+    """Every (file, formulation) through ``process_file``; rows in the order of ``paths``."""
+    files = expand_paths(paths)
+    forms = formulations or (options.formulation,)
+    todo = [(f, fm) for f in files for fm in forms]
+    done_rows = read_rows(out) if (resume and out) else []
+    done = {(r["file"], r["formulation"]) for r in done_rows}
+    todo = [t for t in todo if t not in done]
+    writer = ResultWriter(out, done_rows) if out else None
+    rows = {}
+    bar = _progress(len(todo), progress)
+    work = [(f, _with(options, formulation=fm)) for f, fm in todo]
+    try:
+        for key, row in _execute(work, jobs, dask):
+            rows[key] = row
+            if writer:
+                writer.add(row)
+            bar.update(1)
+            bar.set_postfix_str(Path(row["file"]).name[:30] + (" ERROR" if row["error"] else ""))
+    finally:
+        bar.close()
+        if writer:
+            writer.close()
+    ordered = done_rows + [rows[(f, fm)] for f, fm in todo if (f, fm) in rows]
+    return ordered
+
+
+def _with(options: BatchOptions, **changes) -> BatchOptions:
+    d = asdict(options)
+    d.update(changes)
+    return BatchOptions(**d)
+
+
+def _execute(work, jobs: int, dask: str | None):
+    """Yield ((file, formulation), row) as results arrive."""
+    if dask:
+        from distributed import Client, LocalCluster, as_completed as dask_completed
+        if dask == "local":
+            cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+            client = Client(cluster)
+        else:
+            cluster, client = None, Client(dask)
+        try:
+            futures = {client.submit(process_file, f, o, pure=False): (f, o.formulation) for f, o in work}
+            for fut in dask_completed(futures):
+                yield futures[fut], fut.result()
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        return
+    if jobs <= 1:
+        for f, o in work:
+            yield (f, o.formulation), process_file(f, o)
+        return
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = {pool.submit(process_file, f, o): (f, o.formulation) for f, o in work}
+        for fut in as_completed(futures):
+            yield futures[fut], fut.result()
+
+
+def _progress(total: int, enabled: bool):
+    from tqdm import tqdm
+    return tqdm(total=total, unit="file", disable=not enabled, dynamic_ncols=True,
+                bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}, {rate_fmt}] {postfix}")
+
+
+def summarize(rows: list[dict]) -> dict:
+    ok = [r for r in rows if r.get("verified") in (True, "True") and not r.get("error")]
+    sav = [float(r["saving_pct"]) for r in ok if r.get("saving_pct") not in ("", None)]
+    return {"files": len(rows), "verified": len(ok), "errors": sum(1 for r in rows if r.get("error")),
+            "mean_saving_pct": float(np.mean(sav)) if sav else math.nan,
+            "max_saving_pct": float(np.max(sav)) if sav else math.nan}
