@@ -42,7 +42,8 @@ def step_durations(program, time_model: str):
 def run(args) -> int:
     program = _read(args.file)
     prof = load_profile(args.profile)
-    report = profile(program, prof, duration_s=step_durations(program, args.time_model))
+    duration_s = step_durations(program, args.time_model)
+    report = profile(program, prof, duration_s=duration_s)
     for w in report.warnings:
         print(f"gatesopt: warning: {w}", file=sys.stderr)
     if args.plot:
@@ -51,16 +52,30 @@ def run(args) -> int:
     if args.json:
         d = report.to_dict(per_layer=args.per_layer)
         d["time_model"] = args.time_model
+        from ..planner import slicer_estimate_s
+        d["slicer_estimate_s"] = slicer_estimate_s(program)
         json.dump(d, sys.stdout, indent=2)
         print()
         return 0
     print(format_report(report, args.time_model))
+    print(_slicer_line(program, duration_s))
     if args.per_layer:
         print()
         print(format_layers(report))
     if args.plot:
         print(f"\nplot written to {args.plot}")
     return 0
+
+
+def _slicer_line(program, duration_s) -> str:
+    """The slicer's own estimate beside ours (heat-up waits and homing left out: no slicer counts them)."""
+    from ..planner import comparable_total_s, slicer_estimate_s
+    est = slicer_estimate_s(program)
+    if est is None:
+        return "slicer      no estimate in the file"
+    ours = comparable_total_s(program, duration_s)
+    return (f"slicer      {est:,.0f} s ({_hms(est)}) estimated by the slicer; ours without heat-up "
+            f"and homing {ours:,.0f} s, {100 * (ours / est - 1):+.1f} %")
 
 
 def _hms(s: float) -> str:

@@ -1,0 +1,461 @@
+"""Machine limits: what the firmware's planner is allowed to do, read from the G-code file itself.
+
+Sources, in the order a value is taken (each value records which one it came from):
+
+1. lines of the file that set limits -- Marlin ``M201`` (max acceleration per axis), ``M203`` (max
+   feedrate per axis), ``M204`` (print/retract/travel acceleration), ``M205`` (classic jerk X Y Z E,
+   minimum feedrates S T, minimum segment time B, junction deviation J), RepRapFirmware ``M566``
+   (jerk in mm/min), Klipper ``SET_VELOCITY_LIMIT`` (VELOCITY, ACCEL, ACCEL_TO_DECEL,
+   SQUARE_CORNER_VELOCITY). A line applies from its own line on, as in the firmware: a file that
+   switches ``M204 P800`` / ``M204 P1000`` per feature gets per-step accelerations;
+2. the slicer's configuration block (PrusaSlicer / SuperSlicer / OrcaSlicer / Bambu Studio write
+   ``; machine_max_acceleration_x = 1000`` etc. at the end of the file; a value "a,b" is the normal
+   and the silent mode: we take the normal one). ``machine_limits_usage = ignore`` means the slicer
+   did not use them, so neither do we;
+3. a printer profile default (``PRINTER_DEFAULTS``): the firmware's stock configuration, or a
+   printer definition recognised from the header (Cura's Creality Ender-3 and Prusa i3 MK3
+   definitions, whose machine settings Cura's own estimator uses).
+
+Units: accelerations mm/s^2 (``_mm_s2``), speeds mm/s, times s; axis order X Y Z E.
+
+``MachineLimits`` carries the values in force at the first motion step (what a report shows) and
+``changes``: the later lines, so that ``per_step(program)`` gives the value in force at every step.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import GatesoptError
+from .program import MOTION_KINDS, Program
+
+# The flat parameter vector: one name per scalar limit. ``MachineLimits`` exposes them as typed
+# fields; ``KEYS`` orders the columns of ``per_step``.
+KEYS = (
+    "max_accel_x", "max_accel_y", "max_accel_z", "max_accel_e",
+    "max_feed_x", "max_feed_y", "max_feed_z", "max_feed_e",
+    "jerk_x", "jerk_y", "jerk_z", "jerk_e",
+    "accel_print", "accel_travel", "accel_retract", "accel_to_decel",
+    "junction_deviation", "square_corner_velocity", "max_velocity",
+    "min_segment_time", "min_feed", "min_travel_feed",
+)
+K = {k: i for i, k in enumerate(KEYS)}
+INF = float("inf")
+
+# Stock firmware configurations and known printer definitions. Sources:
+# - "marlin": Marlin 2.x Configuration.h defaults (DEFAULT_MAX_FEEDRATE {300,300,5,25},
+#   DEFAULT_MAX_ACCELERATION {3000,3000,100,10000}, DEFAULT_ACCELERATION / RETRACT / TRAVEL 3000,
+#   CLASSIC_JERK off -> JUNCTION_DEVIATION_MM 0.013, DEFAULT_EJERK 5).
+# - "klipper": toolhead.py defaults for what a printer.cfg must give (max_velocity / max_accel have
+#   no default there; we use a common 300 mm/s, 3000 mm/s^2), square_corner_velocity 5.0.
+# - "reprap": RepRapFirmware, an assumption (its compiled defaults were not checked): the
+#   M203 X6000 Y6000 Z300 E10000 (mm/min) example of its G-code documentation, M201 500,
+#   M566 900 mm/min (15 mm/s) jerk.
+# - "creality_ender3" / "prusa_i3_mk3" / "cura_fdmprinter": Cura's machine definitions
+#   (Ultimaker/Cura resources/definitions creality_base.def.json, prusa_i3_mk3.def.json,
+#   fdmprinter.def.json: machine_max_feedrate_*, machine_max_acceleration_*, machine_acceleration,
+#   machine_max_jerk_xy/z/e), the limits Cura's own estimator runs with (fdmprinter's
+#   299792458000 mm/s "no limit" feedrates are written as inf).
+PRINTER_DEFAULTS: dict[str, dict[str, float]] = {
+    "marlin": dict(max_accel_x=3000, max_accel_y=3000, max_accel_z=100, max_accel_e=10000,
+                   max_feed_x=300, max_feed_y=300, max_feed_z=5, max_feed_e=25,
+                   jerk_x=10, jerk_y=10, jerk_z=0.3, jerk_e=5,
+                   accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
+                   junction_deviation=0.013, square_corner_velocity=np.nan, max_velocity=INF,
+                   min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+    "klipper": dict(max_accel_x=INF, max_accel_y=INF, max_accel_z=100, max_accel_e=INF,
+                    max_feed_x=INF, max_feed_y=INF, max_feed_z=15, max_feed_e=INF,
+                    jerk_x=np.nan, jerk_y=np.nan, jerk_z=np.nan, jerk_e=np.nan,
+                    accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
+                    junction_deviation=np.nan, square_corner_velocity=5.0, max_velocity=300,
+                    min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+    "reprap": dict(max_accel_x=500, max_accel_y=500, max_accel_z=20, max_accel_e=250,
+                   max_feed_x=100, max_feed_y=100, max_feed_z=5, max_feed_e=10000 / 60,
+                   jerk_x=15, jerk_y=15, jerk_z=0.3, jerk_e=5,
+                   accel_print=500, accel_travel=500, accel_retract=250, accel_to_decel=INF,
+                   junction_deviation=np.nan, square_corner_velocity=np.nan, max_velocity=INF,
+                   min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+    "creality_ender3": dict(max_accel_x=500, max_accel_y=500, max_accel_z=100, max_accel_e=5000,
+                            max_feed_x=500, max_feed_y=500, max_feed_z=10, max_feed_e=50,
+                            jerk_x=10, jerk_y=10, jerk_z=0.4, jerk_e=5,
+                            accel_print=500, accel_travel=500, accel_retract=500, accel_to_decel=INF,
+                            junction_deviation=np.nan, square_corner_velocity=np.nan, max_velocity=INF,
+                            min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+    # Cura's fdmprinter.def.json default_value entries: what CuraEngine run from the command line
+    # uses (the CLI does not evaluate a definition's "value" formulas), and so what Cura's own
+    # estimate assumes for a file sliced that way
+    "cura_fdmprinter": dict(max_accel_x=9000, max_accel_y=9000, max_accel_z=100, max_accel_e=10000,
+                            max_feed_x=INF, max_feed_y=INF, max_feed_z=INF, max_feed_e=INF,
+                            jerk_x=20, jerk_y=20, jerk_z=0.4, jerk_e=5,
+                            accel_print=4000, accel_travel=4000, accel_retract=4000, accel_to_decel=INF,
+                            junction_deviation=np.nan, square_corner_velocity=np.nan, max_velocity=INF,
+                            min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+    # prusa_i3_mk3.def.json: fdmprinter plus default_value overrides machine_acceleration 1000,
+    # machine_max_acceleration_z 500, machine_max_feedrate_z 12 / _e 120, machine_max_jerk_xy 10,
+    # _z 0.2, _e 2.5 (default_value entries, so the CLI applies them too)
+    "prusa_i3_mk3": dict(max_accel_x=9000, max_accel_y=9000, max_accel_z=500, max_accel_e=10000,
+                         max_feed_x=INF, max_feed_y=INF, max_feed_z=12, max_feed_e=120,
+                         jerk_x=10, jerk_y=10, jerk_z=0.2, jerk_e=2.5,
+                         accel_print=1000, accel_travel=1000, accel_retract=1000, accel_to_decel=INF,
+                         junction_deviation=np.nan, square_corner_velocity=np.nan, max_velocity=INF,
+                         min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+}
+# Which junction rule each default uses: Marlin 2 stock is junction deviation; the printer
+# definitions above (and Prusa / Creality firmware) use classic jerk.
+DEFAULT_JUNCTION = {"marlin": "deviation", "klipper": "scv", "reprap": "jerk", "cura_fdmprinter": "jerk",
+                    "creality_ender3": "jerk", "prusa_i3_mk3": "jerk"}
+
+
+@dataclass(frozen=True, eq=False)
+class MachineLimits:
+    """Planner limits in force at the first motion step, with their sources and later changes."""
+
+    firmware: str                       # "marlin" | "klipper" | "reprap": whose planner rules apply
+    junction: str                       # "jerk" (classic, Marlin/Prusa) | "deviation" (Marlin 2 JD) | "scv" (Klipper)
+    max_accel_mm_s2: np.ndarray         # (4,) X Y Z E, per-axis acceleration limit (M201)
+    max_feed_mm_s: np.ndarray           # (4,) per-axis feedrate limit (M203)
+    jerk_mm_s: np.ndarray               # (4,) classic jerk: max instantaneous speed change (M205 X Y Z E / M566)
+    accel_print_mm_s2: float            # M204 P (S)
+    accel_travel_mm_s2: float           # M204 T (Marlin 2), = print on firmwares without one
+    accel_retract_mm_s2: float          # M204 R: extruder-only moves
+    accel_to_decel_mm_s2: float         # Klipper max_accel_to_decel (inf: none set in the file)
+    junction_deviation_mm: float        # Marlin 2 JD (M205 J) / machine_max_junction_deviation
+    square_corner_velocity_mm_s: float  # Klipper square_corner_velocity
+    max_velocity_mm_s: float            # Klipper max_velocity (caps every move's speed)
+    min_segment_time_s: float           # Marlin M205 B (us -> s); 0: not modelled / none
+    min_feed_mm_s: float                # M205 S: minimum printing feedrate
+    min_travel_feed_mm_s: float         # M205 T: minimum travel feedrate
+    source: dict = field(default_factory=dict)   # key (see KEYS, plus firmware/junction) -> where it came from
+    changes: tuple = ()                 # ((line, key, value), ...) applied from that line on, after the first motion
+    profile: str = ""                   # which PRINTER_DEFAULTS row filled the gaps
+
+    def vector(self) -> np.ndarray:
+        """The values as one float vector in ``KEYS`` order."""
+        v = np.empty(len(KEYS))
+        v[0:4], v[4:8], v[8:12] = self.max_accel_mm_s2, self.max_feed_mm_s, self.jerk_mm_s
+        v[12:] = (self.accel_print_mm_s2, self.accel_travel_mm_s2, self.accel_retract_mm_s2,
+                  self.accel_to_decel_mm_s2, self.junction_deviation_mm,
+                  self.square_corner_velocity_mm_s, self.max_velocity_mm_s, self.min_segment_time_s,
+                  self.min_feed_mm_s, self.min_travel_feed_mm_s)
+        return v
+
+    def regimes(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(change_line, table)``: row r of ``table`` (len(KEYS) columns) is in force from
+        ``change_line[r-1]`` (row 0 from the start); a step on line l uses row
+        ``searchsorted(change_line, l, 'right')``."""
+        rows = [self.vector()]
+        lines = []
+        for line, key, value in self.changes:
+            row = rows[-1].copy()
+            row[K[key]] = value
+            if lines and lines[-1] == line:
+                rows[-1] = row
+            else:
+                rows.append(row)
+                lines.append(line)
+        return np.asarray(lines, dtype=np.int64), np.vstack(rows)
+
+    def per_step(self, program: Program) -> np.ndarray:
+        """(n_steps, len(KEYS)): the limits in force at each step."""
+        lines, table = self.regimes()
+        return table[np.searchsorted(lines, program.line, side="right")]
+
+    def with_values(self, **values) -> "MachineLimits":
+        """A copy with some scalar limits replaced everywhere (keys as in ``KEYS``)."""
+        v = self.vector()
+        for k, x in values.items():
+            v[K[k]] = x
+        changes = tuple(c for c in self.changes if c[1] not in values)
+        src = dict(self.source, **{k: "override" for k in values})
+        return _from_vector(v, self.firmware, self.junction, src, changes, self.profile)
+
+    def describe(self) -> list[str]:
+        """Human-readable lines: each value with its source."""
+        v = self.vector()
+        out = [f"firmware {self.firmware}, junction rule {self.junction} ({self.source.get('junction', '')})"]
+        for i, k in enumerate(KEYS):
+            out.append(f"{k} = {v[i]:g}  [{self.source.get(k, '')}]")
+        if self.changes:
+            out.append(f"{len(self.changes)} changes after the first motion step")
+        return out
+
+
+def _from_vector(v, firmware, junction, source, changes, profile) -> MachineLimits:
+    return MachineLimits(
+        firmware=firmware, junction=junction,
+        max_accel_mm_s2=v[0:4].copy(), max_feed_mm_s=v[4:8].copy(), jerk_mm_s=v[8:12].copy(),
+        accel_print_mm_s2=float(v[12]), accel_travel_mm_s2=float(v[13]),
+        accel_retract_mm_s2=float(v[14]), accel_to_decel_mm_s2=float(v[15]),
+        junction_deviation_mm=float(v[16]), square_corner_velocity_mm_s=float(v[17]),
+        max_velocity_mm_s=float(v[18]), min_segment_time_s=float(v[19]),
+        min_feed_mm_s=float(v[20]), min_travel_feed_mm_s=float(v[21]),
+        source=source, changes=tuple(changes), profile=profile)
+
+
+# ------------------------------------------------------------------------------------------------
+# reading the file
+_CONFIG_RE = re.compile(rb"^; *(machine_[a-z_]+|gcode_flavor|xy_accel_mm_per_s_per_s) *= *([^\r\n]*)", re.M)
+_CMD_RE = re.compile(rb"^[ \t]*(?:N\d+[ \t]*)?(M201|M203|M204|M205|M566|SET_VELOCITY_LIMIT)"
+                     rb"(?![0-9A-Za-z_.])([^;\r\n]*)", re.M | re.I)
+_WORD_RE = re.compile(rb"([A-Za-z])[ \t]*([-+]?(?:\d+\.?\d*|\.\d+))")
+_KLIPPER_PARAM_RE = re.compile(rb"([A-Za-z_]+)[ \t]*=[ \t]*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
+_FLAVOR_RE = re.compile(rb"^;FLAVOR:([^\r\n]*)", re.M)
+_FIRMWARE_RE = re.compile(rb"^;Firmware: *([^\r\n]*)", re.M)     # ideaMaker
+_CURA_MACHINE_RE = re.compile(rb"^;TARGET_MACHINE\.NAME:([^\r\n]*)", re.M)
+
+_CONFIG_MAP = {
+    "machine_max_acceleration_x": "max_accel_x", "machine_max_acceleration_y": "max_accel_y",
+    "machine_max_acceleration_z": "max_accel_z", "machine_max_acceleration_e": "max_accel_e",
+    "machine_max_feedrate_x": "max_feed_x", "machine_max_feedrate_y": "max_feed_y",
+    "machine_max_feedrate_z": "max_feed_z", "machine_max_feedrate_e": "max_feed_e",
+    "machine_max_jerk_x": "jerk_x", "machine_max_jerk_y": "jerk_y",
+    "machine_max_jerk_z": "jerk_z", "machine_max_jerk_e": "jerk_e",
+    "machine_max_acceleration_extruding": "accel_print",
+    "machine_max_acceleration_travel": "accel_travel",
+    "machine_max_acceleration_retracting": "accel_retract",
+    "machine_max_junction_deviation": "junction_deviation",
+    "machine_min_extruding_rate": "min_feed", "machine_min_travel_rate": "min_travel_feed",
+}
+# KISSlicer's single XY acceleration (its config block): print and travel acceleration
+_KISS_ACCEL = "xy_accel_mm_per_s_per_s"
+
+
+def _first_number(text: str) -> float | None:
+    try:
+        return float(text.split(",")[0].strip())
+    except ValueError:
+        return None
+
+
+_HEAD_BYTES, _TAIL_BYTES = 262144, 524288   # where slicers put their config blocks
+
+
+def _ends(data: bytes) -> list[tuple[bytes, int]]:
+    """The head and the tail of the file (config blocks live there), as (chunk, offset)."""
+    if len(data) <= _HEAD_BYTES + _TAIL_BYTES:
+        return [(data, 0)]
+    start = len(data) - _TAIL_BYTES
+    start = data.find(b"\n", start) + 1 or start
+    return [(data[:_HEAD_BYTES], 0), (data[start:], start)]
+
+
+def _config(data: bytes) -> dict[str, str]:
+    out = {}
+    for chunk, _ in _ends(data):
+        for m in _CONFIG_RE.finditer(chunk):
+            out.setdefault(m.group(1).decode(), m.group(2).decode("utf-8", "replace"))
+    return out
+
+
+def _limit_commands(program: Program) -> list:
+    """``(line, match)`` for each limit-setting line (M201/M203/M204/M205/M566/SET_VELOCITY_LIMIT).
+    Uses the parser's per-line command columns when present so that only those lines are read."""
+    data, ls = program.data, program.line_start
+    letter = getattr(program, "line_letter", None)
+    number = getattr(program, "line_number", None)
+    if letter is None or number is None or len(letter) != program.n_lines:
+        found = list(_CMD_RE.finditer(data))
+        lines = np.searchsorted(ls, [m.start() for m in found], side="right") - 1
+        return list(zip(lines.tolist(), found))
+    cand = np.flatnonzero(((letter == ord("M")) & np.isin(number, (201, 203, 204, 205, 566)))
+                          | (letter == 64))
+    out = []
+    match = _CMD_RE.match
+    for i in cand.tolist():
+        m = match(data, ls[i], ls[i + 1])
+        if m is not None:
+            out.append((i, m))
+    return out
+
+
+def _flavor(data: bytes) -> str:
+    """The slicer's firmware flavor, lower case ('' if none)."""
+    m = None
+    for chunk, _ in _ends(data):
+        m = m or re.search(rb"^; *gcode_flavor *= *([^\r\n]*)", chunk, re.M)
+    if m is None:
+        m = _FLAVOR_RE.search(data, 0, 4096) or _FIRMWARE_RE.search(data, 0, 8192)
+    return m.group(1).decode("ascii", "replace").strip().lower() if m else ""
+
+
+def _printer_profile(data: bytes, firmware: str) -> tuple[str, str]:
+    """(PRINTER_DEFAULTS key, why) for the values the file does not give."""
+    head = data[:20000]
+    if b";Generated with Cura" in head or head.startswith(b";FLAVOR:"):
+        m = _CURA_MACHINE_RE.search(head)
+        if m is not None:       # the Cura front-end names the machine definition it evaluated
+            name = m.group(1).decode("ascii", "replace").lower()
+            if "creality" in name or "ender" in name:
+                return "creality_ender3", f"Cura machine {name!r}: Creality base definition"
+            if "mk3" in name or "prusa" in name:
+                return "prusa_i3_mk3", f"Cura machine {name!r}"
+            return "cura_fdmprinter", f"Cura machine {name!r} not known: fdmprinter defaults"
+        if b"G80 ; mesh bed leveling" in head:
+            return "prusa_i3_mk3", "Cura header without machine name, Prusa i3 MK3 start G-code"
+        return "cura_fdmprinter", "Cura header without machine name: fdmprinter defaults (CuraEngine CLI)"
+    return firmware, f"stock {firmware} configuration"
+
+
+def machine_limits(program: Program, profile: str | None = None) -> MachineLimits:
+    """Planner limits for ``program``: file lines, then the slicer's config block, then defaults.
+
+    ``profile`` names a ``PRINTER_DEFAULTS`` row for the values the file does not give (default:
+    recognised from the header, else the firmware's stock configuration).
+    """
+    data = program.data
+    flavor = _flavor(data)
+    cmds = _limit_commands(program)
+    has_klipper_cmd = any(m.group(1).upper() == b"SET_VELOCITY_LIMIT" for _, m in cmds)
+    if "klipper" in flavor or has_klipper_cmd:
+        firmware = "klipper"
+    elif "reprapfirmware" in flavor or flavor == "rrf":
+        # RepRapFirmware (M203 in mm/min, M566 jerk). Slic3r's "reprap" flavor is RepRap/Sprinter,
+        # i.e. Marlin-like firmware: planned as Marlin.
+        firmware = "reprap"
+    else:
+        firmware = "marlin"
+    source: dict[str, str] = {"firmware": f"flavor {flavor!r}" if flavor else "default (no flavor)"}
+
+    # --- 3: defaults --------------------------------------------------------------------------
+    if profile is None:
+        profile, why = _printer_profile(data, firmware)
+    else:
+        why = "requested"
+    if profile not in PRINTER_DEFAULTS:
+        raise GatesoptError(f"unknown printer profile {profile!r} (known: {', '.join(PRINTER_DEFAULTS)})")
+    v = np.array([float(PRINTER_DEFAULTS[profile][k]) for k in KEYS])
+    for k in KEYS:
+        source[k] = f"default: {profile} ({why})"
+    junction = DEFAULT_JUNCTION[profile]
+    source["junction"] = f"default: {profile}"
+    if firmware == "klipper":
+        junction = "scv"
+        source["junction"] = "Klipper: square_corner_velocity"
+
+    # --- 2: the slicer's config block ----------------------------------------------------------
+    config = _config(data)
+    usage = config.get("machine_limits_usage", "").strip()
+    if usage != "ignore":
+        for key, name in _CONFIG_MAP.items():
+            if key in config:
+                x = _first_number(config[key])
+                if x is None:
+                    continue
+                if name == "accel_travel" and x == 0:   # 0: "same as extruding" (PrusaSlicer)
+                    continue
+                if name == "junction_deviation" and x <= 0:
+                    continue
+                v[K[name]] = x
+                source[name] = f"config: {key}"
+        if _KISS_ACCEL in config:
+            x = _first_number(config[_KISS_ACCEL])
+            if x and x > 0:
+                for name in ("accel_print", "accel_travel"):
+                    v[K[name]] = x
+                    source[name] = f"config: {_KISS_ACCEL}"
+        if firmware == "klipper" and "machine_max_jerk_x" in config:
+            # OrcaSlicer writes a Klipper printer's jerk as SET_VELOCITY_LIMIT SQUARE_CORNER_VELOCITY
+            x = _first_number(config["machine_max_jerk_x"])
+            if x:
+                v[K["square_corner_velocity"]] = x
+                source["square_corner_velocity"] = "config: machine_max_jerk_x (Klipper SCV)"
+        if firmware == "marlin" and any(k.startswith("machine_max_jerk") for k in config):
+            junction = "jerk"
+            source["junction"] = "config: machine_max_jerk_* (classic jerk)"
+        if firmware == "marlin" and "machine_max_junction_deviation" in config:
+            x = _first_number(config["machine_max_junction_deviation"])
+            if x and x > 0:
+                junction = "deviation"
+                source["junction"] = "config: machine_max_junction_deviation"
+    if firmware == "klipper":
+        # one acceleration for every move on Klipper (toolhead.py max_accel)
+        v[K["accel_travel"]] = v[K["accel_retract"]] = v[K["accel_print"]]
+    # the config block's machine maxima also cap what later M204 / SET_VELOCITY_LIMIT lines ask
+    # for, as PrusaSlicer's estimator does (GCodeProcessor set_acceleration: "Clamp the
+    # acceleration with the maximum")
+    caps = {k: v[K[k]] for k in ("accel_print", "accel_travel", "accel_retract")
+            if source[k].startswith("config:")}
+
+    # --- 1: lines of the file -----------------------------------------------------------------
+    motion = np.isin(program.kind, np.asarray(MOTION_KINDS, dtype=program.kind.dtype))
+    first_motion_line = int(program.line[motion][0]) if motion.any() else program.n_lines
+    legacy_m204 = flavor in ("marlin", "marlinlegacy", "marlin_legacy")
+    mm_min = firmware == "reprap"
+    changes: list[tuple[int, str, float]] = []
+    jd_from_line = False
+    for line, m in cmds:
+        cmd = m.group(1).upper()
+        sets: list[tuple[str, float]] = []
+        if cmd == b"SET_VELOCITY_LIMIT":
+            p = {k.upper(): float(x) for k, x in _KLIPPER_PARAM_RE.findall(m.group(2))}
+            if b"ACCEL" in p:
+                sets += [("accel_print", p[b"ACCEL"]), ("accel_travel", p[b"ACCEL"]),
+                         ("accel_retract", p[b"ACCEL"])]
+            if b"ACCEL_TO_DECEL" in p:
+                sets.append(("accel_to_decel", p[b"ACCEL_TO_DECEL"]))
+            if b"SQUARE_CORNER_VELOCITY" in p:
+                sets.append(("square_corner_velocity", p[b"SQUARE_CORNER_VELOCITY"]))
+            if b"VELOCITY" in p:
+                sets.append(("max_velocity", p[b"VELOCITY"]))
+        else:
+            w = {k.upper(): float(x) for k, x in _WORD_RE.findall(m.group(2))}
+            if cmd == b"M201":
+                sets += [(f"max_accel_{a.lower()}", w[a.encode()]) for a in "XYZE" if a.encode() in w]
+            elif cmd == b"M203":
+                f = 1 / 60 if mm_min else 1.0
+                sets += [(f"max_feed_{a.lower()}", w[a.encode()] * f) for a in "XYZE" if a.encode() in w]
+            elif cmd == b"M566":
+                sets += [(f"jerk_{a.lower()}", w[a.encode()] / 60) for a in "XYZE" if a.encode() in w]
+            elif cmd == b"M204":
+                if firmware == "klipper":
+                    # Klipper's M204: S sets max_accel; else min(P, T)
+                    acc = w.get(b"S", min(w.get(b"P", INF), w.get(b"T", INF)))
+                    if acc < INF:
+                        sets += [("accel_print", acc), ("accel_travel", acc), ("accel_retract", acc)]
+                elif b"S" in w:
+                    # legacy format (Marlin 1 / Prusa firmware): S print (and travel), T retract
+                    sets += [("accel_print", w[b"S"]), ("accel_travel", w[b"S"])]
+                    if b"T" in w:
+                        sets.append(("accel_retract" if legacy_m204 or b"P" not in w else "accel_travel", w[b"T"]))
+                else:
+                    if b"P" in w:
+                        sets.append(("accel_print", w[b"P"]))
+                    if b"R" in w:
+                        sets.append(("accel_retract", w[b"R"]))
+                    if b"T" in w:
+                        sets.append(("accel_travel", w[b"T"]))
+            elif cmd == b"M205":
+                if b"X" in w:   # Marlin: X sets both X and Y jerk
+                    sets += [("jerk_x", w[b"X"]), ("jerk_y", w[b"X"])]
+                if b"Y" in w:
+                    sets.append(("jerk_y", w[b"Y"]))
+                if b"Z" in w:
+                    sets.append(("jerk_z", w[b"Z"]))
+                if b"E" in w:
+                    sets.append(("jerk_e", w[b"E"]))
+                if b"S" in w:
+                    sets.append(("min_feed", w[b"S"]))
+                if b"T" in w:
+                    sets.append(("min_travel_feed", w[b"T"]))
+                if b"B" in w:
+                    sets.append(("min_segment_time", w[b"B"] * 1e-6))
+                if b"J" in w:
+                    sets.append(("junction_deviation", w[b"J"]))
+                    jd_from_line = True
+        text = m.group(0).decode("utf-8", "replace").strip()
+        for key, x in sets:
+            if key in caps and caps[key] > 0:
+                x = min(x, caps[key])
+            if line < first_motion_line:
+                v[K[key]] = x
+                source[key] = f"line {line + 1}: {text}"
+            else:
+                changes.append((line, key, x))
+    if jd_from_line and firmware == "marlin":
+        junction = "deviation"
+        source["junction"] = "M205 J (junction deviation)"
+    if junction == "jerk" and np.isnan(v[K["jerk_x"]]):
+        junction = "deviation"
+    return _from_vector(v, firmware, junction, source, changes, profile)
