@@ -25,7 +25,8 @@ ERR_ABSURD = 3          # coordinate beyond ABSURD_MM
 ERR_BAD_FEED = 4        # F <= 0
 ERR_ARC = 5             # G2/G3 without I/J or R, or R too small for the chord
 
-ABSURD_MM = 100000.0    # 100 m: no printer has this; a coordinate beyond it is corrupt input
+ABSURD_MM = 100000.0    # 100 m: no printer has this; an X/Y/Z beyond it is corrupt input
+ABSURD_E_MM = 1.0e8     # 100 km of filament: E is cumulative, and a 1 kg spool is ~330 m
 
 # Kind values (kept equal to program.Kind)
 K_TRAVEL, K_EXTRUDE, K_RETRACT, K_UNRETRACT, K_Z_ONLY, K_ARC, K_DWELL, K_WAIT, K_HOME, K_MOTOR = range(10)
@@ -323,6 +324,18 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
     return cmd_letter, cmd_number, first_pos, False
 
 
+STATE_SIZE = 21   # pos[4], G92 offset[4], enable[4], G91, M83, G20, feed, fan, hotend, bed, reached x2
+
+
+def initial_state(ambient_c: float, default_feed_mm_s: float) -> np.ndarray:
+    """The printer at power-on: at the origin, absolute mm, motors on, heaters at ambient."""
+    st = np.zeros(STATE_SIZE)
+    st[8:12] = 1.0
+    st[15] = default_feed_mm_s
+    st[19] = st[20] = ambient_c
+    return st
+
+
 @njit(cache=True)
 def line_starts(buf):
     """Byte offset of each line's start, plus len(buf) at the end (no file-sized temporaries)."""
@@ -344,8 +357,13 @@ def line_starts(buf):
 
 
 @njit(cache=True)
-def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, default_feed_mm_s):
-    """One pass over all lines. Returns (error, error_line, error_letter, n_steps, arrays...)."""
+def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, default_feed_mm_s, state):
+    """One pass over all lines. Returns (error, error_line, error_letter, n_steps, arrays, markers).
+
+    ``state`` (float64, STATE_SIZE) is the modal state before the first line (see ``initial_state``)
+    and is updated in place to the state after the last line, so a file can be scanned chunk by
+    chunk (``gatesopt.stream``) with the same result as in one piece.
+    """
     n_lines = line_start.shape[0] - 1
     nmax = n_lines
     s_line = np.empty(nmax, np.int64)
@@ -353,7 +371,6 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
     # one position buffer: row 0 is the start position, row i+1 the end of step i, so that
     # start_mm = s_pos[:-1] and end_mm = s_pos[1:] are two views of the same memory
     s_pos = np.empty((nmax + 1, 4), np.float64)
-    s_pos[0, :] = 0.0
     s_feed = np.empty(nmax, np.float64)
     s_len = np.empty(nmax, np.float64)
     s_dur = np.empty(nmax, np.float64)
@@ -387,19 +404,20 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
     present = np.zeros(26, np.bool_)
     value = np.full(26, np.nan)
     bad = np.zeros(26, np.bool_)
-    pos = np.zeros(4)
-    off = np.zeros(4)
+    pos = state[0:4].copy()
+    off = state[4:8].copy()
     tgt = np.zeros(4)
-    en = np.ones(4, np.bool_)
-    rel_xyz = False
-    rel_e = False
-    inch = False
-    feed = default_feed_mm_s
-    fan = 0.0
-    hot = 0.0
-    bed = 0.0
-    hot_reached = ambient_c
-    bed_reached = ambient_c
+    en = state[8:12] != 0.0
+    rel_xyz = state[12] != 0.0
+    rel_e = state[13] != 0.0
+    inch = state[14] != 0.0
+    feed = state[15]
+    fan = state[16]
+    hot = state[17]
+    bed = state[18]
+    hot_reached = state[19]
+    bed_reached = state[20]
+    s_pos[0, :] = pos
     axis_letter = np.array([LX, LY, LZ, LE])
     n = 0
     for ln in range(n_lines):
@@ -454,7 +472,7 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
             if _match_upper(buf, fpos, b, SET_STEPPER_ENABLE):
                 i = fpos + SET_STEPPER_ENABLE.shape[0]
                 axis = -1
-                state = -1
+                en_value = -1
                 while i < b:
                     if _match_upper(buf, i, b, STEPPER_) and i + STEPPER_.shape[0] < b:
                         ch = _upper(buf[i + STEPPER_.shape[0]])
@@ -467,10 +485,10 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                         elif ch == 69:
                             axis = 3
                     if _match_upper(buf, i, b, ENABLE_) and i + ENABLE_.shape[0] < b:
-                        state = buf[i + ENABLE_.shape[0]] - 48
+                        en_value = buf[i + ENABLE_.shape[0]] - 48
                     i += 1
-                if axis >= 0 and (state == 0 or state == 1):
-                    en[axis] = state == 1
+                if axis >= 0 and (en_value == 0 or en_value == 1):
+                    en[axis] = en_value == 1
                     kind = K_MOTOR
             if kind < 0:
                 continue
@@ -499,15 +517,16 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                     continue
                 for q in range(4):
                     k = axis_letter[q]
+                    limit = ABSURD_E_MM if q == 3 else ABSURD_MM
                     if present[k]:
                         v = value[k] * scale
-                        if abs(v) > ABSURD_MM:
+                        if abs(v) > limit:
                             return ERR_ABSURD, ln, k, n, arrs, no_markers
                         rel = rel_e if q == 3 else rel_xyz
                         tgt[q] = pos[q] + v if rel else v + off[q]
                     else:
                         tgt[q] = pos[q]
-                    if abs(tgt[q]) > ABSURD_MM:
+                    if abs(tgt[q]) > limit:
                         return ERR_ABSURD, ln, k, n, arrs, no_markers
                 dx = tgt[0] - pos[0]
                 dy = tgt[1] - pos[1]
@@ -720,4 +739,17 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
             pos[q] = tgt[q]
         n += 1
     markers = (mk_line[:n_mk].copy(), mk_code[:n_mk].copy(), mk_z[:n_mk].copy(), mk_span[:n_mk].copy())
+    state[0:4] = pos
+    state[4:8] = off
+    for q in range(4):
+        state[8 + q] = 1.0 if en[q] else 0.0
+    state[12] = 1.0 if rel_xyz else 0.0
+    state[13] = 1.0 if rel_e else 0.0
+    state[14] = 1.0 if inch else 0.0
+    state[15] = feed
+    state[16] = fan
+    state[17] = hot
+    state[18] = bed
+    state[19] = hot_reached
+    state[20] = bed_reached
     return OK, -1, -1, n, arrs, markers

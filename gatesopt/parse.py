@@ -25,7 +25,7 @@ DEFAULT_FEED_MM_S = 25.0    # F1500: what Marlin-based slicers assume before the
 _ERR_TEXT = {
     _scan.ERR_BAD_NUMBER: "bad number for {L}",
     _scan.ERR_MISSING_NUMBER: "{L} has no number",
-    _scan.ERR_ABSURD: "absurd coordinate for {L} (beyond {lim:g} mm)",
+    _scan.ERR_ABSURD: "absurd coordinate for {L} (beyond {lim:g} mm)",   # lim: per axis, see _scan
     _scan.ERR_BAD_FEED: "feedrate F must be positive",
     _scan.ERR_ARC: "arc needs I/J or an R that reaches the end point",
 }
@@ -202,12 +202,17 @@ def _read_header(data: bytes) -> dict:
 
 
 # ------------------------------------------------------------------------------------------------
-def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | None = None) -> Program:
+def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | None = None,
+          state: np.ndarray | None = None, line_offset: int = 0, require_moves: bool = True) -> Program:
     """Parse G-code (a path, a ``.gz`` path, bytes or text) into a lossless ``Program``.
 
     ``time``: a ``gatesopt.energy.TimeAssumptions`` for durations the paper's T = L/F model
     cannot give (heat-up waits, homing); default: the paper profile's. ``flavor``: "klipper"
     to use Klipper's G90/G91 semantics; default: read from the file's header, else Marlin's.
+    ``state`` and ``line_offset`` are for reading a file in pieces (``gatesopt.stream``): the modal
+    state before the first line (updated in place to the state after the last), and the number of
+    lines before this piece, so that error messages name the line in the whole file; a piece may
+    have no moves (``require_moves=False``).
     Raises ``GcodeError`` (one line: ``file:line: text: reason``) for input that is not G-code.
     """
     from .energy import load_profile  # local: energy imports program, parse is imported by both
@@ -221,14 +226,15 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     header = _read_header(data)
     fl = (flavor or header.get("flavor", "")).lower()
     klipper = "klipper" in fl
+    state = _scan.initial_state(time.ambient_c, DEFAULT_FEED_MM_S) if state is None else state
     err, err_line, err_letter, n, arrs, markers = _scan.scan(
         buf, line_start, klipper, time.hotend_heat_c_per_s, time.bed_heat_c_per_s,
-        time.ambient_c, time.home_s, DEFAULT_FEED_MM_S)
+        time.ambient_c, time.home_s, DEFAULT_FEED_MM_S, state)
     if err != _scan.OK:
         text = data[line_start[err_line]:line_start[err_line + 1]].decode("utf-8", "replace")
         letter = chr(err_letter + 65) if err_letter >= 0 else "?"
-        raise GcodeError(name, int(err_line) + 1,
-                         _ERR_TEXT[err].format(L=letter, lim=_scan.ABSURD_MM), text=text)
+        raise GcodeError(name, int(err_line) + 1 + line_offset,
+                         _ERR_TEXT[err].format(L=letter, lim=_scan.ABSURD_E_MM if letter == "E" else _scan.ABSURD_MM), text=text)
     (s_line, s_kind, s_pos, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
      s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags) = arrs
     ph = np.flatnonzero(l_flags & 1)
@@ -242,14 +248,14 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     step_line, kind = s_line[s], s_kind[s]
     start, end = s_pos[:n], s_pos[1:n + 1]     # views of one buffer: start of step i = end of step i-1
     motion = kind <= Kind.ARC
-    if not motion.any():
+    if require_moves and not motion.any():
         raise GcodeError(name, None, "no moves: no G0/G1/G2/G3 line with a coordinate")
     layer, layer_z, layer_line, method = _find_layers(markers, step_line, kind, start, end)
     feature, feature_names = _find_features(data, markers, step_line)
     head = data[:65536]                 # the line ending is the file's convention: its head tells
     crlf = head.count(b"\r\n")
     line_ending = "\r\n" if crlf and crlf >= head.count(b"\n") // 2 else "\n"
-    if not (end[:, 3] > start[:, 3]).any():
+    if require_moves and not (end[:, 3] > start[:, 3]).any():
         warnings.append(f"{name}: no extrusion anywhere (E never increases)")
     prog = Program(
         source=name, data=data, line_start=line_start,

@@ -270,3 +270,11 @@ def test_missing_file_and_directory_and_corrupt_gzip(tmp_path):
 def test_no_extrusion_is_a_warning():
     p = parse("G1 X1 F600\nG1 X2\n")
     assert any("no extrusion" in w for w in p.warnings)
+
+
+def test_long_prints_may_extrude_more_than_100_m_but_not_absurd_amounts():
+    # cumulative E past 100 m is a long print, not corrupt input (a 1 kg spool is ~330 m)
+    p = parse("M83\n" + "G1 X1 E40000 F600\nG1 X0 E40000\n" * 3)
+    assert p.end_mm[-1, E] == 240000
+    with pytest.raises(GcodeError, match="absurd coordinate for E"):
+        parse("G1 X1 E200000000 F600\n")

@@ -22,7 +22,13 @@ def register(sub) -> None:
     p.add_argument("--per-layer", action="store_true", help="add a table by layer")
     p.add_argument("--plot", metavar="OUT.png",
                    help="write energy over time (the paper's Fig. 4) and the energy-sector chart (Fig. 5)")
+    p.add_argument("--stream", action="store_true",
+                   help="read the file chunk by chunk in bounded memory (automatic above 256 MB); "
+                        "no --plot, no per-step data")
     p.set_defaults(func=run)
+
+
+STREAM_ABOVE_BYTES = 256 << 20     # whole-file arrays take ~8x the file: stream big files
 
 
 def _read(path: str):
@@ -39,7 +45,37 @@ def step_durations(program, time_model: str):
     return durations(program, model=time_model)
 
 
+def _wants_stream(args) -> bool:
+    import os
+    if args.file == "-":
+        return False
+    return args.stream or os.path.getsize(args.file) > STREAM_ABOVE_BYTES
+
+
+def run_stream(args) -> int:
+    from ..errors import GatesoptError
+    from ..stream import profile_stream
+    if args.plot:
+        raise GatesoptError("--plot needs the whole file in memory: drop --stream (or --plot)")
+    report = profile_stream(args.file, args.profile, time_model=args.time_model)
+    for w in report.warnings:
+        print(f"gatesopt: warning: {w}", file=sys.stderr)
+    if args.json:
+        d = report.to_dict(per_layer=args.per_layer)
+        d["time_model"] = args.time_model
+        json.dump(d, sys.stdout, indent=2)
+        print()
+        return 0
+    print(format_report(report, args.time_model))
+    if args.per_layer:
+        print()
+        print(format_layers(report))
+    return 0
+
+
 def run(args) -> int:
+    if _wants_stream(args):
+        return run_stream(args)
     program = _read(args.file)
     prof = load_profile(args.profile)
     duration_s = step_durations(program, args.time_model)

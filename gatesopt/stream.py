@@ -1,0 +1,236 @@
+"""Files of any size in bounded memory: read, profile and gate G-code chunk by chunk.
+
+A whole-file Program holds about 8x the file's size in arrays; a 1 GB file would need 8 GB. Here the
+file is read in chunks that end at a line boundary; the parser's modal state (position, G92
+offsets, G90/G91, M82/M83, units, feed, fan, temperatures, motor enables) is carried from one chunk
+to the next (``gatesopt.parse(..., state=...)``), so each chunk's Program is exactly the rows the
+whole-file parse would give. Peak memory is about 9x the chunk size, whatever the file size.
+
+Gating chunk by chunk keeps every motor on at each chunk boundary (the next chunk starts from the
+file's own enable state): the off interval that would run from a motor's last step to the chunk's
+end is dropped, one gap per motor per chunk of millions of lines.
+"""
+from __future__ import annotations
+
+import dataclasses
+import gzip
+import os
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from . import _scan
+from .energy import EnergyReport, load_profile, profile
+from .errors import GatesoptError, GcodeError
+from .parse import BGCODE_MAGIC, DEFAULT_FEED_MM_S, GZIP_MAGIC, parse
+
+DEFAULT_CHUNK_BYTES = 64 << 20
+
+
+def iter_chunks(path, chunk_bytes: int = DEFAULT_CHUNK_BYTES):
+    """Yield (bytes, first_line_number_0_based) pieces of a file, each ending at a line boundary."""
+    p = Path(path)
+    try:
+        head = p.open("rb").read(4)
+    except FileNotFoundError:
+        raise GcodeError(str(p), None, "no such file") from None
+    except OSError as exc:
+        raise GcodeError(str(p), None, f"cannot read: {exc.strerror}") from None
+    if head[:4] == BGCODE_MAGIC:
+        raise GcodeError(str(p), None, "binary G-code (.bgcode) is not supported: turn off "
+                         "'Supports binary G-code' in PrusaSlicer and export again")
+    f = gzip.open(p, "rb") if head[:2] == GZIP_MAGIC else p.open("rb")
+    line0 = 0
+    rest = b""
+    with f:
+        while True:
+            block = f.read(chunk_bytes)
+            if not block:
+                break
+            data = rest + block
+            cut = data.rfind(b"\n") + 1
+            if cut == 0:            # a line longer than a chunk: keep reading
+                rest = data
+                continue
+            piece, rest = data[:cut], data[cut:]
+            yield piece, line0
+            line0 += piece.count(b"\n")
+    if rest:
+        yield rest, line0
+
+
+def _parse_piece(piece: bytes, name: str, state, line0: int, flavor: str | None):
+    return parse(piece, source=name, state=state, line_offset=line0, flavor=flavor, require_moves=False)
+
+
+def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT_CHUNK_BYTES,
+                   progress=None, time_model: str = "paper") -> EnergyReport:
+    """``energy.profile`` of a file of any size, chunk by chunk (per-step arrays are not kept).
+
+    With ``time_model="planner"`` the machine limits are read once, from the first chunk (where the
+    slicer writes them), and each chunk is planned on its own: the look-ahead restarts at a chunk
+    boundary, a few moves in millions.
+    """
+    prof = load_profile(profile_name)
+    state = _scan.initial_state(prof.time.ambient_c if prof.kind == "table" else 25.0, DEFAULT_FEED_MM_S)
+    name = str(path)
+    tot = defaultdict(float)
+    sectors = defaultdict(float)
+    by_kind_j, by_kind_s = defaultdict(float), defaultdict(float)
+    layer_t, layer_e, layer_z = [], [], []
+    n_lines = n_steps = n_moves = 0
+    flavor = None
+    warnings = []
+    method = ""
+    any_moves = False
+    last_extruding = False      # the previous chunk ended extruding (a spiral crossing the boundary)
+    limits = None
+    for piece, line0 in iter_chunks(path, chunk_bytes):
+        prog = _parse_piece(piece, name, state, line0, flavor)
+        if flavor is None:      # the header (first chunk) says which G90/G91 semantics apply
+            flavor = prog.header.get("flavor", "") or "marlin"
+        warnings += list(prog.warnings)
+        n_lines += prog.n_lines
+        if prog.n_steps == 0:
+            continue
+        any_moves = any_moves or bool((prog.kind <= 5).any())
+        dur = None
+        if time_model == "planner":
+            from .limits import machine_limits
+            from .planner import durations
+            limits = limits if limits is not None else machine_limits(prog)
+            dur = durations(prog, model="planner", limits=limits)
+        r = profile(prog, prof, duration_s=dur)
+        tot["time"] += r.time_s
+        tot["energy"] += r.energy_j
+        n_steps += r.n_steps
+        n_moves += r.n_moves
+        for k, v in r.sectors_j.items():
+            sectors[k] += v
+        for k, v in r.by_kind_j.items():
+            by_kind_j[k] += v
+            by_kind_s[k] += r.by_kind_s[k]
+        # steps before this chunk's first layer marker belong to the previous chunk's last layer
+        pre = prog.layer < 0
+        if pre.any() and layer_t:
+            d = (prog.duration_s if dur is None else dur)[pre]
+            layer_t[-1] += float(d.sum())
+            layer_e[-1] += float(r.step_energy_j[pre].sum())
+        lt, le, lz = r.layer_time_s.tolist(), r.layer_energy_j.tolist(), prog.layer_z_mm.tolist()
+        ext = np.flatnonzero(prog.extruding)
+        continues = bool(lz and layer_z) and (abs(lz[0] - layer_z[-1]) < 1e-6 or
+                                             (len(ext) > 0 and ext[0] == 0 and last_extruding))
+        last_extruding = bool(prog.extruding[-1])
+        if prog.layer_method == "z-change" and continues:
+            # a layer found by Z changes (parse.py's fallback rule: a new layer needs a new Z reached
+            # by a non-extruding move) that the chunk boundary cut in two: one layer again
+            layer_t[-1] += lt.pop(0)
+            layer_e[-1] += le.pop(0)
+            lz.pop(0)
+        layer_t += lt
+        layer_e += le
+        layer_z += lz
+        method = method or prog.layer_method
+        if progress:
+            progress(line0 + prog.n_lines)
+    if n_lines == 0:
+        raise GcodeError(name, None, "empty file: no G-code in it")
+    if not any_moves:
+        raise GcodeError(name, None, "no moves: no G0/G1/G2/G3 line with a coordinate")
+    empty = np.zeros(0)
+    return EnergyReport(
+        source=name, profile=prof.name, n_lines=n_lines, n_steps=n_steps, n_moves=n_moves,
+        n_layers=len(layer_z), time_s=tot["time"], energy_j=tot["energy"], sectors_j=dict(sectors),
+        by_kind_j=dict(by_kind_j), by_kind_s=dict(by_kind_s), layer_time_s=np.array(layer_t),
+        layer_energy_j=np.array(layer_e), layer_z_mm=np.array(layer_z), step_energy_j=empty,
+        step_end_s=empty, layer_method=(method + " (streamed)") if method else "streamed",
+        warnings=tuple(warnings[:20]))
+
+
+@dataclasses.dataclass(frozen=True)
+class StreamGatingResult:
+    chunks: int
+    energy_before_j: float
+    energy_after_j: float
+    lines_before: int
+    lines_after: int
+    verified: bool
+    findings: tuple
+
+    @property
+    def saving_pct(self) -> float:
+        return 100.0 * (1.0 - self.energy_after_j / self.energy_before_j) if self.energy_before_j else 0.0
+
+
+def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dgates",
+                motors=("X", "Y"), chunk_bytes: int = DEFAULT_CHUNK_BYTES, verify_chunks: bool = True,
+                force: bool = False, progress=None) -> StreamGatingResult:
+    """Gate a file of any size chunk by chunk into ``out_path`` (temp file + rename, verified).
+
+    No rotation (a rotation must be chosen over the whole print, which a stream cannot see first).
+    """
+    from .gating.emit import emit
+    from .gating.problem import GatingOptions, build, score
+    from .gating.solve import solve
+    from .verify import verify
+
+    out_path = Path(out_path)
+    if out_path.exists() and not force:
+        raise GatesoptError(f"{out_path}: exists; pass --force to overwrite it")
+    opts = GatingOptions.for_firmware(firmware, motors=tuple(motors), rotate="none")
+    name = str(path)
+    state_in = _scan.initial_state(25.0, DEFAULT_FEED_MM_S)
+    state_out = state_in.copy()
+    tmp = out_path.with_name(out_path.name + f".tmp-{os.getpid()}")
+    e_before = e_after = 0.0
+    lines_before = lines_after = 0
+    findings = []
+    chunks = 0
+    flavor = None
+    try:
+        with open(tmp, "wb") as out:
+            for piece, line0 in iter_chunks(path, chunk_bytes):
+                chunks += 1
+                prog = _parse_piece(piece, name, state_in, line0, flavor)
+                if flavor is None:
+                    flavor = prog.header.get("flavor", "") or "marlin"
+                lines_before += prog.n_lines
+                if not (prog.kind <= 5).any():
+                    out.write(piece)
+                    _parse_piece(piece, name + " (output)", state_out, line0, flavor)
+                    lines_after += prog.n_lines
+                    continue
+                problem = build(prog, opts)
+                sol = solve(problem, formulation)
+                end = float(problem.time_before_s)
+                keep = sol.off_end_s < end - 1e-12        # motors on at the chunk boundary
+                if not keep.all():
+                    m, a, b = sol.off_motor[keep], sol.off_start_s[keep], sol.off_end_s[keep]
+                    sc = score(problem, m, a, b)
+                    sol = dataclasses.replace(sol, off_motor=m, off_start_s=a, off_end_s=b,
+                                              energy_j=sc.energy_j, lines_added=sc.lines_added,
+                                              added_time_s=sc.added_time_s)
+                text = emit(prog, sol, firmware=firmware)
+                data = text.encode("utf-8", "surrogateescape")
+                out.write(data)
+                state_before_out = state_out.copy()
+                outp = _parse_piece(data, name + " (output)", state_out, line0, flavor)
+                lines_after += outp.n_lines
+                e_before += sol.energy_before_j
+                e_after += sol.energy_j
+                if verify_chunks:
+                    rep = verify(prog, outp, firmware=firmware, start_ahead_s=opts.start_ahead_s,
+                                 end_late_s=opts.end_late_s, claimed=(sol.energy_j, sol.time_after_s))
+                    if not rep.ok:
+                        findings += [f"chunk {chunks}: {f}" for f in rep.findings[:5]]
+                del prog, outp, problem, sol, text, data, state_before_out
+                if progress:
+                    progress(line0)
+        if findings:
+            raise GatesoptError(f"{name}: verification failed, nothing written: {findings[0]}")
+        os.replace(tmp, out_path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return StreamGatingResult(chunks, e_before, e_after, lines_before, lines_after, not findings, tuple(findings))

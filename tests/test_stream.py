@@ -1,0 +1,83 @@
+"""Streaming: chunk-by-chunk parsing, profiling and gating equal the whole-file results."""
+from __future__ import annotations
+
+import gzip
+
+import numpy as np
+import pytest
+
+from gatesopt import GcodeError, parse
+from gatesopt import _scan
+from gatesopt.energy import profile
+from gatesopt.parse import DEFAULT_FEED_MM_S
+from gatesopt.stream import gate_stream, iter_chunks, profile_stream
+
+from conftest import PROJECT_INSTANCES, SHARED_INSTANCES, read_bytes
+
+
+def test_chunks_end_at_line_boundaries_and_cover_the_file(tmp_path):
+    text = "".join(f"G1 X{i} Y{i % 7} F600 ; line {i}\n" for i in range(5000)) + "G1 X0"
+    p = tmp_path / "a.gcode.gz"
+    p.write_bytes(gzip.compress(text.encode()))
+    pieces = list(iter_chunks(p, chunk_bytes=4096))
+    assert len(pieces) > 10
+    assert b"".join(c for c, _ in pieces) == text.encode()
+    assert all(c.endswith(b"\n") for c, _ in pieces[:-1])
+    assert [l0 for _, l0 in pieces] == list(np.cumsum([0] + [c.count(b"\n") for c, _ in pieces[:-1]]))
+
+
+def test_carried_state_gives_the_whole_file_rows():
+    text = ("G20\nM83\nG91\nG1 X1 E0.1 F60\nG90\nG92 X0\nM82\nG1 X2 E5\nG92 E0\nM106 S128\n"
+            "S0 Y\nG1 Y3 E1\nM104 S200\nG1 X0 E2\n")
+    whole = parse(text)
+    lines = text.splitlines(keepends=True)
+    state = _scan.initial_state(25.0, DEFAULT_FEED_MM_S)
+    parts = []
+    for a, b in ((0, 4), (4, 9), (9, 14)):
+        parts.append(parse("".join(lines[a:b]), state=state, line_offset=a, require_moves=False))
+    end = np.vstack([p.end_mm for p in parts if p.n_steps])
+    assert np.allclose(end, whole.end_mm)
+    assert np.array_equal(np.concatenate([p.enabled for p in parts if p.n_steps]), whole.enabled)
+    assert np.allclose(np.concatenate([p.fan for p in parts if p.n_steps]), whole.fan)
+
+
+def test_error_line_numbers_count_from_the_whole_file(tmp_path):
+    p = tmp_path / "bad.gcode"
+    p.write_text("".join("G1 X1 F600\n" for _ in range(3000)) + "G1 X1.2.3\n")
+    with pytest.raises(GcodeError, match=r"bad.gcode:3001: G1 X1.2.3: bad number for X"):
+        profile_stream(p, chunk_bytes=2048)
+
+
+@pytest.mark.parametrize("name", ["real_prusa261_benchy.gcode.gz", "slic3r13_star_honey20.gcode.gz",
+                                  "real_fullcontrol_ripple_vase.gcode.gz"])
+@pytest.mark.parametrize("chunk", [60_000, 1_000_000])
+def test_streamed_profile_equals_the_whole_file(name, chunk):
+    path = SHARED_INSTANCES / name
+    if not path.exists():
+        pytest.skip(f"{path} not found")
+    r = profile(parse(path))
+    s = profile_stream(path, chunk_bytes=chunk)
+    assert s.n_lines == r.n_lines and s.n_steps == r.n_steps and s.n_layers == r.n_layers
+    assert s.energy_j == pytest.approx(r.energy_j, rel=1e-12)
+    assert s.time_s == pytest.approx(r.time_s, rel=1e-12)
+    assert np.allclose(s.layer_energy_j, r.layer_energy_j, rtol=1e-9, atol=1e-9)
+    for k in r.sectors_j:
+        assert s.sectors_j[k] == pytest.approx(r.sectors_j[k], rel=1e-9, abs=1e-9)
+
+
+def test_streamed_gating_is_verified_and_close_to_whole_file(tmp_path):
+    from gatesopt.gating.problem import GatingOptions, build
+    from gatesopt.gating.solve import solve
+    src = PROJECT_INSTANCES / "cyl_grid.gcode"
+    out = tmp_path / "out.gcode"
+    res = gate_stream(src, out, chunk_bytes=8_000)
+    assert res.chunks > 2 and res.verified
+    whole = solve(build(parse(src), GatingOptions(rotate="none")), "dp")
+    # keeping motors on at chunk boundaries can only cost energy, and only a little
+    assert whole.energy_j <= res.energy_after_j + 1e-6 < res.energy_before_j
+    assert res.energy_after_j <= whole.energy_j * 1.01
+    assert profile(parse(out)).n_lines == res.lines_after
+    # never overwrite without force, and nothing partial is left behind
+    with pytest.raises(Exception, match="exists"):
+        gate_stream(src, out, chunk_bytes=8_000)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.gcode"]
