@@ -1,0 +1,82 @@
+"""Exact gating when the problem separates: one linear, vectorised pass (formulations/gating.md "dp").
+
+With no budgets, no shared stall and additive XY power, the energy of a gating is
+E0 - sum_g x_g * net_g with net_g = gap_saving_j[g] - gap_stall_j[g]: each gap is decided on its
+own, off iff net_g > 0 (a tie keeps the motor on: fewer lines). The best rotation is the one with the
+least energy, then the fewest lines. Otherwise (budgets, shared stalls, non-additive power) the same
+pass is a heuristic: budgets are repaired by dropping the gaps of least net value per unit of
+budget, and the status is "feasible".
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from .problem import GatingProblem, GatingSolution, solution_from_gaps
+
+_REL_TIE = 1e-12
+
+
+def choose(problem: GatingProblem) -> tuple[int, np.ndarray]:
+    """(angle index, chosen gap indices) of the separable optimum (budgets ignored)."""
+    net = problem.gap_net_j
+    on = net > 0.0
+    K = problem.n_angles
+    gain = np.bincount(problem.gap_angle[on], weights=net[on], minlength=K)
+    lines = np.bincount(problem.gap_angle[on], weights=problem.gap_lines[on], minlength=K)
+    best = gain.max() if K else 0.0
+    tied = np.flatnonzero(gain >= best - _REL_TIE * max(abs(problem.energy_before_j), 1.0))
+    k = int(tied[np.argmin(lines[tied])])       # energy first, then lines (first angle on a tie)
+    chosen = np.flatnonzero(on & (problem.gap_angle == k))
+    return k, chosen
+
+
+def repair_budgets(problem: GatingProblem, chosen: np.ndarray) -> np.ndarray:
+    """Drop chosen gaps, least net value per unit of budget first, until both budgets hold
+    (counted with each gap's own lines and stall: an upper bound on the shared count)."""
+    T_max, L_max = problem.max_added_time_s, problem.max_added_lines
+    if not np.isfinite(T_max) and not np.isfinite(L_max):
+        return chosen
+    net = problem.gap_net_j[chosen]
+    use = 0.0
+    if np.isfinite(T_max) and T_max >= 0:
+        use = use + problem.gap_stall_s[chosen] / max(T_max, 1e-12)
+    if np.isfinite(L_max):
+        use = use + problem.gap_lines[chosen] / max(L_max, 1e-12)
+    density = net / np.maximum(use, 1e-300)
+    order = np.argsort(-density, kind="stable")
+    t = np.cumsum(problem.gap_stall_s[chosen][order])
+    l = np.cumsum(problem.gap_lines[chosen][order])
+    ok = (t <= T_max + 1e-12) & (l <= L_max)
+    # keep the longest prefix that fits, then any later gap that still fits (one greedy pass)
+    keep = np.zeros(len(order), bool)
+    if ok.all():
+        return chosen
+    n_pref = int(np.argmin(ok)) if not ok.all() else len(ok)
+    keep[:n_pref] = True
+    tt = t[n_pref - 1] if n_pref else 0.0
+    ll = l[n_pref - 1] if n_pref else 0
+    for j in range(n_pref, len(order)):
+        g = chosen[order[j]]
+        if tt + problem.gap_stall_s[g] <= T_max + 1e-12 and ll + problem.gap_lines[g] <= L_max:
+            keep[j] = True
+            tt += problem.gap_stall_s[g]
+            ll += problem.gap_lines[g]
+    return np.sort(chosen[order[keep]])
+
+
+def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
+          hint: GatingSolution | None = None) -> GatingSolution:
+    t0 = time.perf_counter()
+    k, chosen = choose(problem)
+    exact = problem.separable
+    if problem.options.has_budget:
+        chosen = repair_budgets(problem, chosen)
+    sol = solution_from_gaps(problem, "dp", "optimal" if exact else "feasible", k, chosen,
+                             solve_s=time.perf_counter() - t0,
+                             message="" if exact else "not separable: dp is a heuristic here")
+    if exact:   # the separable optimum is its own bound
+        sol = replace(sol, bound=sol.energy_j, gap=0.0, solve_s=time.perf_counter() - t0)
+    return sol
