@@ -1,0 +1,279 @@
+"""``gatesopt solve`` and ``gatesopt compare``: motor power gating (3DGates) from the command line.
+
+Option parsing and printing only; the work is ``gatesopt.gating.pipeline.run`` (order -> build ->
+solve -> emit -> re-parse -> verify). Every output is verified before it is written; a file is
+written to a temporary name in the target folder and renamed, never over an existing file without
+``--force``, never over the input.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import tempfile
+
+from ..errors import GatesoptError
+from ..parse import parse
+
+FIRMWARES = ("3dgates", "marlin", "klipper")
+FORMULATION_NAMES = ("greedy", "dp", "milp", "cpsat")
+
+
+def _add_common(p) -> None:
+    p.add_argument("--firmware", choices=FIRMWARES, default="3dgates",
+                   help="instruction dialect and cost model (default: 3dgates, the paper's S0/S1)")
+    p.add_argument("--motors", default="X,Y", metavar="X,Y",
+                   help="motors to gate, comma separated (default X,Y; Z and E opt-in)")
+    p.add_argument("--rotate", default="auto", metavar="auto|none|DEG",
+                   help="rotate the model on the bed: auto (best angle), none, or degrees ccw")
+    p.add_argument("--start-ahead-ms", type=float, default=1.8,
+                   help="switch a motor on at least this long before it steps (default 1.8, paper)")
+    p.add_argument("--end-late-ms", type=float, default=1.0,
+                   help="keep a motor on at least this long after it steps (default 1.0, paper)")
+    p.add_argument("--max-added-time-pct", type=float, default=None, metavar="P",
+                   help="budget: firmware stalls may add at most P %% to the print time")
+    p.add_argument("--max-added-lines-pct", type=float, default=None, metavar="P",
+                   help="budget: at most P %% more lines")
+    p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
+                   help="solver time limit in seconds (milp, cpsat; default 60)")
+    p.add_argument("--profile", default="paper", metavar="NAME|TOML",
+                   help="energy profile: shipped name or TOML file (default: paper)")
+    p.add_argument("--bed", default=None, metavar="WxD",
+                   help="bed size in mm for the rotation check (default: from the file's header)")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("solve", help="insert motor power-gating instructions (and re-order curves)",
+                       description="Write gated G-code: motors switched off while idle (3DGates), "
+                                   "optionally rotated on the bed; verified before it is written.")
+    p.add_argument("file", help="input G-code (.gcode or .gcode.gz)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.gcode", help="output file")
+    p.add_argument("--formulation", choices=FORMULATION_NAMES, default="dp",
+                   help="greedy (paper's Algorithm 1), dp (exact when separable), milp, cpsat")
+    _add_common(p)
+    p.add_argument("--json", metavar="REPORT.json", help="also write the report as JSON")
+    p.add_argument("--no-order", action="store_true", help="do not re-order curves")
+    p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.set_defaults(func=run_solve)
+
+    c = sub.add_parser("compare", help="all gating formulations side by side",
+                       description="Solve each file with every gating formulation (greedy always "
+                                   "included) and print one table; outputs are verified, not written.")
+    c.add_argument("files", nargs="+", help="G-code files")
+    c.add_argument("--formulations", default=",".join(FORMULATION_NAMES), metavar="LIST",
+                   help="comma separated (default: all); greedy is always a row")
+    _add_common(c)
+    c.add_argument("--plot", metavar="OUT.png", help="bar chart of the saving per formulation")
+    c.add_argument("--json", metavar="OUT.json", help="write the rows as JSON")
+    c.set_defaults(func=run_compare)
+
+
+# ------------------------------------------------------------------------------------------------
+def options_from_args(args):
+    from ..gating.problem import GatingOptions
+    motors = tuple(m.strip().upper() for m in args.motors.split(",") if m.strip())
+    rotate = args.rotate
+    if rotate not in ("auto", "none"):
+        try:
+            rotate = float(rotate)
+        except ValueError:
+            raise GatesoptError(f"--rotate must be auto, none or degrees, not {args.rotate!r}") from None
+    for name in ("start_ahead_ms", "end_late_ms"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v >= 0):
+            raise GatesoptError(f"--{name.replace('_', '-')} must be >= 0, not {v}")
+    if not (args.time_limit > 0):
+        raise GatesoptError(f"--time-limit must be > 0 s, not {args.time_limit}")
+    bed = None
+    if args.bed:
+        try:
+            w, d = (float(v) for v in args.bed.lower().split("x"))
+            bed = (w, d)
+        except ValueError:
+            raise GatesoptError(f"--bed must look like 220x220, not {args.bed!r}") from None
+    return GatingOptions.for_firmware(
+        args.firmware, motors=motors, rotate=rotate, start_ahead_s=args.start_ahead_ms / 1e3,
+        end_late_s=args.end_late_ms / 1e3, max_added_time_pct=args.max_added_time_pct,
+        max_added_lines_pct=args.max_added_lines_pct, profile=args.profile, bed_size_mm=bed)
+
+
+def _check_paths(inp: str, out: str, force: bool) -> None:
+    if os.path.abspath(inp) == os.path.abspath(out) or (
+            os.path.exists(out) and os.path.exists(inp) and os.path.samefile(inp, out)):
+        raise GatesoptError(f"{out}: the output must not be the input file")
+    if os.path.exists(out) and not force:
+        raise GatesoptError(f"{out}: exists; pass --force to overwrite it")
+    folder = os.path.dirname(os.path.abspath(out))
+    if not os.path.isdir(folder):
+        raise GatesoptError(f"{out}: folder {folder} does not exist")
+
+
+def write_atomic(path: str, text: str, newline_bytes=None) -> None:
+    """Write ``text`` to a temporary file beside ``path`` and rename it into place."""
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=".gatesopt-", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(text.encode("utf-8", "surrogateescape"))
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def format_solve_report(s: dict) -> str:
+    def pct(a, b):
+        return 100.0 * (a / b - 1.0) if b else 0.0
+    lines = [
+        f"file          {s['source']}",
+        f"formulation   {s['formulation'] or '-'} ({s['firmware']} firmware)   status {s['status']}"
+        + (f"   bound {s['bound']:.3f} J" if s.get("bound") is not None else "")
+        + (f"   gap {100 * s['gap']:.4f} %" if s.get("gap") is not None else "   gap n/a"),
+        f"energy        {s['energy_before_j']:.1f} J -> {s['energy_after_j']:.1f} J"
+        f"   saving {s['saving_pct']:.2f} %",
+        f"time          {s['time_before_s']:.2f} s -> {s['time_after_s']:.2f} s"
+        f"   ({pct(s['time_after_s'], s['time_before_s']):+.3f} %, firmware stalls included)",
+        f"lines         +{s['lines_added']} ({s['instruction_lines']} instruction lines, {s['splits']} moves split)"
+        f"   file size {s['size_change_pct']:+.2f} %",
+        f"rotation      {s['rotation_deg']:g} deg about ({s['center_xy'][0]:.3f}, {s['center_xy'][1]:.3f})"
+        f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um",
+        "off time      " + ("  ".join(f"{m} {t:.2f} s" for m, t in s["off_time_s"].items()) or "-"),
+        f"solve         {s['solve_s']:.3f} s   (whole run {s['wall_s']:.2f} s)"
+        + ("   curves re-ordered" if s["ordered"] else ""),
+        f"verified      {'yes' if s['verified'] else 'NO'}",
+    ]
+    for n in s.get("notes", []):
+        lines.append(f"note          {n}")
+    return "\n".join(lines)
+
+
+def run_solve(args) -> int:
+    from ..gating.pipeline import run
+    _check_paths(args.file, args.output, args.force)
+    options = options_from_args(args)
+    program = parse(args.file)
+    result = run(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
+                 order=not args.no_order, gating=not args.no_gating)
+    s = result.summary()
+    if not result.report.ok:
+        print(format_solve_report(s))
+        print(f"gatesopt: error: the output failed verification; nothing written to {args.output}",
+              file=sys.stderr)
+        for f in result.report.findings:
+            print(f"  {f}", file=sys.stderr)
+        return 1
+    _check_paths(args.file, args.output, args.force)   # again: the solve may have taken a while
+    write_atomic(args.output, result.text)
+    s["output"] = args.output
+    print(format_solve_report(s))
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(s, f, indent=2, default=_jsonable)
+            f.write("\n")
+    return 0
+
+
+def _jsonable(v):
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return str(v)
+
+
+# ------------------------------------------------------------------------------------------------
+def compare_rows(program, options, formulations, time_limit_s) -> list[dict]:
+    """One row per formulation (greedy first), each a verified run (nothing written)."""
+    from ..gating.pipeline import run
+    from ..gating.solve import FORMULATIONS, is_installed
+    names = ["greedy"] + [f for f in formulations if f != "greedy"]
+    rows = []
+    for name in names:
+        row = {"file": os.path.basename(program.source), "formulation": name}
+        if name not in FORMULATIONS:
+            row.update(status="unknown", error=f"unknown formulation {name!r}")
+            rows.append(row)
+            continue
+        if not is_installed(name):
+            row.update(status="unavailable", error="backend not installed")
+            rows.append(row)
+            continue
+        try:
+            r = run(program, options, formulation=name, time_limit_s=time_limit_s, order=False)
+        except ModuleNotFoundError as exc:
+            row.update(status="unavailable", error=str(exc))
+            rows.append(row)
+            continue
+        except GatesoptError as exc:
+            row.update(status="error", error=str(exc))
+            rows.append(row)
+            continue
+        s = r.summary()
+        row.update({k: s[k] for k in ("saving_pct", "energy_before_j", "energy_after_j", "lines_added",
+                                      "instruction_lines", "size_change_pct", "added_time_pct",
+                                      "status", "gap", "bound", "solve_s", "rotation_deg", "verified")})
+        if not r.report.ok:
+            row["findings"] = [str(f) for f in r.report.findings[:3]]
+        rows.append(row)
+    return rows
+
+
+def format_compare(rows: list[dict]) -> str:
+    head = (f"{'file':28s} {'formulation':11s} {'saving %':>9s} {'instr':>7s} {'size +%':>8s} "
+            f"{'time +%':>8s} {'rot deg':>8s} {'status':>11s} {'gap':>9s} {'solve s':>8s} {'verified':>8s}")
+    out = [head, "-" * len(head)]
+    for r in rows:
+        if "saving_pct" not in r:
+            out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {'':>9s} {'':>7s} {'':>8s} {'':>8s} "
+                       f"{'':>8s} {r['status']:>11s}   {r.get('error', '')[:60]}")
+            continue
+        gap = "n/a" if r["gap"] is None else f"{100 * r['gap']:.3f}%"
+        out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {r['saving_pct']:9.2f} "
+                   f"{r['instruction_lines']:7d} {r['size_change_pct']:8.2f} {r['added_time_pct']:8.3f} "
+                   f"{r['rotation_deg']:8.3f} {r['status']:>11s} {gap:>9s} {r['solve_s']:8.3f} "
+                   f"{'yes' if r['verified'] else 'NO':>8s}")
+    return "\n".join(out)
+
+
+def plot_compare(rows: list[dict], path: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    files = list(dict.fromkeys(r["file"] for r in rows))
+    forms = list(dict.fromkeys(r["formulation"] for r in rows))
+    fig, ax = plt.subplots(figsize=(max(6, 1.2 * len(files) * len(forms) / 2), 4))
+    w = 0.8 / max(len(forms), 1)
+    for k, f in enumerate(forms):
+        ys = []
+        for fn in files:
+            r = next((r for r in rows if r["file"] == fn and r["formulation"] == f), None)
+            ys.append(r.get("saving_pct", math.nan) if r else math.nan)
+        ax.bar([i + k * w for i in range(len(files))], ys, width=w, label=f)
+    ax.set_xticks([i + w * (len(forms) - 1) / 2 for i in range(len(files))])
+    ax.set_xticklabels(files, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("energy saving %")
+    ax.set_title("motor power gating: saving by formulation")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run_compare(args) -> int:
+    options = options_from_args(args)
+    forms = [f.strip() for f in args.formulations.split(",") if f.strip()]
+    rows = []
+    for path in args.files:
+        program = parse(path)
+        rows += compare_rows(program, options, forms, args.time_limit)
+    print(format_compare(rows))
+    if args.plot:
+        plot_compare(rows, args.plot)
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(rows, f, indent=2, default=_jsonable)
+            f.write("\n")
+    bad = [r for r in rows if "verified" in r and not r["verified"]]
+    return 1 if bad else 0

@@ -1,0 +1,58 @@
+"""``gatesopt verify ORIG OUT``: the independent checks of ``gatesopt.verify``; exit 0 only if all hold."""
+from __future__ import annotations
+
+import json
+import sys
+
+from ..parse import parse
+
+
+def register(sub) -> None:
+    p = sub.add_parser("verify", help="check a rewritten file against its original",
+                       description="Re-parse both files and check: extruded geometry per layer "
+                                   "(after undoing a declared rotation), E per layer, control "
+                                   "commands in order, motor timing (start-ahead, end-late), and "
+                                   "energy/time against a claimed report. Exit 0 only if all hold.")
+    p.add_argument("original", help="the original G-code")
+    p.add_argument("output", help="the rewritten G-code")
+    p.add_argument("--firmware", choices=("3dgates", "marlin", "klipper", "reprap"), default="3dgates",
+                   help="firmware the output is meant for (stall times, automatic re-enable)")
+    p.add_argument("--start-ahead-ms", type=float, default=1.8)
+    p.add_argument("--end-late-ms", type=float, default=1.0)
+    p.add_argument("--profile", default="paper", metavar="NAME|TOML", help="energy profile")
+    p.add_argument("--reordered", action="store_true",
+                   help="the output re-orders curves (default: detected from its header)")
+    p.add_argument("--claimed", metavar="REPORT.json",
+                   help="a `gatesopt solve --json` report: energy_after_j and time_after_s must match")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..verify import verify
+    original = parse(args.original)
+    output = parse(args.output)
+    claimed = None
+    if args.claimed:
+        with open(args.claimed, encoding="utf-8") as f:
+            claimed = json.load(f)
+    rep = verify(original, output, firmware=args.firmware, start_ahead_s=args.start_ahead_ms / 1e3,
+                 end_late_s=args.end_late_ms / 1e3, claimed=claimed, profile=args.profile,
+                 reordered=True if args.reordered else None)
+    if args.json:
+        json.dump(rep.to_dict(), sys.stdout, indent=2)
+        print()
+        return 0 if rep.ok else 1
+    print(f"checks        {', '.join(rep.checks)}")
+    print(f"energy        {rep.energy_before_j:.1f} J -> {rep.energy_j:.1f} J   saving {rep.saving_pct:.2f} %")
+    print(f"time          {rep.time_before_s:.2f} s -> {rep.time_s:.2f} s   (stalls {rep.stall_s:.2f} s)")
+    print(f"lines         {rep.lines_before} -> {rep.lines_after}   bytes {rep.bytes_before} -> {rep.bytes_after}")
+    if rep.rotate_deg:
+        print(f"rotation      {rep.rotate_deg:g} deg about ({rep.center_mm[0]:g}, {rep.center_mm[1]:g})")
+    if rep.ok:
+        print("verified      all checks hold")
+        return 0
+    print(f"verified      FAILED ({len(rep.findings)} finding(s))")
+    for f in rep.findings:
+        print(f"  {f}")
+    return 1

@@ -1,0 +1,622 @@
+"""Emit gated G-code: the original Program plus motor switches (and a rotation) -> G-code text.
+
+3DGates (Chen et al., ASPLOS'17) Section 4.4, Algorithm 1 lines 12-21: the re-compiler only
+*inserts* S-series instructions and, to honour Start-Ahead and End-Late, splits an instruction
+"X -> X1 + S Y on + X2" at the exact moment. This module does that for any firmware dialect
+(``gatesopt.firmware``) and for an optional rotation of the model about a centre in the XY plane.
+
+What the text looks like:
+
+- every original line that is not rewritten is copied byte for byte, in order; with no switch and
+  no rotation the output *is* the input;
+- a switch at time t (paper time model, T = L/F, 3DGates Eq. 2, measured from the start of the
+  program) that falls inside a G0/G1/G2/G3 step splits that step into pieces that meet at the
+  exact point: collinear for lines, on the same circle for arcs, E proportional to the fraction
+  of the step. The first piece keeps the line's other words (F ...) and its comment; later pieces
+  inherit the modal feedrate. Pieces are written in the line's own modal state (G90/G91, M82/M83,
+  G20, G92 offset). With relative values (G91, M83) the pieces' numbers add up *exactly*, in
+  decimal text, to the original number; with absolute values the last piece keeps the original
+  text;
+- a switch inside a step that cannot be split (dwell, heat-up wait, homing) moves to the safe side
+  (an "on" to the step's start, an "off" to its end) and is counted in ``EmitResult.moved``;
+- a rotation rewrites every XY coordinate (and the arc centre offsets I/J, as vectors) of every
+  motion line, counter-clockwise by ``rotate_deg`` about ``center`` in machine coordinates, and
+  adds the line ``; gatesopt: rotate_deg=<deg> center_x=<x> center_y=<y>`` at the top. A move that
+  is single-axis after rotation (other-axis change <= ``snap_mm``) gets exactly the previous text
+  on the other axis, so the firmware does not step that motor; ``EmitResult.max_snap_mm`` is the
+  largest such correction.
+
+Files with line numbers and checksums (``N12 G1 ... *34``) are refused when anything must change:
+inserting lines would mean renumbering every following line, and hosts resend by number.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from decimal import Decimal
+
+import numpy as np
+
+from .. import firmware as fwmod
+from ..errors import GatesoptError
+from ..program import AXES, Kind, Program, X, Y
+
+# Decimals written (mm). Rotated end points: 0.1 um (slicers write 1 um; a rotation makes every
+# coordinate irrational, and 0.1 um keeps the time of each move within 20 us of the solver's at
+# >= 5 mm/s, which the verifier's start-ahead check needs). Split points: 0.01 um and 1 nm of E,
+# so that an instruction lands where the solver put it. In inches two more decimals.
+DECIMALS_MM = {"X": 4, "Y": 4, "Z": 3, "E": 5, "I": 4, "J": 4}
+DECIMALS_SPLIT_MM = {"X": 5, "Y": 5, "Z": 5, "E": 6, "I": 5, "J": 5}
+DECIMALS_INCH = {k: v + 2 for k, v in DECIMALS_MM.items()}
+DECIMALS_SPLIT_INCH = {k: v + 2 for k, v in DECIMALS_SPLIT_MM.items()}
+SNAP_MM = 1e-3
+TIME_EPS_S = 1e-9
+SPLITTABLE = (Kind.TRAVEL, Kind.EXTRUDE, Kind.RETRACT, Kind.UNRETRACT, Kind.Z_ONLY, Kind.ARC)
+_SPLITTABLE_INT = frozenset(int(k) for k in SPLITTABLE)
+_ARC = int(Kind.ARC)
+ROTATE_HEADER = "; gatesopt: rotate_deg={deg} center_x={cx} center_y={cy}"
+
+_WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+)?)")
+_XY_WORD = re.compile(r"[XYxy]\s*[-+.0-9]")
+_LINE_NUMBER = re.compile(rb"(?m)^[ \t]*N\d+")
+
+
+class EmitError(GatesoptError, ValueError):
+    """The program cannot be rewritten as asked."""
+
+
+@dataclass(frozen=True)
+class Switch:
+    """One motor instruction: at ``time_s`` (paper time from program start) ``motor`` goes on/off."""
+
+    time_s: float
+    motor: int          # 0..3 = X Y Z E
+    on: bool
+
+
+@dataclass(frozen=True)
+class EmitResult:
+    text: str
+    lines_added: int            # motor lines + extra pieces of split moves + the rotation header
+    instruction_lines: int      # motor on/off lines written
+    splits: int                 # steps split
+    moved: int                  # switches moved to the safe side of an unsplittable step
+    max_snap_mm: float          # largest single-axis snap
+    rotate_deg: float = 0.0
+    center_mm: tuple = (0.0, 0.0)
+    notes: tuple = field(default=())
+
+
+# ------------------------------------------------------------------------------------------------
+# number text
+def _fmt(x: float, d: int) -> str:
+    s = f"{x:.{d}f}"
+    if "." in s:
+        s = s.rstrip("0").rstrip(".")
+    if s in ("-0", "", "+0"):
+        s = "0"
+    return s
+
+
+def _dec_text(v: Decimal) -> str:
+    s = format(v, "f")
+    if "." in s:
+        s = s.rstrip("0").rstrip(".")
+    if s in ("-0", ""):
+        s = "0"
+    return s
+
+
+def rotate_xy(xy: np.ndarray, deg: float, center) -> np.ndarray:
+    """Rotate points (..., 2) counter-clockwise by ``deg`` about ``center``."""
+    k, rest = divmod(float(deg), 90.0)
+    if rest == 0.0:     # quarter turns exactly (as gatesopt.gating.problem.rotation_matrix)
+        c, s = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))[int(k) % 4]
+    else:
+        a = math.radians(deg)
+        c, s = math.cos(a), math.sin(a)
+    cx, cy = center
+    if xy.ndim == 1:      # one point: plain floats (called once per rewritten move)
+        x, y = float(xy[0]) - cx, float(xy[1]) - cy
+        return np.array([cx + c * x - s * y, cy + s * x + c * y])
+    x = xy[..., 0] - cx
+    y = xy[..., 1] - cy
+    return np.stack([cx + c * x - s * y, cy + s * x + c * y], axis=-1)
+
+
+# ------------------------------------------------------------------------------------------------
+@dataclass
+class _Line:
+    """A motion line split into its G word, its other words (in order) and its comment suffix."""
+
+    gword: str
+    words: list            # [(LETTER, value_text)] in the original order, G word excluded
+    suffix: str            # from the end of the code to the end of the line (comment), no ending
+
+    @classmethod
+    def parse(cls, text: str) -> "_Line":
+        body = text.rstrip("\r\n")
+        cut = body.find(";")
+        code = body if cut < 0 else body[:cut]
+        code_r = code.rstrip()
+        suffix = body[len(code_r):]
+        words = [(m.group(1).upper(), m.group(2)) for m in _WORD.finditer(code_r)]
+        if not words or words[0][0] != "G":
+            raise EmitError(f"not a motion line: {body.strip()[:60]}")
+        g = code_r.strip().split()[0] if code_r.strip()[:1] in "Gg" else "G" + words[0][1]
+        # keep the G word as written when it is a clean token ("G1", "G01"), else normalise
+        if not re.fullmatch(r"[Gg]\d+(\.\d+)?", g):
+            g = "G" + words[0][1]
+        return cls(g.upper(), words[1:], suffix)
+
+    def value(self, letter: str) -> str | None:
+        for k, v in self.words:
+            if k == letter:
+                return v
+        return None
+
+
+@dataclass(frozen=True)
+class Placed:
+    """One instruction line group placed in the program (what ``render`` writes).
+
+    ``fraction`` None: the lines go right before step ``row`` (``row == n_steps``: after the last
+    step); else step ``row`` is split at that fraction of its duration and the lines go between.
+    """
+
+    time_s: float
+    row: int
+    on: bool
+    motors: tuple           # motor letters
+    fraction: float | None = None
+
+
+class _Emitter:
+    """Rewrites motion lines: rotation, splits, single-axis snaps. One pass in line order."""
+
+    def __init__(self, program: Program, rotate_deg: float, center, rotate_rows, snap):
+        self.p = program
+        self.deg = float(rotate_deg)
+        self.rotated = self.deg % 360.0 != 0.0
+        self.center = (float(center[0]), float(center[1]))
+        lo, hi = (0, program.n_steps) if rotate_rows is None else (int(rotate_rows[0]), int(rotate_rows[1]))
+        self.lo, self.hi = lo, hi
+        self.snap = snap
+        self.max_snap = 0.0
+        self.snap_missed = 0
+        self.snap_refused = 0
+        # the last text written on X/Y, the offset it was written in, and the machine XY it means
+        self.em_text = {"X": None, "Y": None}
+        self.em_off = [math.nan, math.nan]
+        self.em_val = np.array([math.nan, math.nan])
+
+    # -- rotation of one row's end points (rows [lo, hi) end rotated; a row starts where the
+    # previous one ended, so rows (lo, hi] start rotated) --------------------------------------------
+    def end_rot(self, r: int) -> bool:
+        return self.rotated and self.lo <= r < self.hi
+
+    def start_rot(self, r: int) -> bool:
+        return self.rotated and (self.lo < r <= self.hi or r == self.lo == 0)
+
+    def _rot(self, xy):
+        return rotate_xy(np.asarray(xy, float), self.deg, self.center)
+
+    def _point(self, r: int, f: float) -> np.ndarray:
+        """Machine X Y Z E at fraction f of step r, XY in the output's (rotated) frame."""
+        p = self.p
+        a = p.start_mm[r].astype(float).copy()
+        b = p.end_mm[r].astype(float).copy()
+        if int(p.kind[r]) == _ARC and 0.0 < f < 1.0:
+            cx, cy = p.arc_center_mm[r]
+            a0 = math.atan2(a[1] - cy, a[0] - cx)
+            a1 = math.atan2(b[1] - cy, b[0] - cx)
+            sweep = _sweep(a0, a1, bool(p.arc_ccw[r]))
+            rad = math.hypot(a[0] - cx, a[1] - cy)
+            ang = a0 + f * sweep
+            q = np.array([cx + rad * math.cos(ang), cy + rad * math.sin(ang),
+                          a[2] + f * (b[2] - a[2]), a[3] + f * (b[3] - a[3])])
+            if self.end_rot(r):
+                q[:2] = self._rot(q[:2])
+            return q
+        if self.start_rot(r):
+            a[:2] = self._rot(a[:2])
+        if self.end_rot(r):
+            b[:2] = self._rot(b[:2])
+        if f == 0.0:
+            return a
+        if f == 1.0:
+            return b
+        return a + f * (b - a)
+
+    # -- bookkeeping for lines kept as written ----------------------------------------------------
+    def note_kept(self, r: int) -> None:
+        p = self.p
+        if not self.rotated:
+            return
+        if int(p.kind[r]) not in _SPLITTABLE_INT:
+            if (p.end_mm[r, :2] != p.start_mm[r, :2]).any():   # homing moved XY
+                self.em_text = {"X": None, "Y": None}
+                self.em_val = p.end_mm[r, :2].astype(float).copy()
+            return
+        end = self._point(r, 1.0)
+        self.em_val = end[:2].copy()
+        if (p.end_mm[r, :2] == p.start_mm[r, :2]).all():
+            return          # Z/E only: X/Y text unchanged
+        ln = _Line.parse(p.line_text(int(p.line[r])))
+        for k, a in enumerate(("X", "Y")):
+            v = ln.value(a)
+            if p.relative_xyz[r]:
+                self.em_text[a] = None
+            elif v is not None:
+                self.em_text[a] = v
+                self.em_off[k] = float(p.offset_mm[r, k])
+
+    # -- one rewritten row ---------------------------------------------------------------------------
+    def rewrite(self, r: int, cuts: list) -> list[str]:
+        """Lines (no endings) for step r, cut at ``cuts`` = [(fraction, [lines between])]."""
+        p = self.p
+        ln = _Line.parse(p.line_text(int(p.line[r])))
+        scale = 25.4 if p.inch[r] else 1.0
+        dec_end = DECIMALS_INCH if p.inch[r] else DECIMALS_MM
+        dec_cut = DECIMALS_SPLIT_INCH if p.inch[r] else DECIMALS_SPLIT_MM
+        rel = {a: (bool(p.relative_e[r]) if a == "E" else bool(p.relative_xyz[r])) for a in AXES}
+        off = p.offset_mm[r].astype(float)
+        arc = int(p.kind[r]) == _ARC
+        rot_row = self.end_rot(r) or self.start_rot(r)
+        present = [a for a in AXES if ln.value(a) is not None]
+        write = list(present)
+        if rot_row and (arc or "X" in present or "Y" in present or
+                        (p.end_mm[r, :2] != p.start_mm[r, :2]).any()):
+            write = sorted(set(write) | {"X", "Y"}, key=AXES.index)
+        for a in write:
+            if ln.value(a) == "":
+                raise EmitError(f"{p.source}:{int(p.line[r]) + 1}: axis word {a} without a number")
+        if arc and ln.value("P") not in (None, "", "1") and cuts:
+            raise EmitError(f"{p.source}:{int(p.line[r]) + 1}: cannot split a G2/G3 with P (several turns)")
+        start = self._point(r, 0.0)
+        end = self._point(r, 1.0)
+        # single-axis snap: the other axis gets exactly the text written before (or 0 if relative)
+        snapped = {}
+        if rot_row and self.snap is not None and not arc:
+            for k, a in enumerate(("X", "Y")):
+                if not self.snap[r, k]:
+                    continue
+                ref = self.em_val[k] if not np.isnan(self.em_val[k]) else start[k]
+                if abs(ref - end[k]) > SNAP_MM:
+                    # snapping again would carry the drift of earlier snaps past the tolerance
+                    self.snap_refused += 1
+                    continue
+                if rel[a]:
+                    snapped[a] = "0"
+                elif self.em_text[a] is not None and self.em_off[k] == off[k]:
+                    snapped[a] = self.em_text[a]
+                else:
+                    self.snap_missed += 1
+                    continue
+                self.max_snap = max(self.max_snap, abs(ref - end[k]))
+        bounds = [0.0] + [c[0] for c in cuts] + [1.0]
+        out: list[str] = []
+        sums = {a: Decimal(0) for a in AXES}
+        prev_q = start
+        cur_xy = start[:2].copy()     # where the firmware is when this piece starts (arc centre base)
+        if rot_row and not np.isnan(self.em_val).any():
+            cur_xy = self.em_val.copy()
+        vals: dict = {}
+        for k in range(len(bounds) - 1):
+            last = k == len(bounds) - 2
+            q = self._point(r, bounds[k + 1])
+            dec = dec_end if last else dec_cut
+            vals = {}
+            for a in write:
+                ai = AXES.index(a)
+                if a in snapped:
+                    vals[a] = snapped[a]
+                    continue
+                keep_text = not (rot_row and ai < 2) and ln.value(a) is not None
+                if rel[a]:
+                    if last:
+                        total = (Decimal(ln.value(a)) if keep_text
+                                 else Decimal(_fmt((end[ai] - start[ai]) / scale, dec_end[a])))
+                        vals[a] = _dec_text(total - sums[a])
+                    else:
+                        t = Decimal(_fmt((q[ai] - start[ai]) / scale - float(sums[a]), dec[a]))
+                        vals[a] = _dec_text(t)
+                        sums[a] += t
+                elif last and keep_text:
+                    vals[a] = ln.value(a)
+                else:
+                    vals[a] = _fmt((q[ai] - off[ai]) / scale, dec[a])
+            ij = None
+            if arc:
+                c = np.array(p.arc_center_mm[r], float)
+                if self.end_rot(r):
+                    c = self._rot(c)
+                ij = (_fmt((c[0] - cur_xy[0]) / scale, dec["I"]), _fmt((c[1] - cur_xy[1]) / scale, dec["J"]))
+            if k == 0:
+                words, done = [], set()
+                new_ij = arc and (rot_row or len(bounds) > 2 or ln.value("R") is not None)
+                for letter, v in ln.words:
+                    if letter in ("X", "Y") and "X" in vals and "Y" in vals and rot_row:
+                        if "X" not in done:
+                            words += [f"X{vals['X']}", f"Y{vals['Y']}"]
+                            done |= {"X", "Y"}
+                    elif letter in AXES and letter in vals:
+                        words.append(f"{letter}{vals[letter]}")
+                        done.add(letter)
+                    elif letter in ("I", "J", "R") and new_ij:
+                        if "IJ" not in done:
+                            words += [f"I{ij[0]}", f"J{ij[1]}"]
+                            done.add("IJ")
+                    else:
+                        words.append(f"{letter}{v}")
+                for a in write:  # an axis the rotation added (the line named only one of X/Y)
+                    if a not in done:
+                        words.insert(_axis_insert_at(words), f"{a}{vals[a]}")
+                        done.add(a)
+                if new_ij and "IJ" not in done:
+                    words += [f"I{ij[0]}", f"J{ij[1]}"]
+                out.append(" ".join([ln.gword] + words) + ln.suffix)
+            else:
+                words = [f"{a}{vals[a]}" for a in write]
+                if ij is not None:
+                    words += [f"I{ij[0]}", f"J{ij[1]}"]
+                out.append(" ".join([ln.gword] + words))
+            if not last:
+                out.extend(cuts[k][1])
+            cur_xy = _written_xy(vals, rel, off, scale, cur_xy)
+            prev_q = q
+        if self.rotated:
+            self.em_val = cur_xy
+            for k, a in enumerate(("X", "Y")):
+                if a in vals:
+                    self.em_text[a] = None if rel[a] else vals[a]
+                    self.em_off[k] = off[k]
+        return out
+
+
+def _written_xy(vals, rel, off, scale, prev_xy) -> np.ndarray:
+    out = np.array(prev_xy, float)
+    for k, a in enumerate(("X", "Y")):
+        if a in vals:
+            out[k] = prev_xy[k] + float(vals[a]) * scale if rel[a] else float(vals[a]) * scale + off[k]
+    return out
+
+
+def _axis_insert_at(words: list[str]) -> int:
+    """Index after the last X/Y/Z word (so an added Y lands beside X)."""
+    idx = 0
+    for k, w in enumerate(words):
+        if w[:1] in ("X", "Y", "Z"):
+            idx = k + 1
+    return idx
+
+
+def _sweep(a0: float, a1: float, ccw: bool) -> float:
+    """Signed angle from a0 to a1, counter-clockwise (> 0) or clockwise (< 0); equal: full turn."""
+    d = a1 - a0
+    if ccw:
+        while d <= 1e-12:
+            d += 2 * math.pi
+    else:
+        while d >= -1e-12:
+            d -= 2 * math.pi
+    return d
+
+
+# ------------------------------------------------------------------------------------------------
+def place_switches(program: Program, switches) -> list[Placed]:
+    """Group ``Switch``es into instruction moments and locate each in the program's steps.
+
+    Same time (within 1 ns) and same direction -> one moment. A moment on a step boundary goes
+    right before the step that starts there; one strictly inside a step splits it.
+    """
+    items = sorted(((float(s.time_s), bool(s.on), int(s.motor)) for s in switches))
+    moments: list[list] = []
+    for t, on, m in items:
+        if moments and moments[-1][1] == on and abs(moments[-1][0] - t) <= TIME_EPS_S:
+            moments[-1][2].add(AXES[m])
+        else:
+            moments.append([t, on, {AXES[m]}])
+    dur = np.asarray(program.duration_s, float)
+    t_end = np.cumsum(dur)
+    t_start = t_end - dur
+    n = program.n_steps
+    out = []
+    for t, on, ms in moments:
+        motors = tuple(a for a in AXES if a in ms)
+        i = int(np.searchsorted(t_end, t + TIME_EPS_S, side="right"))
+        if i >= n:
+            out.append(Placed(t, n, on, motors))
+        elif t <= t_start[i] + TIME_EPS_S:
+            out.append(Placed(t, i, on, motors))
+        else:
+            out.append(Placed(t, i, on, motors, (t - t_start[i]) / dur[i]))
+    return out
+
+
+def render(program: Program, placed, *, firmware="3dgates", rotate_deg: float = 0.0,
+           center_mm=(0.0, 0.0), rotate_rows=None, snap=None) -> EmitResult:
+    """Write ``program`` with instruction lines ``placed`` (``Placed``) and an optional rotation.
+
+    ``rotate_rows``: (lo, hi): rows whose end point the rotation moves (default all);
+    ``snap``: (n, 2) bool, X/Y of a row that must not step (written equal to the previous text);
+    default under rotation: rows whose rotated X or Y change is at most ``SNAP_MM``.
+    """
+    fw = fwmod.get(firmware)
+    placed = list(placed)
+    fw.check_motors(sorted({m for pl in placed for m in pl.motors}, key=AXES.index))
+    rotated = float(rotate_deg) % 360.0 != 0.0
+    if not placed and not rotated:
+        return EmitResult(program.to_gcode(), 0, 0, 0, 0, 0.0)
+    if _LINE_NUMBER.search(program.data):
+        raise EmitError(f"{program.source}: the file uses line numbers/checksums (N.. *..); inserting "
+                        "lines would renumber every following line and break host resends: strip them first")
+    n = program.n_steps
+    em = _Emitter(program, rotate_deg, center_mm, rotate_rows, snap)
+    if rotated:
+        lo, hi = em.lo, em.hi
+        o = program.offset_mm[lo:min(hi + 1, n), :2]
+        if len(o) and (o != o[0]).any():
+            raise EmitError(f"{program.source}: a G92 sets X/Y inside the part to rotate: cannot rotate")
+        if snap is None:
+            em.snap = _default_snap(em, program)
+    nl = program.line_ending
+    before: dict[int, list[str]] = {}
+    cuts: dict[int, list] = {}
+    moved = instr = 0
+    inside: dict[int, list[Placed]] = {}     # unsplittable row -> instructions that fall inside it
+    for pl in sorted(placed, key=lambda q: q.time_s):
+        r = int(pl.row)
+        if r < n and pl.fraction is not None and 0.0 < pl.fraction < 1.0 and program.kind[r] not in SPLITTABLE:
+            inside.setdefault(r, []).append(pl)
+            continue
+        lines = fw.on_lines(pl.motors) if pl.on else fw.off_lines(pl.motors)
+        if not lines:
+            continue
+        instr += len(lines)
+        if r >= n:
+            before.setdefault(int(program.line[n - 1]) + 1, []).extend(lines)
+        elif pl.fraction is None or pl.fraction <= 0.0:
+            before.setdefault(int(program.line[r]), []).extend(lines)
+        elif pl.fraction >= 1.0:
+            before.setdefault(int(program.line[r]) + 1, []).extend(lines)
+        else:
+            cuts.setdefault(r, []).append((float(pl.fraction), lines))
+    for r, pls in inside.items():
+        # A dwell, heat-up wait or homing cannot be split. Per motor only the last instruction
+        # inside it matters: a final "on" goes before the step, a final "off" after it -- both on
+        # the safe side of start-ahead / end-late (the motor is on for the whole step).
+        last: dict[str, bool] = {}
+        for pl in pls:
+            for m in pl.motors:
+                last[m] = pl.on
+        moved += len(pls)
+        on_m = tuple(m for m in AXES if last.get(m) is True)
+        off_m = tuple(m for m in AXES if last.get(m) is False)
+        for motors, on, at in ((on_m, True, int(program.line[r])), (off_m, False, int(program.line[r]) + 1)):
+            lines = fw.on_lines(motors) if on else fw.off_lines(motors)
+            if lines:
+                instr += len(lines)
+                before.setdefault(at, [])
+                if on:
+                    before[at].extend(lines)
+                else:
+                    before[at][:0] = lines     # right after the step, before anything placed there
+    rewrite = set(cuts)
+    if rotated:
+        d = program.end_mm[:, :2] != program.start_mm[:, :2]
+        xy = np.isin(program.kind, SPLITTABLE) & (d.any(axis=1) | (program.kind == Kind.ARC))
+        rows = np.arange(n)
+        in_range = (rows >= em.lo) & (rows <= em.hi)
+        xy &= in_range
+        rewrite |= set(np.flatnonzero(xy).tolist())
+        # a move that names X or Y without changing them still names an absolute position
+        # that the rotation moves
+        for r in np.flatnonzero(in_range & ~xy & np.isin(program.kind, SPLITTABLE)):
+            if _XY_WORD.search(program.line_text(int(program.line[r])).split(";", 1)[0]):
+                rewrite.add(int(r))
+    row_of_line = {int(program.line[r]): r for r in range(n)}
+    out: list[str] = []
+    added = 0
+    if rotated:
+        out.append(ROTATE_HEADER.format(deg=_fmt(float(rotate_deg), 9), cx=_fmt(float(center_mm[0]), 6),
+                                        cy=_fmt(float(center_mm[1]), 6)) + nl)
+        added += 1
+    splits = 0
+    for li in range(program.n_lines + 1):
+        ins = before.get(li)
+        if ins:
+            out.extend(x + nl for x in ins)
+            added += len(ins)
+        if li == program.n_lines:
+            break
+        r = row_of_line.get(li)
+        if r is None or r not in rewrite:
+            out.append(program.line_text(li))
+            if r is not None:
+                em.note_kept(r)
+            continue
+        cut = []
+        for f, ls in sorted(cuts.get(r, []), key=lambda c: c[0]):
+            if cut and f - cut[-1][0] <= 1e-12:      # several lines at one moment: one split
+                cut[-1] = (cut[-1][0], cut[-1][1] + ls)
+            else:
+                cut.append((f, list(ls)))
+        new = em.rewrite(r, cut)
+        text = program.line_text(li)
+        ending = text[len(text.rstrip("\r\n")):]
+        out.extend(x + nl for x in new[:-1])
+        out.append(new[-1] + ending)
+        if cut:
+            splits += 1
+        added += len(new) - 1
+    notes = []
+    if em.snap_missed:
+        notes.append(f"{em.snap_missed} single-axis snaps could not be applied (no previous absolute text)")
+    if em.snap_refused:
+        notes.append(f"{em.snap_refused} single-axis snaps refused (earlier snaps had drifted the axis "
+                     f"by more than {SNAP_MM * 1e3:g} um): those moves step both motors")
+    if moved:
+        notes.append(f"{moved} instruction(s) moved out of a dwell/wait/homing step to its safe side")
+    return EmitResult("".join(out), added, instr, splits, moved, em.max_snap, float(rotate_deg),
+                      (float(center_mm[0]), float(center_mm[1])), tuple(notes))
+
+
+def _default_snap(em: _Emitter, program: Program) -> np.ndarray:
+    """(n, 2) bool: X/Y of line moves whose rotated change is at most ``SNAP_MM``."""
+    n = program.n_steps
+    rows = np.arange(n)
+    s = program.start_mm[:, :2].astype(float).copy()
+    e = program.end_mm[:, :2].astype(float).copy()
+    srot = (rows > em.lo) & (rows <= em.hi) | ((rows == em.lo) & (em.lo == 0))
+    erot = (rows >= em.lo) & (rows < em.hi)
+    s[srot] = rotate_xy(s[srot], em.deg, em.center)
+    e[erot] = rotate_xy(e[erot], em.deg, em.center)
+    d = program.end_mm[:, :2] != program.start_mm[:, :2]
+    xy = np.isin(program.kind, SPLITTABLE) & (program.kind != Kind.ARC) & d.any(axis=1)
+    return (np.abs(e - s) <= SNAP_MM) & xy[:, None]
+
+
+def render_switches(program: Program, switches, **kw) -> EmitResult:
+    """``render`` for a list of ``Switch``es (time, motor, on)."""
+    return render(program, place_switches(program, switches), **kw)
+
+
+# ------------------------------------------------------------------------------------------------
+# GatingSolution -> text
+def solution_placed(solution) -> list[Placed]:
+    """The solution's instruction lines (``GatingSolution.instructions()``) as ``Placed`` groups."""
+    ins = solution.instructions()
+    out = []
+    for k in range(len(ins.time_s)):
+        motors = tuple(AXES[m] for m in ins.motors[k])
+        frac = float(ins.fraction[k]) if bool(ins.split[k]) else None
+        out.append(Placed(float(ins.time_s[k]), int(ins.row[k]), bool(ins.on[k]), motors, frac))
+    return out
+
+
+def solution_snap(solution) -> np.ndarray | None:
+    """(n, 2) bool: X/Y of rows the solution takes as not stepping under its rotation."""
+    prob = solution.problem
+    if float(solution.rotation_deg) % 360.0 == 0.0:
+        return None
+    from .problem import steps_motor_at
+    steps, _ = steps_motor_at(prob, solution.angle_index)
+    xy0 = (prob.steps_motor0[:, X] | prob.steps_motor0[:, Y]) & ~prob.arc
+    return ~steps[:, :2] & xy0[:, None]
+
+
+def emit_result(program: Program, solution, firmware=None) -> EmitResult:
+    """Emit with the full report (lines added, splits, snaps). ``firmware`` defaults to the one
+    the solution's options name."""
+    fw = firmware or getattr(solution.problem.options, "firmware", "3dgates")
+    prob = solution.problem
+    return render(program, solution_placed(solution), firmware=fw, rotate_deg=solution.rotation_deg,
+                  center_mm=tuple(float(v) for v in solution.center_xy),
+                  rotate_rows=(prob.rotate_lo, prob.rotate_hi), snap=solution_snap(solution))
+
+
+def emit(program: Program, solution, firmware="3dgates") -> str:
+    """Gated G-code text for ``program`` under a ``GatingSolution``."""
+    return emit_result(program, solution, firmware=firmware).text

@@ -1,0 +1,139 @@
+"""The whole rewrite as one library call: [order curves] -> build -> solve -> emit -> re-parse -> verify.
+
+``gatesopt solve``, ``gatesopt compare`` and ``bench/gating.py`` are thin layers over ``run``.
+Nothing is written to disk here; the caller writes ``RunResult.text`` only if ``report.ok``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import math
+import time
+from dataclasses import dataclass
+
+from ..parse import parse
+from ..program import Program
+from ..verify import VerifyReport, energy_of, verify
+from .emit import EmitResult, emit_result, render
+from .problem import GatingOptions, GatingSolution, build
+from .solve import solve
+
+
+@dataclass(frozen=True, eq=False)
+class RunResult:
+    original: Program
+    base: Program                       # what gating worked on (the original, or the re-ordered print)
+    solution: GatingSolution | None     # None with gating off
+    emitted: EmitResult | None
+    text: str
+    output: Program
+    report: VerifyReport
+    ordered: bool
+    notes: tuple
+    wall_s: float
+
+    def summary(self) -> dict:
+        """The report keys of ``gatesopt solve --json`` (issue 3)."""
+        r, s = self.report, self.solution
+        d = {
+            "source": self.original.source, "firmware": r.firmware, "verified": r.ok,
+            "findings": [str(f) for f in r.findings],
+            "energy_before_j": r.energy_before_j, "energy_after_j": r.energy_j,
+            "saving_pct": r.saving_pct, "time_before_s": r.time_before_s, "time_after_s": r.time_s,
+            "added_time_pct": 100.0 * (r.time_s / r.time_before_s - 1.0) if r.time_before_s else 0.0,
+            "lines_before": r.lines_before, "lines_after": r.lines_after,
+            "lines_added": r.lines_after - r.lines_before,
+            "bytes_before": r.bytes_before, "bytes_after": r.bytes_after,
+            "size_change_pct": 100.0 * (r.bytes_after / r.bytes_before - 1.0) if r.bytes_before else 0.0,
+            "rotation_deg": r.rotate_deg, "center_xy": list(r.center_mm), "ordered": self.ordered,
+            "formulation": s.formulation if s else None, "status": s.status if s else "skipped",
+            "objective_j": s.energy_j if s else None,
+            "objective_time_s": s.time_after_s if s else None,
+            "bound": (None if s is None or math.isnan(s.bound) else s.bound),
+            "gap": (None if s is None or math.isnan(s.gap) else s.gap),
+            "solve_s": s.solve_s if s else 0.0,
+            "instruction_lines": self.emitted.instruction_lines if self.emitted else 0,
+            "splits": self.emitted.splits if self.emitted else 0,
+            "max_snap_mm": float(self.emitted.max_snap_mm) if self.emitted else 0.0,
+            "off_time_s": s.off_time_s() if s else {},
+            "message": s.message if s else "",
+            "notes": list(self.notes), "wall_s": self.wall_s,
+        }
+        return d
+
+
+def _order(program: Program, time_limit_s: float):
+    """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note)."""
+    try:
+        ordering = importlib.import_module("gatesopt.ordering")
+        problem = ordering.build(program)
+        solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s)
+        text = ordering.emit(program, problem, solution)
+    except (ImportError, AttributeError, NotImplementedError) as exc:
+        return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})"
+    return parse(text, source=program.source), True, ""
+
+
+def run(program: Program, options: GatingOptions | None = None, *, formulation: str = "dp",
+        time_limit_s: float | None = None, order: bool = True, gating: bool = True,
+        order_time_limit_s: float = 2.0) -> RunResult:
+    """Rewrite ``program``: optional curve ordering, then power gating; verify the result."""
+    t0 = time.perf_counter()
+    o = options or GatingOptions()
+    notes = []
+    base, ordered = program, False
+    if order:
+        base, ordered, note = _order(program, order_time_limit_s)
+        if note:
+            notes.append(note)
+    ordered_base = base
+    sol = None
+    em = None
+    if gating:
+        problem = build(base, o)
+        sol = solve(problem, formulation, time_limit_s=time_limit_s)
+        deg = sol.rotation_deg
+        if deg % 360.0 != 0.0:
+            # Rotation first, as its own rewrite: the rotated text (a move whose rotated X or Y
+            # change is at most 1 um gets exactly the previous text on that axis, as long as the
+            # snaps do not drift the print by more than 1 um) is re-parsed, and gating is solved
+            # again on exactly that geometry, so that the emitted times and energies are the
+            # ones the solver scored.
+            rot = render(base, [], firmware=o.firmware, rotate_deg=deg,
+                         center_mm=tuple(float(v) for v in sol.center_xy),
+                         rotate_rows=(problem.rotate_lo, problem.rotate_hi))
+            notes += list(rot.notes)
+            max_snap = rot.max_snap_mm
+            base = parse(rot.text, source=program.source)
+            problem = build(base, o.replace(rotate="none"))
+            sol = solve(problem, formulation, time_limit_s=time_limit_s)
+        else:
+            max_snap = 0.0
+        em = emit_result(base, sol, firmware=o.firmware)
+        em = dataclasses.replace(em, max_snap_mm=max(em.max_snap_mm, max_snap), rotate_deg=deg)
+        text = em.text
+        notes += list(em.notes)
+    else:
+        text = base.to_gcode()
+    out = parse(text, source=(program.source + " (output)"))
+    claimed = (sol.energy_j, sol.time_after_s) if sol is not None else None
+    rep = verify(program, out, firmware=o.firmware, start_ahead_s=o.start_ahead_s,
+                 end_late_s=o.end_late_s, claimed=claimed, profile=o.profile, reordered=ordered)
+    if ordered and sol is not None:
+        # the ordering's own checks, on the re-ordered print before gating split any move
+        try:
+            ov = importlib.import_module("gatesopt.ordering.verify")
+            extra = list(ov.check(program, ordered_base))
+        except ModuleNotFoundError:
+            extra = []
+        if extra:
+            rep = dataclasses.replace(rep, ok=False, findings=rep.findings + tuple(extra))
+        rep = dataclasses.replace(rep, checks=rep.checks + ("ordering",))
+    return RunResult(program, base, sol, em, text, out, rep, ordered, tuple(notes),
+                     time.perf_counter() - t0)
+
+
+def energy_time(program: Program, firmware: str = "3dgates", profile: str = "paper"):
+    """(energy J, time s) of a program as it stands (its own motor lines, stalls included)."""
+    e, t, _ = energy_of(program, firmware=firmware, profile=profile)
+    return e, t

@@ -1,0 +1,724 @@
+"""Independent verifier: re-parse an emitted file and prove it prints what the original printed.
+
+DESIGN.md "Verification": every output, every test. The checks trust nothing the solver says; they
+read the two Programs (``gatesopt.parse`` of the original and of the output) and:
+
+1. ``geometry``: per layer, the extruded moves are the same after undoing the declared rotation
+   (``; gatesopt: rotate_deg=`` header): a multiset of segments up to direction (so a re-ordered
+   curve, printed either way, matches), matched within ``geometry_tol_mm``; arcs as arcs (end
+   points + centre). On the output side, runs of continuous collinear pieces separated only by
+   motor instruction lines (a split move) are joined back, taking from each piece the longest
+   stretch that is a move of the original -- so an instruction inserted *between* two original
+   moves never merges them. Moves shorter than ``SHORT_MM`` are below any printer's resolution
+   and not reported.
+2. ``extrusion``: net E per layer equal (relative ``e_rel_tol``).
+3. ``commands``: for gating output every original line that is not a motion is still there,
+   unchanged and in order (only motor instructions and the rotation header may be added); for
+   re-ordered output the heater, fan and tool commands keep their order.
+4. ``timing``: no motor steps while a motor instruction holds it off (on firmware that needs an
+   explicit enable), each explicit enable comes at least ``start_ahead_s`` before the motor's next
+   step, and no disable comes within ``end_late_s`` of the motor's last step (3DGates Sec. 4.4,
+   instruction inertia and delay). Times are the paper's T = L/F (Eq. 2) without stalls: a stall
+   only adds time between an instruction and the moves around it, so this is the strict reading.
+5. ``energy``: energy and time of the output, recomputed from its text with the one energy model
+   (``gatesopt.energy.step_energy_j``, stall times from ``gatesopt.firmware.stall_durations``),
+   agree with what the solver claimed within ``claim_rel_tol``.
+
+Findings carry the 1-based line number in the output file (or the original, said so).
+"""
+from __future__ import annotations
+
+import importlib
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import firmware as fwmod
+from .energy import load_profile, step_energy_j
+from .errors import GatesoptError
+from .program import AXES, MOTION_KINDS, Kind, Program
+
+# 1 um: the single-axis snap of a rotated output (<= 1e-3 mm) plus the 0.05 um rounding of its text
+GEOMETRY_TOL_MM = 1.1e-3
+SHORT_MM = 5e-3        # unmatched extruded moves shorter than this are not reported (see check_geometry)
+E_REL_TOL = 1e-4
+# The emitted text has finite resolution (split points 0.01 um, rotated points 0.1 um); 20 us is
+# about 1 % of the 1.8 ms start-ahead and covers 0.1 um of rounding at 5 mm/s.
+TIME_TOL_S = 2e-5
+CLAIM_REL_TOL = 1e-6
+_JOIN_ANGLE_RAD = 2e-3
+ROTATE_PREFIX = "; gatesopt: rotate_deg="
+ORDER_PREFIX = "; gatesopt: order"
+CONTROL_COMMANDS = (("M", 104), ("M", 109), ("M", 140), ("M", 190), ("M", 141), ("M", 191),
+                    ("M", 106), ("M", 107))
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One failed check. ``line``: 1-based line in the output (``in_original``: in the original)."""
+
+    check: str
+    line: int | None
+    message: str
+    in_original: bool = False
+
+    def __str__(self) -> str:
+        where = "" if self.line is None else (f"original line {self.line}: " if self.in_original
+                                              else f"line {self.line}: ")
+        return f"[{self.check}] {where}{self.message}"
+
+
+@dataclass(frozen=True)
+class VerifyReport:
+    ok: bool
+    findings: tuple
+    energy_j: float                 # output, recomputed from its text (stalls included)
+    time_s: float
+    energy_before_j: float          # original, same model
+    time_before_s: float
+    stall_s: float
+    lines_before: int
+    lines_after: int
+    bytes_before: int
+    bytes_after: int
+    rotate_deg: float
+    center_mm: tuple
+    reordered: bool
+    firmware: str
+    checks: tuple = field(default=())
+
+    @property
+    def saving_pct(self) -> float:
+        return 100.0 * (1.0 - self.energy_j / self.energy_before_j) if self.energy_before_j else 0.0
+
+    def to_dict(self) -> dict:
+        return {"ok": self.ok, "findings": [str(f) for f in self.findings],
+                "energy_j": self.energy_j, "time_s": self.time_s,
+                "energy_before_j": self.energy_before_j, "time_before_s": self.time_before_s,
+                "stall_s": self.stall_s, "lines_before": self.lines_before,
+                "lines_after": self.lines_after, "bytes_before": self.bytes_before,
+                "bytes_after": self.bytes_after, "rotate_deg": self.rotate_deg,
+                "reordered": self.reordered, "firmware": self.firmware, "checks": list(self.checks)}
+
+
+# ------------------------------------------------------------------------------------------------
+def read_rotation(program: Program) -> tuple[float, float, float]:
+    """(deg, center_x, center_y) from a ``; gatesopt: rotate_deg=`` line in the first 50 lines."""
+    for i in range(min(program.n_lines, 50)):
+        t = program.line_text(i).strip()
+        if t.startswith(ROTATE_PREFIX):
+            try:
+                kv = dict(w.split("=", 1) for w in t[len("; gatesopt:"):].split() if "=" in w)
+                return float(kv["rotate_deg"]), float(kv.get("center_x", 0)), float(kv.get("center_y", 0))
+            except (KeyError, ValueError):
+                raise GatesoptError(f"{program.source}:{i + 1}: unreadable rotation header: {t[:80]}") from None
+    return 0.0, 0.0, 0.0
+
+
+def _has_line(program: Program, prefix: str, within: int = 50) -> bool:
+    return any(program.line_text(i).startswith(prefix) for i in range(min(program.n_lines, within)))
+
+
+def _rotate(xy: np.ndarray, deg: float, center) -> np.ndarray:
+    a = math.radians(deg)
+    c, s = math.cos(a), math.sin(a)
+    x = xy[..., 0] - center[0]
+    y = xy[..., 1] - center[1]
+    return np.stack([center[0] + c * x - s * y, center[1] + s * x + c * y], axis=-1)
+
+
+# ------------------------------------------------------------------------------------------------
+# 1. geometry
+def _near(points: np.ndarray, q: np.ndarray, tol: float) -> np.ndarray:
+    """(len(q),) bool: a point of ``points`` lies within Chebyshev ``tol`` of each q."""
+    from scipy.spatial import cKDTree
+    if len(points) == 0 or len(q) == 0:
+        return np.zeros(len(q), bool)
+    d, _ = cKDTree(points).query(q, k=1, p=np.inf, distance_upper_bound=tol)
+    return np.isfinite(d)
+
+
+def _moves(program: Program) -> np.ndarray:
+    """(2k, 6) start+end xyz of every extruded move of ``program``, both directions."""
+    ext = program.extruding
+    a, b = program.start_mm[ext, :3], program.end_mm[ext, :3]
+    return np.concatenate([np.concatenate([a, b], axis=1), np.concatenate([b, a], axis=1)]).astype(float)
+
+
+def _vertices(program: Program) -> np.ndarray:
+    """End points (xyz) of every extruded move: the joints a rewrite must keep."""
+    ext = program.extruding
+    return np.concatenate([program.start_mm[ext, :3], program.end_mm[ext, :3]]).astype(float)
+
+
+def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm: float = GEOMETRY_TOL_MM,
+              vertices: np.ndarray | None = None, original_moves: np.ndarray | None = None):
+    """Extruded segments: (layer, key (k, 10), first row, E) with key = start xyz, end xyz, centre
+    xy (0 for lines), arc flag. ``vertices`` (the original's joints) given: the output side, whose
+    split pieces are joined back into the moves they came from."""
+    motion = np.isin(program.kind, MOTION_KINDS)
+    rows = np.flatnonzero(motion)
+    if not len(rows):
+        return np.zeros(0, np.int64), np.zeros((0, 9)), np.zeros(0, np.int64), np.zeros(0)
+    ext = program.extruding[rows]
+    s = program.start_mm[rows, :3].astype(float).copy()
+    e = program.end_mm[rows, :3].astype(float).copy()
+    c = np.nan_to_num(program.arc_center_mm[rows].astype(float), nan=0.0)
+    arc = program.kind[rows] == Kind.ARC
+    lay = program.layer[rows]
+    de = (program.end_mm[rows, 3] - program.start_mm[rows, 3]).astype(float)
+    if undo_deg % 360.0 != 0.0:
+        # The rotation covers the print proper (layer >= 0); start G-code (purge lines, layer -1)
+        # stays where the slicer put it. Where the layer finder's view is unsure, the geometry
+        # decides: a row whose end is an original vertex only once un-rotated was rotated.
+        sel = lay >= 0
+        if vertices is not None:
+            e_undo = e.copy()
+            e_undo[:, :2] = _rotate(e[:, :2], -undo_deg, center)
+            near_undo = _near(vertices, e_undo, tol_mm)
+            near_raw = _near(vertices, e, tol_mm)
+            sel = near_undo | (~near_raw & sel)
+        s[sel, :2] = _rotate(s[sel, :2], -undo_deg, center)
+        e[sel, :2] = _rotate(e[sel, :2], -undo_deg, center)
+        c[sel & arc] = _rotate(c[sel & arc], -undo_deg, center)
+    ccw = program.arc_ccw[rows]
+    keep = ext.copy()
+    join = np.zeros(max(len(rows) - 1, 0), bool)
+    closed_join = {}
+    if vertices is not None and len(rows) > 1:
+        # Output side: join row k to row k+1 when they are the pieces of one split move: both
+        # extruding, same layer, continuous, separated by motor instruction lines only (what
+        # gating inserts), collinear (lines: the joint on the chord within the tolerance) or on
+        # one circle in one sense (arcs) -- and the joint is no vertex of the original print (an
+        # instruction inserted *between* two original moves must not merge them).
+        d0 = e[:-1] - s[:-1]
+        d1 = e[1:] - s[1:]
+        chord = e[1:] - s[:-1]
+        cl = np.linalg.norm(chord, axis=1)
+        u = chord / np.maximum(cl, 1e-300)[:, None]
+        w = e[:-1] - s[:-1]
+        off_chord = np.linalg.norm(w - np.einsum("ij,ij->i", w, u)[:, None] * u, axis=1)
+        forward = (np.einsum("ij,ij->i", d0, d1) > 0) & (cl > 0)
+        cont = np.all(np.abs(e[:-1] - s[1:]) <= 1e-6, axis=1)
+        motor_cum = np.cumsum(program.kind == Kind.MOTOR)
+        between_motor = motor_cum[rows[1:] - 1] - motor_cum[rows[:-1]]
+        line_gap = program.line[rows[1:]] - program.line[rows[:-1]] - 1
+        only_motor = (rows[1:] - rows[:-1] - 1 == between_motor) & (line_gap == between_motor)
+        # (no same-layer test: a z-change layer finder may start a layer inside a split move)
+        same = ext[:-1] & ext[1:] & cont & only_motor
+        line_ok = ~arc[:-1] & ~arc[1:] & forward & (off_chord <= tol_mm)
+        arc_ok = arc[:-1] & arc[1:] & (ccw[:-1] == ccw[1:]) & np.all(np.abs(c[:-1] - c[1:]) <= tol_mm, axis=1)
+        # Rebuild the original moves from runs of joinable pieces: from each piece, join the
+        # longest stretch of the run that is a move of the original (so a line inserted *between*
+        # two original moves keeps them two, and a split move becomes one again).
+        cand = same & (line_ok | arc_ok)
+        if original_moves is not None and cand.any():
+            from scipy.spatial import cKDTree
+            tree = cKDTree(original_moves)
+            m = len(cand)
+            k = 0
+            while k < m:
+                if not cand[k]:
+                    k += 1
+                    continue
+                j_end = k
+                while j_end < m and cand[j_end]:
+                    j_end += 1                  # rows k..j_end form a run
+                i = k
+                while i < j_end:
+                    best = None
+                    for j in range(j_end, i, -1):
+                        d, _ = tree.query(np.concatenate([s[i], e[j]]), k=1, p=np.inf,
+                                          distance_upper_bound=tol_mm)
+                        if np.isfinite(d):
+                            best = j
+                            break
+                    if best is None:
+                        i += 1
+                        continue
+                    join[i:best] = True
+                    i = best + 1
+                k = j_end + 1
+        else:
+            join[:] = cand
+        # a closed loop whose seam was moved inside a straight side (a re-ordering may start a
+        # loop anywhere) has that side in two pieces, first and last of the chain: join them
+        chain_start = np.ones(len(rows), bool)
+        chain_start[1:] = ~same
+        cid = np.cumsum(chain_start) - 1
+        firsts = np.flatnonzero(chain_start)
+        lasts = np.append(firsts[1:] - 1, len(rows) - 1)
+        cand = ((lasts > firsts) & ext[firsts] & ext[lasts] & ~arc[firsts] & ~arc[lasts]
+                & np.all(np.abs(e[lasts] - s[firsts]) <= tol_mm, axis=1))
+        firsts, lasts = firsts[cand], lasts[cand]
+        if len(lasts):
+            keep_c = ~_near(vertices, e[lasts], tol_mm)
+            firsts, lasts = firsts[keep_c], lasts[keep_c]
+        for f, l in zip(firsts, lasts):
+            v0, v1 = e[l] - s[l], e[f] - s[f]
+            n0, n1 = np.linalg.norm(v0), np.linalg.norm(v1)
+            if n0 > 0 and n1 > 0 and np.dot(v0, v1) / (n0 * n1) > math.cos(2e-2):
+                closed_join[int(l)] = int(f)
+        del cid
+    start_of = np.ones(len(rows), bool)
+    start_of[1:] = ~join
+    gid = np.cumsum(start_of) - 1
+    g_first = np.flatnonzero(start_of)
+    g_last = np.append(g_first[1:] - 1, len(rows) - 1)
+    gk = keep[g_first]
+    g_first, g_last = g_first[gk], g_last[gk]
+    e_sum = np.bincount(gid, weights=de)[gid[g_first]]
+    a = s[g_first]
+    b = e[g_last]
+    is_arc = arc[g_first]
+    cc = np.where(is_arc[:, None], c[g_first], 0.0)
+    if closed_join:
+        pos_first = {int(r): k for k, r in enumerate(g_first)}
+        pos_last = {int(r): k for k, r in enumerate(g_last)}
+        drop = np.zeros(len(g_first), bool)
+        for l, f in closed_join.items():
+            kl, kf = pos_last.get(l), pos_first.get(f)
+            if kl is None or kf is None or kl == kf:
+                continue
+            b[kl] = b[kf]
+            e_sum[kl] += e_sum[kf]
+            drop[kf] = True
+        keep2 = ~drop
+        a, b, cc, is_arc, g_first, e_sum = a[keep2], b[keep2], cc[keep2], is_arc[keep2], g_first[keep2], e_sum[keep2]
+    # a move shorter than the tolerance is below any printer's resolution (a microstep is ~12 um);
+    # a rotated output may write it as a point (both axes snapped)
+    big = (np.abs(b - a).max(axis=1) > tol_mm) | is_arc
+    if not big.all():
+        a, b, cc, is_arc, g_first, e_sum = a[big], b[big], cc[big], is_arc[big], g_first[big], e_sum[big]
+    # as written; matching tries both directions (an arc reversed runs the other sense, which
+    # the key ignores: the end points and the centre fix the arc up to that)
+    key = np.concatenate([a, b, cc, is_arc[:, None].astype(float)], axis=1)
+    return lay[g_first], key, rows[g_first], e_sum
+
+
+def _match(ka: np.ndarray, kb: np.ndarray, tol: float):
+    """Greedy one-to-one matching of rows of ka to rows of kb within Chebyshev ``tol``.
+    Returns (unmatched a indices, unmatched b indices)."""
+    from scipy.spatial import cKDTree
+
+    if len(ka) == 0 or len(kb) == 0:
+        return np.arange(len(ka)), np.arange(len(kb))
+    tree = cKDTree(kb)
+    kq = min(8, len(kb))
+    rev = ka.copy()
+    rev[:, 0:3], rev[:, 3:6] = ka[:, 3:6], ka[:, 0:3]
+    d1, i1 = tree.query(ka, k=kq, p=np.inf, distance_upper_bound=tol)
+    d2, i2 = tree.query(rev, k=kq, p=np.inf, distance_upper_bound=tol)
+    if kq == 1:
+        d1, i1, d2, i2 = d1[:, None], i1[:, None], d2[:, None], i2[:, None]
+    dist = np.concatenate([d1, d2], axis=1)
+    idx = np.concatenate([i1, i2], axis=1)
+    o = np.argsort(dist, axis=1, kind="stable")
+    dist = np.take_along_axis(dist, o, axis=1)
+    idx = np.take_along_axis(idx, o, axis=1)
+    used = np.zeros(len(kb), bool)
+    miss_a = []
+    for i in range(len(ka)):
+        found = False
+        for d, j in zip(dist[i], idx[i]):
+            if not np.isfinite(d):
+                break
+            if not used[j]:
+                used[j] = found = True
+                break
+        if not found:
+            miss_a.append(i)
+    # second chance for a's whose 8 nearest were all taken (many identical segments)
+    if miss_a:
+        left_b = np.flatnonzero(~used)
+        still = []
+        if len(left_b):
+            t2 = cKDTree(kb[left_b])
+            for i in miss_a:
+                kk = min(len(left_b), 64)
+                da, ja = t2.query(ka[i], k=kk, p=np.inf, distance_upper_bound=tol)
+                db, jb = t2.query(rev[i], k=kk, p=np.inf, distance_upper_bound=tol)
+                d = np.concatenate([np.atleast_1d(da), np.atleast_1d(db)])
+                j = np.concatenate([np.atleast_1d(ja), np.atleast_1d(jb)])
+                oo = np.argsort(d, kind="stable")
+                d, j = d[oo], j[oo]
+                for dd, jj in zip(d, j):
+                    if not np.isfinite(dd):
+                        still.append(i)
+                        break
+                    if not used[left_b[jj]]:
+                        used[left_b[jj]] = True
+                        break
+                else:
+                    still.append(i)
+        else:
+            still = miss_a
+        miss_a = still
+    return np.array(miss_a, np.int64), np.flatnonzero(~used)
+
+
+def check_geometry(original: Program, output: Program, *, tol_mm: float = GEOMETRY_TOL_MM,
+                   max_findings: int = 10) -> list[Finding]:
+    deg, cx, cy = read_rotation(output)
+    la, ka, ra, ea = _segments(original, tol_mm=tol_mm)
+    lb, kb, rb, eb = _segments(output, deg, (cx, cy), tol_mm=tol_mm, vertices=_vertices(original),
+                               original_moves=_moves(original))
+    out: list[Finding] = []
+    if original.n_layers != output.n_layers:
+        # the layer finder saw the two files differently (a z-change file whose XY moved): compare
+        # the whole print at once -- a segment's key holds its Z, so nothing is lost but speed
+        la = np.zeros_like(la)
+        lb = np.zeros_like(lb)
+    for L in np.union1d(np.unique(la), np.unique(lb)):
+        ia = np.flatnonzero(la == L)
+        ib = np.flatnonzero(lb == L)
+        ma, mb = _match(ka[ia], kb[ib], tol_mm)
+        # a move of a few micrometres that a rotated output's snaps shortened below the tolerance
+        # (or lengthened above it) has no partner: below any printer's resolution, not reported
+        ma = ma[np.abs(ka[ia][ma, 3:6] - ka[ia][ma, 0:3]).max(axis=1) > SHORT_MM] if len(ma) else ma
+        mb = mb[np.abs(kb[ib][mb, 3:6] - kb[ib][mb, 0:3]).max(axis=1) > SHORT_MM] if len(mb) else mb
+        for i in ma[:3]:
+            k = ka[ia[i]]
+            out.append(Finding("geometry", int(original.line[ra[ia[i]]]) + 1,
+                               f"layer {L}: extruded segment ({k[0]:.3f},{k[1]:.3f},{k[2]:.3f})-"
+                               f"({k[3]:.3f},{k[4]:.3f},{k[5]:.3f}) of the original is not in the output",
+                               in_original=True))
+        for j in mb[:3]:
+            k = kb[ib[j]]
+            out.append(Finding("geometry", int(output.line[rb[ib[j]]]) + 1,
+                               f"layer {L}: extruded segment ({k[0]:.3f},{k[1]:.3f},{k[2]:.3f})-"
+                               f"({k[3]:.3f},{k[4]:.3f},{k[5]:.3f}) is not in the original"))
+        if len(out) >= max_findings:
+            break
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# 2. extrusion
+def _layer_e(program: Program) -> tuple[np.ndarray, np.ndarray]:
+    """Net filament per layer (all E motion: extrusion, retraction, unretraction). Net, because a
+    re-ordering may retract more or less often, and a move shorter than the single-axis snap
+    may become an E-only move in a rotated output: neither changes what is deposited."""
+    ext = np.isin(program.kind, MOTION_KINDS)
+    de = program.end_mm[:, 3] - program.start_mm[:, 3]
+    lay = program.layer[ext] + 1           # layer -1 -> bin 0
+    n = max(program.n_layers + 1, int(lay.max()) + 1 if len(lay) else 1)
+    return np.bincount(lay, weights=de[ext], minlength=n), np.arange(n) - 1
+
+
+def check_extrusion(original: Program, output: Program, *, rel_tol: float = E_REL_TOL) -> list[Finding]:
+    ea, layers = _layer_e(original)
+    eb, _ = _layer_e(output)
+    if original.n_layers != output.n_layers:     # the layer finder disagrees: compare the total
+        ea, eb = ea.sum(keepdims=True), eb.sum(keepdims=True)
+    n = max(len(ea), len(eb))
+    ea = np.pad(ea, (0, n - len(ea)))
+    eb = np.pad(eb, (0, n - len(eb)))
+    bad = np.abs(ea - eb) > rel_tol * np.maximum(np.abs(ea), np.abs(eb)) + 1e-6
+    out = []
+    for k in np.flatnonzero(bad)[:5]:
+        L = k - 1
+        rows = np.flatnonzero((output.layer == L) & output.extruding)
+        line = int(output.line[rows[0]]) + 1 if len(rows) else None
+        out.append(Finding("extrusion", line, f"layer {L}: net E {eb[k]:.5f} mm, original {ea[k]:.5f} mm"))
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# 3. commands
+def _non_motion_lines(program: Program) -> np.ndarray:
+    motion_lines = program.line[np.isin(program.kind, MOTION_KINDS)]
+    mask = np.ones(program.n_lines, bool)
+    mask[motion_lines] = False
+    return np.flatnonzero(mask)
+
+
+def check_commands(original: Program, output: Program, *, reordered: bool = False,
+                   max_findings: int = 5) -> list[Finding]:
+    out: list[Finding] = []
+    if reordered:
+        def seq(p):
+            m = np.zeros(p.n_lines, bool)
+            for letter, num in CONTROL_COMMANDS:
+                m |= p.is_command(letter, num)
+            m |= p.line_letter == ord("T")
+            idx = np.flatnonzero(m)
+            return idx, [p.line_text(i).strip() for i in idx]
+        ia, ta = seq(original)
+        ib, tb = seq(output)
+        for k in range(max(len(ta), len(tb))):
+            if k >= len(ta):
+                out.append(Finding("commands", int(ib[k]) + 1, f"control command not in the original: {tb[k][:60]}"))
+            elif k >= len(tb):
+                out.append(Finding("commands", int(ia[k]) + 1, f"control command missing: {ta[k][:60]}", True))
+            elif ta[k] != tb[k]:
+                out.append(Finding("commands", int(ib[k]) + 1, f"control command {tb[k][:40]!r} where the "
+                                                            f"original has {ta[k][:40]!r}"))
+            if len(out) >= max_findings:
+                break
+        return out
+    a = _non_motion_lines(original)
+    b = _non_motion_lines(output)
+    i = j = 0
+    while i < len(a) and len(out) < max_findings:
+        if j >= len(b):
+            out.append(Finding("commands", int(a[i]) + 1,
+                               f"line missing from the output: {original.line_text(int(a[i])).strip()[:60]}", True))
+            i += 1
+            continue
+        ta = original.line_text(int(a[i]))
+        tb = output.line_text(int(b[j]))
+        if ta == tb:
+            i += 1
+            j += 1
+        elif fwmod.parse_motor_line(tb) is not None or tb.startswith(ROTATE_PREFIX):
+            j += 1                       # an inserted motor instruction / rotation header
+        else:
+            # deleted or changed: say which; resynchronise on the next equal line
+            nxt = next((jj for jj in range(j, min(j + 50, len(b)))
+                        if output.line_text(int(b[jj])) == ta), None)
+            if nxt is not None:
+                out.append(Finding("commands", int(b[j]) + 1, f"line added: {tb.strip()[:60]}"))
+                j = nxt
+            else:
+                out.append(Finding("commands", int(a[i]) + 1,
+                                   f"line missing or changed in the output: {ta.strip()[:60]}", True))
+                i += 1
+    if not out:
+        for jj in range(j, len(b)):
+            tb = output.line_text(int(b[jj]))
+            if fwmod.parse_motor_line(tb) is None and not tb.startswith(ROTATE_PREFIX):
+                out.append(Finding("commands", int(b[jj]) + 1, f"line added: {tb.strip()[:60]}"))
+                break
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# 4. timing
+def check_timing(output: Program, *, firmware="3dgates", start_ahead_s: float = 1.8e-3,
+                 end_late_s: float = 1.0e-3, original: Program | None = None,
+                 tol_s: float = TIME_TOL_S, max_findings: int = 10) -> list[Finding]:
+    fw = fwmod.get(firmware)
+    dur = np.asarray(output.duration_s, float)
+    t_end = np.cumsum(dur)
+    t_start = t_end - dur
+    steps = np.asarray(output.steps_motor(), bool)
+    motor_rows = np.flatnonzero(output.kind == Kind.MOTOR)
+    orig_motor_text = set()
+    if original is not None:
+        for r in np.flatnonzero(original.kind == Kind.MOTOR):
+            orig_motor_text.add(original.line_text(int(original.line[r])).strip())
+    explicit_on = fw.reenable == "exact"
+    out: list[Finding] = []
+    parsed = {}
+    for r in motor_rows:
+        text = output.line_text(int(output.line[r]))
+        pm = fwmod.parse_motor_line(text)
+        if pm is not None:
+            parsed[int(r)] = (pm[0], pm[1], text.strip() in orig_motor_text)
+    for m, letter in enumerate(AXES):
+        ev = [(r, on, orig) for r, (on, ms, orig) in parsed.items() if letter in ms]
+        if not ev:
+            continue
+        ev.sort()
+        ev_rows = np.array([e[0] for e in ev])
+        step_rows = np.flatnonzero(steps[:, m])
+        # state before each step row: the last instruction before it
+        k = np.searchsorted(ev_rows, step_rows, "right") - 1
+        for kk, sr in zip(k, step_rows):
+            if kk < 0:
+                continue
+            r, on, orig = ev[kk]
+            if not on and not orig and explicit_on:
+                out.append(Finding("timing", int(output.line[sr]) + 1,
+                                   f"motor {letter} steps while off (switched off at line {int(output.line[r]) + 1})"))
+                break
+        state = True
+        for r, on, orig in ev:
+            if orig:
+                state = on
+                continue
+            t = t_start[r]
+            if on and not state:
+                j = np.searchsorted(step_rows, r)
+                if j < len(step_rows):
+                    sr = step_rows[j]
+                    lead = t_start[sr] - t
+                    if lead < start_ahead_s - tol_s:
+                        out.append(Finding("timing", int(output.line[r]) + 1,
+                                           f"motor {letter} switched on only {lead * 1e3:.3f} ms before its step "
+                                           f"at line {int(output.line[sr]) + 1} (start-ahead {start_ahead_s * 1e3:g} ms)"))
+            if not on:
+                j = np.searchsorted(step_rows, r) - 1
+                if j >= 0:
+                    sr = step_rows[j]
+                    lag = t - t_end[sr]
+                    if lag < end_late_s - tol_s:
+                        out.append(Finding("timing", int(output.line[r]) + 1,
+                                           f"motor {letter} switched off {lag * 1e3:.3f} ms after its step at "
+                                           f"line {int(output.line[sr]) + 1} (end-late {end_late_s * 1e3:g} ms)"))
+            state = on
+            if len(out) >= max_findings:
+                break
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# 5. energy
+def _file_enable(program: Program, original_motor_text=frozenset()) -> np.ndarray:
+    """(n, 4) motor state as the slicer's file has it: the parsed state with the effect of every
+    inserted disable undone (a motor held off by a gating line counts as on). Lines whose text is
+    in ``original_motor_text`` are the file's own."""
+    en = np.asarray(program.enabled, bool).copy()
+    rows = np.flatnonzero(program.kind == Kind.MOTOR)
+    if not len(rows):
+        return en
+    ev = [[] for _ in AXES]
+    for r in rows:
+        text = program.line_text(int(program.line[r]))
+        pm = fwmod.parse_motor_line(text)
+        if pm is None:
+            continue
+        inserted_off = (not pm[0]) and text.strip() not in original_motor_text
+        for mtr in pm[1]:
+            ev[AXES.index(mtr)].append((int(r), inserted_off))
+    idx = np.arange(program.n_steps)
+    for m in range(4):
+        if not ev[m]:
+            continue
+        er = np.array([x[0] for x in ev[m]])
+        ins = np.array([x[1] for x in ev[m]])
+        k = np.searchsorted(er, idx, "right") - 1
+        held = (k >= 0) & ins[np.maximum(k, 0)]
+        en[held, m] = True
+    return en
+
+
+def energy_of(program: Program, *, firmware="3dgates", profile="paper", duration_s=None,
+              original: Program | None = None):
+    """(energy J, time s, stall s) of ``program`` recomputed from its text with the one model.
+
+    A firmware stall at a motor instruction is priced with the motors as the slicer's file has
+    them (``_file_enable``; ``original`` tells the file's own motor lines from inserted ones): the
+    whole printer keeps drawing power while the firmware drains its queue or dwells, and no gating
+    credit is taken for it -- the convention of ``gatesopt.gating.problem`` (``stall_coeffs``
+    priced with ``enable0``)."""
+    prof = load_profile(profile)
+    coeffs = prof.coefficients(program)
+    stall = fwmod.stall_durations(program, firmware)
+    dur = (program.duration_s if duration_s is None else np.asarray(duration_s, float)) + stall
+    en = np.asarray(program.enabled, bool).copy()
+    motor = program.kind == Kind.MOTOR
+    if motor.any():
+        own = frozenset()
+        if original is not None:
+            own = frozenset(original.line_text(int(original.line[r])).strip()
+                            for r in np.flatnonzero(original.kind == Kind.MOTOR))
+        en[motor] = _file_enable(program, own)[motor]
+    e = step_energy_j(dur, coeffs, en)
+    return float(e.sum()), float(dur.sum()), float(stall.sum())
+
+
+def _claimed(claimed):
+    if claimed is None:
+        return None
+    if isinstance(claimed, dict):
+        # a `gatesopt solve --json` report: the solver's own numbers where present
+        e = claimed.get("objective_j", claimed.get("energy_after_j", claimed.get("energy_j")))
+        t = claimed.get("objective_time_s", claimed.get("time_after_s", claimed.get("time_s")))
+        return e, t
+    if isinstance(claimed, (tuple, list)):
+        return claimed[0], claimed[1]
+    return getattr(claimed, "energy_j", None), getattr(claimed, "time_after_s", getattr(claimed, "time_s", None))
+
+
+def _order_changed(original: Program, output: Program) -> bool:
+    """True if the output prints its extruded segments in another order (or direction) than the
+    original: then it is a re-ordering, else gating-only output (checked line by line)."""
+    deg, cx, cy = read_rotation(output)
+    _, ka, _, _ = _segments(original)
+    _, kb, _, _ = _segments(output, deg, (cx, cy), vertices=_vertices(original),
+                            original_moves=_moves(original))
+    if len(ka) != len(kb):
+        return True
+    return bool(np.any(np.abs(ka[:, :6] - kb[:, :6]) > 10 * GEOMETRY_TOL_MM))
+
+
+def _without_motor_lines(program: Program, original: Program) -> Program:
+    """The program with its motor instruction lines removed (re-parsed): what the ordering checks
+    see, since gating's lines are checked here and are no barrier for a re-ordering."""
+    rows = np.flatnonzero(program.kind == Kind.MOTOR)
+    if not len(rows):
+        return program
+    from .parse import parse
+    keep = {original.line_text(int(original.line[r])).strip()
+            for r in np.flatnonzero(original.kind == Kind.MOTOR)}
+    drop = {int(program.line[r]) for r in rows if program.line_text(int(program.line[r])).strip() not in keep}
+    text = "".join(program.line_text(i) for i in range(program.n_lines) if i not in drop)
+    return parse(text, source=program.source)
+
+
+# ------------------------------------------------------------------------------------------------
+def verify(original: Program, output: Program, *, firmware="3dgates", start_ahead_s: float = 1.8e-3,
+           end_late_s: float = 1.0e-3, claimed=None, profile="paper", reordered: bool | None = None,
+           claim_rel_tol: float = CLAIM_REL_TOL, geometry_tol_mm: float = GEOMETRY_TOL_MM,
+           time_tol_s: float = TIME_TOL_S) -> VerifyReport:
+    """Run every check of ``output`` against ``original``; ``ok`` only if all hold.
+
+    ``claimed``: what the solver reported (a GatingSolution, a dict with ``energy_after_j`` /
+    ``time_after_s``, or an (energy J, time s) pair); None skips that comparison.
+    ``reordered``: output whose curves were re-ordered (None: detect it: a ``; gatesopt: order``
+    header, or original lines that are not all kept in order); then only heater/fan/tool commands must keep their order, and
+    ``gatesopt.ordering.verify.check`` runs too if it exists.
+    """
+    fw = fwmod.get(firmware)
+    if reordered is None:
+        # detect: a header says so, or the lines are not the original's plus insertions (then the
+        # output can only be a re-ordering, and is checked as one)
+        reordered = _has_line(output, ORDER_PREFIX) or _order_changed(original, output)
+    findings: list[Finding] = []
+    checks = []
+    deg, cx, cy = read_rotation(output)
+    findings += check_geometry(original, output, tol_mm=geometry_tol_mm)
+    checks.append("geometry")
+    findings += check_extrusion(original, output)
+    checks.append("extrusion")
+    findings += check_commands(original, output, reordered=reordered)
+    checks.append("commands")
+    findings += check_timing(output, firmware=fw, start_ahead_s=start_ahead_s, end_late_s=end_late_s,
+                             original=original, tol_s=time_tol_s)
+    checks.append("timing")
+    if reordered:
+        try:
+            ov = importlib.import_module("gatesopt.ordering.verify")
+        except ModuleNotFoundError:
+            ov = None
+        if ov is not None and hasattr(ov, "check"):
+            stripped = _without_motor_lines(output, original)
+            if stripped.n_lines == output.n_lines:
+                findings += list(ov.check(original, output))
+                checks.append("ordering")
+            else:
+                # re-ordered and gated: the ordering checks compare move by move, which split
+                # moves fail; ``gating.pipeline.run`` runs them on the re-ordered file before gating
+                checks.append("ordering(skipped: gated)")
+    e_after, t_after, stall = energy_of(output, firmware=fw, profile=profile, original=original)
+    e_before, t_before, _ = energy_of(original, firmware=fw, profile=profile)
+    cl = _claimed(claimed)
+    if cl is not None:
+        checks.append("energy")
+        ce, ct = cl
+        if ce is not None and abs(ce - e_after) > claim_rel_tol * max(abs(e_after), 1e-12):
+            findings.append(Finding("energy", None, f"energy recomputed from the text {e_after:.6f} J, "
+                                                    f"solver claimed {ce:.6f} J (rel. diff "
+                                                    f"{abs(ce - e_after) / max(abs(e_after), 1e-12):.2e})"))
+        if ct is not None and abs(ct - t_after) > claim_rel_tol * max(abs(t_after), 1e-12):
+            findings.append(Finding("energy", None, f"time recomputed from the text {t_after:.6f} s, "
+                                                    f"solver claimed {ct:.6f} s"))
+    return VerifyReport(
+        ok=not findings, findings=tuple(findings), energy_j=e_after, time_s=t_after,
+        energy_before_j=e_before, time_before_s=t_before, stall_s=stall,
+        lines_before=original.n_lines, lines_after=output.n_lines, bytes_before=len(original.data),
+        bytes_after=len(output.data), rotate_deg=deg, center_mm=(cx, cy), reordered=bool(reordered),
+        firmware=fw.name, checks=tuple(checks))

@@ -1,0 +1,130 @@
+"""``gatesopt solve``, ``gatesopt compare`` and ``gatesopt verify`` through gatesopt.cli.main."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+import gatesopt
+from gatesopt.cli import main
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "instances"
+
+# two layers of a square with a long X-only and Y-only side: something to gate
+SQUARE = "".join([
+    "; test square\nG21\nG90\nM82\nM104 S200\nG28\nG92 E0\nG1 Z0.2 F600\nG1 X50 Y50 F3000\n",
+    "G1 X90 Y50 E2 F1200\nG1 X90 Y90 E4\nM106 S255\nG1 X50 Y90 E6\nG1 X50 Y50 E8\n",
+    "G1 Z0.4 F600\nG1 X90 Y50 E10 F1200\nG1 X90 Y90 E12\nG1 X50 Y90 E14\nG1 X50 Y50 E16\n",
+    "M107\nM104 S0\nM84\n",
+])
+
+
+@pytest.fixture
+def square(tmp_path):
+    p = tmp_path / "in.gcode"
+    p.write_text(SQUARE)
+    return p
+
+
+def test_solve_writes_verified_output_and_json(square, tmp_path, capsys):
+    out = tmp_path / "out.gcode"
+    rj = tmp_path / "r.json"
+    rc = main(["solve", str(square), "-o", str(out), "--formulation", "dp", "--rotate", "none",
+               "--no-order", "--json", str(rj)])
+    assert rc == 0
+    text = out.read_text()
+    assert "S0 " in text and "S1 " in text
+    d = json.loads(rj.read_text())
+    for k in ("energy_before_j", "energy_after_j", "time_before_s", "time_after_s", "lines_added",
+              "rotation_deg", "formulation", "status", "gap", "solve_s"):
+        assert k in d
+    assert d["energy_after_j"] < d["energy_before_j"] and d["formulation"] == "dp"
+    assert d["lines_added"] == len(text.splitlines()) - len(SQUARE.splitlines())
+    printed = capsys.readouterr().out
+    assert "saving" in printed and "verified      yes" in printed
+    # and the file verifies on its own, against the claimed numbers
+    assert main(["verify", str(square), str(out), "--claimed", str(rj)]) == 0
+    assert not list(tmp_path.glob(".gatesopt-*"))           # no temporary file left behind
+
+
+def test_solve_refuses_to_overwrite(square, tmp_path, capsys):
+    out = tmp_path / "out.gcode"
+    out.write_text("keep me\n")
+    assert main(["solve", str(square), "-o", str(out), "--no-order"]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert out.read_text() == "keep me\n"
+    assert main(["solve", str(square), "-o", str(out), "--no-order", "--force", "--rotate", "none"]) == 0
+    assert out.read_text() != "keep me\n"
+
+
+def test_solve_refuses_input_as_output(square, capsys):
+    assert main(["solve", str(square), "-o", str(square), "--force"]) == 2
+    assert "input" in capsys.readouterr().err
+    assert square.read_text() == SQUARE
+
+
+def test_solve_bad_options_are_one_line_errors(square, tmp_path, capsys):
+    out = tmp_path / "o.gcode"
+    assert main(["solve", str(square), "-o", str(out), "--motors", "X,Q"]) == 2
+    assert main(["solve", str(square), "-o", str(out), "--rotate", "sideways"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("gatesopt: error:") == 2 and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_no_gating_keeps_the_file(square, tmp_path):
+    out = tmp_path / "o.gcode"
+    assert main(["solve", str(square), "-o", str(out), "--no-gating", "--no-order"]) == 0
+    assert out.read_text() == SQUARE
+
+
+@pytest.mark.parametrize("fw", ["klipper", "marlin"])
+def test_solve_firmware_dialects(square, tmp_path, fw):
+    out = tmp_path / f"{fw}.gcode"
+    assert main(["solve", str(square), "-o", str(out), "--firmware", fw, "--rotate", "none",
+                 "--no-order", "--formulation", "dp"]) == 0
+    added = out.read_text().replace(SQUARE, "")
+    if fw == "klipper":
+        new = [l for l in out.read_text().splitlines() if l not in SQUARE.splitlines()]
+        assert all(not l.startswith(("M18", "M84")) for l in new)
+    assert main(["verify", str(square), str(out), "--firmware", fw]) == 0 or added == ""
+
+
+def test_verify_exit_codes_and_line_numbers(square, tmp_path, capsys):
+    out = tmp_path / "out.gcode"
+    assert main(["solve", str(square), "-o", str(out), "--rotate", "none", "--no-order"]) == 0
+    broken = tmp_path / "broken.gcode"
+    broken.write_text(out.read_text().replace("M106 S255\n", ""))
+    capsys.readouterr()
+    assert main(["verify", str(square), str(broken)]) == 1
+    printed = capsys.readouterr().out
+    assert "FAILED" in printed and "line" in printed and "M106" in printed
+
+
+def test_compare_table_and_plot(square, tmp_path, capsys):
+    png = tmp_path / "cmp.png"
+    js = tmp_path / "cmp.json"
+    rc = main(["compare", str(square), "--formulations", "dp,milp", "--rotate", "none",
+               "--time-limit", "10", "--plot", str(png), "--json", str(js)])
+    assert rc == 0
+    table = capsys.readouterr().out
+    assert "greedy" in table and "dp" in table and "saving %" in table
+    rows = json.loads(js.read_text())
+    assert rows[0]["formulation"] == "greedy"
+    solved = {r["formulation"]: r for r in rows if "saving_pct" in r}
+    if "dp" in solved and "milp" in solved:
+        assert solved["dp"]["saving_pct"] == pytest.approx(solved["milp"]["saving_pct"], abs=1e-6)
+    assert png.exists() and png.stat().st_size > 1000
+
+
+@pytest.mark.skipif(not (SHARED / "real_slic3r131_stars.gcode").exists(), reason="../shared/instances absent")
+def test_solve_real_file_with_rotation(tmp_path):
+    out = tmp_path / "stars.gcode"
+    rj = tmp_path / "r.json"
+    assert main(["solve", str(SHARED / "real_slic3r131_stars.gcode"), "-o", str(out), "--rotate", "45",
+                 "--no-order", "--json", str(rj)]) == 0
+    d = json.loads(rj.read_text())
+    assert d["rotation_deg"] == 45 and d["verified"]
+    assert out.read_text().startswith("; gatesopt: rotate_deg=45 ")
+    assert gatesopt.parse(out).n_layers == gatesopt.parse(SHARED / "real_slic3r131_stars.gcode").n_layers
