@@ -124,19 +124,18 @@ def _find_layers(markers, step_line, kind, start, end):
             missing = np.isnan(z[uniq])
             z[uniq[missing]] = ext_z[valid][first][missing]
         return layer, z, marker_line.astype(np.int64), f"marker:{name}"
-    # Fallback: a new layer where an extruding step starts at a Z different from the previous
-    # extruding step's, and that Z was reached by a non-extruding move (a travel or a Z move).
-    # Z-hops come back down before extruding, so they make no layer; spiral vase mode raises Z
-    # while extruding, so it makes none either (the whole spiral is one layer: we do not invent
-    # per-revolution layers without a marker).
+    # Fallback: a new layer where an extrusion starts at a Z different from the Z where the previous
+    # extrusion ended, i.e. the Z changed in between, by a move that deposits nothing (a layer
+    # change). Z-hops come back down before extruding, so they make no layer; in spiral vase mode
+    # each extrusion starts where the last one ended, so the spiral is one layer (no invented
+    # per-revolution layers without a marker); lines between extrusions that do not move Z (motor
+    # instructions, dwells, fan changes) change nothing.
     idx = np.flatnonzero(extruding)
     if len(idx) == 0:
         return np.full(n_steps, -1, np.int32), np.zeros(0), np.zeros(0, np.int64), "none"
     zs = start[idx, 2]
-    prev_step_extruding = np.zeros(len(idx), bool)
-    prev_step_extruding[1:] = extruding[idx[1:] - 1]
     new = np.ones(len(idx), bool)
-    new[1:] = (np.abs(np.diff(zs)) > 1e-6) & ~prev_step_extruding[1:]
+    new[1:] = np.abs(zs[1:] - end[idx[:-1], 2]) > 1e-6
     layer_of_ext = np.cumsum(new) - 1
     # each step belongs to the layer of the next extruding step (the layer change travel is the
     # new layer's first step); steps after the last extrusion belong to the last layer

@@ -84,7 +84,7 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
     warnings = []
     method = ""
     any_moves = False
-    last_extruding = False      # the previous chunk ended extruding (a spiral crossing the boundary)
+    last_ext_z = np.nan         # Z where the previous chunk's last extrusion ended
     limits = None
     for piece, line0 in iter_chunks(path, chunk_bytes):
         prog = _parse_piece(piece, name, state, line0, flavor)
@@ -119,9 +119,11 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
             layer_e[-1] += float(r.step_energy_j[pre].sum())
         lt, le, lz = r.layer_time_s.tolist(), r.layer_energy_j.tolist(), prog.layer_z_mm.tolist()
         ext = np.flatnonzero(prog.extruding)
-        continues = bool(lz and layer_z) and (abs(lz[0] - layer_z[-1]) < 1e-6 or
-                                             (len(ext) > 0 and ext[0] == 0 and last_extruding))
-        last_extruding = bool(prog.extruding[-1])
+        # parse.py's rule across the boundary: the chunk's first extrusion continues the last layer
+        # when it starts at the Z where the previous chunk's last extrusion ended
+        continues = bool(lz and layer_z) and len(ext) > 0 and abs(prog.start_mm[ext[0], 2] - last_ext_z) < 1e-6
+        if len(ext):
+            last_ext_z = float(prog.end_mm[ext[-1], 2])
         if prog.layer_method == "z-change" and continues:
             # a layer found by Z changes (parse.py's fallback rule: a new layer needs a new Z reached
             # by a non-extruding move) that the chunk boundary cut in two: one layer again

@@ -278,3 +278,12 @@ def test_long_prints_may_extrude_more_than_100_m_but_not_absurd_amounts():
     assert p.end_mm[-1, E] == 240000
     with pytest.raises(GcodeError, match="absurd coordinate for E"):
         parse("G1 X1 E200000000 F600\n")
+
+
+def test_z_fallback_ignores_lines_between_extrusions_that_do_not_move_z():
+    # a gated spiral: motor instructions and a dwell between extrusions make no new layer
+    pts = "".join(f"G1 X{10 * math.cos(a):.3f} Y{10 * math.sin(a):.3f} Z{0.2 + a / 100:.4f} E0.1\n"
+                  + ("S0 Y\nS1 Y\n" if i % 3 == 0 else "") + ("G4 P1\n" if i % 7 == 0 else "")
+                  for i, a in enumerate(np.linspace(0, 20, 200)))
+    p = parse("M83\nG1 X10 Y0 Z0.2 F600\n" + pts)
+    assert p.n_layers == 1
