@@ -39,6 +39,8 @@ def _add_common(p) -> None:
                    help="solver time limit in seconds (milp, cpsat; default 60)")
     p.add_argument("--profile", default="paper", metavar="NAME|TOML",
                    help="energy profile: shipped name or TOML file (default: paper)")
+    p.add_argument("--threads", type=int, default=2, metavar="N",
+                   help="solver threads (default 2); 1 makes every run byte-identical (seeds are fixed)")
     p.add_argument("--bed", default=None, metavar="WxD",
                    help="bed size in mm for the rotation check (default: from the file's header)")
 
@@ -47,8 +49,12 @@ def register(sub) -> None:
     p = sub.add_parser("solve", help="insert motor power-gating instructions (and re-order curves)",
                        description="Write gated G-code: motors switched off while idle (3DGates), "
                                    "optionally rotated on the bed; verified before it is written.")
-    p.add_argument("file", help="input G-code (.gcode or .gcode.gz)")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.gcode", help="output file")
+    p.add_argument("file", help="input G-code (.gcode or .gcode.gz), or - for standard input")
+    p.add_argument("-o", "--output", metavar="OUT.gcode", help="output file, or - for standard output")
+    p.add_argument("--in-place", action="store_true",
+                   help="replace the input file (a slicer's post-processing step): written to a "
+                        "temporary file beside it, verified, then renamed over it keeping its "
+                        "permissions; on any failure the input is left untouched")
     p.add_argument("--formulation", choices=FORMULATION_NAMES, default="dp",
                    help="greedy (paper's Algorithm 1), dp (exact when separable), milp, cpsat")
     _add_common(p)
@@ -84,6 +90,8 @@ def options_from_args(args):
         v = getattr(args, name)
         if not (math.isfinite(v) and v >= 0):
             raise GatesoptError(f"--{name.replace('_', '-')} must be >= 0, not {v}")
+    if args.threads < 1:
+        raise GatesoptError(f"--threads must be at least 1, not {args.threads}")
     if not (args.time_limit > 0):
         raise GatesoptError(f"--time-limit must be > 0 s, not {args.time_limit}")
     bed = None
@@ -96,7 +104,8 @@ def options_from_args(args):
     return GatingOptions.for_firmware(
         args.firmware, motors=motors, rotate=rotate, start_ahead_s=args.start_ahead_ms / 1e3,
         end_late_s=args.end_late_ms / 1e3, max_added_time_pct=args.max_added_time_pct,
-        max_added_lines_pct=args.max_added_lines_pct, profile=args.profile, bed_size_mm=bed)
+        max_added_lines_pct=args.max_added_lines_pct, profile=args.profile, bed_size_mm=bed,
+        num_workers=args.threads)
 
 
 def _check_paths(inp: str, out: str, force: bool) -> None:
@@ -110,13 +119,26 @@ def _check_paths(inp: str, out: str, force: bool) -> None:
         raise GatesoptError(f"{out}: folder {folder} does not exist")
 
 
-def write_atomic(path: str, text: str, newline_bytes=None) -> None:
-    """Write ``text`` to a temporary file beside ``path`` and rename it into place."""
+def write_atomic(path: str, text: str, like: str | None = None) -> None:
+    """Write ``text`` to a temporary file beside ``path`` and rename it into place.
+
+    ``like``: an existing file whose permissions (and gzip compression) the new file keeps, for
+    replacing a file in place.
+    """
+    import gzip
+    import shutil
     folder = os.path.dirname(os.path.abspath(path))
     fd, tmp = tempfile.mkstemp(prefix=".gatesopt-", suffix=".tmp", dir=folder)
     try:
+        data = text.encode("utf-8", "surrogateescape")
+        if like is not None:
+            with open(like, "rb") as f:
+                if f.read(2) == b"\x1f\x8b":
+                    data = gzip.compress(data)
         with os.fdopen(fd, "wb") as f:
-            f.write(text.encode("utf-8", "surrogateescape"))
+            f.write(data)
+        if like is not None:
+            shutil.copymode(like, tmp)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -150,25 +172,55 @@ def format_solve_report(s: dict) -> str:
     return "\n".join(lines)
 
 
+def _solve_paths(args) -> tuple[str, str]:
+    """(input, output) after checking the combination of FILE, -o and --in-place."""
+    if args.in_place:
+        if args.output not in (None, args.file):
+            raise GatesoptError("--in-place writes over the input: do not give -o as well")
+        if args.file == "-":
+            raise GatesoptError("--in-place needs a file, not standard input")
+        if not os.path.isfile(args.file):
+            raise GatesoptError(f"{args.file}: no such file")
+        return args.file, args.file
+    if not args.output:
+        raise GatesoptError("give an output file with -o OUT.gcode (or -o - for standard output), "
+                            "or --in-place to replace the input")
+    if args.output != "-":
+        if args.file == "-":
+            if os.path.exists(args.output) and not args.force:
+                raise GatesoptError(f"{args.output}: exists; pass --force to overwrite it")
+        else:
+            _check_paths(args.file, args.output, args.force)
+    return args.file, args.output
+
+
 def run_solve(args) -> int:
     from ..gating.pipeline import run
-    _check_paths(args.file, args.output, args.force)
+    inp, out = _solve_paths(args)
+    report_to = sys.stderr if out == "-" else sys.stdout     # stdout carries the G-code
     options = options_from_args(args)
-    program = parse(args.file)
+    if inp == "-":
+        program = parse(sys.stdin.buffer.read(), source="<stdin>")
+    else:
+        program = parse(inp)
     result = run(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
                  order=not args.no_order, gating=not args.no_gating)
     s = result.summary()
     if not result.report.ok:
-        print(format_solve_report(s))
-        print(f"gatesopt: error: the output failed verification; nothing written to {args.output}",
-              file=sys.stderr)
-        for f in result.report.findings:
-            print(f"  {f}", file=sys.stderr)
-        return 1
-    _check_paths(args.file, args.output, args.force)   # again: the solve may have taken a while
-    write_atomic(args.output, result.text)
-    s["output"] = args.output
-    print(format_solve_report(s))
+        print(format_solve_report(s), file=sys.stderr)
+        where = "the input is unchanged" if args.in_place else f"nothing written to {out}"
+        first = str(result.report.findings[0]) if result.report.findings else "see above"
+        raise GatesoptError(f"the output failed verification ({first}); {where}")
+    if out == "-":
+        sys.stdout.buffer.write(result.text.encode("utf-8", "surrogateescape"))
+        sys.stdout.flush()
+    elif args.in_place:
+        write_atomic(out, result.text, like=inp)
+    else:
+        _check_paths(inp, out, args.force)   # again: the solve may have taken a while
+        write_atomic(out, result.text)
+    s["output"] = out
+    print(format_solve_report(s), file=report_to)
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(s, f, indent=2, default=_jsonable)

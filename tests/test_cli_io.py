@@ -1,0 +1,103 @@
+"""Slicer-facing I/O of `gatesopt solve`: --in-place, pipes, never overwriting, never partial files."""
+from __future__ import annotations
+
+import gzip
+import os
+import stat
+import subprocess
+import sys
+
+import pytest
+
+from gatesopt import parse
+from gatesopt.cli import main
+from gatesopt.verify import verify
+
+from conftest import PROJECT_INSTANCES
+
+SRC = PROJECT_INSTANCES / "square_lines.gcode"
+
+
+def _copy(tmp_path, name="print.gcode", mode=0o640, gz=False):
+    p = tmp_path / name
+    data = SRC.read_bytes()
+    p.write_bytes(gzip.compress(data) if gz else data)
+    p.chmod(mode)
+    return p
+
+
+def test_in_place_replaces_verified_and_keeps_permissions(tmp_path):
+    p = _copy(tmp_path)
+    assert main(["solve", "--in-place", "--rotate", "none", "--no-order", str(p)]) == 0
+    assert stat.S_IMODE(p.stat().st_mode) == 0o640
+    out = parse(p)
+    assert "S0" in out.to_gcode()
+    assert verify(parse(SRC), out).ok
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["print.gcode"]     # no temp file left
+
+
+def test_in_place_keeps_gzip(tmp_path):
+    p = _copy(tmp_path, "print.gcode.gz", gz=True)
+    assert main(["solve", "--in-place", "--rotate", "none", "--no-order", str(p)]) == 0
+    assert p.read_bytes()[:2] == b"\x1f\x8b"
+    assert verify(parse(SRC), parse(p)).ok
+
+
+def test_in_place_failure_leaves_the_original_untouched(tmp_path, capsys):
+    p = tmp_path / "bad.gcode"
+    p.write_text("G1 X0 F600\nG1 X1.2.3\n")
+    before = p.read_bytes()
+    assert main(["solve", "--in-place", str(p)]) == 2
+    assert p.read_bytes() == before
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad.gcode:2" in err[0]
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["bad.gcode"]
+
+
+def test_in_place_failed_verification_leaves_the_original(tmp_path, monkeypatch, capsys):
+    import dataclasses
+    from gatesopt.gating import pipeline
+    real = pipeline.run
+
+    def broken(*a, **k):
+        r = real(*a, **k)
+        return dataclasses.replace(r, report=dataclasses.replace(r.report, ok=False, findings=("line 9: made up",)))
+    monkeypatch.setattr(pipeline, "run", broken)
+    p = _copy(tmp_path)
+    before = p.read_bytes()
+    assert main(["solve", "--in-place", "--rotate", "none", str(p)]) == 2
+    assert p.read_bytes() == before
+    assert "failed verification (line 9: made up); the input is unchanged" in capsys.readouterr().err
+
+
+def test_option_combinations_are_refused(tmp_path, capsys):
+    p = _copy(tmp_path)
+    assert main(["solve", str(p)]) == 2                       # no -o, no --in-place
+    assert main(["solve", str(p), "-o", str(p)]) == 2          # -o is the input
+    assert main(["solve", "--in-place", "-", ]) == 2           # in place needs a file
+    other = tmp_path / "exists.gcode"
+    other.write_text("keep me")
+    assert main(["solve", str(p), "-o", str(other)]) == 2      # never overwrite without --force
+    assert other.read_text() == "keep me"
+    msgs = capsys.readouterr().err
+    assert "--in-place" in msgs and "must not be the input" in msgs and "--force" in msgs
+
+
+def test_pipes_stdin_to_stdout_messages_on_stderr():
+    text = SRC.read_text()
+    r = subprocess.run([sys.executable, "-m", "gatesopt", "solve", "-", "-o", "-", "--rotate", "none",
+                        "--no-order"], input=text, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith(text.splitlines()[0])          # G-code on stdout, nothing else
+    assert "verified      yes" in r.stderr
+    assert verify(parse(text), parse(r.stdout)).ok
+
+
+def test_determinism_same_input_same_bytes(tmp_path):
+    outs = []
+    for k in range(2):
+        o = tmp_path / f"o{k}.gcode"
+        assert main(["solve", str(SRC), "-o", str(o), "--formulation", "cpsat", "--max-added-lines-pct", "30",
+                     "--time-limit", "20", "--threads", "1"]) == 0
+        outs.append(o.read_bytes())
+    assert outs[0] == outs[1]
