@@ -251,3 +251,19 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
                 s = float(planner(program, int(r)))
         out[r] = s
     return out
+
+
+def detect(program) -> str:
+    """The dialect a file's own motor enable/disable lines are written in: "klipper" for
+    SET_STEPPER_ENABLE, "marlin" for M17/M18 naming axes, "3dgates" for the S-series (also the
+    answer when the file has none). M84 at the end of a print says nothing: every dialect has it."""
+    import numpy as np
+    from .program import Kind
+    rows = program.line[program.kind == Kind.MOTOR]
+    letters = program.line_letter[rows]
+    numbers = program.line_number[rows]
+    if np.any(letters == ord("@")):
+        return "klipper"
+    if np.any((letters == ord("M")) & ((numbers == 17) | (numbers == 18))):
+        return "marlin"
+    return "3dgates"

@@ -154,3 +154,15 @@ def test_real_file_identity_verifies():
     p = gatesopt.parse(SHARED / "slic3r13_torus_3dhoney20_acp.gcode")
     rep = verify(p, p)
     assert rep.ok and rep.energy_j == pytest.approx(rep.energy_before_j)
+
+
+def test_verify_cli_detects_the_output_dialect(tmp_path, capsys):
+    from gatesopt.cli import main
+    src = __import__("conftest").PROJECT_INSTANCES / "square_lines.gcode"
+    for fw in ("klipper", "marlin", "3dgates"):
+        out = tmp_path / f"{fw}.gcode"
+        assert main(["solve", str(src), "-o", str(out), "--firmware", fw, "--max-added-time-pct", "1",
+                     "--rotate", "none", "--no-order"]) == 0
+        capsys.readouterr()
+        assert main(["verify", str(src), str(out)]) == 0
+        assert f"(firmware: {fw})" in capsys.readouterr().out

@@ -15,8 +15,9 @@ def register(sub) -> None:
                                    "energy/time against a claimed report. Exit 0 only if all hold.")
     p.add_argument("original", help="the original G-code")
     p.add_argument("output", help="the rewritten G-code")
-    p.add_argument("--firmware", choices=("3dgates", "marlin", "klipper", "reprap"), default="3dgates",
-                   help="firmware the output is meant for (stall times, automatic re-enable)")
+    p.add_argument("--firmware", choices=("auto", "3dgates", "marlin", "klipper", "reprap"), default="auto",
+                   help="firmware the output is meant for (stall times, automatic re-enable); auto: "
+                        "the claimed report's, else the dialect of the output's own motor lines")
     p.add_argument("--start-ahead-ms", type=float, default=1.8)
     p.add_argument("--end-late-ms", type=float, default=1.0)
     p.add_argument("--profile", default="paper", metavar="NAME|TOML", help="energy profile")
@@ -36,14 +37,18 @@ def run(args) -> int:
     if args.claimed:
         with open(args.claimed, encoding="utf-8") as f:
             claimed = json.load(f)
-    rep = verify(original, output, firmware=args.firmware, start_ahead_s=args.start_ahead_ms / 1e3,
+    firmware = args.firmware
+    if firmware == "auto":
+        from ..firmware import detect
+        firmware = (claimed or {}).get("firmware") or detect(output)
+    rep = verify(original, output, firmware=firmware, start_ahead_s=args.start_ahead_ms / 1e3,
                  end_late_s=args.end_late_ms / 1e3, claimed=claimed, profile=args.profile,
                  reordered=True if args.reordered else None)
     if args.json:
         json.dump(rep.to_dict(), sys.stdout, indent=2)
         print()
         return 0 if rep.ok else 1
-    print(f"checks        {', '.join(rep.checks)}")
+    print(f"checks        {', '.join(rep.checks)}   (firmware: {firmware})")
     print(f"energy        {rep.energy_before_j:.1f} J -> {rep.energy_j:.1f} J   saving {rep.saving_pct:.2f} %")
     print(f"time          {rep.time_before_s:.2f} s -> {rep.time_s:.2f} s   (stalls {rep.stall_s:.2f} s)")
     print(f"lines         {rep.lines_before} -> {rep.lines_after}   bytes {rep.bytes_before} -> {rep.bytes_after}")
