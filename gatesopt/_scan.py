@@ -24,6 +24,7 @@ ERR_MISSING_NUMBER = 2  # an axis word without a number on a motion line
 ERR_ABSURD = 3          # coordinate beyond ABSURD_MM
 ERR_BAD_FEED = 4        # F <= 0
 ERR_ARC = 5             # G2/G3 without I/J or R, or R too small for the chord
+ERR_BAD_CHAR = 6        # a character that is no part of a G-code word inside a G command
 
 ABSURD_MM = 100000.0    # 100 m: no printer has this; an X/Y/Z beyond it is corrupt input
 ABSURD_E_MM = 1.0e8     # 100 km of filament: E is cumulative, and a 1 kg spool is ~330 m
@@ -494,6 +495,10 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 continue
         elif letter == 71:  # G
             g = number
+            if lenient:
+                # the tokenizer stopped at a stray character: firmware would read on past it and
+                # we would not; a G command we cannot read the way the firmware does is corrupt
+                return ERR_BAD_CHAR, ln, -1, n, arrs, no_markers
             if g == 0.0 or g == 1.0 or g == 2.0 or g == 3.0:
                 arc = g >= 2.0
                 any_axis = False

@@ -28,6 +28,7 @@ _ERR_TEXT = {
     _scan.ERR_ABSURD: "absurd coordinate for {L} (beyond {lim:g} mm)",   # lim: per axis, see _scan
     _scan.ERR_BAD_FEED: "feedrate F must be positive",
     _scan.ERR_ARC: "arc needs I/J or an R that reaches the end point",
+    _scan.ERR_BAD_CHAR: "unexpected character in a G command (not G-code, or a damaged line)",
 }
 
 

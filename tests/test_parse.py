@@ -287,3 +287,12 @@ def test_z_fallback_ignores_lines_between_extrusions_that_do_not_move_z():
                   for i, a in enumerate(np.linspace(0, 20, 200)))
     p = parse("M83\nG1 X10 Y0 Z0.2 F600\n" + pts)
     assert p.n_layers == 1
+
+
+def test_stray_characters_inside_a_g_command_are_an_error_but_text_commands_are_not():
+    with pytest.raises(GcodeError, match=r"<text>:2: .*unexpected character in a G command"):
+        parse("G1 X0 F600\nG1 X1 \x82\xfd Y10 E1\n")
+    with pytest.raises(GcodeError, match="unexpected character"):
+        parse("G1 X0 F600\nG1 X1 # Y2\n")
+    p = parse("M117 Printing 1/10 #%&\nG1 X1 F600\nM118 E1 ok: 50%\n")
+    assert p.n_steps == 1

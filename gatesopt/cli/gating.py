@@ -207,7 +207,8 @@ def run_solve(args) -> int:
                  order=not args.no_order, gating=not args.no_gating)
     s = result.summary()
     if not result.report.ok:
-        print(format_solve_report(s), file=sys.stderr)
+        if out != "-":      # stderr keeps the one line a slicer shows
+            print(format_solve_report(s))
         where = "the input is unchanged" if args.in_place else f"nothing written to {out}"
         first = str(result.report.findings[0]) if result.report.findings else "see above"
         raise GatesoptError(f"the output failed verification ({first}); {where}")
