@@ -1,0 +1,213 @@
+"""Curve-ordering benchmark over ../shared/instances (issue 4, "Evaluation").
+
+    python bench/ordering.py run [--files GLOB] [--modes safe,free] [--formulations auto,greedy]
+                                 [--time-limit S] [--out bench/ordering-results.jsonl]
+    python bench/ordering.py report [--out ...] [--write docs/RESULTS.md]
+
+``run`` appends one JSON line per (file, mode, formulation): the verified pipeline
+(``gatesopt.ordering.pipeline.order_program``: build -> solve -> emit -> re-parse -> verify), with
+travel measured on the parsed files, group statuses, gaps, solve time, and per layer the largest
+group and its solve time (Fleming Fig. 3). ``report`` turns the lines into the tables of
+docs/RESULTS.md, section "## Curve ordering" (replaced in place with ``--write``).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import fnmatch
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+INSTANCES = ROOT.parent / "shared" / "instances"
+DEFAULT_OUT = ROOT / "bench" / "ordering-results.jsonl"
+
+
+def manifest() -> dict:
+    with open(INSTANCES / "MANIFEST.tsv", newline="") as f:
+        return {r["file"]: r for r in csv.DictReader(f, delimiter="\t")}
+
+
+def run(args) -> None:
+    import gatesopt
+    from gatesopt.ordering import OrderingOptions
+    from gatesopt.ordering.pipeline import order_program
+    man = manifest()
+    files = sorted(f for f in man if fnmatch.fnmatch(f, args.files))
+    out = Path(args.out)
+    for name in files:
+        t = time.perf_counter()
+        prog = gatesopt.parse(INSTANCES / name)
+        parse_s = time.perf_counter() - t
+        for mode in args.modes.split(","):
+            for form in args.formulations.split(","):
+                t = time.perf_counter()
+                res = order_program(prog, OrderingOptions(mode=mode), formulation=form,
+                                    time_limit_s=args.time_limit, budget_s=args.budget)
+                s = dict(res.summary)
+                sizes = np.diff(res.problem.group_curve_start)
+                groups = [{"n": int(sizes[g]), "status": gs.status, "gap": gs.gap,
+                           "solve_s": gs.solve_s, "method": gs.method}
+                          for g, gs in enumerate(res.solution.groups)
+                          if not res.problem.group_fixed[g] and sizes[g] >= 2]
+                s.update(file=name, slicer=man[name]["slicer"], infill=man[name]["infill_pattern"],
+                         parse_s=parse_s, run_s=time.perf_counter() - t, group_rows=groups)
+                s.pop("per_layer", None)
+                s["layers"] = [{"layer": r["layer"], "largest_group": r["largest_group"],
+                                "solve_s": r["solve_s"], "status": r["status"]}
+                               for r in res.solution.layer_summary(res.problem)]
+                with open(out, "a") as f:
+                    f.write(json.dumps(s, default=float) + "\n")
+                print(f"{name} {mode} {form}: travel {s['travel_before_mm']:.0f} -> "
+                      f"{s['travel_after_mm']:.0f} mm ({s['travel_change_pct']:+.1f} %), groups "
+                      f"opt {s['groups_optimal']} feas {s['groups_feasible']} fb {s['groups_fallback']}, "
+                      f"solve {s['solve_s']:.1f} s, verified {s['verified']}", flush=True)
+
+
+def _slicer_family(s: str) -> str:
+    s = s.lower()
+    for key, name in (("prusaslicer", "PrusaSlicer"), ("superslicer", "SuperSlicer"), ("slic3r", "Slic3r"),
+                      ("cura", "Cura"), ("orca", "OrcaSlicer"), ("bambu", "BambuStudio"),
+                      ("creality", "Creality Print"), ("ideamaker", "ideaMaker"), ("kisslicer", "KISSlicer"),
+                      ("kiri", "Kiri:Moto"), ("icesl", "IceSL"), ("fullcontrol", "FullControl")):
+        if key in s:
+            return name
+    return s or "?"
+
+
+def report(args) -> str:
+    rows = [json.loads(l) for l in open(args.out) if l.strip()]
+    last = {}
+    for r in rows:                      # the latest run of each (file, mode, formulation)
+        last[(r["file"], r["order_mode"], r["formulation"])] = r
+    rows = list(last.values())
+    forms = sorted({r["formulation"] for r in rows})
+    tl = sorted({r["time_limit_s"] for r in rows})
+    bud = sorted({r.get("budget_s") or 0 for r in rows})
+    lines = ["## Curve ordering", "",
+             "Command (from the repository root, with ../shared/instances beside it; 2 cores shared "
+             "with other jobs):", "", "```",
+             f"python bench/ordering.py run --modes safe,free --formulations {','.join(forms)} "
+             f"--time-limit {tl[0] if tl else 1}" + (f" --budget {bud[0]}" if bud and bud[0] else ""),
+             "python bench/ordering.py report --write docs/RESULTS.md", "```", "",
+             "Travel = non-extruding XY moves from the first layer on, measured on the parsed input and "
+             "the parsed, verified output (every row passed `gatesopt.ordering.verify.check`, else "
+             "it says so). *groups* = re-orderable groups of >= 2 curves; *optimal* = proven "
+             "(DP, bound or MILP), *feasible* = exact solver stopped at the per-group time limit with "
+             "a gap, *fallback* = too large for the exact step (greedy path, gap to the cheap bound). "
+             "Time = solve only (build, emit, verify excluded) / the whole pipeline.", "",
+             "Issue 4 targets: >= 95 % of real groups proven optimal, the rest within 2 %, an instance "
+             "in <= 10 s on 2 cores; compare the bold lines below. The gaps of unproven groups are to "
+             "their lower bound (the MILP's, or the cheap bound of `bounds.py` for fallback groups), "
+             "not measured distances to the optimum. `--budget 10` shares 10 s of exact solving per "
+             "file among its groups; greedy passes and the budget check itself come on top (so a file "
+             "with ~1000 groups takes longer). Peers (LKH via elkai, OR-Tools routing) were not run.", ""]
+    for form in forms:
+        for mode in ("safe", "free"):
+            rs = sorted((r for r in rows if r["formulation"] == form and r["order_mode"] == mode),
+                        key=lambda r: r["file"])
+            if not rs:
+                continue
+            lines += [f"### {form}, {mode} mode", "",
+                      "| file | slicer | infill | travel before mm | after mm | change | retractions | "
+                      "groups | optimal | feasible | fallback | worst gap | largest group | solve s | run s | verified |",
+                      "|---|---|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+            for r in rs:
+                lines.append(
+                    f"| {r['file']} | {_slicer_family(r['slicer'])} | {r['infill'] or '-'} | "
+                    f"{r['travel_before_mm']:,.0f} | {r['travel_after_mm']:,.0f} | "
+                    f"{r['travel_change_pct']:+.1f} % | {r['retractions_before']} -> {r['retractions_after']} | "
+                    f"{r['groups_reordered']} | {r['groups_optimal']} | {r['groups_feasible']} | "
+                    f"{r['groups_fallback']} | {100 * r['worst_gap']:.1f} % | {r['largest_group']} | "
+                    f"{r['solve_s']:.1f} | {r['run_s']:.1f} | {'yes' if r['verified'] else 'NO'} |")
+            # totals
+            g = [x for r in rs for x in r["group_rows"]]
+            n_g = len(g)
+            n_opt = sum(x["status"] == "optimal" for x in g)
+            gaps = np.array([x["gap"] for x in g if x["status"] != "optimal"])
+            tb = sum(r["travel_before_mm"] for r in rs)
+            ta = sum(r["travel_after_mm"] for r in rs)
+            ch = np.array([r["travel_change_pct"] for r in rs if r["travel_before_mm"] > 0])
+            lines += ["", f"**{len(rs)} files: travel {tb:,.0f} -> {ta:,.0f} mm ({100 * (ta / tb - 1):+.1f} %); "
+                          f"per file median {np.median(ch):+.1f} %, best {ch.min():+.1f} %, worst {ch.max():+.1f} %. "
+                          f"Groups proven optimal: {n_opt} of {n_g} ({100 * n_opt / max(n_g, 1):.1f} %); "
+                          f"the rest: gap median {100 * np.median(gaps) if len(gaps) else 0:.1f} %, "
+                          f"<= 2 % for {int((gaps <= 0.02).sum())} of {len(gaps)}. "
+                          f"Solve time per file: median {np.median([r['solve_s'] for r in rs]):.1f} s, "
+                          f"max {max(r['solve_s'] for r in rs):.1f} s; "
+                          f"files solved in <= 10 s: {sum(r['solve_s'] <= 10 for r in rs)} of {len(rs)}. "
+                          f"Verified: {sum(r['verified'] for r in rs)} of {len(rs)}.**", ""]
+            # by slicer family and infill pattern (Fleming Fig. 2)
+            fam = {}
+            for r in rs:
+                k = (_slicer_family(r["slicer"]), (r["infill"] or "-").split(" ")[0])
+                fam.setdefault(k, []).append(r)
+            lines += ["| slicer | infill | files | travel change (sum) |", "|---|---|---:|---:|"]
+            for k in sorted(fam):
+                b = sum(r["travel_before_mm"] for r in fam[k])
+                a = sum(r["travel_after_mm"] for r in fam[k])
+                lines.append(f"| {k[0]} | {k[1]} | {len(fam[k])} | {100 * (a / b - 1) if b else 0:+.1f} % |")
+            # runtime against the largest group per layer (Fleming Fig. 3)
+            pts = [(L["largest_group"], L["solve_s"]) for r in rs for L in r["layers"] if L["largest_group"] >= 2]
+            if pts:
+                edges = [2, 4, 8, 16, 32, 64, 128, 256, 100000]
+                lines += ["", "Solve time per layer against its largest group (Fleming Fig. 3):", "",
+                          "| largest group (curves) | layers | median s | max s | layers proven optimal |",
+                          "|---|---:|---:|---:|---:|"]
+                lay = [(L["largest_group"], L["solve_s"], L["status"]) for r in rs for L in r["layers"]
+                       if L["largest_group"] >= 2]
+                for a, b in zip(edges[:-1], edges[1:]):
+                    sel = [x for x in lay if a <= x[0] < b]
+                    if sel:
+                        t = np.array([x[1] for x in sel])
+                        lines.append(f"| {a}-{b - 1 if b < 100000 else '...'} | {len(sel)} | "
+                                     f"{np.median(t):.3f} | {t.max():.2f} | "
+                                     f"{sum(x[2] == 'optimal' for x in sel)} |")
+            lines.append("")
+    return "\n".join(lines)
+
+
+def write_section(path: Path, section: str) -> None:
+    text = path.read_text() if path.exists() else "# Results\n"
+    head = "## Curve ordering"
+    if head in text:
+        a = text.index(head)
+        nxt = text.find("\n## ", a + len(head))
+        text = text[:a] + section.rstrip() + "\n" + (text[nxt:] if nxt >= 0 else "")
+    else:
+        text = text.rstrip() + "\n\n" + section.rstrip() + "\n"
+    path.write_text(text)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("--files", default="*.gcode*")
+    r.add_argument("--modes", default="safe,free")
+    r.add_argument("--formulations", default="auto")
+    r.add_argument("--time-limit", type=float, default=1.0)
+    r.add_argument("--budget", type=float, default=None)
+    r.add_argument("--out", default=str(DEFAULT_OUT))
+    p = sub.add_parser("report")
+    p.add_argument("--out", default=str(DEFAULT_OUT))
+    p.add_argument("--write", metavar="RESULTS.md")
+    a = ap.parse_args()
+    if not INSTANCES.exists():
+        sys.exit(f"bench/ordering.py: {INSTANCES} not found")
+    if a.cmd == "run":
+        run(a)
+    else:
+        sec = report(a)
+        if a.write:
+            write_section(Path(a.write), sec)
+        print(sec)
+
+
+if __name__ == "__main__":
+    main()

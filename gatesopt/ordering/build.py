@@ -1,0 +1,282 @@
+"""Program -> OrderingProblem: curves, gaps, barriers and groups (formulations/ordering.md, "Build").
+
+A *curve* is a maximal run of extruding steps (layer >= 0) whose lines are separated only by
+neutral lines (comments, blank lines, F-only ``G1 F..``). Between two curves lies a *gap*: the
+slicer's travel (retract, wipe, z-hop, travel, unretract) plus any other lines. A line in a gap is
+
+- *motion*: a non-extruding move; it is rebuilt when the curves around it change;
+- *neutral*: comments, F-only moves; they travel with the next curve;
+- *state*: a command that sets state an extrusion sees (acceleration M204/M201,
+  jerk M205, speed/flow M220/M221, linear advance M900, Klipper SET_VELOCITY_LIMIT and
+  SET_PRESSURE_ADVANCE); it travels with the next curve, and ``emit`` re-issues it wherever a
+  curve would otherwise see another value than in the original;
+- *barrier*: anything else (heaters, fan, G92, modal switches, object labels M486 / EXCLUDE_OBJECT /
+  ``; printing object`` / ``;MESH:``, dwells, unknown commands): no curve crosses it;
+- *fatal*: tool changes (T), filament change (M600...), homing: the layer keeps its order.
+
+A gap is a *boundary* when it holds a barrier or the layer changes. Groups never span a boundary.
+``--order-mode safe`` further splits at every change of feature (``;TYPE:``) and keeps walls,
+ironing, skirt/brim and (without feature comments) closed loops in the slicer's order and
+direction; the first layer keeps its order in both modes (adhesion, and start G-code purges).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..program import Kind, Program
+from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
+
+LINE_MOTION, LINE_NEUTRAL, LINE_STATE, LINE_BARRIER, LINE_FATAL, LINE_CURVE = range(6)
+
+STATE_M = (201, 203, 204, 205, 220, 221, 900)   # fan M106/M107 is a barrier (verify keeps its order)
+FATAL_M = (0, 1, 25, 125, 600, 601, 602, 701, 702)
+STATE_EXT = (b"SET_VELOCITY_LIMIT", b"SET_PRESSURE_ADVANCE", b"M204")
+OBJECT_LABEL = re.compile(rb"\n[^\n]*(?:printing object|; *stop printing object|;MESH:|EXCLUDE_OBJECT|M486)",
+                          re.I)
+FEATURE_LINE = re.compile(rb"\n(;[ \t]*(?:TYPE:|FEATURE:|feature )[ \t]*)([^\r\n]*)")
+FIXED_FEATURE = re.compile(r"perimeter|wall|ironing|skirt|brim|wipe|prime|tower|shell|inset|outline",
+                           re.I)
+MOTION_KINDS = (Kind.TRAVEL, Kind.RETRACT, Kind.UNRETRACT, Kind.Z_ONLY, Kind.ARC, Kind.EXTRUDE)
+
+
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """Where curves and gaps lie in the file (shared by build and emit)."""
+
+    line_class: np.ndarray      # (n_lines,) int8: LINE_*
+    step_of_line: np.ndarray    # (n_lines,) int64: the step a line holds (-1: none)
+    curve_s0: np.ndarray        # (n,) first step of each curve
+    curve_s1: np.ndarray        # (n,) one past its last step
+    curve_l0: np.ndarray        # (n,) first line
+    curve_l1: np.ndarray        # (n,) last line (inclusive)
+    gap_boundary: np.ndarray    # (n,) bool: the gap *before* curve i is a boundary
+    layer_fatal: np.ndarray     # (n_layers,) bool
+    layer_keep: np.ndarray      # (n_layers,) bool: the layer keeps its order (why: layer_why)
+    layer_why: tuple = ()
+    feature_prefix: str = ";TYPE:"
+    state_key: dict = field(default_factory=dict)     # line -> state key
+    notes: tuple = ()
+
+
+def _line_text_bytes(program: Program, i: int) -> bytes:
+    return program.data[program.line_start[i]:program.line_start[i + 1]]
+
+
+def state_key_of(program: Program, i: int):
+    """The state a state line sets (fan P index, M204 words, Klipper command name)."""
+    raw = _line_text_bytes(program, i).split(b";")[0].strip().upper()
+    words = raw.split()
+    head = words[0] if words else b""
+    if head in (b"M106", b"M107"):
+        p = [w for w in words[1:] if w.startswith(b"P")]
+        return ("fan", p[0].decode() if p else "P0")
+    if head in (b"M204", b"M201", b"M203", b"M205"):
+        return (head.decode(),) + tuple(sorted({w[:1].decode() for w in words[1:]}))
+    return (head.decode(),)
+
+
+def layout(program: Program) -> Layout:
+    """Classify every line and find the curves (see module docstring)."""
+    n_lines = program.n_lines
+    letter, number = program.line_letter, program.line_number
+    step_of_line = np.full(n_lines, -1, np.int64)
+    step_of_line[program.line] = np.arange(program.n_steps)
+    cls = np.full(n_lines, LINE_BARRIER, np.int8)
+    is_step = step_of_line >= 0
+    cls[(letter == 0) & ~is_step] = LINE_NEUTRAL
+    g = letter == ord("G")
+    cls[g & np.isin(number, (0, 1, 2, 3)) & ~is_step] = LINE_NEUTRAL       # F-only moves
+    m = letter == ord("M")
+    cls[m & np.isin(number, STATE_M)] = LINE_STATE
+    cls[m & np.isin(number, FATAL_M)] = LINE_FATAL
+    cls[letter == ord("T")] = LINE_FATAL
+    cls[g & np.isin(number, (28, 29))] = LINE_FATAL
+    ext = np.flatnonzero(letter == ord("@"))
+    for i in ext:
+        head = _line_text_bytes(program, int(i)).strip().split(b" ")[0].upper()
+        if head in STATE_EXT:
+            cls[i] = LINE_STATE
+    # object labels written as comments are barriers (M486 / EXCLUDE_OBJECT are barriers already)
+    starts = [mm.start() for mm in OBJECT_LABEL.finditer(b"\n" + program.data)]
+    if starts:
+        lab = np.searchsorted(program.line_start, np.asarray(starts), side="right") - 1
+        lab = lab[cls[lab] == LINE_NEUTRAL]
+        cls[lab] = LINE_BARRIER
+    kind = program.kind
+    steps = np.flatnonzero(is_step)
+    sk = kind[step_of_line[steps]]
+    motion = np.isin(sk, MOTION_KINDS)
+    cls[steps[motion]] = LINE_MOTION
+    cls[steps[~motion]] = LINE_BARRIER           # dwell, heat wait, homing handled as FATAL above
+    cls[steps[sk == Kind.HOME]] = LINE_FATAL
+
+    # ---- curves: runs of extruding steps in layers >= 0 separated only by neutral lines
+    extr = program.extruding & (program.layer >= 0)
+    es = np.flatnonzero(extr)
+    cls[program.line[es]] = LINE_CURVE
+    not_neutral = np.concatenate(([0], np.cumsum(cls != LINE_NEUTRAL)))   # prefix count per line
+    if len(es):
+        lines = program.line[es]
+        # non-neutral lines strictly between consecutive extruding steps' lines
+        between = not_neutral[lines[1:]] - not_neutral[lines[:-1] + 1]
+        new = np.ones(len(es), bool)
+        new[1:] = ((es[1:] != es[:-1] + 1) | (between > 0)
+                   | (program.layer[es[1:]] != program.layer[es[:-1]])
+                   | (program.feature[es[1:]] != program.feature[es[:-1]]))
+        first = np.flatnonzero(new)
+        s0 = es[first]
+        last = np.concatenate((first[1:] - 1, [len(es) - 1]))
+        s1 = es[last] + 1
+    else:
+        s0 = s1 = np.zeros(0, np.int64)
+    l0, l1 = program.line[s0], program.line[s1 - 1] if len(s1) else np.zeros(0, np.int64)
+    n = len(s0)
+    barrier_count = np.concatenate(([0], np.cumsum((cls == LINE_BARRIER) | (cls == LINE_FATAL))))
+    fatal_count = np.concatenate(([0], np.cumsum(cls == LINE_FATAL)))
+    gap_boundary = np.ones(n, bool)
+    if n > 1:
+        gl0, gl1 = l1[:-1] + 1, l0[1:]                         # gap lines [gl0, gl1)
+        gap_boundary[1:] = ((barrier_count[gl1] - barrier_count[gl0]) > 0) | (
+            program.layer[s0[1:]] != program.layer[s0[:-1]])
+    n_layers = max(program.n_layers, int(program.layer.max()) + 1 if program.n_steps else 0)
+    layer_fatal = np.zeros(n_layers, bool)
+    layer_keep = np.zeros(n_layers, bool)
+    why = [""] * n_layers
+    curve_layer = program.layer[s0]
+    if n:
+        # fatal lines anywhere from a layer's first curve to its last one, or in the gap before it
+        for lay in np.unique(curve_layer):
+            cs = np.flatnonzero(curve_layer == lay)
+            a = l1[cs[0] - 1] + 1 if cs[0] > 0 else l0[cs[0]]
+            if fatal_count[l1[cs[-1]] + 1] - fatal_count[a] > 0:
+                layer_fatal[lay] = True
+                layer_keep[lay] = True
+                why[lay] = "tool change, filament change or homing in the layer"
+        # Z that changes while extruding (spiral vase): reversing would run Z backwards
+        dz = np.abs(program.end_mm[es, 2] - program.start_mm[es, 2]) > 1e-6
+        for lay in np.unique(program.layer[es[dz]]):
+            layer_keep[lay] = True
+            why[lay] = why[lay] or "Z changes while extruding (spiral vase)"
+    if n:
+        first = int(curve_layer[0])
+        layer_keep[first] = True
+        why[first] = why[first] or "first layer keeps the slicer's order"
+    notes = []
+    if (program.relative_xyz[es].any() if len(es) else False) or (program.inch[es].any() if len(es) else False):
+        layer_keep[:] = True
+        notes.append("relative XYZ (G91) or inch units (G20) while printing: order kept")
+    fm = FEATURE_LINE.search(b"\n" + program.data)
+    prefix = fm.group(1).decode() if fm else ";TYPE:"
+    skey = {int(i): state_key_of(program, int(i)) for i in np.flatnonzero(cls == LINE_STATE)}
+    return Layout(cls, step_of_line, s0.astype(np.int64), s1.astype(np.int64), l0.astype(np.int64),
+                  l1.astype(np.int64), gap_boundary, layer_fatal, layer_keep, tuple(why), prefix,
+                  skey, tuple(notes))
+
+
+def _fixed_features(program: Program) -> np.ndarray:
+    """(n_features,) bool: features whose order and direction the slicer fixed."""
+    fixed = np.array([bool(FIXED_FEATURE.search(nm)) for nm in program.feature_names], bool)
+    # solid fills printed monotonic or concentric keep their order too
+    return fixed
+
+
+_MONOTONIC_CFG = re.compile(rb"\n; *(top_fill_pattern|bottom_fill_pattern|solid_fill_pattern|fill_pattern|"
+                            rb"top_surface_pattern|bottom_surface_pattern|infill_pattern|"
+                            rb"top_bottom_pattern)\s*=\s*(\w+)")
+_ORDERED_PATTERNS = (b"monotonic", b"monotonicline", b"concentric")
+_SOLID_FEATURE = re.compile(r"solid|top|bottom|skin|surface", re.I)
+_SPARSE_FEATURE = re.compile(r"internal infill|^fill$|sparse", re.I)
+
+
+def _pattern_fixed(program: Program) -> np.ndarray:
+    """Features whose fill pattern the slicer orders on purpose (monotonic, concentric)."""
+    tail = program.data[-200_000:]
+    cfg = {m.group(1).lower(): m.group(2).lower() for m in _MONOTONIC_CFG.finditer(b"\n" + tail)}
+    solid_ordered = any(cfg.get(k, b"") in _ORDERED_PATTERNS for k in (
+        b"top_fill_pattern", b"bottom_fill_pattern", b"solid_fill_pattern", b"top_surface_pattern",
+        b"bottom_surface_pattern", b"top_bottom_pattern"))
+    sparse_ordered = any(cfg.get(k, b"") in _ORDERED_PATTERNS for k in (b"fill_pattern", b"infill_pattern"))
+    out = np.zeros(len(program.feature_names), bool)
+    for i, nm in enumerate(program.feature_names):
+        if solid_ordered and _SOLID_FEATURE.search(nm):
+            out[i] = True
+        if sparse_ordered and _SPARSE_FEATURE.search(nm):
+            out[i] = True
+    return out
+
+
+def build(program: Program, options: OrderingOptions | None = None, lay: Layout | None = None) -> OrderingProblem:
+    """Curves and groups of ``program`` (see module docstring)."""
+    options = options or OrderingOptions()
+    lay = lay or layout(program)
+    s0, s1 = lay.curve_s0, lay.curve_s1
+    n = len(s0)
+    start_xy = program.start_mm[s0, :2] if n else np.zeros((0, 2))
+    end_xy = program.end_mm[s1 - 1, :2] if n else np.zeros((0, 2))
+    closed = np.hypot(*(end_xy - start_xy).T) <= CLOSED_TOL_MM if n else np.zeros(0, bool)
+    # polyline vertices: the start of each step and the end of the last
+    counts = (s1 - s0) + 1
+    pstart = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+    if n:
+        idx = np.concatenate([np.arange(a, b) for a, b in zip(s0, s1)])
+        owner = np.repeat(np.arange(n), s1 - s0)
+        pts = np.empty((pstart[-1], 2))
+        pos_in = pstart[owner] + (idx - s0[owner])
+        pts[pos_in] = program.start_mm[idx, :2]
+        pts[pstart[1:] - 1] = end_xy
+        # arcs cannot start a rotated loop (their centre would move with the seam): no seam there
+        has_arc = np.zeros(n, bool)
+        np.logical_or.at(has_arc, owner, program.kind[idx] == Kind.ARC)
+        closed = closed & ~(has_arc & options.move_seams)
+    else:
+        pts = np.zeros((0, 2))
+    layer = program.layer[s0].astype(np.int64)
+    feature = program.feature[s0].astype(np.int64)
+    fixed_feat = _fixed_features(program) | _pattern_fixed(program)
+    has_features = len(program.feature_names) > 0
+    # ---- groups
+    gstart, glayer, gfixed, glabel = [], [], [], []
+    for c in range(n):
+        lay_c = int(layer[c])
+        keep = bool(lay.layer_keep[lay_c]) if lay_c < len(lay.layer_keep) else True
+        if options.mode == "safe":
+            if keep:
+                fx = True
+            elif has_features and feature[c] >= 0:
+                fx = bool(fixed_feat[feature[c]])
+            else:
+                fx = bool(closed[c])
+            key = (feature[c], fx)
+        else:
+            fx = keep
+            key = (fx,)
+        new = c == 0 or lay.gap_boundary[c] or layer[c] != layer[c - 1] or key != prev_key
+        if new:
+            gstart.append(c)
+            glayer.append(lay_c)
+            gfixed.append(fx)
+            fname = program.feature_names[feature[c]] if feature[c] >= 0 else ("loops" if closed[c] else "curves")
+            glabel.append(f"L{lay_c} {fname if options.mode == 'safe' else 'all'}")
+        prev_key = key
+    gstart.append(n)
+    origin = program.start_mm[s0[0], :2] if n else np.zeros(2)
+    feed = options.travel_feed_mm_s
+    if feed is None:
+        tr = (program.kind == Kind.TRAVEL) & (program.length_mm > 1.0)
+        feed = float(np.median(program.feed_mm_s[tr])) if tr.any() else 100.0
+    per_mm = {"distance": 1.0, "time": 1.0 / feed, "energy": options.travel_power_w / feed}[options.cost]
+    unit = {"distance": "mm", "time": "s", "energy": "J"}[options.cost]
+    notes = list(lay.notes)
+    for i, w in enumerate(lay.layer_why):
+        if w and i > 0:
+            notes.append(f"layer {i}: {w}")
+    return OrderingProblem(
+        curve_start_xy=start_xy, curve_end_xy=end_xy, curve_closed=np.asarray(closed, bool),
+        curve_layer=layer, points_xy=pts, curve_point_start=pstart,
+        group_curve_start=np.asarray(gstart, np.int64), group_layer=np.asarray(glayer, np.int64),
+        group_fixed=np.asarray(gfixed, bool), group_label=tuple(glabel), origin_xy=origin,
+        options=options, cost_per_mm=per_mm, cost_unit=unit,
+        curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), travel_feed_mm_s=feed, layout=lay)

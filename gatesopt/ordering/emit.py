@@ -1,0 +1,420 @@
+"""Re-emit G-code with the curves in the solved order and direction.
+
+Rules (formulations/ordering.md, "Emit"; gatesopt.ordering.build explains the line classes):
+
+- A curve printed as the slicer printed it keeps its lines byte for byte, except the E word in
+  absolute-E (M82) files, re-numbered from the cumulative E of the new order. A reversed curve,
+  or a loop that starts at another vertex, is written move by move (``G1 X Y E F``; arcs with G2
+  and G3 swapped and I/J re-computed from the new start point).
+- A gap whose two neighbours are still neighbours (same curves, same ends) is copied as it was:
+  the slicer's own retraction, wipe, z-hop, combing path.
+- Any other gap is rebuilt the way the slicer builds its travels, with parameters read from the
+  file (``TravelStyle``): retract (if the travel is at least the shortest travel the slicer
+  retracted for), z-hop, one straight travel, lower, unretract. Its non-motion lines are kept:
+  a boundary gap's lines (layer change, barriers) stay at the boundary in their order; a gap
+  inside a group travels with the curve that followed it (minus ``;TYPE:``/wipe comments, which
+  are re-derived).
+- State every extrusion sees (fan, acceleration, jerk, flow, pressure advance, feature label,
+  feedrate) is tracked through the output; before each curve, every value that differs from what
+  that curve saw in the original is re-issued with the original line.
+- G92 resets stay where they were (they are barriers), and E after them continues from them.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..program import Kind, Program
+from .build import (LINE_CURVE, LINE_MOTION, LINE_NEUTRAL, LINE_STATE,
+                    Layout, layout)
+from .problem import OrderingProblem, OrderingSolution
+
+_E_WORD = re.compile(r"(?<![A-Za-z_])([Ee])([-+]?\d*\.?\d*)")
+_F_WORD = re.compile(r"(?<![A-Za-z_])[Ff]([-+]?\d*\.?\d+)")
+_TYPE_OR_WIPE = re.compile(r"^\s*;\s*(TYPE:|FEATURE:|feature |WIPE_START|WIPE_END)", re.I)
+
+
+def _num(v: float, nd: int) -> str:
+    s = f"{v:.{nd}f}".rstrip("0").rstrip(".")
+    if s in ("-0", "", "-"):
+        s = "0"
+    if s.startswith("0.") and nd:
+        s = s[1:]               # ".5" as PrusaSlicer writes; every firmware reads it
+    elif s.startswith("-0."):
+        s = "-" + s[2:]
+    return s
+
+
+@dataclass(frozen=True)
+class TravelStyle:
+    """How the slicer travels, read from its own gaps."""
+
+    retract_mm: float = 0.0         # filament pulled back before a travel
+    retract_feed_mm_s: float = 35.0
+    unretract_feed_mm_s: float = 35.0
+    min_travel_mm: float = np.inf   # shortest travel the slicer retracted for
+    hop_mm: float = 0.0             # z-hop height (0: none)
+    travel_feed_mm_s: float = 150.0
+    z_feed_mm_s: float = 10.0
+    travel_cmd: str = "G1"
+
+
+def travel_style(program: Program, lay: Layout) -> TravelStyle:
+    """Median retraction, z-hop and speeds over the file's gaps between curves."""
+    kind, d = program.kind, program.delta_mm
+    n = len(lay.curve_s0)
+    if n < 2:
+        return TravelStyle()
+    g0 = lay.curve_s1[:-1]          # gap steps [g0, g1)
+    g1 = lay.curve_s0[1:]
+    retr = np.zeros(len(g0))
+    hop = np.zeros(len(g0))
+    xy_len = np.hypot(*(program.start_mm[g1, :2] - program.end_mm[g0 - 1, :2]).T)
+    retract_rows = (d[:, 3] < 0)
+    cum_r = np.concatenate(([0.0], np.cumsum(np.where(retract_rows, -d[:, 3], 0.0))))
+    retr = cum_r[g1] - cum_r[g0]
+    z_end = program.end_mm[:, 2]
+    # z-hop: highest Z inside the gap above the next curve's Z (gaps within one layer only)
+    same_layer = program.layer[g0 - 1] == program.layer[g1]
+    for i in np.flatnonzero((retr > 0) & same_layer)[:2000]:
+        if g1[i] > g0[i]:
+            hop[i] = z_end[g0[i]:g1[i]].max() - program.start_mm[g1[i], 2]
+    has_r = retr > 1e-6
+    style = {}
+    if has_r.any():
+        style["retract_mm"] = float(np.median(retr[has_r]))
+        internal = has_r & same_layer
+        style["min_travel_mm"] = float(xy_len[internal].min()) if internal.any() else 1.0
+        hops = hop[has_r & same_layer]
+        if len(hops) and np.mean(hops > 1e-3) >= 0.5:
+            style["hop_mm"] = float(np.median(hops[hops > 1e-3]))
+    rr = (kind == Kind.RETRACT) & (np.hypot(d[:, 0], d[:, 1]) == 0)
+    if rr.any():
+        style["retract_feed_mm_s"] = float(np.median(program.feed_mm_s[rr]))
+    ur = kind == Kind.UNRETRACT
+    if ur.any():
+        style["unretract_feed_mm_s"] = float(np.median(program.feed_mm_s[ur]))
+    tr = (kind == Kind.TRAVEL) & (program.length_mm > 1.0)
+    if tr.any():
+        style["travel_feed_mm_s"] = float(np.median(program.feed_mm_s[tr]))
+        lines = program.line[np.flatnonzero(tr)[:5000]]
+        g0_share = np.mean(program.line_number[lines] == 0)
+        style["travel_cmd"] = "G0" if g0_share > 0.5 else "G1"
+    zr = kind == Kind.Z_ONLY
+    if zr.any():
+        style["z_feed_mm_s"] = float(np.median(program.feed_mm_s[zr]))
+    return TravelStyle(**style)
+
+
+class _Writer:
+    """Output text plus the machine state the output has reached."""
+
+    def __init__(self, program: Program, lay: Layout):
+        self.p, self.lay = program, lay
+        self.nl = program.line_ending
+        self.out: list[str] = []
+        self.e = 0.0            # cumulative machine E of the output
+        self.e_off = 0.0        # logical E = machine E - e_off (absolute-E mode)
+        self.xyz = np.zeros(3)
+        self.feed = None        # mm/s in force
+        self.state: dict = {}
+        self.feature = None
+        self.rewritten = 0
+
+    # -- copying original lines -------------------------------------------------------------
+    def copy_line(self, i: int) -> None:
+        p = self.p
+        text = p.line_text(i)
+        s = int(self.lay.step_of_line[i])
+        cls = self.lay.line_class[i]
+        if s >= 0:
+            d_e = p.end_mm[s, 3] - p.start_mm[s, 3]
+            new_e = self.e + d_e
+            if not p.relative_e[s]:
+                code, sep, comment = text.partition(";")
+                if _E_WORD.search(code):
+                    want = new_e - self.e_off
+                    orig = p.end_mm[s, 3] - p.offset_mm[s, 3]
+                    if abs(want - orig) > 1e-7:
+                        code = _E_WORD.sub(lambda m: m.group(1) + _num(want, 6), code, count=1)
+                        text = code + sep + comment
+                        self.rewritten += 1
+            self.e = new_e
+            self.xyz = p.end_mm[s, :3].copy()
+            self.feed = float(p.feed_mm_s[s])
+        else:
+            code = text.split(";")[0].strip().upper()
+            if code.startswith("G92"):
+                m = _E_WORD.search(code[3:])
+                if m and m.group(2):
+                    self.e_off = self.e - float(m.group(2))
+                elif code == "G92":
+                    self.e_off = self.e
+            elif cls == LINE_NEUTRAL and code[:2] in ("G0", "G1"):
+                m = _F_WORD.search(code)
+                if m:
+                    self.feed = float(m.group(1)) / 60.0
+            if cls == LINE_STATE:
+                self.state[self.lay.state_key[i]] = text.rstrip("\r\n")
+            elif cls == LINE_NEUTRAL and not code:
+                name = _feature_of_comment(text, self.lay.feature_prefix)
+                if name is not None:
+                    self.feature = name
+        if not text.endswith("\n"):
+            text += self.nl
+        self.out.append(text)
+
+    def write(self, text: str) -> None:
+        self.out.append(text + self.nl)
+
+    # -- new moves ------------------------------------------------------------------------------
+    def _f(self, feed_mm_s: float) -> str:
+        if self.feed is not None and abs(self.feed - feed_mm_s) < 1e-9:
+            return ""
+        self.feed = feed_mm_s
+        return f" F{_num(feed_mm_s * 60.0, 3)}"
+
+    def move_e(self, d_e: float, feed_mm_s: float, relative: bool) -> None:
+        self.e += d_e
+        val = d_e if relative else self.e - self.e_off
+        self.write(f"G1 E{_num(val, 6)}{self._f(feed_mm_s)}")
+
+    def move_xyz(self, xyz, feed_mm_s: float, cmd: str, offset) -> None:
+        words = ""
+        for ax, k in (("X", 0), ("Y", 1), ("Z", 2)):
+            if abs(xyz[k] - self.xyz[k]) > 1e-9:
+                words += f" {ax}{_num(xyz[k] - offset[k], 5)}"
+        if words:
+            self.write(f"{cmd}{words}{self._f(feed_mm_s)}")
+            self.xyz = np.asarray(xyz, float).copy()
+
+    def step(self, s: int, reverse: bool) -> None:
+        """One extruding step of the original, forwards or backwards, as a new line."""
+        p = self.p
+        a, b = (p.end_mm[s], p.start_mm[s]) if reverse else (p.start_mm[s], p.end_mm[s])
+        off = p.offset_mm[s]
+        d_e = p.end_mm[s, 3] - p.start_mm[s, 3]
+        self.e += d_e
+        e_val = d_e if p.relative_e[s] else self.e - self.e_off
+        if p.kind[s] == Kind.ARC:
+            ccw = bool(p.arc_ccw[s]) != reverse
+            c = p.arc_center_mm[s]
+            cmd = "G3" if ccw else "G2"
+            words = f" X{_num(b[0] - off[0], 5)} Y{_num(b[1] - off[1], 5)}"
+            if abs(b[2] - a[2]) > 1e-9:
+                words += f" Z{_num(b[2] - off[2], 5)}"
+            words += f" I{_num(c[0] - a[0], 5)} J{_num(c[1] - a[1], 5)}"
+        else:
+            cmd = "G1"
+            words = ""
+            for ax, k in (("X", 0), ("Y", 1), ("Z", 2)):
+                if abs(b[k] - a[k]) > 1e-12 or (k < 2 and abs(b[k] - self.xyz[k]) > 1e-9):
+                    words += f" {ax}{_num(b[k] - off[k], 5)}"
+        self.write(f"{cmd}{words} E{_num(e_val, 6)}{self._f(float(p.feed_mm_s[s]))}")
+        self.xyz = b[:3].copy()
+
+
+def _feature_of_comment(text: str, prefix: str):
+    t = text.strip()
+    pre = prefix.strip()
+    if pre and t.startswith(pre):
+        return t[len(pre):].strip()
+    return None
+
+
+def _required_state(program: Program, lay: Layout):
+    """key -> (sorted state lines, their texts): what was in force at any line."""
+    by_key: dict = {}
+    for i in sorted(lay.state_key):
+        by_key.setdefault(lay.state_key[i], []).append(i)
+    out = {}
+    for k, lines in by_key.items():
+        arr = np.asarray(lines, np.int64)
+        out[k] = (arr, [program.line_text(int(i)).rstrip("\r\n") for i in arr])
+    return out
+
+
+def _state_at(req, line: int) -> dict:
+    st = {}
+    for k, (arr, texts) in req.items():
+        j = int(np.searchsorted(arr, line, side="left")) - 1
+        if j >= 0:
+            st[k] = texts[j]
+    return st
+
+
+def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution) -> str:
+    """G-code text with the curves of ``problem`` in the order of ``solution``."""
+    lay = problem.layout if problem.layout is not None else layout(program)
+    style = travel_style(program, lay)
+    w = _Writer(program, lay)
+    p = program
+    n = len(lay.curve_s0)
+    if n == 0:
+        return program.to_gcode()
+    order = np.asarray(solution.curve_order, np.int64)
+    rev = np.asarray(solution.curve_reversed, bool)
+    seam = np.asarray(solution.curve_seam, np.int64)
+    if len(order) != n or not np.array_equal(np.sort(order), np.arange(n)):
+        raise ValueError("solution does not order every curve of the program exactly once")
+    l0, l1, s0, s1 = lay.curve_l0, lay.curve_l1, lay.curve_s0, lay.curve_s1
+    changed = rev | (seam != 0)
+    gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
+    group_first = problem.group_curve_start[gidx]          # original first curve of each curve's group
+    req = _required_state(p, lay)
+    feature_names = p.feature_names
+
+    def gap_lines(c):
+        a = l1[c - 1] + 1 if c > 0 else 0
+        return range(a, l0[c])
+
+    # prefix + first gap: verbatim (the first layer keeps its order, so curve 0 stays first)
+    prev = -1
+    for i in gap_lines(order[0]) if order[0] == 0 else gap_lines(0):
+        w.copy_line(i)
+    for k, c in enumerate(order):
+        c = int(c)
+        if k > 0:
+            if prev == c - 1 and not changed[prev] and not changed[c]:
+                for i in gap_lines(c):
+                    w.copy_line(i)
+            else:
+                lines = []
+                if group_first[c] != group_first[prev]:         # crossing into c's group
+                    f = int(group_first[c])
+                    lines.append((gap_lines(f), True))
+                    if c != f:
+                        lines.append((gap_lines(c), False))
+                elif c != group_first[c]:
+                    lines.append((gap_lines(c), False))
+                _rebuilt_gap(w, p, lay, style, lines, c, _entry_mm(p, lay, c, bool(rev[c]), int(seam[c])))
+        # state the curve saw in the original
+        st = _state_at(req, int(l0[c]))
+        for key, text in st.items():
+            if w.state.get(key) != text:
+                w.write(text)
+                w.state[key] = text
+        fi = int(p.feature[s0[c]])
+        if fi >= 0 and w.feature != feature_names[fi]:
+            w.write(f"{lay.feature_prefix}{feature_names[fi]}")
+            w.feature = feature_names[fi]
+        _curve(w, p, lay, c, bool(rev[c]), int(seam[c]))
+        prev = c
+    # state the remainder of the file expects, then the remainder verbatim
+    last = int(l1[n - 1])
+    st = _state_at(req, last + 1)
+    for key, text in st.items():
+        if w.state.get(key) != text:
+            w.write(text)
+            w.state[key] = text
+    for i in range(last + 1, p.n_lines):
+        w.copy_line(i)
+    return "".join(w.out)
+
+
+def _curve(w: _Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> None:
+    a, b = int(lay.curve_s0[c]), int(lay.curve_s1[c])
+    if not reverse and seam == 0:
+        if w.feed is None or abs(w.feed - p.feed_mm_s[a]) > 1e-9:
+            # the first move may rely on a modal F set before it: set it explicitly
+            if not _F_WORD.search(p.line_text(int(p.line[a])).split(";")[0]):
+                w.write(f"G1 F{_num(p.feed_mm_s[a] * 60.0, 3)}")
+                w.feed = float(p.feed_mm_s[a])
+        for i in range(int(lay.curve_l0[c]), int(lay.curve_l1[c]) + 1):
+            w.copy_line(i)
+        return
+    steps = range(b - 1, a - 1, -1) if reverse else list(range(a + seam, b)) + list(range(a, a + seam))
+    for s in steps:
+        w.step(s, reverse)
+
+
+def _entry_mm(p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> np.ndarray:
+    """XYZ where curve c starts when printed ``reverse``d / from vertex ``seam``."""
+    if reverse:
+        return p.end_mm[int(lay.curve_s1[c]) - 1, :3]
+    return p.start_mm[int(lay.curve_s0[c]) + seam, :3]
+
+
+def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_sets, c: int,
+                 target) -> None:
+    """One rebuilt travel into curve c, with the non-motion lines of the given original gaps.
+
+    Each gap's lines split where the slicer retracted, travelled and unretracted: lines before
+    its first retraction come before ours, lines after its last travel after our travel, lines
+    after its unretraction after ours. The filament
+    the consumed gaps pulled back and pushed forward is kept: the retraction length is the
+    slicer's own for this gap (else the file's median), and the net E of the consumed gaps is
+    unchanged, so E per layer (and across a layer change) stays what it was.
+    """
+    pre, mid, post, late = [], [], [], []
+    boundary_retracted = early_push = False
+    r_boundary = r_internal = 0.0
+    net = 0.0
+    for lines, boundary in line_sets:
+        lines = list(lines)
+        cls = lay.line_class[lines] if lines else np.zeros(0, np.int8)
+        travel_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION
+                      and p.kind[lay.step_of_line[i]] in (Kind.TRAVEL, Kind.ARC)]
+        retract_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION
+                       and p.end_mm[lay.step_of_line[i], 3] < p.start_mm[lay.step_of_line[i], 3]]
+        split_t = travel_pos[-1] if travel_pos else len(lines)
+        split_r = min(retract_pos[0], split_t) if retract_pos else split_t
+        push_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION
+                    and p.end_mm[lay.step_of_line[i], 3] > p.start_mm[lay.step_of_line[i], 3]]
+        split_u = push_pos[-1] if push_pos else len(lines)
+        if boundary and push_pos and push_pos[-1] < split_t:
+            early_push = True           # the slicer unretracted before its last travel
+        for j, i in enumerate(lines):
+            if cls[j] == LINE_MOTION:
+                st = lay.step_of_line[i]
+                d_e = p.end_mm[st, 3] - p.start_mm[st, 3]
+                net += d_e
+                if d_e < 0:
+                    if boundary:
+                        boundary_retracted = True
+                        r_boundary -= d_e
+                    else:
+                        r_internal -= d_e
+                continue
+            if cls[j] == LINE_CURVE:
+                continue
+            if not boundary and cls[j] == LINE_NEUTRAL and _TYPE_OR_WIPE.match(p.line_text(i)):
+                continue
+            (pre if j < split_r else mid if j < split_t else post if j < split_u else late).append(i)
+    for i in pre:
+        w.copy_line(i)
+    s = int(lay.curve_s0[c])
+    off = p.offset_mm[s]
+    dist = float(np.hypot(*(target[:2] - w.xyz[:2])))
+    relative_e = bool(p.relative_e[s])
+    moving = dist > 1e-9 or abs(target[2] - w.xyz[2]) > 1e-9
+    r = r_boundary if r_boundary > 0 else (r_internal if r_internal > 0 else style.retract_mm)
+    retract = moving and r > 0 and (boundary_retracted or (style.retract_mm > 0 and dist >= style.min_travel_mm))
+    if retract:
+        w.move_e(-r, style.retract_feed_mm_s, relative_e)
+    for i in mid:
+        w.copy_line(i)
+    if moving:
+        z_now, z_to = w.xyz[2], target[2]
+        if retract and style.hop_mm > 0:
+            z_up = max(z_now, z_to) + style.hop_mm
+        else:
+            z_up = max(z_now, z_to)
+        if z_up > z_now + 1e-9:
+            w.move_xyz([w.xyz[0], w.xyz[1], z_up], style.z_feed_mm_s, "G1", off)
+        w.move_xyz([target[0], target[1], w.xyz[2]], style.travel_feed_mm_s, style.travel_cmd, off)
+        if abs(w.xyz[2] - z_to) > 1e-9:
+            w.move_xyz([w.xyz[0], w.xyz[1], z_to], style.z_feed_mm_s, "G1", off)
+    push = (r if retract else 0.0) + net     # unretract, plus any prime the slicer's gaps added
+    if (early_push or not boundary_retracted) and abs(push) > 1e-9:
+        # a retraction the slicer did not make here: undo it at once, on this side of any marker
+        w.move_e(push, style.unretract_feed_mm_s, relative_e)
+        push = 0.0
+    for i in post:                      # e.g. the next layer's marker: before the unretract, as the slicer
+        w.copy_line(i)
+    if abs(push) > 1e-9:
+        w.move_e(push, style.unretract_feed_mm_s, relative_e)
+    for i in late:
+        w.copy_line(i)

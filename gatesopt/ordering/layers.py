@@ -1,0 +1,152 @@
+"""Solve a whole OrderingProblem: group after group, layer after layer.
+
+Each group starts where the previous one ended (Fleming et al. Eq. 1: the layer's entry point is
+the previous layer's exit), so groups are solved in print order and chained, as the paper's
+Algorithm 1 chains layers. Fixed-order groups are copied (status "optimal": nothing to decide).
+
+Better than the paper's purely greedy chaining where the next group's entry is known: when the
+next group is fixed (walls of the same island, or the next layer's walls in safe mode), the path
+of this group must travel on to that entry (``Group.end_xy``), so its end is chosen with the next
+group in mind. And a group never gets worse than the slicer's own order from the same start to the
+same end: if a heuristic's path costs more, the original order is kept.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import auto, cpsat, dp, greedy, milp, tsp
+from .problem import GroupSolution, OrderingProblem, OrderingSolution
+
+FORMULATIONS = {
+    "greedy": greedy.solve,
+    "tsp": tsp.solve,
+    "cpsat": cpsat.solve,
+    "milp": milp.solve,
+    "auto": auto.solve,
+    "dp": dp.solve,             # library only: exact for small groups, raises on larger ones
+}
+
+
+def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: float = 2.0,
+          budget_s: float | None = None, **kwargs) -> OrderingSolution:
+    """Order every group; ``time_limit_s`` is per group (exact formulations only); ``budget_s``
+    caps the whole solve: each group gets at most its share of what is left (groups the DP or the
+    bound settle take next to nothing)."""
+    if formulation not in FORMULATIONS:
+        raise ValueError(f"unknown formulation {formulation!r}: one of {sorted(FORMULATIONS)}")
+    fn = FORMULATIONS[formulation]
+    t0 = time.perf_counter()
+    n = problem.n_curves
+    order_out = []
+    reversed_ = np.zeros(n, bool)
+    seam = np.zeros(n, np.int64)
+    sols = []
+    pos = np.asarray(problem.origin_xy, float)
+    plans = []      # per group: [(GroupSolution, Group)] options: the solver's path, the slicer's
+    cache = {}      # identical groups recur layer after layer (same infill, same start): solve once
+    for g in range(problem.n_groups):
+        end = None
+        if g + 1 < problem.n_groups and problem.group_fixed[g + 1]:
+            end = problem.curve_start_xy[problem.group_curve_start[g + 1]]
+        grp = problem.group(g, pos, end)
+        if problem.group_fixed[g] or grp.n_curves == 0:
+            order = np.arange(grp.n_cands)      # one candidate per curve, in the slicer's order
+            obj = grp.path_cost_mm(order)
+            opts = [GroupSolution.make(order, obj, obj, "optimal", 0.0, "fixed")]
+        else:
+            key = _key(grp)
+            gs = cache.get(key)
+            if gs is None:
+                limit = time_limit_s
+                if budget_s is not None:
+                    left_groups = max(1, int((~problem.group_fixed[g:]).sum()))
+                    limit = min(limit, max(0.0, (budget_s - (time.perf_counter() - t0)) / left_groups))
+                gs = fn(grp, time_limit_s=limit, **kwargs)
+                cache[key] = gs
+            else:
+                gs = GroupSolution.make(gs.order, gs.objective_mm, gs.bound_mm, gs.status, 0.0,
+                                        gs.method + "+cached")
+            grp.check_order(gs.order)
+            ident = np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
+            opts = [gs]
+            if len(ident) == grp.n_curves and not np.array_equal(ident, gs.order):
+                ident_obj = grp.path_cost_mm(ident)
+                opts.append(GroupSolution.make(ident, ident_obj, gs.bound_mm, gs.status, gs.solve_s,
+                                               gs.method + "+kept"))
+                if ident_obj < gs.objective_mm - 1e-9:      # never worse than the slicer's order
+                    opts = opts[::-1]
+        plans.append((grp, opts))
+        pos = grp.exit_xy(opts[0].order)
+    choice = _chain(problem, plans)
+    for g, (grp, opts) in enumerate(plans):
+        gs = opts[choice[g]]
+        curves = problem.group_curves(g)
+        for k in gs.order:
+            c = int(curves[grp.cand_curve[k]])
+            order_out.append(c)
+            reversed_[c] = bool(grp.cand_reversed[k])
+            seam[c] = int(grp.cand_seam[k])
+        sols.append(gs)
+    after = _travel(problem, np.asarray(order_out, np.int64), reversed_, seam)
+    return OrderingSolution(np.asarray(order_out, np.int64), reversed_, seam, tuple(sols),
+                            problem.original_travel_mm(), after, time.perf_counter() - t0, formulation)
+
+
+def _travel(problem: OrderingProblem, order, reversed_, seam) -> float:
+    """Model travel of a full solution (start of each curve from the end of the one before)."""
+    pos = np.asarray(problem.origin_xy, float)
+    total = 0.0
+    for c in order:
+        a, b = problem.curve_start_xy[c], problem.curve_end_xy[c]
+        if seam[c]:
+            a = b = problem.points_xy[problem.curve_point_start[c] + seam[c]]
+        if reversed_[c]:
+            a, b = b, a
+        total += float(np.hypot(*(a - pos)))
+        pos = b
+    return total
+
+
+def _chain(problem: OrderingProblem, plans) -> list[int]:
+    """Pick, per group, the solver's path or the slicer's order so that the whole chain is
+    shortest (a DP over groups with one state per option: each path is fixed, only the link into
+    it depends on where the previous group ended). Contains the all-original choice, so the
+    total never exceeds the slicer's travel."""
+    pos = [np.asarray(problem.origin_xy, float)]
+    cost = [0.0]
+    back = []
+    for grp, opts in plans:
+        new_pos, new_cost, new_back = [], [], []
+        for gs in opts:
+            o = gs.order
+            if len(o) == 0:
+                inner, entry, exit_ = 0.0, None, None
+            else:
+                entry, exit_ = grp.cand_entry_xy[o[0]], grp.cand_exit_xy[o[-1]]
+                inner = float(np.hypot(*(grp.cand_entry_xy[o[1:]] - grp.cand_exit_xy[o[:-1]]).T).sum())
+            best, arg = np.inf, 0
+            for j, (p, c) in enumerate(zip(pos, cost)):
+                v = c + (0.0 if entry is None else float(np.hypot(*(entry - p))))
+                if v < best - 1e-12:
+                    best, arg = v, j
+            new_cost.append(best + inner)
+            new_pos.append(pos[arg] if exit_ is None else exit_)
+            new_back.append(arg)
+        pos, cost = new_pos, new_cost
+        back.append(new_back)
+    choice = [0] * len(plans)
+    k = int(np.argmin(cost)) if cost else 0
+    for g in range(len(plans) - 1, -1, -1):
+        choice[g] = k
+        k = back[g][k]
+    return choice
+
+
+def _key(grp) -> bytes:
+    """Exact identity of a group instance (coordinates to 0.1 µm)."""
+    parts = [grp.start_xy, grp.cand_entry_xy, grp.cand_exit_xy,
+             np.zeros(2) - 1e9 if grp.end_xy is None else grp.end_xy]
+    q = np.concatenate([np.ravel(np.rint(np.asarray(a, float) * 1e4)) for a in parts]).astype(np.int64)
+    return q.tobytes() + grp.cand_curve.tobytes()

@@ -1,0 +1,280 @@
+"""Curve ordering: formulations against brute force and each other; build/emit/verify on G-code."""
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gatesopt
+from gatesopt.ordering import (OrderingOptions, build, emit, from_polylines, solve)
+from gatesopt.ordering import cpsat, dp, greedy, milp, tsp, auto
+from gatesopt.ordering.bounds import lower_bound_mm
+from gatesopt.ordering.problem import Group
+from gatesopt.ordering.verify import check
+
+INSTANCES = Path(__file__).resolve().parents[2] / "shared" / "instances"
+
+
+def brute_force(group: Group) -> float:
+    """Every permutation of the curves x every candidate (direction / seam) of each."""
+    per_curve = [np.flatnonzero(group.cand_curve == c) for c in range(group.n_curves)]
+    best = np.inf
+    for perm in itertools.permutations(range(group.n_curves)):
+        for choice in itertools.product(*(per_curve[c] for c in perm)):
+            best = min(best, group.path_cost_mm(np.array(choice)))
+    return best
+
+
+def random_problem(seed: int, n_curves: int, closed_share: float = 0.3, move_seams: bool = False,
+                   clustered: bool = False):
+    rng = np.random.default_rng(seed)
+    polys = []
+    for _ in range(n_curves):
+        if rng.random() < closed_share:
+            c = rng.uniform(0, 50, 2)
+            t = np.sort(rng.uniform(0, 2 * np.pi, 5))
+            ring = c + 3 * np.c_[np.cos(t), np.sin(t)]
+            polys.append(np.vstack([ring, ring[:1]]))
+        elif clustered:     # parallel infill-like lines with nearly touching ends
+            y = rng.integers(0, 8) * 0.5
+            polys.append(np.array([[0.0, y], [20.0, y]]) + rng.normal(0, 0.01, (2, 2)))
+        else:
+            polys.append(rng.uniform(0, 50, (rng.integers(2, 4), 2)))
+    return from_polylines([polys], origin_xy=rng.uniform(0, 50, 2),
+                          options=OrderingOptions(mode="free", move_seams=move_seams, seam_candidates=3))
+
+
+TINY = [(seed, n) for seed in range(6) for n in (2, 3, 4, 5)]
+
+
+@pytest.mark.parametrize("seed,n", TINY)
+def test_exact_formulations_match_brute_force(seed, n):
+    prob = random_problem(seed, n, move_seams=seed % 2 == 1, clustered=seed % 3 == 0)
+    grp = prob.group(0, prob.origin_xy)
+    best = brute_force(grp)
+    a = cpsat.solve(grp, time_limit_s=10)
+    b = milp.solve(grp, time_limit_s=10)
+    assert a.status == b.status == "optimal"
+    assert a.objective_mm == pytest.approx(best, abs=1e-3)
+    assert b.objective_mm == pytest.approx(best, abs=1e-3)
+    assert auto.solve(grp, time_limit_s=10).objective_mm == pytest.approx(best, abs=1e-3)
+    assert dp.solve(grp).objective_mm == pytest.approx(best, abs=1e-9)
+    # heuristics are feasible and never better than the optimum; bounds never above it
+    for f in (greedy.solve, tsp.solve):
+        h = f(grp, time_limit_s=10)
+        grp.check_order(h.order)
+        assert h.objective_mm >= best - 1e-6
+        assert h.bound_mm <= best + 1e-6
+    assert lower_bound_mm(grp) <= best + 1e-9
+
+
+def test_six_curves_brute_force():
+    prob = random_problem(42, 6, closed_share=0.0)
+    grp = prob.group(0, prob.origin_xy, end_xy=(25.0, 25.0))     # with an end point to reach
+    best = brute_force(grp)
+    assert dp.solve(grp).objective_mm == pytest.approx(best, abs=1e-9)
+    assert greedy.solve(grp).objective_mm >= best - 1e-9
+    assert tsp.solve(grp).objective_mm >= best - 1e-9
+    assert lower_bound_mm(grp) <= best + 1e-9
+    assert cpsat.solve(grp, time_limit_s=20).objective_mm == pytest.approx(best, abs=1e-3)
+    assert milp.solve(grp, time_limit_s=20).objective_mm == pytest.approx(best, abs=1e-3)
+
+
+def test_cpsat_milp_and_dp_agree_on_medium_groups():
+    for seed in range(2):
+        prob = random_problem(100 + seed, 12, clustered=True)
+        grp = prob.group(0, prob.origin_xy)
+        a = cpsat.solve(grp, time_limit_s=20)
+        b = milp.solve(grp, time_limit_s=20)
+        assert a.status == b.status == "optimal"
+        assert a.objective_mm == pytest.approx(b.objective_mm, abs=2e-3)
+        assert dp.solve(grp).objective_mm == pytest.approx(b.objective_mm, abs=2e-3)
+        g = greedy.solve(grp)
+        assert g.objective_mm >= a.objective_mm - 1e-6
+
+
+def test_greedy_local_search_is_a_local_optimum_and_beats_nearest_neighbour():
+    prob = random_problem(7, 300, closed_share=0.1)
+    grp = prob.group(0, prob.origin_xy)
+    nn = grp.path_cost_mm(greedy.nearest_neighbour(grp))
+    g = greedy.solve(grp)
+    grp.check_order(g.order)
+    assert g.objective_mm <= nn + 1e-9
+    assert g.bound_mm <= g.objective_mm
+
+
+def test_from_polylines_orders_a_plotter_drawing_without_gcode():
+    # five horizontal strokes drawn left to right, far apart in the file's order
+    strokes = [np.array([[0.0, y], [10.0, y]]) for y in (0, 40, 10, 30, 20)]
+    prob = from_polylines([strokes, strokes])
+    sol = solve(prob, "cpsat", time_limit_s=5)
+    assert sol.travel_after_mm < sol.travel_before_mm
+    assert sorted(sol.curve_order.tolist()) == list(range(10))
+    assert sol.curve_reversed.any()            # zig-zag: every other stroke drawn backwards
+    # layer 1 starts where layer 0 ended
+    assert all(g.status == "optimal" for g in sol.groups)
+
+
+def test_closed_loops_keep_their_seam_and_direction():
+    ring = np.array([[0, 0], [5, 0], [5, 5], [0, 5], [0, 0]], float)
+    loops = [ring + [20 * k, 0] for k in range(4)]
+    prob = from_polylines([loops[::-1]], origin_xy=(100, 0))
+    sol = solve(prob, "auto")
+    assert not sol.curve_reversed.any()
+    assert not sol.curve_seam.any()
+    seams = from_polylines([loops[::-1]], origin_xy=(100, 0),
+                           options=OrderingOptions(mode="free", move_seams=True))
+    sol2 = solve(seams, "cpsat")
+    assert sol2.travel_after_mm < sol.travel_after_mm     # a seam near the previous loop helps
+    assert not sol2.curve_reversed.any()
+
+
+def test_fixed_groups_are_untouched():
+    strokes = [np.array([[0.0, y], [10.0, y]]) for y in (0, 40, 10, 30, 20)]
+    prob = from_polylines([strokes], fixed_layers=(0,))
+    sol = solve(prob, "auto")
+    assert sol.curve_order.tolist() == list(range(5))
+    assert not sol.curve_reversed.any()
+    assert sol.travel_after_mm == pytest.approx(sol.travel_before_mm)
+
+
+def test_cpsat_falls_back_without_losing_the_hint():
+    prob = random_problem(3, 40, clustered=False, closed_share=0.0)
+    grp = prob.group(0, prob.origin_xy)
+    hint = greedy.solve(grp)
+    res = cpsat.solve(grp, time_limit_s=0.01, hint=hint)
+    grp.check_order(res.order)
+    assert res.objective_mm <= hint.objective_mm + 1e-6 or res.status == "fallback"
+    assert res.bound_mm <= res.objective_mm + 1e-9
+
+
+# ------------------------------------------------------------------------------------------------
+# G-code: a hand-made file with absolute E, a z-hop retraction, an arc and a fan barrier
+def _handmade_gcode() -> str:
+    out = ["G21", "G90", "M82", "M104 S200", "G28", "G92 E0", "G1 Z0.2 F600"]
+    e = 0.0
+    for layer in range(3):
+        z = 0.2 * (layer + 1)
+        out.append(";LAYER_CHANGE")
+        out.append(f"G1 Z{z:.1f} F600")
+        ys = [0, 8, 2, 6, 4]
+        for k, y in enumerate(ys):
+            out.append(f"G1 E{e - 1:.5f} F2400")
+            out.append(f"G1 Z{z + 0.4:.1f} F600")
+            out.append(f"G0 X10 Y{10 + y} F9000")
+            out.append(f"G1 Z{z:.1f} F600")
+            out.append(f"G1 E{e:.5f} F2400")
+            out.append(";TYPE:Internal infill")
+            e += 0.5
+            out.append(f"G1 X30 Y{10 + y} E{e:.5f} F1800")
+            if k == 2:
+                e += 0.3
+                out.append(f"G2 X40 Y{20 + y} I0 J10 E{e:.5f}")
+            if k == 3 and layer == 1:
+                out.append("M106 S128")
+        out.append(";TYPE:Perimeter")
+        out.append(f"G1 E{e - 1:.5f} F2400")
+        out.append("G0 X0 Y0 F9000")
+        out.append(f"G1 E{e:.5f} F2400")
+        for x, y in ((50, 0), (50, 30), (0, 30), (0, 0)):
+            e += 0.8
+            out.append(f"G1 X{x} Y{y} E{e:.5f} F1200")
+    out.append("M104 S0")
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize("mode", ["safe", "free"])
+@pytest.mark.parametrize("formulation", ["greedy", "tsp", "cpsat", "milp", "auto"])
+def test_handmade_gcode_round_trip(mode, formulation):
+    prog = gatesopt.parse(_handmade_gcode())
+    prob = build(prog, OrderingOptions(mode=mode))
+    sol = solve(prob, formulation, time_limit_s=5)
+    assert sol.travel_after_mm <= sol.travel_before_mm + 1e-9
+    text = emit(prog, prob, sol)
+    out = gatesopt.parse(text)
+    assert check(prog, out) == []
+    if sol.curve_reversed.any() and "G2 " in prog.to_gcode():
+        assert ("G3 " in text) or not sol.curve_reversed[
+            [c for c in range(prob.n_curves) if "G2" in prog.line_text(int(prog.line[prob.curve_step_stop[c] - 1]))]].any()
+    # absolute E keeps counting: the last extrusion reaches the same E as the original
+    assert out.end_mm[out.extruding, 3].max() == pytest.approx(prog.end_mm[prog.extruding, 3].max(), abs=1e-4)
+
+
+def test_emit_breaks_nothing_when_the_order_is_kept():
+    prog = gatesopt.parse(_handmade_gcode())
+    prob = build(prog, OrderingOptions(mode="safe"))
+    from gatesopt.ordering.problem import OrderingSolution
+    keep = OrderingSolution(np.arange(prob.n_curves), np.zeros(prob.n_curves, bool),
+                            np.zeros(prob.n_curves, np.int64), (), 0.0, 0.0, 0.0, "none")
+    assert emit(prog, prob, keep) == prog.to_gcode()
+
+
+def test_verify_catches_a_moved_extrusion():
+    prog = gatesopt.parse(_handmade_gcode())
+    text = prog.to_gcode().replace("G1 X30 Y14 E", "G1 X31 Y14 E", 1)
+    assert any(f.check == "geometry" for f in check(prog, gatesopt.parse(text)))
+
+
+def test_fan_barrier_is_respected():
+    prog = gatesopt.parse(_handmade_gcode())
+    prob = build(prog, OrderingOptions(mode="free"))
+    sol = solve(prob, "auto")
+    text = emit(prog, prob, sol)
+    out = gatesopt.parse(text)
+    assert [f for f in check(prog, out) if f.check in ("barriers", "commands")] == []
+
+
+# ------------------------------------------------------------------------------------------------
+REAL = ["real_slic3r131_stars.gcode", "real_prusa240_m486_arcwelder.gcode",
+        "cura413_star_triangles20.gcode.gz", "prusa25_star_rect15_m82.gcode.gz"]
+
+
+@pytest.mark.parametrize("name", REAL)
+def test_real_files_round_trip(name):
+    path = INSTANCES / name
+    if not path.exists():
+        pytest.skip(f"{path} absent (../shared/instances is not part of the repository)")
+    prog = gatesopt.parse(path)
+    for mode in ("safe", "free"):
+        prob = build(prog, OrderingOptions(mode=mode))
+        sol = solve(prob, "auto", time_limit_s=0.5, budget_s=3.0)
+        assert sol.travel_after_mm <= sol.travel_before_mm + 1e-6
+        out = gatesopt.parse(emit(prog, prob, sol))
+        assert check(prog, out) == []
+
+
+# ------------------------------------------------------------------------------------------------
+def test_cli_order_writes_verified_output_and_json(tmp_path, capsys):
+    import json
+    from gatesopt.cli import main
+    src = tmp_path / "in.gcode"
+    src.write_text(_handmade_gcode())
+    out, rep = tmp_path / "out.gcode", tmp_path / "r.json"
+    assert main(["order", str(src), "-o", str(out), "--order-mode", "free", "--json", str(rep)]) == 0
+    d = json.loads(rep.read_text())
+    assert d["verified"] and d["travel_after_mm"] <= d["travel_before_mm"]
+    assert check(gatesopt.parse(src), gatesopt.parse(out)) == []
+    printed = capsys.readouterr().out
+    assert "travel" in printed and "verified      yes" in printed
+    # never overwrite without --force, never the input itself
+    assert main(["order", str(src), "-o", str(out)]) == 2
+    assert main(["order", str(src), "-o", str(out), "--force"]) == 0
+    assert main(["order", str(src), "-o", str(src), "--force"]) == 2
+    assert "must not be the input" in capsys.readouterr().err
+    assert main(["order", str(src), "-o", str(tmp_path / "x.gcode"), "--time-limit", "0"]) == 2
+
+
+def test_move_seams_on_gcode_rotates_loops_and_verifies():
+    prog = gatesopt.parse(_handmade_gcode())
+    prob = build(prog, OrderingOptions(mode="free", move_seams=True))
+    sol = solve(prob, "auto")
+    assert (sol.curve_seam != 0).any()
+    assert sol.travel_after_mm < solve(build(prog, OrderingOptions(mode="free")), "auto").travel_after_mm
+    assert check(prog, gatesopt.parse(emit(prog, prob, sol))) == []
+
+
+def test_package_exports_functions_not_submodules():
+    import gatesopt.ordering as o
+    assert callable(o.build) and callable(o.emit) and callable(o.solve)
