@@ -47,8 +47,8 @@ def step_durations(program, time_model: str):
 
 def _wants_stream(args) -> bool:
     import os
-    if args.file == "-":
-        return False
+    if args.file == "-" or not os.path.isfile(args.file):
+        return False            # the parser says what is wrong with a missing file
     return args.stream or os.path.getsize(args.file) > STREAM_ABOVE_BYTES
 
 
