@@ -142,3 +142,33 @@ def test_mutated_real_files_give_a_clear_error_or_a_verified_output(tmp_path, ca
             assert not out.exists(), f"{name}: a partial output was left"
         leftovers = [p.name for p in tmp_path.iterdir() if p.name not in ("in.gcode", "out.gcode")]
         assert not leftovers, (name, leftovers)
+
+
+def test_ctrl_c_during_an_exact_solve_still_gives_a_verified_answer(monkeypatch):
+    from gatesopt.gating import pipeline
+    real = pipeline.solve
+
+    def interrupted(problem, formulation, **kw):
+        if formulation != "dp":
+            raise KeyboardInterrupt
+        return real(problem, formulation, **kw)
+    monkeypatch.setattr(pipeline, "solve", interrupted)
+    program = parse(PROJECT_INSTANCES / "square_lines.gcode")
+    opts = GatingOptions.for_firmware("marlin", max_added_time_pct=1.0, rotate="none")
+    res = run(program, opts, formulation="milp", order=False)
+    assert res.report.ok
+    assert res.solution.status == "fallback"
+    assert any("interrupted" in n for n in res.notes)
+    assert res.report.energy_j < res.report.energy_before_j
+
+
+def test_ctrl_c_during_ordering_keeps_the_slicer_order(monkeypatch):
+    import gatesopt.ordering as ordering
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(ordering, "solve", interrupted)
+    program = parse(PROJECT_INSTANCES / "square_lines.gcode")
+    res = run(program, GatingOptions(rotate="none"), formulation="dp", order=True)
+    assert res.report.ok and not res.ordered
+    assert any("slicer's order kept" in n for n in res.notes)

@@ -71,7 +71,24 @@ def _order(program: Program, time_limit_s: float):
         text = ordering.emit(program, problem, solution)
     except (ImportError, AttributeError, NotImplementedError) as exc:
         return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})"
+    except KeyboardInterrupt:   # Ctrl-C: the slicer's own order is a valid answer
+        return program, False, "curve ordering interrupted (Ctrl-C): the slicer's order kept"
     return parse(text, source=program.source), True, ""
+
+
+def _solve_interruptible(problem, formulation: str, time_limit_s, notes: list):
+    """``solve``, but a Ctrl-C during an exact solve still gives an answer: dp's (linear time,
+    budgets repaired), marked "fallback" and said in the notes. (CP-SAT itself catches SIGINT and
+    returns its best solution, which the formulation reports as feasible or fallback.)"""
+    try:
+        return solve(problem, formulation, time_limit_s=time_limit_s)
+    except KeyboardInterrupt:
+        if formulation == "dp":
+            raise
+        sol = solve(problem, "dp")
+        notes.append(f"{formulation} interrupted (Ctrl-C): dp's answer used instead")
+        return dataclasses.replace(sol, status="fallback",
+                                   message=f"{formulation} interrupted; dp answer ({sol.status})")
 
 
 def run(program: Program, options: GatingOptions | None = None, *, formulation: str = "dp",
@@ -91,7 +108,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     em = None
     if gating:
         problem = build(base, o)
-        sol = solve(problem, formulation, time_limit_s=time_limit_s)
+        sol = _solve_interruptible(problem, formulation, time_limit_s, notes)
         deg = sol.rotation_deg
         if deg % 360.0 != 0.0:
             # Rotation first, as its own rewrite: the rotated text (a move whose rotated X or Y
@@ -106,7 +123,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             max_snap = rot.max_snap_mm
             base = parse(rot.text, source=program.source)
             problem = build(base, o.replace(rotate="none"))
-            sol = solve(problem, formulation, time_limit_s=time_limit_s)
+            sol = _solve_interruptible(problem, formulation, time_limit_s, notes)
         else:
             max_snap = 0.0
         em = emit_result(base, sol, firmware=o.firmware)
