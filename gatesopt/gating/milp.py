@@ -18,6 +18,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._native import native_stdout_to_stderr
+
 from ..program import X, Y
 from . import dp
 from .problem import (GatingProblem, GatingSolution, _integral, _is_split, _row_at, _TIME_EPS_S,
@@ -467,7 +469,8 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
         sol0.col_value = list(full)
         sol0.value_valid = True
         h.setSolution(sol0)
-    h.run()
+    with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
+        h.run()
     status = h.getModelStatus()
     info = h.getInfo()
     mapped = _status_map().get(status, "fallback")

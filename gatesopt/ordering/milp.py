@@ -15,6 +15,8 @@ import time
 import highspy
 import numpy as np
 
+from .._native import native_stdout_to_stderr
+
 from .bounds import lower_bound_mm
 from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
@@ -354,7 +356,8 @@ def _lp_rounds(model, t0: float, time_limit_s: float, max_rounds: int = 60) -> f
         if left <= 0:
             break
         h.setOptionValue("time_limit", float(left))
-        h.run()
+        with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
+            h.run()
         if h.getModelStatus() != _OPT:
             break
         bound = max(bound, float(h.getInfo().objective_function_value))
@@ -406,7 +409,8 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
         sol.col_value = model.columns_of(best).tolist()
         sol.value_valid = True
         h.setSolution(sol)
-        h.run()
+        with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
+            h.run()
         ms = h.getModelStatus()
         info = h.getInfo()
         if np.isfinite(info.mip_dual_bound):
