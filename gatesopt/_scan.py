@@ -591,8 +591,6 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 elif present[LS] and not np.isnan(value[LS]):
                     dur = max(value[LS], 0.0)
                 kind = K_DWELL
-                for q in range(4):
-                    tgt[q] = pos[q]
             elif g == 28.0:
                 kind = K_HOME
                 dur = home_s
@@ -644,32 +642,26 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
             elif m == 83.0:
                 rel_e = True
                 continue
-            elif m == 104.0 or m == 109.0:
+            elif m == 104.0 or m == 109.0 or m == 140.0 or m == 190.0:
+                bed_cmd = m == 140.0 or m == 190.0
                 t = value[LS] if present[LS] else (value[LR] if present[LR] else np.nan)
                 if not np.isnan(t):
-                    hot = t
-                if m == 109.0:
-                    target = hot
-                    dur = abs(target - hot_reached) / hot_rate if target > 0 else 0.0
-                    hot_reached = target if target > 0 else hot_reached
-                    kind = K_WAIT
-                    for q in range(4):
-                        tgt[q] = pos[q]
-                else:
+                    if bed_cmd:
+                        bed = t
+                    else:
+                        hot = t
+                if m == 104.0 or m == 140.0:
                     continue
-            elif m == 140.0 or m == 190.0:
-                t = value[LS] if present[LS] else (value[LR] if present[LR] else np.nan)
-                if not np.isnan(t):
-                    bed = t
-                if m == 190.0:
-                    target = bed
-                    dur = abs(target - bed_reached) / bed_rate if target > 0 else 0.0
-                    bed_reached = target if target > 0 else bed_reached
-                    kind = K_WAIT
-                    for q in range(4):
-                        tgt[q] = pos[q]
-                else:
-                    continue
+                # M109 / M190 wait: heat from the last temperature waited for (paper.toml [time])
+                target = bed if bed_cmd else hot
+                reached = bed_reached if bed_cmd else hot_reached
+                if target > 0:
+                    dur = abs(target - reached) / (bed_rate if bed_cmd else hot_rate)
+                    if bed_cmd:
+                        bed_reached = target
+                    else:
+                        hot_reached = target
+                kind = K_WAIT
             elif m == 106.0:
                 # only the part-cooling fan (no P, or P0) counts
                 if present[LP] and not np.isnan(value[LP]) and value[LP] != 0.0:
@@ -693,8 +685,6 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                     if (not named) or present[axis_letter[q]]:
                         en[q] = m == 17.0
                 kind = K_MOTOR
-                for q in range(4):
-                    tgt[q] = pos[q]
             else:
                 continue
         elif letter == 83:  # S-series (3DGates Table 3): S1 X = on, S0 X = off
@@ -707,14 +697,12 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 if not named:
                     continue
                 kind = K_MOTOR
-                for q in range(4):
-                    tgt[q] = pos[q]
             else:
                 continue
         else:
             continue
-        if kind == K_MOTOR:
-            for q in range(4):
+        if kind == K_DWELL or kind == K_WAIT or kind == K_MOTOR:
+            for q in range(4):          # rows that take time without moving
                 tgt[q] = pos[q]
         # ---- write the step row
         s_line[n] = ln
