@@ -260,6 +260,9 @@ def render_html(rows, figures, title="gatesopt results") -> str:
 def write_report(rows, out_html, png_dir=None, sweeps=None, title="gatesopt results") -> list[str]:
     if not rows:
         raise GatesoptError("no result rows to report")
+    folder = Path(out_html).resolve().parent
+    if not folder.is_dir():
+        raise GatesoptError(f"{out_html}: folder {folder} does not exist")
     figures = build_figures(rows, sweeps)
     text = render_html(rows, figures, title)
     Path(out_html).write_text(text, encoding="utf-8")

@@ -98,3 +98,10 @@ def test_report_has_every_figure_and_renders_in_chromium(files, tmp_path):
                           "--virtual-time-budget=5000", "--dump-dom", html_path.as_uri()],
                          capture_output=True, text=True, timeout=120).stdout
     assert f'data-figures-rendered="{len(figs)}/{len(figs)}"' in dom
+
+
+def test_report_to_a_missing_folder_is_a_one_line_error(files, tmp_path, capsys):
+    rows_path = tmp_path / "r.csv"
+    run_batch(files[:1], OPTS, out=rows_path, progress=False)
+    assert main(["report", str(rows_path), "-o", str(tmp_path / "nope" / "r.html")]) == 2
+    assert "does not exist" in capsys.readouterr().err
