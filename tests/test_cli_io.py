@@ -101,3 +101,13 @@ def test_determinism_same_input_same_bytes(tmp_path):
                      "--time-limit", "20", "--threads", "1"]) == 0
         outs.append(o.read_bytes())
     assert outs[0] == outs[1]
+
+
+def test_a_new_output_gets_the_usual_permissions(tmp_path):
+    out = tmp_path / "new.gcode"
+    old = os.umask(0o022)
+    try:
+        assert main(["solve", str(SRC), "-o", str(out), "--rotate", "none", "--no-order"]) == 0
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o644

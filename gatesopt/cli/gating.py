@@ -139,6 +139,10 @@ def write_atomic(path: str, text: str, like: str | None = None) -> None:
             f.write(data)
         if like is not None:
             shutil.copymode(like, tmp)
+        else:       # mkstemp makes a private 0600 file; a new output gets the usual permissions
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
