@@ -164,8 +164,9 @@ def format_solve_report(s: dict) -> str:
         f"   ({pct(s['time_after_s'], s['time_before_s']):+.3f} %, firmware stalls included)",
         f"lines         +{s['lines_added']} ({s['instruction_lines']} instruction lines, {s['splits']} moves split)"
         f"   file size {s['size_change_pct']:+.2f} %",
-        f"rotation      {s['rotation_deg']:g} deg about ({s['center_xy'][0]:.3f}, {s['center_xy'][1]:.3f})"
-        f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um",
+        (f"rotation      {s['rotation_deg']:g} deg about ({s['center_xy'][0]:.3f}, {s['center_xy'][1]:.3f})"
+         f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um" if s["rotation_deg"]
+         else "rotation      none"),
         "off time      " + ("  ".join(f"{m} {t:.2f} s" for m, t in s["off_time_s"].items()) or "-"),
         f"solve         {s['solve_s']:.3f} s   (whole run {s['wall_s']:.2f} s)"
         + ("   curves re-ordered" if s["ordered"] else ""),
