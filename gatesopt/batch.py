@@ -60,11 +60,10 @@ def travel_mm(program: Program) -> float:
     return float(np.hypot(d[:, 0], d[:, 1]).sum())
 
 
-def max_curves_per_layer(program: Program) -> int:
+def max_curves_per_layer(order_problem) -> int:
     """Curves in the layer with the most (Fleming et al.'s measure of a model's ordering difficulty)."""
-    from .ordering import build
-    prob = build(program)
-    return int(np.bincount(prob.curve_layer).max()) if len(prob.curve_layer) else 0
+    layers = order_problem.curve_layer
+    return int(np.bincount(layers).max()) if len(layers) else 0
 
 
 def _infill_pattern(program: Program) -> str:
@@ -105,8 +104,8 @@ def process_file(path: str, options: BatchOptions) -> dict:
             row[f"off_time_{m}_s"] = v
         row["findings"] = " | ".join(s.get("findings", []))[:2000]
         row["verified"] = bool(s.get("verified"))
-        if options.order:
-            row["max_curves_per_layer"] = max_curves_per_layer(program)
+        if res.order_problem is not None:
+            row["max_curves_per_layer"] = max_curves_per_layer(res.order_problem)
         tb, ta = travel_mm(program), travel_mm(res.output)
         row.update(travel_before_mm=tb, travel_after_mm=ta,
                    travel_reduction_pct=100.0 * (1.0 - ta / tb) if tb > 0 else 0.0)

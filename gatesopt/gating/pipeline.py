@@ -31,6 +31,7 @@ class RunResult:
     ordered: bool
     notes: tuple
     wall_s: float
+    order_problem: object = None        # the OrderingProblem, when curves were ordered
 
     def summary(self) -> dict:
         """The report keys of ``gatesopt solve --json`` (issue 3)."""
@@ -63,17 +64,17 @@ class RunResult:
 
 
 def _order(program: Program, time_limit_s: float):
-    """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note)."""
+    """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note, problem)."""
     try:
         ordering = importlib.import_module("gatesopt.ordering")
         problem = ordering.build(program)
         solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s)
         text = ordering.emit(program, problem, solution)
     except (ImportError, AttributeError, NotImplementedError) as exc:
-        return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})"
+        return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})", None
     except KeyboardInterrupt:   # Ctrl-C: the slicer's own order is a valid answer
-        return program, False, "curve ordering interrupted (Ctrl-C): the slicer's order kept"
-    return parse(text, source=program.source), True, ""
+        return program, False, "curve ordering interrupted (Ctrl-C): the slicer's order kept", None
+    return parse(text, source=program.source), True, "", problem
 
 
 def _solve_interruptible(problem, formulation: str, time_limit_s, notes: list):
@@ -98,9 +99,9 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     t0 = time.perf_counter()
     o = options or GatingOptions()
     notes = []
-    base, ordered = program, False
+    base, ordered, order_problem = program, False, None
     if order:
-        base, ordered, note = _order(program, order_time_limit_s)
+        base, ordered, note, order_problem = _order(program, order_time_limit_s)
         if note:
             notes.append(note)
     ordered_base = base
@@ -147,7 +148,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             rep = dataclasses.replace(rep, ok=False, findings=rep.findings + tuple(extra))
         rep = dataclasses.replace(rep, checks=rep.checks + ("ordering",))
     return RunResult(program, base, sol, em, text, out, rep, ordered, tuple(notes),
-                     time.perf_counter() - t0)
+                     time.perf_counter() - t0, order_problem=order_problem)
 
 
 def energy_time(program: Program, firmware: str = "3dgates", profile: str = "paper"):
