@@ -88,37 +88,48 @@ def _find(buf, i, end, pat):
     return -1
 
 
+@njit(cache=True, inline="always")     # on the hot path: inlined, as the code it replaced was
+def _scan_number(buf, j, end):
+    """[+-]digits[.digits] at j: (value, digits read, position after it).
+
+    The value is an integer mantissa divided once by a power of ten: for up to 15 significant
+    digits that is the correctly rounded double, equal to float(text). Digits beyond 18 scale the
+    value instead (such numbers are absurd anyway). NaN when there are no digits.
+    """
+    neg = False
+    if j < end and (buf[j] == 45 or buf[j] == 43):
+        neg = buf[j] == 45
+        j += 1
+    mant = 0
+    nd = 0
+    nfrac = 0
+    while j < end and 48 <= buf[j] <= 57:
+        if nd < 18:
+            mant = mant * 10 + (buf[j] - 48)
+            nd += 1
+        else:
+            nfrac -= 1
+        j += 1
+    if j < end and buf[j] == 46:
+        j += 1
+        while j < end and 48 <= buf[j] <= 57:
+            if nd < 18:
+                mant = mant * 10 + (buf[j] - 48)
+                nd += 1
+                nfrac += 1
+            j += 1
+    if nd == 0:
+        return np.nan, 0, j
+    v = mant / POW10[nfrac] if nfrac >= 0 else mant * POW10[-nfrac]
+    return (-v if neg else v), nd, j
+
+
 @njit(cache=True)
 def _number_at(buf, i, end):
     """A decimal number starting at i (blanks skipped), NaN if none."""
     while i < end and (buf[i] == 32 or buf[i] == 9):
         i += 1
-    neg = False
-    if i < end and (buf[i] == 45 or buf[i] == 43):
-        neg = buf[i] == 45
-        i += 1
-    mant = 0
-    nd = 0
-    nfrac = 0
-    while i < end and 48 <= buf[i] <= 57:
-        if nd < 18:
-            mant = mant * 10 + (buf[i] - 48)
-            nd += 1
-        else:
-            nfrac -= 1
-        i += 1
-    if i < end and buf[i] == 46:
-        i += 1
-        while i < end and 48 <= buf[i] <= 57:
-            if nd < 18:
-                mant = mant * 10 + (buf[i] - 48)
-                nd += 1
-                nfrac += 1
-            i += 1
-    v = mant / POW10[nfrac] if nfrac >= 0 else mant * POW10[-nfrac]
-    if nd == 0:
-        return np.nan
-    return -v if neg else v
+    return _scan_number(buf, i, end)[0]
 
 
 @njit(cache=True)
@@ -256,37 +267,7 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
             # extended command word (SET_VELOCITY_LIMIT, EXCLUDE_OBJECT_START, ...)
             return EXT, np.nan, i, True
         i += 1
-        # number: [+-]digits[.digits], as an integer mantissa divided once by a power of ten:
-        # for up to 15 significant digits that is the correctly rounded double, equal to float(text)
-        j = i
-        neg = False
-        if j < b and (buf[j] == 45 or buf[j] == 43):
-            neg = buf[j] == 45
-            j += 1
-        mant = 0
-        nd = 0
-        nfrac = 0
-        while j < b and 48 <= buf[j] <= 57:
-            if nd < 18:
-                mant = mant * 10 + (buf[j] - 48)
-                nd += 1
-            else:
-                nfrac -= 1          # digits beyond 18: scale up instead (absurd values anyway)
-            j += 1
-        if j < b and buf[j] == 46:
-            j += 1
-            while j < b and 48 <= buf[j] <= 57:
-                if nd < 18:
-                    mant = mant * 10 + (buf[j] - 48)
-                    nd += 1
-                    nfrac += 1
-                j += 1
-        if nfrac > 0:
-            ip = mant / POW10[nfrac]
-        elif nfrac < 0:
-            ip = mant * POW10[-nfrac]
-        else:
-            ip = float(mant)
+        v, nd, j = _scan_number(buf, i, b)
         k = L - _A
         if touched[0] < 26:
             touched[0] += 1
@@ -299,12 +280,8 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
             i = j + 1
             placeholder[0] = True
             continue
-        if nd == 0:
-            if j > i:           # a sign or dot without digits
-                bad[k] = True
-            v = np.nan
-        else:
-            v = -ip if neg else ip
+        if nd == 0 and j > i:   # a sign or dot without digits
+            bad[k] = True
         # what follows a number must end the word
         if nd > 0 and j < b:
             cj = buf[j]
