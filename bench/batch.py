@@ -10,12 +10,12 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import re
 import sys
 import time
 from pathlib import Path
 
 from gatesopt.batch import BatchOptions, run_batch, summarize
+from _markdown import replace_section  # bench/_markdown.py
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -50,7 +50,7 @@ def main() -> int:
     text = "\n".join(md)
     print(text)
     if a.write:
-        _replace_section(Path(a.write), "## Batch throughput", text)
+        replace_section(Path(a.write), f"## Batch throughput\n\n{text}")
     if a.report:
         from gatesopt.report import rotation_sweep, write_report
         out = REPO / "docs" / "report"
@@ -61,7 +61,7 @@ def main() -> int:
         pngs = write_report(rows[2], out / "report.html", png_dir=out, sweeps=sweeps,
                             title="gatesopt on ../shared/instances")
         figs = "\n".join(f"![{Path(p).stem}](report/{Path(p).name})" for p in pngs)
-        _replace_section(REPO / "docs" / "RESULTS.md", "## Report figures",
+        replace_section(REPO / "docs" / "RESULTS.md", "## Report figures\n\n"
                          f"Drawn by `gatesopt report` from the 2-job rows above (`python bench/batch.py --report`); "
                          f"the self-contained page is docs/report/report.html.\n\n{figs}")
     return 0
@@ -69,16 +69,6 @@ def main() -> int:
 
 def _stable(r):
     return {k: v for k, v in r.items() if k not in ("solve_s", "wall_s")}
-
-
-def _replace_section(path: Path, head: str, body: str) -> None:
-    doc = path.read_text() if path.exists() else ""
-    section = f"{head}\n\n{body}\n"
-    if head in doc:
-        doc = re.sub(re.escape(head) + r"\n.*?(?=\n## |\Z)", lambda m: section, doc, flags=re.S)
-    else:
-        doc = doc.rstrip() + "\n\n" + section
-    path.write_text(doc)
 
 
 if __name__ == "__main__":

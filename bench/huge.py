@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _markdown import replace_section  # bench/_markdown.py
 
 HERE = Path(__file__).resolve().parent
 
@@ -129,14 +130,7 @@ def main() -> int:
     text = "\n".join(md)
     print(text)
     if a.write:
-        path = Path(a.write)
-        doc = path.read_text() if path.exists() else "# Benchmarks\n"
-        section = "## Huge files\n\n" + text + "\n"
-        if "## Huge files" in doc:
-            doc = re.sub(r"## Huge files\n.*?(?=\n## |\Z)", section, doc, flags=re.S)
-        else:
-            doc = doc.rstrip() + "\n\n" + section
-        path.write_text(doc)
+        replace_section(Path(a.write), "## Huge files\n\n" + text)
     return 0
 
 

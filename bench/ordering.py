@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _markdown import replace_section  # bench/_markdown.py
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -172,18 +173,6 @@ def report(args) -> str:
     return "\n".join(lines)
 
 
-def write_section(path: Path, section: str) -> None:
-    text = path.read_text() if path.exists() else "# Results\n"
-    head = "## Curve ordering"
-    if head in text:
-        a = text.index(head)
-        nxt = text.find("\n## ", a + len(head))
-        text = text[:a] + section.rstrip() + "\n" + (text[nxt:] if nxt >= 0 else "")
-    else:
-        text = text.rstrip() + "\n\n" + section.rstrip() + "\n"
-    path.write_text(text)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -205,7 +194,7 @@ def main() -> None:
     else:
         sec = report(a)
         if a.write:
-            write_section(Path(a.write), sec)
+            replace_section(Path(a.write), sec)
         print(sec)
 
 

@@ -36,6 +36,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _markdown import replace_section  # bench/_markdown.py
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -409,18 +410,6 @@ def report(args) -> str:
     return "\n".join(lines)
 
 
-def write_section(path: Path, section: str) -> None:
-    text = path.read_text() if path.exists() else "# Results\n"
-    head = "## Curve ordering: peers"
-    if head in text:
-        a = text.index(head)
-        nxt = text.find("\n## ", a + len(head))
-        text = text[:a] + section.rstrip() + "\n" + (text[nxt:] if nxt >= 0 else "")
-    else:
-        text = text.rstrip() + "\n\n" + section.rstrip() + "\n"
-    path.write_text(text)
-
-
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "_elkai_worker":
         print(json.dumps(elkai_solve_json(json.loads(sys.stdin.read())), default=float))
@@ -453,7 +442,7 @@ def main() -> None:
     else:
         sec = report(a)
         if a.write:
-            write_section(Path(a.write), sec)
+            replace_section(Path(a.write), sec)
         print(sec)
 
 

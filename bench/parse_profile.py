@@ -33,6 +33,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from _markdown import replace_section  # bench/_markdown.py
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "instances"
@@ -292,19 +293,6 @@ def run(args) -> str:
     return text
 
 
-def write_section(md: Path, section: str) -> None:
-    """Replace (or append) the "## Parse and profile" section of a Markdown file."""
-    old = md.read_text() if md.exists() else "# Benchmarks\n"
-    lines = old.splitlines(keepends=True)
-    start = next((i for i, l in enumerate(lines) if l.rstrip() == SECTION), None)
-    if start is None:
-        new = old.rstrip("\n") + "\n\n" + section
-    else:
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
-        new = "".join(lines[:start]) + section + ("\n" + "".join(lines[end:]) if end < len(lines) else "")
-    md.write_text(new)
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--files", type=int, default=4, help="how many of the largest files (default 4)")
@@ -324,7 +312,7 @@ def main(argv=None) -> int:
     text = run(args)
     print(text)
     if args.write:
-        write_section(args.write, text)
+        replace_section(args.write, text)
     return 0
 
 

@@ -43,6 +43,7 @@ _WARMUP_RE = re.compile(rb"^;\s*[:|]\s*([\d.]+)[^\n]*Extruder Warm-Up", re.M)
 import gatesopt  # noqa: E402
 from gatesopt import planner  # noqa: E402
 from gatesopt.limits import machine_limits  # noqa: E402
+from _markdown import replace_section  # bench/_markdown.py
 
 
 # Why a file is more than 3 % off (checked by hand: the numbers quoted were measured with
@@ -224,19 +225,6 @@ def accuracy() -> tuple[str, dict]:
     return "\n".join(md), summary
 
 
-def replace_section(path: Path, body: str) -> None:
-    text = path.read_text() if path.exists() else f"# {path.stem.title()}\n"
-    new = f"{SECTION}\n\n{body.strip()}\n"
-    if SECTION in text:
-        head, rest = text.split(SECTION, 1)
-        nxt = rest.find("\n## ")
-        tail = rest[nxt + 1:] if nxt >= 0 else ""
-        text = head + new + ("\n" + tail if tail else "")
-    else:
-        text = text.rstrip("\n") + "\n\n" + new
-    path.write_text(text)
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--speed", action="store_true")
@@ -251,12 +239,12 @@ def main() -> int:
         md, res = speed(args.repeat)
         print(md)
         if args.write:
-            replace_section(ROOT / "docs" / "BENCHMARKS.md", md)
+            replace_section(ROOT / "docs" / "BENCHMARKS.md", f"{SECTION}\n\n{md}")
     if args.accuracy:
         md, res = accuracy()
         print(md)
         if args.write:
-            replace_section(ROOT / "docs" / "RESULTS.md", md)
+            replace_section(ROOT / "docs" / "RESULTS.md", f"{SECTION}\n\n{md}")
     return 0
 
 

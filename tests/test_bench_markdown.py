@@ -1,0 +1,34 @@
+"""bench/_markdown.py: every benchmark writes its docs section through this one helper."""
+from __future__ import annotations
+
+import sys
+
+from conftest import REPO
+
+sys.path.insert(0, str(REPO / "bench"))
+from _markdown import replace_section  # noqa: E402
+
+DOC = ("# Results\n\nintro\n\n## Curve ordering\n\nold ordering\n\n"
+       "## Curve ordering: peers (LKH-3)\n\nold peers\n\n## Power gating\n\ngating\n")
+
+
+def test_replaces_only_the_section_with_the_same_heading_line(tmp_path):
+    p = tmp_path / "RESULTS.md"
+    p.write_text(DOC)
+    replace_section(p, "## Curve ordering\n\nnew ordering\n")
+    assert p.read_text() == DOC.replace("old ordering", "new ordering")
+    replace_section(p, "## Curve ordering: peers (LKH-3)\n\nnew peers")
+    assert "new peers" in p.read_text() and "old peers" not in p.read_text()
+    assert p.read_text().count("## ") == 3 and p.read_text().endswith("## Power gating\n\ngating\n")
+
+
+def test_appends_a_new_section_and_creates_a_missing_file(tmp_path):
+    p = tmp_path / "RESULTS.md"
+    p.write_text(DOC)
+    replace_section(p, "## Huge files\n\nnumbers")
+    assert p.read_text() == DOC + "\n## Huge files\n\nnumbers\n"
+    q = tmp_path / "BENCHMARKS.md"
+    replace_section(q, "## Batch throughput\n\nx")
+    assert q.read_text() == "# Benchmarks\n\n## Batch throughput\n\nx\n"
+    replace_section(q, "## Batch throughput\n\ny")              # idempotent in shape
+    assert q.read_text() == "# Benchmarks\n\n## Batch throughput\n\ny\n"
