@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ProfileError
-from .program import Kind, Program, X, Y
+from .program import Kind, Program
 
 SECTORS = ("X", "Y", "Z", "E", "heater", "fans", "idle")
 

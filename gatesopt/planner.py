@@ -144,7 +144,7 @@ class Plan:
         dur = self.duration_s[step]
         t = np.clip(t, 0.0, dur)
         L = self.length_mm[step]
-        v0, vc, v1, a = self.entry_mm_s[step], self.cruise_mm_s[step], self.exit_mm_s[step], self.accel_mm_s2[step]
+        v0, vc, a = self.entry_mm_s[step], self.cruise_mm_s[step], self.accel_mm_s2[step]
         ta, tc = self.accel_s[step], self.cruise_s[step]
         d_acc = 0.5 * (v0 + vc) * ta
         d_cru = vc * tc

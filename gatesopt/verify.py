@@ -246,7 +246,6 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
         # loop anywhere) has that side in two pieces, first and last of the chain: join them
         chain_start = np.ones(len(rows), bool)
         chain_start[1:] = ~same
-        cid = np.cumsum(chain_start) - 1
         firsts = np.flatnonzero(chain_start)
         lasts = np.append(firsts[1:] - 1, len(rows) - 1)
         cand = ((lasts > firsts) & ext[firsts] & ext[lasts] & ~arc[firsts] & ~arc[lasts]
@@ -260,7 +259,6 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
             n0, n1 = np.linalg.norm(v0), np.linalg.norm(v1)
             if n0 > 0 and n1 > 0 and np.dot(v0, v1) / (n0 * n1) > math.cos(2e-2):
                 closed_join[int(l)] = int(f)
-        del cid
     start_of = np.ones(len(rows), bool)
     start_of[1:] = ~join
     gid = np.cumsum(start_of) - 1

@@ -9,7 +9,6 @@ from gatesopt.calibrate import CalibrationError, PowerLog, fit, read_power_log, 
 from gatesopt.cli import main
 from gatesopt.energy import load_profile
 
-from conftest import PROJECT_INSTANCES
 
 # a print with heat-up, fan changes, motors switched off at the end and an idle tail: every
 # parameter the component model has is visible in it

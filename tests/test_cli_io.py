@@ -7,8 +7,6 @@ import stat
 import subprocess
 import sys
 
-import pytest
-
 from gatesopt import parse
 from gatesopt.cli import main
 from gatesopt.verify import verify

@@ -212,7 +212,6 @@ def test_budgets_with_rotation_match_brute_force():
 def test_non_additive_xy_power_matches_brute_force():
     # both XY off saves 3 W less than the sum of the two (a measured both_xy_gated value)
     p0 = small_problem()
-    n = p0.n_steps
     c = p0.coeffs
     coeffs = with_xy_off(c, 3.0)
     p = from_moves(p0.start_mm, p0.end_mm, p0.duration_s, p0.options, coeffs=coeffs)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from gatesopt import GcodeError, Kind, parse
-from gatesopt.program import E, X, Y, Z
+from gatesopt.program import E, X, Y
 
 from conftest import manifest, read_bytes, shared_params
 

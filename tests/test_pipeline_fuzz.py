@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gatesopt import GatesoptError, parse
+from gatesopt import parse
 from gatesopt.cli import main
 from gatesopt.gating.pipeline import run
 from gatesopt.gating.problem import GatingOptions

@@ -12,7 +12,7 @@ from gatesopt.energy import profile
 from gatesopt.parse import DEFAULT_FEED_MM_S
 from gatesopt.stream import gate_stream, iter_chunks, profile_stream
 
-from conftest import PROJECT_INSTANCES, SHARED_INSTANCES, read_bytes
+from conftest import PROJECT_INSTANCES, SHARED_INSTANCES
 
 
 def test_chunks_end_at_line_boundaries_and_cover_the_file(tmp_path):

@@ -298,7 +298,6 @@ class _Emitter:
         bounds = [0.0] + [c[0] for c in cuts] + [1.0]
         out: list[str] = []
         sums = {a: Decimal(0) for a in AXES}
-        prev_q = start
         cur_xy = start[:2].copy()     # where the firmware is when this piece starts (arc centre base)
         if rot_row and not np.isnan(self.em_val).any():
             cur_xy = self.em_val.copy()
@@ -365,7 +364,6 @@ class _Emitter:
             if not last:
                 out.extend(cuts[k][1])
             cur_xy = _written_xy(vals, rel, off, scale, cur_xy)
-            prev_q = q
         if self.rotated:
             self.em_val = cur_xy
             for k, a in enumerate(("X", "Y")):

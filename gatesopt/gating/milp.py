@@ -74,9 +74,6 @@ def build_model(problem: GatingProblem, incumbent_j: float = math.inf) -> Couple
       stalls and budgets only add energy, so no solution at that angle beats the incumbent;
       with budgets, also when the budget bound (``_budget_bounds``) is above it.
     """
-    o = problem.options
-    n = problem.n_steps
-    T = problem.total_s
     E0 = problem.energy_before_j
     inter = problem.xy_inter_w
     use_inter = problem.xy_coupled
@@ -108,7 +105,6 @@ def _budget_bounds(model: CoupledModel) -> np.ndarray:
     is charged 1/|sharers| to each sharer (their sum never exceeds what is really paid), which makes
     the budgets separable; each budget alone then gives a fractional knapsack, the larger of the
     two bounds is kept."""
-    nx = model.nx
     e = model.x_energy_j.copy()
     lines = model.x_lines.copy()
     tau = model.x_stall_s.copy()

@@ -259,7 +259,7 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution)
     seam = np.asarray(solution.curve_seam, np.int64)
     if len(order) != n or not np.array_equal(np.sort(order), np.arange(n)):
         raise ValueError("solution does not order every curve of the program exactly once")
-    l0, l1, s0, s1 = lay.curve_l0, lay.curve_l1, lay.curve_s0, lay.curve_s1
+    l0, l1, s0 = lay.curve_l0, lay.curve_l1, lay.curve_s0
     changed = rev | (seam != 0)
     gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
     group_first = problem.group_curve_start[gidx]          # original first curve of each curve's group
