@@ -16,14 +16,16 @@ from __future__ import annotations
 
 import time
 
-from . import dp, greedy, milp
-from .problem import Group, GroupSolution
+from . import dp, greedy, ils, milp
+from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
 #: largest group (in candidates, i.e. ~2x curves) handed to the exact formulation (HiGHS: its
 #: model has ~m^2 columns; beyond ~160 candidates it rarely closes the gap within seconds)
 EXACT_MAX_CANDS = 160
 #: below this per-group limit (a spent budget) the exact step is not even built
 MIN_EXACT_S = 0.05
+#: share of the group's time limit the iterated local search may use before the exact step
+ILS_SHARE = 0.25
 #: stop after the MILP's LP cutting-plane rounds if they leave more than this gap
 GIVE_UP_GAP = None   # measured: with 0.15, free-mode Cura groups lost most proofs the branch loop finds
 
@@ -39,9 +41,21 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
     if heur.status == "optimal" or group.n_curves <= 1:
         return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "optimal",
                                   time.perf_counter() - t0, "auto:bound")
-    if group.n_cands > exact_max_cands or time_limit_s < MIN_EXACT_S:
+    # escape the local optimum before anything else: a better incumbent is what lets the exact
+    # step (or the bound) prove it, and what a fallback group keeps
+    exact_next = group.n_cands <= exact_max_cands and time_limit_s >= MIN_EXACT_S
+    share = ILS_SHARE if exact_next else 1.0
+    order = ils.improve_ils(group, heur.order, deadline=t0 + share * time_limit_s)
+    obj = group.path_cost_mm(order)
+    if obj < heur.objective_mm - 1e-9:
+        status = "optimal" if obj - heur.bound_mm <= OPTIMAL_ABS_TOL_MM else "feasible"
+        heur = GroupSolution.make(order, obj, heur.bound_mm, status, heur.solve_s, "ils")
+        if status == "optimal":
+            return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "optimal",
+                                      time.perf_counter() - t0, "auto:ils+bound")
+    if not exact_next:
         return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "fallback",
-                                  time.perf_counter() - t0, "auto:greedy")
+                                  time.perf_counter() - t0, "auto:ils")
     left = max(time_limit_s - (time.perf_counter() - t0), 0.05)
     ex = milp.solve(group, time_limit_s=left, hint=heur, give_up_gap=GIVE_UP_GAP)
     if ex.objective_mm > heur.objective_mm:        # never worse than the warm start

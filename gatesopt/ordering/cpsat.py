@@ -46,6 +46,9 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None, num_workers: i
     if triv is not None:
         return GroupSolution.make(triv.order, triv.objective_mm, triv.bound_mm, triv.status,
                                   triv.solve_s, "cpsat")
+    if hint is None:                 # a quarter of the limit for the local search's incumbent
+        from .ils import warm_start
+        hint = warm_start(group, deadline=t0 + 0.25 * time_limit_s)
     return _solve_circuit(group, t0, time_limit_s, hint, num_workers, seed, closed=False)
 
 
@@ -159,6 +162,11 @@ def _solve_circuit(group: Group, t0, time_limit_s, hint, num_workers, seed, clos
         status = "fallback"
     group.check_order(order)
     obj = group.path_cost_mm(order)
+    if hint is not None:             # integer costs: the model's optimum may be a hair longer
+        h_order = np.asarray(getattr(hint, "order", hint), np.int64)
+        h_obj = group.path_cost_mm(h_order)
+        if h_obj < obj - 1e-9:
+            order, obj = h_order, h_obj
     if status == "optimal" or obj - bound <= OPTIMAL_ABS_TOL_MM:
         status = "optimal"
     return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "cpsat")

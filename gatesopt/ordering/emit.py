@@ -10,7 +10,10 @@ Rules (formulations/ordering.md, "Emit"; gatesopt.ordering.build explains the li
   the slicer's own retraction, wipe, z-hop, combing path.
 - Any other gap is rebuilt the way the slicer builds its travels, with parameters read from the
   file (``TravelStyle``): retract (if the travel is at least the shortest travel the slicer
-  retracted for), z-hop, one straight travel, lower, unretract. Its non-motion lines are kept:
+  retracted for), z-hop, one straight travel, lower, unretract. If the slicer combs (it made
+  long travels without retracting), a rebuilt travel that crosses no wall of its layer and is
+  no longer than the slicer's own dry travels skips the retraction, as the slicer would
+  (``WallCrossing``). Its non-motion lines are kept:
   a boundary gap's lines (layer change, barriers) stay at the boundary in their order; a gap
   inside a group travels with the curve that followed it (minus ``;TYPE:``/wipe comments, which
   are re-derived).
@@ -59,6 +62,68 @@ class TravelStyle:
     travel_feed_mm_s: float = 150.0
     z_feed_mm_s: float = 10.0
     travel_cmd: str = "G1"
+    #: longest same-layer travel the slicer made without retracting (combing: Cura, ideaMaker,
+    #: Creality Print, PrusaSlicer's "only retract when crossing perimeters"); 0: it does not comb
+    comb_max_mm: float = 0.0
+
+
+#: travels shorter than this say nothing about combing (every slicer skips retracting for them)
+COMB_MIN_TRAVEL_MM = 2.0
+#: share of long same-layer travels without retraction that marks a combing slicer
+COMB_SHARE = 0.2
+#: a rebuilt travel is trimmed by this much at each end before the wall-crossing test (its ends
+#: are curve ends, which touch walls)
+COMB_TRIM_MM = 0.3
+_WALL_FEATURE = re.compile(r"wall|perimeter|shell|skirt|brim", re.I)
+
+
+class WallCrossing:
+    """Does a straight travel cross a wall of its layer? (A combing slicer's reason to retract.)
+
+    Walls: the layer's closed curves and curves whose feature names a wall or perimeter. A travel
+    that crosses none of them stays inside one region bounded by walls — over infill, where the
+    slicer itself travels without retracting — so it may skip the retraction.
+    """
+
+    def __init__(self, program: Program, problem: OrderingProblem, lay: Layout):
+        names = program.feature_names
+        feat = program.feature[lay.curve_s0]
+        is_wall = np.array([f >= 0 and bool(_WALL_FEATURE.search(names[f])) for f in feat], bool)
+        self.wall = is_wall | problem.curve_closed
+        self.problem = problem
+        self.cache: dict = {}
+
+    def _segments(self, layer: int):
+        seg = self.cache.get(layer)
+        if seg is None:
+            pr = self.problem
+            cs = np.flatnonzero((pr.curve_layer == layer) & self.wall)
+            parts = [pr.points_xy[pr.curve_point_start[c]:pr.curve_point_start[c + 1]] for c in cs]
+            a = np.concatenate([q[:-1] for q in parts]) if parts else np.zeros((0, 2))
+            b = np.concatenate([q[1:] for q in parts]) if parts else np.zeros((0, 2))
+            seg = self.cache[layer] = (a, b)
+        return seg
+
+    def crosses(self, layer: int, p, q) -> bool:
+        p, q = np.asarray(p[:2], float), np.asarray(q[:2], float)
+        d = q - p
+        length = float(np.hypot(*d))
+        if length <= 2 * COMB_TRIM_MM:
+            return False
+        u = d / length
+        p, q = p + COMB_TRIM_MM * u, q - COMB_TRIM_MM * u
+        a, b = self._segments(layer)
+        if not len(a):
+            return False
+        lo, hi = np.minimum(p, q), np.maximum(p, q)
+        near = ((np.maximum(a, b) >= lo) & (np.minimum(a, b) <= hi)).all(axis=1)
+        a, b = a[near], b[near]
+
+        def cross(o, v, w):     # z of (v - o) x (w - o)
+            return (v[..., 0] - o[..., 0]) * (w[..., 1] - o[..., 1]) - (v[..., 1] - o[..., 1]) * (w[..., 0] - o[..., 0])
+        o1, o2 = cross(p, q, a), cross(p, q, b)
+        o3, o4 = cross(a, b, p), cross(a, b, q)
+        return bool(np.any((o1 * o2 <= 0) & (o3 * o4 <= 0) & ((o1 != 0) | (o2 != 0))))
 
 
 def travel_style(program: Program, lay: Layout) -> TravelStyle:
@@ -90,6 +155,11 @@ def travel_style(program: Program, lay: Layout) -> TravelStyle:
         hops = hop[has_r & same_layer]
         if len(hops) and np.mean(hops > 1e-3) >= 0.5:
             style["hop_mm"] = float(np.median(hops[hops > 1e-3]))
+        # combing: a fair share of the travels at least as long as a retracted one went without
+        long_ = same_layer & (xy_len >= max(style["min_travel_mm"], COMB_MIN_TRAVEL_MM))
+        combed = long_ & ~has_r
+        if long_.sum() >= 10 and combed.sum() >= COMB_SHARE * long_.sum():
+            style["comb_max_mm"] = float(np.percentile(xy_len[combed], 95))
     rr = (kind == Kind.RETRACT) & (np.hypot(d[:, 0], d[:, 1]) == 0)
     if rr.any():
         style["retract_feed_mm_s"] = float(np.median(program.feed_mm_s[rr]))
@@ -249,6 +319,7 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution)
     """G-code text with the curves of ``problem`` in the order of ``solution``."""
     lay = problem.layout if problem.layout is not None else layout(program)
     style = travel_style(program, lay)
+    walls = WallCrossing(program, problem, lay) if style.comb_max_mm > 0 else None
     w = _Writer(program, lay)
     p = program
     n = len(lay.curve_s0)
@@ -289,7 +360,8 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution)
                         lines.append((gap_lines(c), False))
                 elif c != group_first[c]:
                     lines.append((gap_lines(c), False))
-                _rebuilt_gap(w, p, lay, style, lines, c, _entry_mm(p, lay, c, bool(rev[c]), int(seam[c])))
+                _rebuilt_gap(w, p, lay, style, lines, c, _entry_mm(p, lay, c, bool(rev[c]), int(seam[c])),
+                             walls, int(problem.curve_layer[c]))
         # state the curve saw in the original
         st = _state_at(req, int(l0[c]))
         for key, text in st.items():
@@ -338,7 +410,7 @@ def _entry_mm(p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> np.n
 
 
 def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_sets, c: int,
-                 target) -> None:
+                 target, walls: WallCrossing | None = None, layer: int = -1) -> None:
     """One rebuilt travel into curve c, with the non-motion lines of the given original gaps.
 
     Each gap's lines split where the slicer retracted, travelled and unretracted: lines before
@@ -383,19 +455,45 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
             if not boundary and cls[j] == LINE_NEUTRAL and _TYPE_OR_WIPE.match(p.line_text(i)):
                 continue
             (pre if j < split_r else mid if j < split_t else post if j < split_u else late).append(i)
-    for i in pre:
-        w.copy_line(i)
     s = int(lay.curve_s0[c])
     off = p.offset_mm[s]
-    dist = float(np.hypot(*(target[:2] - w.xyz[:2])))
     relative_e = bool(p.relative_e[s])
+    # E per layer must not change: where a layer's first line lies inside these gaps, what this
+    # gap has emitted when that line is copied must equal what the slicer's gap lines before it
+    # moved (net_before)
+    gap = np.fromiter((i for lines, _ in line_sets for i in lines), np.int64)
+    markers = p.layer_line[np.isin(p.layer_line, gap)] if len(gap) else np.zeros(0, np.int64)
+    net_before = {}
+    if len(markers):
+        mot = gap[lay.line_class[gap] == LINE_MOTION]
+        st = lay.step_of_line[mot]
+        de = p.end_mm[st, 3] - p.start_mm[st, 3]
+        net_before = {int(m): float(de[mot < m].sum()) for m in markers}
+    emitted = 0.0
+
+    def move_e(d_e: float, feed_mm_s: float = style.unretract_feed_mm_s) -> None:
+        nonlocal emitted
+        w.move_e(d_e, feed_mm_s, relative_e)
+        emitted += d_e
+
+    def copy(i: int) -> None:
+        if i in net_before and abs(net_before[i] - emitted) > 1e-9:
+            move_e(net_before[i] - emitted)
+        w.copy_line(i)
+
+    for i in pre:
+        copy(i)
+    dist = float(np.hypot(*(target[:2] - w.xyz[:2])))
     moving = dist > 1e-9 or abs(target[2] - w.xyz[2]) > 1e-9
     r = r_boundary if r_boundary > 0 else (r_internal if r_internal > 0 else style.retract_mm)
     retract = moving and r > 0 and (boundary_retracted or (style.retract_mm > 0 and dist >= style.min_travel_mm))
+    if (retract and walls is not None and dist <= style.comb_max_mm
+            and abs(target[2] - w.xyz[2]) <= 1e-9 and not walls.crosses(layer, w.xyz, target)):
+        retract = False     # the slicer combs: a travel over infill that crosses no wall goes dry
     if retract:
-        w.move_e(-r, style.retract_feed_mm_s, relative_e)
+        move_e(-r, style.retract_feed_mm_s)
     for i in mid:
-        w.copy_line(i)
+        copy(i)
     if moving:
         z_now, z_to = w.xyz[2], target[2]
         if retract and style.hop_mm > 0:
@@ -407,14 +505,13 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
         w.move_xyz([target[0], target[1], w.xyz[2]], style.travel_feed_mm_s, style.travel_cmd, off)
         if abs(w.xyz[2] - z_to) > 1e-9:
             w.move_xyz([w.xyz[0], w.xyz[1], z_to], style.z_feed_mm_s, "G1", off)
-    push = (r if retract else 0.0) + net     # unretract, plus any prime the slicer's gaps added
-    if (early_push or not boundary_retracted) and abs(push) > 1e-9:
+    # unretract, plus any prime the slicer's gaps added: whatever brings the gap to its net E
+    if (early_push or not boundary_retracted) and abs(net - emitted) > 1e-9:
         # a retraction the slicer did not make here: undo it at once, on this side of any marker
-        w.move_e(push, style.unretract_feed_mm_s, relative_e)
-        push = 0.0
+        move_e(net - emitted)
     for i in post:                      # e.g. the next layer's marker: before the unretract, as the slicer
-        w.copy_line(i)
-    if abs(push) > 1e-9:
-        w.move_e(push, style.unretract_feed_mm_s, relative_e)
+        copy(i)
+    if abs(net - emitted) > 1e-9:
+        move_e(net - emitted)
     for i in late:
-        w.copy_line(i)
+        copy(i)

@@ -19,6 +19,9 @@ import numpy as np
 from . import auto, cpsat, dp, greedy, milp, tsp
 from .problem import GroupSolution, OrderingProblem, OrderingSolution
 
+#: groups up to this many curves are settled by the subset DP (``dp.fits``) in milliseconds
+DP_CURVES = 12
+
 FORMULATIONS = {
     "greedy": greedy.solve,
     "tsp": tsp.solve,
@@ -46,6 +49,10 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     pos = np.asarray(problem.origin_xy, float)
     plans = []      # per group: [(GroupSolution, Group)] options: the solver's path, the slicer's
     cache = {}      # identical groups recur layer after layer (same infill, same start): solve once
+    # the budget is shared by weight: a group the DP settles, a fixed group or a repeat of an
+    # earlier group's geometry costs next to nothing; the others in proportion to their curves
+    weight = _budget_weights(problem) if budget_s is not None else None
+    weight_left = float(weight.sum()) if weight is not None else 0.0
     for g in range(problem.n_groups):
         end = None
         if g + 1 < problem.n_groups and problem.group_fixed[g + 1]:
@@ -60,9 +67,9 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             gs = cache.get(key)
             if gs is None:
                 limit = time_limit_s
-                if budget_s is not None:
-                    left_groups = max(1, int((~problem.group_fixed[g:]).sum()))
-                    limit = min(limit, max(0.0, (budget_s - (time.perf_counter() - t0)) / left_groups))
+                if budget_s is not None and weight[g] > 0:
+                    share = weight[g] / max(weight_left, weight[g])
+                    limit = min(limit, max(0.0, (budget_s - (time.perf_counter() - t0)) * share))
                 gs = fn(grp, time_limit_s=limit, **kwargs)
                 cache[key] = gs
             else:
@@ -79,6 +86,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                     opts = opts[::-1]
         plans.append((grp, opts))
         pos = grp.exit_xy(opts[0].order)
+        if weight is not None:
+            weight_left -= weight[g]
     choice = _chain(problem, plans)
     for g, (grp, opts) in enumerate(plans):
         gs = opts[choice[g]]
@@ -92,6 +101,23 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     after = _travel(problem, np.asarray(order_out, np.int64), reversed_, seam)
     return OrderingSolution(np.asarray(order_out, np.int64), reversed_, seam, tuple(sols),
                             problem.original_travel_mm(), after, time.perf_counter() - t0, formulation)
+
+
+def _budget_weights(problem: OrderingProblem) -> np.ndarray:
+    """Per group, its claim on a shared budget: its curve count if some solver will have to work
+    on it (not fixed, too large for the subset DP, geometry not seen in an earlier group), else 0."""
+    w = np.zeros(problem.n_groups)
+    seen = set()
+    for g in range(problem.n_groups):
+        curves = problem.group_curves(g)
+        if problem.group_fixed[g] or len(curves) <= DP_CURVES:
+            continue
+        key = np.rint(np.concatenate([problem.curve_start_xy[curves], problem.curve_end_xy[curves]])
+                      * 1e4).astype(np.int64).tobytes()
+        if key not in seen:
+            seen.add(key)
+            w[g] = len(curves)
+    return w
 
 
 def _travel(problem: OrderingProblem, order, reversed_, seam) -> float:

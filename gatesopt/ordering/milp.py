@@ -386,9 +386,9 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     if triv is not None:
         return GroupSolution.make(triv.order, triv.objective_mm, triv.bound_mm, triv.status,
                                   triv.solve_s, "milp")
-    if hint is None:
-        from .greedy import solve as greedy_solve
-        hint = greedy_solve(group)
+    if hint is None:                 # a quarter of the limit for the local search's incumbent
+        from .ils import warm_start
+        hint = warm_start(group, deadline=t0 + 0.25 * time_limit_s)
     best = np.asarray(getattr(hint, "order", hint), np.int64)
     best_obj = group.path_cost_mm(best)
     bound = lower_bound_mm(group)
