@@ -228,6 +228,14 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
                 i = k
                 while i < j_end:
                     best = None
+                    d, _ = tree.query(np.concatenate([s[i], e[i]]), k=1, p=np.inf,
+                                      distance_upper_bound=tol_mm)
+                    if np.isfinite(d):
+                        # the piece is an original move by itself: joining it to the next could
+                        # only coincide with some *other* move (A+B = C reversed, on a path that
+                        # doubles back on itself)
+                        i += 1
+                        continue
                     for j in range(j_end, i, -1):
                         d, _ = tree.query(np.concatenate([s[i], e[j]]), k=1, p=np.inf,
                                           distance_upper_bound=tol_mm)
