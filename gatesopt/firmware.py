@@ -215,6 +215,25 @@ def parse_motor_line(text: str) -> tuple[bool, tuple[str, ...]] | None:
     return None
 
 
+def parse_motor_lines(texts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``parse_motor_line`` of each text, as arrays: (a motor line, on, motors as a mask with
+    bit m for ``AXES[m]``)."""
+    parsed = [parse_motor_line(t) for t in texts]
+    ok = np.array([p is not None for p in parsed], bool)
+    on = np.array([p is not None and p[0] for p in parsed], bool)
+    mask = np.array([0 if p is None else sum(1 << AXES.index(m) for m in p[1]) for p in parsed], np.uint8)
+    return ok, on, mask
+
+
+def parse_motor_rows(program: Program, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``parse_motor_lines`` of the lines of steps ``rows``, each distinct text parsed once (a gated
+    file has millions of instruction lines and a handful of texts)."""
+    from ._text import distinct_lines
+    inverse, texts = distinct_lines(program, program.line[rows])
+    ok, on, mask = parse_motor_lines(texts)
+    return ok[inverse], on[inverse], mask[inverse]
+
+
 def motor_line_is_on(text: str) -> bool | None:
     """True for an enable line, False for a disable line, None if ``text`` is neither."""
     r = parse_motor_line(text)
@@ -238,18 +257,13 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     rows = np.flatnonzero(program.kind == Kind.MOTOR)
     motion = np.flatnonzero(np.isin(program.kind, MOTION_KINDS))
     last_motion = int(motion[-1]) if len(motion) else -1
-    for r in rows[rows < last_motion]:
-        parsed = parse_motor_line(program.line_text(int(program.line[r])))
-        if parsed is None:
-            continue
-        on, motors = parsed
-        if on:
-            s = fw.stall_on_s   # Klipper's ENABLE=1 dwells too, though we never write it
-        else:
-            s = fw.stall_off_s
-            if planner is not None and fw.name in ("marlin", "reprap"):
-                s = float(planner(program, int(r)))
-        out[r] = s
+    rows = rows[rows < last_motion]
+    ok, on, _ = parse_motor_rows(program, rows)
+    # Klipper's ENABLE=1 dwells too, though we never write it
+    out[rows[ok]] = np.where(on[ok], fw.stall_on_s, fw.stall_off_s)
+    if planner is not None and fw.name in ("marlin", "reprap"):
+        for r in rows[ok & ~on]:
+            out[r] = float(planner(program, int(r)))
     return out
 
 

@@ -25,6 +25,12 @@ read the two Programs (``gatesopt.parse`` of the original and of the output) and
    agree with what the solver claimed within ``claim_rel_tol``.
 
 Findings carry the 1-based line number in the output file (or the original, said so).
+
+A gated file of millions of lines is checked in bulk, with the same answers as a line-by-line
+reading: lines are compared as bytes in a compiled walk (``gatesopt._text``), each distinct text of
+a motor instruction is parsed once, a split move is joined back in one lookup when its whole run is
+a move of the original, and a layer whose segments are exactly the original's, none repeated, is
+matched without a k-d tree (``gatesopt._rowset``); everything else takes the general path.
 """
 from __future__ import annotations
 
@@ -33,7 +39,9 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
+from . import _rowset, _text
 from . import firmware as fwmod
 from .energy import load_profile, step_energy_j
 from .errors import GatesoptError
@@ -131,12 +139,17 @@ def _rotate(xy: np.ndarray, deg: float, center) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------
 # 1. geometry
 def _near(points: np.ndarray, q: np.ndarray, tol: float) -> np.ndarray:
-    """(len(q),) bool: a point of ``points`` lies within Chebyshev ``tol`` of each q."""
+    """(len(q),) bool: a point of ``points`` lies within Chebyshev ``tol`` of each q (exact
+    copies found by hashing, the rest by a k-d tree; the tree's bound is strict, so not with tol 0)."""
     from scipy.spatial import cKDTree
     if len(points) == 0 or len(q) == 0:
         return np.zeros(len(q), bool)
-    d, _ = cKDTree(points).query(q, k=1, p=np.inf, distance_upper_bound=tol)
-    return np.isfinite(d)
+    near = _rowset.member(points, q) if tol > 0 else np.zeros(len(q), bool)
+    rest = np.flatnonzero(~near)
+    if len(rest):
+        d, _ = cKDTree(points).query(q[rest], k=1, p=np.inf, distance_upper_bound=tol)
+        near[rest] = np.isfinite(d)
+    return near
 
 
 def _moves(program: Program) -> np.ndarray:
@@ -215,16 +228,18 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
         cand = same & (line_ok | arc_ok)
         if original_moves is not None and cand.any():
             from scipy.spatial import cKDTree
-            tree = cKDTree(original_moves)
-            m = len(cand)
-            k = 0
-            while k < m:
-                if not cand[k]:
-                    k += 1
-                    continue
-                j_end = k
-                while j_end < m and cand[j_end]:
-                    j_end += 1                  # rows k..j_end form a run
+            # runs of joinable pieces: rows k..j_end with cand[k:j_end] all true
+            edge = np.diff(np.concatenate(([0], cand.astype(np.int8), [0])))
+            run_k, run_end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+            # the common case, one split move: the whole run is a move of the original
+            whole = _near(original_moves, np.concatenate([s[run_k], e[run_end]], axis=1), tol_mm)
+            mark = np.zeros(len(join) + 1, np.int64)
+            np.add.at(mark, run_k[whole], 1)
+            np.add.at(mark, run_end[whole], -1)
+            join |= np.cumsum(mark[:-1]) > 0
+            if not whole.all():
+                tree = cKDTree(original_moves)
+            for k, j_end in zip(run_k[~whole].tolist(), run_end[~whole].tolist()):
                 i = k
                 while i < j_end:
                     best = None
@@ -247,7 +262,6 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
                         continue
                     join[i:best] = True
                     i = best + 1
-                k = j_end + 1
         else:
             join[:] = cand
         # a closed loop whose seam was moved inside a straight side (a re-ordering may start a
@@ -303,6 +317,28 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
     return lay[g_first], key, rows[g_first], e_sum
 
 
+@njit(cache=True)
+def _take_nearest_free(dist, idx, used):
+    """Each row i in order takes its nearest candidate idx[i] (sorted by dist, inf = none) that is
+    not ``used`` yet, and marks it used. Returns the rows that found none."""
+    miss = np.empty(dist.shape[0], np.int64)
+    n_miss = 0
+    for i in range(dist.shape[0]):
+        found = False
+        for c in range(dist.shape[1]):
+            if not np.isfinite(dist[i, c]):
+                break
+            j = idx[i, c]
+            if not used[j]:
+                used[j] = True
+                found = True
+                break
+        if not found:
+            miss[n_miss] = i
+            n_miss += 1
+    return miss[:n_miss]
+
+
 def _match(ka: np.ndarray, kb: np.ndarray, tol: float):
     """Greedy one-to-one matching of rows of ka to rows of kb within Chebyshev ``tol``.
     Returns (unmatched a indices, unmatched b indices)."""
@@ -324,17 +360,7 @@ def _match(ka: np.ndarray, kb: np.ndarray, tol: float):
     dist = np.take_along_axis(dist, o, axis=1)
     idx = np.take_along_axis(idx, o, axis=1)
     used = np.zeros(len(kb), bool)
-    miss_a = []
-    for i in range(len(ka)):
-        found = False
-        for d, j in zip(dist[i], idx[i]):
-            if not np.isfinite(d):
-                break
-            if not used[j]:
-                used[j] = found = True
-                break
-        if not found:
-            miss_a.append(i)
+    miss_a = _take_nearest_free(dist, idx, used).tolist()
     # second chance for a's whose 8 nearest were all taken (many identical segments)
     if miss_a:
         left_b = np.flatnonzero(~used)
@@ -364,21 +390,57 @@ def _match(ka: np.ndarray, kb: np.ndarray, tol: float):
     return np.array(miss_a, np.int64), np.flatnonzero(~used)
 
 
-def check_geometry(original: Program, output: Program, *, tol_mm: float = GEOMETRY_TOL_MM,
-                   max_findings: int = 10) -> list[Finding]:
+def _segment_pair(original: Program, output: Program, tol_mm: float = GEOMETRY_TOL_MM):
+    """``_segments`` of the original and of the output (its split moves joined back)."""
     deg, cx, cy = read_rotation(output)
-    la, ka, ra, ea = _segments(original, tol_mm=tol_mm)
-    lb, kb, rb, eb = _segments(output, deg, (cx, cy), tol_mm=tol_mm, vertices=_vertices(original),
-                               original_moves=_moves(original))
+    return (_segments(original, tol_mm=tol_mm),
+            _segments(output, deg, (cx, cy), tol_mm=tol_mm, vertices=_vertices(original),
+                      original_moves=_moves(original)))
+
+
+def _by_value(v: np.ndarray, values: np.ndarray) -> list[np.ndarray]:
+    """For each of ``values``: the indices where ``v`` equals it, ascending."""
+    o = np.argsort(v, kind="stable")
+    lo = np.searchsorted(v[o], values, "left")
+    hi = np.searchsorted(v[o], values, "right")
+    return [o[a:b] for a, b in zip(lo, hi)]
+
+
+def _self_matched_layers(la, ka, lb, kb, layers, tol) -> np.ndarray:
+    """Per layer of ``layers``: True where ``_match`` would pair every segment with itself, so
+    nothing is unmatched: both sides hold the same keys in the same order, and no two keys of the
+    layer coincide in either direction (then each segment's nearest candidate, at distance 0, is
+    its own copy and nobody else's). Gating output is this case unless a split changed a number."""
+    out = np.zeros(len(layers), bool)
+    if (tol <= 0 or la.shape != lb.shape or ka.shape != kb.shape or not np.array_equal(la, lb)
+            or not np.isfinite(ka).all() or not np.array_equal(ka, kb)):
+        return out
+    rev = ka.copy()
+    rev[:, 0:3], rev[:, 3:6] = ka[:, 3:6], ka[:, 0:3]
+    distinct_rev = ~(rev == ka).all(axis=1)            # a key that is its own reverse counts once
+    keys = np.concatenate([ka, rev[distinct_rev]])
+    lay = np.concatenate([la, la[distinct_rev]])
+    dup = _rowset.repeated(np.concatenate([lay[:, None].astype(float), keys], axis=1))
+    out[:] = True
+    out[np.isin(layers, lay[dup])] = False
+    return out
+
+
+def check_geometry(original: Program, output: Program, *, tol_mm: float = GEOMETRY_TOL_MM,
+                   max_findings: int = 10, segments=None) -> list[Finding]:
+    """``segments``: ``_segment_pair(original, output, tol_mm)`` if the caller has it already."""
+    (la, ka, ra, ea), (lb, kb, rb, eb) = segments or _segment_pair(original, output, tol_mm)
     out: list[Finding] = []
     if original.n_layers != output.n_layers:
         # the layer finder saw the two files differently (a z-change file whose XY moved): compare
         # the whole print at once -- a segment's key holds its Z, so nothing is lost but speed
         la = np.zeros_like(la)
         lb = np.zeros_like(lb)
-    for L in np.union1d(np.unique(la), np.unique(lb)):
-        ia = np.flatnonzero(la == L)
-        ib = np.flatnonzero(lb == L)
+    layers = np.union1d(np.unique(la), np.unique(lb))
+    same = _self_matched_layers(la, ka, lb, kb, layers, tol_mm)
+    for L, ia, ib, skip in zip(layers, _by_value(la, layers), _by_value(lb, layers), same):
+        if skip:
+            continue
         ma, mb = _match(ka[ia], kb[ib], tol_mm)
         # a move of a few micrometres that a rotated output's snaps shortened below the tolerance
         # (or lengthened above it) has no partner: below any printer's resolution, not reported
@@ -466,42 +528,60 @@ def check_commands(original: Program, output: Program, *, reordered: bool = Fals
         return out
     a = _non_motion_lines(original)
     b = _non_motion_lines(output)
+    inverse, texts = _text.distinct_lines(output, b)
+    inserted = np.array([fwmod.parse_motor_line(t) is not None or t.startswith(ROTATE_PREFIX)
+                         for t in texts], bool)[inverse]
+    buf_a, buf_b = np.frombuffer(original.data, np.uint8), np.frombuffer(output.data, np.uint8)
     i = j = 0
     while i < len(a) and len(out) < max_findings:
+        # equal lines and inserted motor instructions / rotation header, in bulk
+        i, j = _text.walk_kept(buf_a, original.line_start, a, buf_b, output.line_start, b, inserted, i, j)
+        if i >= len(a):
+            break
         if j >= len(b):
             out.append(Finding("commands", int(a[i]) + 1,
                                f"line missing from the output: {original.line_text(int(a[i])).strip()[:60]}", True))
             i += 1
             continue
+        # line b[j] is neither a[i] nor an insertion: deleted or changed: say which;
+        # resynchronise on the next equal line
         ta = original.line_text(int(a[i]))
         tb = output.line_text(int(b[j]))
-        if ta == tb:
-            i += 1
-            j += 1
-        elif fwmod.parse_motor_line(tb) is not None or tb.startswith(ROTATE_PREFIX):
-            j += 1                       # an inserted motor instruction / rotation header
+        nxt = next((jj for jj in range(j, min(j + 50, len(b))) if output.line_text(int(b[jj])) == ta), None)
+        if nxt is not None:
+            out.append(Finding("commands", int(b[j]) + 1, f"line added: {tb.strip()[:60]}"))
+            j = nxt
         else:
-            # deleted or changed: say which; resynchronise on the next equal line
-            nxt = next((jj for jj in range(j, min(j + 50, len(b)))
-                        if output.line_text(int(b[jj])) == ta), None)
-            if nxt is not None:
-                out.append(Finding("commands", int(b[j]) + 1, f"line added: {tb.strip()[:60]}"))
-                j = nxt
-            else:
-                out.append(Finding("commands", int(a[i]) + 1,
-                                   f"line missing or changed in the output: {ta.strip()[:60]}", True))
-                i += 1
+            out.append(Finding("commands", int(a[i]) + 1,
+                               f"line missing or changed in the output: {ta.strip()[:60]}", True))
+            i += 1
     if not out:
-        for jj in range(j, len(b)):
-            tb = output.line_text(int(b[jj]))
-            if fwmod.parse_motor_line(tb) is None and not tb.startswith(ROTATE_PREFIX):
-                out.append(Finding("commands", int(b[jj]) + 1, f"line added: {tb.strip()[:60]}"))
-                break
+        extra = j + np.flatnonzero(~inserted[j:])
+        if len(extra):
+            out.append(Finding("commands", int(b[extra[0]]) + 1,
+                               f"line added: {output.line_text(int(b[extra[0]])).strip()[:60]}"))
     return out
 
 
 # ------------------------------------------------------------------------------------------------
 # 4. timing
+def _own_motor_texts(original: Program | None) -> frozenset:
+    """The stripped texts of the original's motor lines: the file's own instructions."""
+    if original is None:
+        return frozenset()
+    rows = np.flatnonzero(original.kind == Kind.MOTOR)
+    return frozenset(t.strip() for t in _text.distinct_lines(original, original.line[rows])[1])
+
+
+def _motor_rows(program: Program, rows: np.ndarray, own_texts=frozenset()):
+    """Per step of ``rows``: (a motor line, on, motor mask with bit m = AXES[m], the file's own
+    line (its stripped text in ``own_texts``)); each distinct text is read once."""
+    inverse, texts = _text.distinct_lines(program, program.line[rows])
+    ok, on, mask = fwmod.parse_motor_lines(texts)
+    own = np.array([t.strip() in own_texts for t in texts], bool)
+    return ok[inverse], on[inverse], mask[inverse], own[inverse]
+
+
 def check_timing(output: Program, *, firmware="3dgates", start_ahead_s: float = 1.8e-3,
                  end_late_s: float = 1.0e-3, original: Program | None = None,
                  tol_s: float = TIME_TOL_S, max_findings: int = 10) -> list[Finding]:
@@ -511,62 +591,55 @@ def check_timing(output: Program, *, firmware="3dgates", start_ahead_s: float = 
     t_start = t_end - dur
     steps = np.asarray(output.steps_motor(), bool)
     motor_rows = np.flatnonzero(output.kind == Kind.MOTOR)
-    orig_motor_text = set()
-    if original is not None:
-        for r in np.flatnonzero(original.kind == Kind.MOTOR):
-            orig_motor_text.add(original.line_text(int(original.line[r])).strip())
+    parsed, is_on, mask, own = _motor_rows(output, motor_rows, _own_motor_texts(original))
     explicit_on = fw.reenable == "exact"
     out: list[Finding] = []
-    parsed = {}
-    for r in motor_rows:
-        text = output.line_text(int(output.line[r]))
-        pm = fwmod.parse_motor_line(text)
-        if pm is not None:
-            parsed[int(r)] = (pm[0], pm[1], text.strip() in orig_motor_text)
     for m, letter in enumerate(AXES):
-        ev = [(r, on, orig) for r, (on, ms, orig) in parsed.items() if letter in ms]
-        if not ev:
+        sel = parsed & (mask >> m & 1).astype(bool)
+        if not sel.any():
             continue
-        ev.sort()
-        ev_rows = np.array([e[0] for e in ev])
+        ev_rows, on, orig = motor_rows[sel], is_on[sel], own[sel]
         step_rows = np.flatnonzero(steps[:, m])
-        # state before each step row: the last instruction before it
-        k = np.searchsorted(ev_rows, step_rows, "right") - 1
-        for kk, sr in zip(k, step_rows):
-            if kk < 0:
-                continue
-            r, on, orig = ev[kk]
-            if not on and not orig and explicit_on:
+        if explicit_on:
+            # the first step whose last instruction before it is an inserted "off"
+            k = np.searchsorted(ev_rows, step_rows, "right") - 1
+            kk = np.maximum(k, 0)
+            held = np.flatnonzero((k >= 0) & ~on[kk] & ~orig[kk])
+            if len(held):
+                sr, r = step_rows[held[0]], ev_rows[k[held[0]]]
                 out.append(Finding("timing", int(output.line[sr]) + 1,
                                    f"motor {letter} steps while off (switched off at line {int(output.line[r]) + 1})"))
-                break
-        state = True
-        for r, on, orig in ev:
-            if orig:
-                state = on
-                continue
-            t = t_start[r]
-            if on and not state:
-                j = np.searchsorted(step_rows, r)
-                if j < len(step_rows):
-                    sr = step_rows[j]
-                    lead = t_start[sr] - t
-                    if lead < start_ahead_s - tol_s:
-                        out.append(Finding("timing", int(output.line[r]) + 1,
-                                           f"motor {letter} switched on only {lead * 1e3:.3f} ms before its step "
-                                           f"at line {int(output.line[sr]) + 1} (start-ahead {start_ahead_s * 1e3:g} ms)"))
-            if not on:
-                j = np.searchsorted(step_rows, r) - 1
-                if j >= 0:
-                    sr = step_rows[j]
-                    lag = t - t_end[sr]
-                    if lag < end_late_s - tol_s:
-                        out.append(Finding("timing", int(output.line[r]) + 1,
-                                           f"motor {letter} switched off {lag * 1e3:.3f} ms after its step at "
-                                           f"line {int(output.line[sr]) + 1} (end-late {end_late_s * 1e3:g} ms)"))
-            state = on
-            if len(out) >= max_findings:
-                break
+        if not len(step_rows):
+            continue
+        # each inserted instruction against the motor's steps around it; the state before an
+        # instruction is the previous instruction's (on before the first)
+        t = t_start[ev_rows]
+        was_on = np.concatenate(([True], on[:-1]))
+        j = np.searchsorted(step_rows, ev_rows)                 # first step at or after it
+        nxt = step_rows[np.minimum(j, len(step_rows) - 1)]
+        prv = step_rows[np.maximum(j - 1, 0)]
+        lead = t_start[nxt] - t
+        lag = t - t_end[prv]
+        late_on = ~orig & on & ~was_on & (j < len(step_rows)) & (lead < start_ahead_s - tol_s)
+        early_off = ~orig & ~on & (j >= 1) & (lag < end_late_s - tol_s)
+        hits = np.flatnonzero(late_on | early_off)
+        # at most max_findings in all; once reached, a motor still reports its first inserted
+        # instruction if that one fails
+        if len(out) >= max_findings:
+            first = np.flatnonzero(~orig)[:1]
+            hits = hits[:1] if len(first) and len(hits) and hits[0] == first[0] else hits[:0]
+        else:
+            hits = hits[:max_findings - len(out)]
+        for h in hits:
+            r = ev_rows[h]
+            if on[h]:
+                out.append(Finding("timing", int(output.line[r]) + 1,
+                                   f"motor {letter} switched on only {lead[h] * 1e3:.3f} ms before its step "
+                                   f"at line {int(output.line[nxt[h]]) + 1} (start-ahead {start_ahead_s * 1e3:g} ms)"))
+            else:
+                out.append(Finding("timing", int(output.line[r]) + 1,
+                                   f"motor {letter} switched off {lag[h] * 1e3:.3f} ms after its step at "
+                                   f"line {int(output.line[prv[h]]) + 1} (end-late {end_late_s * 1e3:g} ms)"))
     return out
 
 
@@ -580,23 +653,15 @@ def _file_enable(program: Program, original_motor_text=frozenset()) -> np.ndarra
     rows = np.flatnonzero(program.kind == Kind.MOTOR)
     if not len(rows):
         return en
-    ev = [[] for _ in AXES]
-    for r in rows:
-        text = program.line_text(int(program.line[r]))
-        pm = fwmod.parse_motor_line(text)
-        if pm is None:
-            continue
-        inserted_off = (not pm[0]) and text.strip() not in original_motor_text
-        for mtr in pm[1]:
-            ev[AXES.index(mtr)].append((int(r), inserted_off))
+    parsed, on, mask, own = _motor_rows(program, rows, original_motor_text)
+    inserted_off = ~on & ~own
     idx = np.arange(program.n_steps)
     for m in range(4):
-        if not ev[m]:
+        sel = parsed & (mask >> m & 1).astype(bool)
+        if not sel.any():
             continue
-        er = np.array([x[0] for x in ev[m]])
-        ins = np.array([x[1] for x in ev[m]])
-        k = np.searchsorted(er, idx, "right") - 1
-        held = (k >= 0) & ins[np.maximum(k, 0)]
+        k = np.searchsorted(rows[sel], idx, "right") - 1
+        held = (k >= 0) & inserted_off[sel][np.maximum(k, 0)]
         en[held, m] = True
     return en
 
@@ -617,11 +682,7 @@ def energy_of(program: Program, *, firmware="3dgates", profile="paper", duration
     en = np.asarray(program.enabled, bool).copy()
     motor = program.kind == Kind.MOTOR
     if motor.any():
-        own = frozenset()
-        if original is not None:
-            own = frozenset(original.line_text(int(original.line[r])).strip()
-                            for r in np.flatnonzero(original.kind == Kind.MOTOR))
-        en[motor] = _file_enable(program, own)[motor]
+        en[motor] = _file_enable(program, _own_motor_texts(original))[motor]
     e = step_energy_j(dur, coeffs, en)
     return float(e.sum()), float(dur.sum()), float(stall.sum())
 
@@ -639,13 +700,11 @@ def _claimed(claimed):
     return getattr(claimed, "energy_j", None), getattr(claimed, "time_after_s", getattr(claimed, "time_s", None))
 
 
-def _order_changed(original: Program, output: Program) -> bool:
+def _order_changed(original: Program, output: Program, segments=None) -> bool:
     """True if the output prints its extruded segments in another order (or direction) than the
-    original: then it is a re-ordering, else gating-only output (checked line by line)."""
-    deg, cx, cy = read_rotation(output)
-    _, ka, _, _ = _segments(original)
-    _, kb, _, _ = _segments(output, deg, (cx, cy), vertices=_vertices(original),
-                            original_moves=_moves(original))
+    original: then it is a re-ordering, else gating-only output (checked line by line).
+    ``segments``: ``_segment_pair(original, output)`` if the caller has it already."""
+    (_, ka, _, _), (_, kb, _, _) = segments or _segment_pair(original, output)
     if len(ka) != len(kb):
         return True
     return bool(np.any(np.abs(ka[:, :6] - kb[:, :6]) > 10 * GEOMETRY_TOL_MM))
@@ -679,14 +738,16 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     ``gatesopt.ordering.verify.check`` runs too if it exists.
     """
     fw = fwmod.get(firmware)
+    segments = _segment_pair(original, output, geometry_tol_mm)
     if reordered is None:
         # detect: a header says so, or the lines are not the original's plus insertions (then the
         # output can only be a re-ordering, and is checked as one)
-        reordered = _has_line(output, ORDER_PREFIX) or _order_changed(original, output)
+        reordered = _has_line(output, ORDER_PREFIX) or _order_changed(
+            original, output, segments if geometry_tol_mm == GEOMETRY_TOL_MM else None)
     findings: list[Finding] = []
     checks = []
     deg, cx, cy = read_rotation(output)
-    findings += check_geometry(original, output, tol_mm=geometry_tol_mm)
+    findings += check_geometry(original, output, tol_mm=geometry_tol_mm, segments=segments)
     checks.append("geometry")
     findings += check_extrusion(original, output)
     checks.append("extrusion")

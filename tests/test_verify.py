@@ -166,3 +166,87 @@ def test_verify_cli_detects_the_output_dialect(tmp_path, capsys):
         capsys.readouterr()
         assert main(["verify", str(src), str(out)]) == 0
         assert f"(firmware: {fw})" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------------------------------
+# The verifier's bulk paths (equal lines walked in a kernel, motor lines read once per distinct
+# text, a split move joined back in one query when the whole run is an original move) must still
+# reject what the line-by-line reading rejected.
+def test_distinct_lines_groups_exactly_equal_texts():
+    from gatesopt._text import distinct_lines
+    rng = np.random.default_rng(3)
+    words = ["S0 X", "S0 X ", "S0 Y", "S1 X", "s0 x", "M107", "S0 X\r", ";", ""]
+    text = "".join(str(rng.choice(words)) + "\n" for _ in range(2000))
+    p = gatesopt.parse("G1 X1\n" + text, require_moves=False)
+    lines = np.arange(1, p.n_lines)
+    inverse, texts = distinct_lines(p, lines)
+    assert len(texts) == len(set(texts))
+    assert [texts[k] for k in inverse] == [p.line_text(int(i)) for i in lines]
+
+
+@pytest.fixture(scope="module")
+def gated_stars():
+    from gatesopt.gating.pipeline import run
+    from gatesopt.gating.problem import GatingOptions
+    path = SHARED / "real_slic3r131_stars.gcode"
+    if not path.exists():
+        pytest.skip("../shared/instances absent")
+    p = gatesopt.parse(path)
+    res = run(p, GatingOptions.for_firmware("3dgates", rotate="none"), order=False)
+    assert res.report.ok and res.emitted.splits > 100 and p.line_ending == "\r\n"
+    return p, res.text
+
+
+def _mutated_checks(p, text):
+    rep = verify(p, gatesopt.parse(text, source="mutated"))
+    assert not rep.ok
+    return _checks(rep)
+
+
+def test_a_control_line_replaced_by_a_motor_line_is_caught(gated_stars):
+    p, text = gated_stars
+    assert "commands" in _mutated_checks(p, text.replace("M106 S255\r\n", "S0 X\r\n", 1))
+
+
+def test_a_line_changed_in_one_byte_is_caught(gated_stars):
+    p, text = gated_stars
+    assert "commands" in _mutated_checks(p, text.replace("M106 S224.4\r\n", "M106 S224.5\r\n", 1))
+
+
+def test_an_inserted_command_is_caught(gated_stars):
+    p, text = gated_stars
+    lines = text.splitlines(keepends=True)
+    k = next(i for i in range(len(lines) // 2, len(lines)) if lines[i].startswith("S1 "))
+    assert "commands" in _mutated_checks(p, "".join(lines[:k] + ["M104 S0\r\n"] + lines[k:]))
+
+
+def test_a_dropped_switch_on_in_a_real_output_is_caught(gated_stars):
+    p, text = gated_stars
+    lines = text.splitlines(keepends=True)
+    k = next(i for i in range(len(lines) // 2, len(lines)) if lines[i].startswith("S1 "))
+    assert "timing" in _mutated_checks(p, "".join(lines[:k] + lines[k + 1:]))
+
+
+def test_a_bent_split_move_is_caught(gated_stars):
+    # the first piece of a split move ends 0.05 mm off the move: the pieces are no longer one
+    # straight move, so they are not joined back, and neither matches the original
+    p, text = gated_stars
+    lines = text.splitlines(keepends=True)
+    k = next(i for i in range(len(lines) // 2, len(lines)) if lines[i].startswith("S0 ")
+             and lines[i - 1].startswith("G1 X") and lines[i + 1].startswith("G1 X"))
+    q = gatesopt.parse("".join(lines[:k]))
+    x, y = q.end_mm[-1, :2]
+    words = lines[k - 1].split()
+    lines[k - 1] = " ".join([words[0], f"X{x + 0.05:.3f}", f"Y{y + 0.05:.3f}"] + words[3:]) + "\r\n"
+    assert "geometry" in _mutated_checks(p, "".join(lines))
+
+
+def test_two_collinear_moves_rewritten_as_one_split_elsewhere_are_caught():
+    # original: two collinear moves meeting at X10; output: one move split at X7. The run of
+    # pieces (0 -> 20) is no move of the original, so nothing is joined and both sides differ
+    p = gatesopt.parse("G90\nM83\nG1 X0 Y0\nG1 X10 Y0 E1\nG1 X20 Y0 E1\nG1 X20 Y10 E1\n")
+    ok = gatesopt.parse("G90\nM83\nG1 X0 Y0\nG1 X5 Y0 E0.5\nS0 Y\nG1 X10 Y0 E0.5\nG1 X20 Y0 E1\nS1 Y\n"
+                        "G1 X20 Y10 E1\n")
+    assert "geometry" not in _checks(verify(p, ok, start_ahead_s=0, end_late_s=0))
+    bad = gatesopt.parse("G90\nM83\nG1 X0 Y0\nG1 X7 Y0 E0.7\nS0 Y\nG1 X20 Y0 E1.3\nS1 Y\nG1 X20 Y10 E1\n")
+    assert "geometry" in _checks(verify(p, bad, start_ahead_s=0, end_late_s=0))

@@ -26,6 +26,10 @@ What the text looks like:
   on the other axis, so the firmware does not step that motor; ``EmitResult.max_snap_mm`` is the
   largest such correction.
 
+Without rotation the text is written by a compiled pass over the lines (``_emit_kernel``); the
+per-line ``_Emitter`` below is the reference it must equal byte for byte, and still writes the
+rotated output and any split move the kernel leaves to it (arcs, unusual spelling).
+
 Files with line numbers and checksums (``N12 G1 ... *34``) are refused when anything must change:
 inserting lines would mean renumbering every following line, and hosts resend by number.
 """
@@ -170,6 +174,39 @@ class Placed:
     on: bool
     motors: tuple           # motor letters
     fraction: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class PlacedArrays:
+    """``Placed`` groups as arrays, one entry each: what the unrotated emitter works on."""
+
+    time_s: np.ndarray      # (k,) float
+    row: np.ndarray         # (k,) int64
+    on: np.ndarray          # (k,) bool
+    motor_mask: np.ndarray  # (k,) uint8: bit m = motor AXES[m]
+    split: np.ndarray       # (k,) bool: ``fraction`` is given (``Placed.fraction`` not None)
+    fraction: np.ndarray    # (k,) float
+
+    @classmethod
+    def from_placed(cls, placed) -> "PlacedArrays":
+        k = len(placed)
+        return cls(np.fromiter((pl.time_s for pl in placed), float, k),
+                   np.fromiter((pl.row for pl in placed), np.int64, k),
+                   np.fromiter((pl.on for pl in placed), bool, k),
+                   np.fromiter((sum(1 << AXES.index(m) for m in set(pl.motors)) for pl in placed), np.uint8, k),
+                   np.fromiter((pl.fraction is not None for pl in placed), bool, k),
+                   np.fromiter((0.0 if pl.fraction is None else pl.fraction for pl in placed), float, k))
+
+    def to_placed(self) -> list[Placed]:
+        return [Placed(float(t), int(r), bool(on), tuple(a for m, a in enumerate(AXES) if mask >> m & 1),
+                       float(f) if s else None)
+                for t, r, on, mask, s, f in zip(self.time_s, self.row, self.on, self.motor_mask.tolist(),
+                                                 self.split, self.fraction)]
+
+    def motors(self) -> list[str]:
+        """Every motor letter switched, in X Y Z E order."""
+        bits = int(np.bitwise_or.reduce(self.motor_mask)) if len(self.motor_mask) else 0
+        return [a for m, a in enumerate(AXES) if bits >> m & 1]
 
 
 class _Emitter:
@@ -442,15 +479,25 @@ def render(program: Program, placed, *, firmware="3dgates", rotate_deg: float = 
     default under rotation: rows whose rotated X or Y change is at most ``SNAP_MM``.
     """
     fw = fwmod.get(firmware)
-    placed = list(placed)
-    fw.check_motors(sorted({m for pl in placed for m in pl.motors}, key=AXES.index))
+    if isinstance(placed, PlacedArrays):
+        fw.check_motors(placed.motors())
+        n_placed = len(placed.time_s)
+    else:
+        placed = list(placed)
+        fw.check_motors(sorted({m for pl in placed for m in pl.motors}, key=AXES.index))
+        n_placed = len(placed)
     rotated = float(rotate_deg) % 360.0 != 0.0
-    if not placed and not rotated:
+    if not n_placed and not rotated:
         return EmitResult(program.to_gcode(), 0, 0, 0, 0, 0.0)
     if _LINE_NUMBER.search(program.data):
         raise EmitError(f"{program.source}: the file uses line numbers/checksums (N.. *..); inserting "
                         "lines would renumber every following line and break host resends: strip them first")
     n = program.n_steps
+    if not rotated and (n < 2 or bool((program.line[1:] > program.line[:-1]).all())):
+        arrays = placed if isinstance(placed, PlacedArrays) else PlacedArrays.from_placed(placed)
+        return _render_plain(program, fw, arrays, float(rotate_deg), center_mm)
+    if isinstance(placed, PlacedArrays):
+        placed = placed.to_placed()
     em = _Emitter(program, rotate_deg, center_mm, rotate_rows, snap)
     if rotated:
         lo, hi = em.lo, em.hi
@@ -561,6 +608,121 @@ def render(program: Program, placed, *, firmware="3dgates", rotate_deg: float = 
                       (float(center_mm[0]), float(center_mm[1])), tuple(notes))
 
 
+def _instruction_table(fw):
+    """The instruction lines of each (direction, motors) code ``16 * on + motor mask``, as texts
+    (a list per code) and as the kernel's table: (texts, code_ptr (33,), txt_id, txt_buf, txt_ptr,
+    bytes per code (32,) without line endings)."""
+    texts = [fw.on_lines(motors) if code >= 16 else fw.off_lines(motors)
+             for code in range(32) for motors in [tuple(a for m, a in enumerate(AXES) if code >> m & 1)]]
+    distinct = list(dict.fromkeys(t for lines in texts for t in lines))
+    blobs = [t.encode("utf-8", "surrogateescape") for t in distinct]
+    txt_ptr = np.concatenate([[0], np.cumsum([len(b) for b in blobs])]).astype(np.int64)
+    txt_id = np.array([distinct.index(t) for lines in texts for t in lines], np.int64)
+    code_ptr = np.concatenate([[0], np.cumsum([len(lines) for lines in texts])]).astype(np.int64)
+    cum = np.concatenate([[0], np.cumsum(np.diff(txt_ptr)[txt_id])]).astype(np.int64)
+    return (texts, code_ptr, txt_id, np.frombuffer(b"".join(blobs), np.uint8), txt_ptr,
+            cum[code_ptr[1:]] - cum[code_ptr[:-1]])
+
+
+def _render_plain(program: Program, fw, placed: PlacedArrays, rotate_deg: float, center_mm,
+                  split_in_kernel: bool = True) -> EmitResult:
+    """``render`` without rotation, over arrays: where each instruction goes is decided here with
+    numpy (the same rules as the per-line loop in ``render``), the text is written by
+    ``_emit_kernel.render_plain``; split moves it leaves are written by ``_Emitter.rewrite`` (all
+    of them with ``split_in_kernel=False``: the reference the tests compare the kernel with)."""
+    from . import _emit_kernel
+
+    n = program.n_steps
+    o = np.argsort(placed.time_s, kind="stable")         # time order; ties keep the given order
+    row, on, split, frac = placed.row[o], placed.on[o], placed.split[o], placed.fraction[o]
+    code = on.astype(np.int64) * 16 + placed.motor_mask[o]
+    texts, code_ptr, txt_id, txt_buf, txt_ptr, code_bytes = _instruction_table(fw)
+    code_lines = np.diff(code_ptr)
+    in_prog = row < n
+    r0 = np.minimum(row, n - 1)
+    line_r = program.line[r0]
+    strictly_inside = split & (frac > 0.0) & (frac < 1.0)
+    unsplittable = in_prog & strictly_inside & ~np.isin(program.kind[r0], SPLITTABLE)
+    live = ~unsplittable & (code_lines[code] > 0)
+    cut = live & in_prog & split & ~(frac <= 0.0) & ~(frac >= 1.0)
+    put = live & ~cut
+    slot = np.where(~in_prog, program.line[n - 1] + 1,
+                    np.where(~split | (frac <= 0.0), line_r, line_r + 1))
+    instr = int(code_lines[code[live]].sum())
+    # instruction lines before a line: (slot, rank, time order); rank 0 = an "off" moved out of the
+    # step ending right before (first), 1 = placed there, 2 = an "on" moved out of the step there
+    ins_slot, ins_rank, ins_code = [slot[put]], [np.ones(int(put.sum()), np.int64)], [code[put]]
+    moved = int(unsplittable.sum())
+    if moved:
+        # A dwell, heat-up wait or homing cannot be split. Per motor only the last instruction
+        # inside it matters: a final "on" goes before the step, a final "off" after it -- both on
+        # the safe side of start-ahead / end-late (the motor is on for the whole step).
+        idx = np.flatnonzero(unsplittable)
+        for r in dict.fromkeys(row[idx].tolist()):
+            last = {}
+            for k in idx[row[idx] == r]:
+                for m in range(4):
+                    if placed.motor_mask[o[k]] >> m & 1:
+                        last[m] = bool(on[k])
+            for is_on, at, rank in ((True, int(program.line[r]), 2), (False, int(program.line[r]) + 1, 0)):
+                mask = sum(1 << m for m, v in last.items() if v is is_on)
+                c = 16 * is_on + mask
+                if mask and code_lines[c]:
+                    instr += int(code_lines[c])
+                    ins_slot.append(np.array([at]))
+                    ins_rank.append(np.array([rank]))
+                    ins_code.append(np.array([c]))
+    ins_slot, ins_rank, ins_code = (np.concatenate(v).astype(np.int64) for v in (ins_slot, ins_rank, ins_code))
+    oi = np.lexsort((np.arange(len(ins_slot)), ins_rank, ins_slot))
+    ins_slot, ins_code = ins_slot[oi], ins_code[oi]
+    # cuts: by row, then fraction (stable: moments at one fraction keep their time order)
+    c_row, c_frac, c_code = row[cut], frac[cut], code[cut]
+    oc = np.argsort(c_frac, kind="stable")
+    oc = oc[np.argsort(c_row[oc], kind="stable")]
+    c_row, c_frac, c_code = c_row[oc], c_frac[oc], c_code[oc]
+    split_rows, cut_start = np.unique(c_row, return_index=True)
+    cut_ptr = np.append(cut_start, len(c_row)).astype(np.int64)
+    split_line = program.line[split_rows].astype(np.int64)
+    nl = program.line_ending.encode()
+    ls = program.line_start
+    line_len = ls[split_line + 1] - ls[split_line]
+    cap = (len(program.data) + int((code_bytes[ins_code] + len(nl) * code_lines[ins_code]).sum())
+           + int((code_bytes[c_code] + len(nl) * code_lines[c_code]).sum())
+           + int(((np.diff(cut_ptr) + 1) * (line_len + 100 + len(nl))).sum()))
+    out = np.empty(cap, np.uint8)
+    left_at = np.full(len(split_rows), -1, np.int64)
+    buf = np.frombuffer(program.data, np.uint8)
+    size, added = _emit_kernel.render_plain(
+        buf, ls, ins_slot, ins_code, split_rows.astype(np.int64), split_line, cut_ptr, c_frac, c_code,
+        code_ptr, txt_id, txt_buf, txt_ptr, np.frombuffer(nl, np.uint8), program.kind == Kind.ARC,
+        program.start_mm, program.end_mm, program.offset_mm, program.relative_xyz, program.relative_e,
+        program.inch, split_in_kernel, out, left_at)
+    added += int(code_lines[ins_code].sum())
+    pieces, at = [], 0
+    em = _Emitter(program, 0.0, (0.0, 0.0), None, None)
+    for k in np.flatnonzero(left_at >= 0):
+        # a split the kernel leaves (an arc, an unusual spelling, a rounding tie): the reference
+        r = int(split_rows[k])
+        cuts = []
+        for f, c in zip(c_frac[cut_ptr[k]:cut_ptr[k + 1]].tolist(), c_code[cut_ptr[k]:cut_ptr[k + 1]].tolist()):
+            if cuts and f - cuts[-1][0] <= 1e-12:      # several lines at one moment: one split
+                cuts[-1] = (cuts[-1][0], cuts[-1][1] + texts[c])
+            else:
+                cuts.append((f, list(texts[c])))
+        new = em.rewrite(r, cuts)
+        text = program.line_text(int(split_line[k]))
+        ending = text[len(text.rstrip("\r\n")):]
+        pieces += [out[at:left_at[k]], "".join(x + program.line_ending for x in new[:-1]).encode(
+            "utf-8", "surrogateescape") + (new[-1] + ending).encode("utf-8", "surrogateescape")]
+        at = int(left_at[k])
+        added += len(new) - 1
+    pieces.append(out[at:size])
+    data = b"".join(pieces) if len(pieces) > 1 else out[:size].tobytes()
+    notes = (f"{moved} instruction(s) moved out of a dwell/wait/homing step to its safe side",) if moved else ()
+    return EmitResult(data.decode("utf-8", "surrogateescape"), added, instr, len(split_rows), moved, 0.0,
+                      rotate_deg, (float(center_mm[0]), float(center_mm[1])), notes)
+
+
 def _default_snap(em: _Emitter, program: Program) -> np.ndarray:
     """(n, 2) bool: X/Y of line moves whose rotated change is at most ``SNAP_MM``."""
     n = program.n_steps
@@ -605,12 +767,22 @@ def solution_snap(solution) -> np.ndarray | None:
     return ~steps[:, :2] & xy0[:, None]
 
 
+def solution_arrays(solution) -> PlacedArrays:
+    """``solution_placed`` as arrays (no object per instruction line)."""
+    ins = solution.instructions()
+    return PlacedArrays(np.asarray(ins.time_s, float), np.asarray(ins.row, np.int64), np.asarray(ins.on, bool),
+                        np.asarray(ins.motor_mask, np.uint8), np.asarray(ins.split, bool),
+                        np.asarray(ins.fraction, float))
+
+
 def emit_result(program: Program, solution, firmware=None) -> EmitResult:
     """Emit with the full report (lines added, splits, snaps). ``firmware`` defaults to the one
     the solution's options name."""
     fw = firmware or getattr(solution.problem.options, "firmware", "3dgates")
     prob = solution.problem
-    return render(program, solution_placed(solution), firmware=fw, rotate_deg=solution.rotation_deg,
+    rotated = float(solution.rotation_deg) % 360.0 != 0.0
+    placed = solution_placed(solution) if rotated else solution_arrays(solution)
+    return render(program, placed, firmware=fw, rotate_deg=solution.rotation_deg,
                   center_mm=tuple(float(v) for v in solution.center_xy),
                   rotate_rows=(prob.rotate_lo, prob.rotate_hi), snap=solution_snap(solution))
 

@@ -1,0 +1,345 @@
+"""The compiled core of gating emission without rotation: one pass over the lines of a file.
+
+``emit.render`` decides *what* goes where (instruction lines before a line, moves split at a
+fraction of their time) with numpy; this kernel writes the bytes. Lines that are not rewritten are
+copied as they are; instruction lines are copied from a small table of texts; a split move is
+written here when its line is in the plain form slicers write (``G1 X.. Y.. E.. F..``: upper-case
+letters, one space between words, ASCII) and every number it needs can be rounded here exactly as
+Python's ``format`` rounds. Any other split move (arcs, unusual spelling, a number within a few
+ulps of a rounding tie) is left to ``emit._Emitter.rewrite``, the reference implementation: the
+kernel records where its text goes and the caller splices it in. The two must write the same bytes
+(tests/test_gating_emit.py compares them line by line).
+
+Number texts follow ``emit._fmt`` and ``emit._dec_text``: rounded to a fixed number of decimals,
+trailing zeros and a trailing '.' dropped, "-0" written "0". Relative values (G91, M83) are summed
+as integers in units of the last decimal, which is what the reference's ``Decimal`` arithmetic is.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+POW10 = 10.0 ** np.arange(19)
+IPOW10 = 10 ** np.arange(19, dtype=np.int64)
+_TIE_REL = 4.5e-16      # 4 x the relative error of one rounded product: x * 10**d is within it
+_MAX_SCALED = 1.0e15    # |x| * 10**d below 2**50: its integer and fractional parts are exact
+_MERGE_FRACTION = 1e-12  # cuts this close to a group's first cut share one split (as emit.render)
+
+# decimals of split points per axis X Y Z E (emit.DECIMALS_SPLIT_MM; inches: two more)
+DECIMALS_SPLIT = np.array([5, 5, 5, 6], np.int64)
+
+_SP, _DOT, _MINUS, _PLUS, _SEMI = 32, 46, 45, 43, 59
+_AXIS_OF_LETTER = np.full(26, -1, np.int64)
+_AXIS_OF_LETTER[ord("X") - 65] = 0
+_AXIS_OF_LETTER[ord("Y") - 65] = 1
+_AXIS_OF_LETTER[ord("Z") - 65] = 2
+_AXIS_OF_LETTER[ord("E") - 65] = 3
+_LETTER_OF_AXIS = np.array([ord("X"), ord("Y"), ord("Z"), ord("E")], np.uint8)
+
+
+@njit(cache=True)
+def _round_scaled(x, d):
+    """(round(x * 10**d), ok): rounded as ``f"{x:.{d}f}"`` rounds x's exact binary value. ``ok`` is
+    False out of range (NaN included) or within a few ulps of a tie, where the product computed in
+    floating point cannot tell which way the exact value rounds."""
+    y = abs(x) * POW10[d]
+    if not (y < _MAX_SCALED):
+        return 0, False
+    n0 = math.floor(y)
+    frac = y - n0
+    if abs(frac - 0.5) <= _TIE_REL * y:
+        return 0, False
+    n = np.int64(n0) + (1 if frac > 0.5 else 0)
+    return (-n if x < 0 else n), True
+
+
+@njit(cache=True)
+def _put_scaled(out, p, v, d):
+    """Write the integer v in units of 10**-d as the shortest decimal text (no trailing zeros, no
+    '-0'); return the position after it."""
+    if v == 0:
+        out[p] = 48
+        return p + 1
+    if v < 0:
+        out[p] = _MINUS
+        p += 1
+        v = -v
+    ip = v // IPOW10[d]
+    fp = v % IPOW10[d]
+    nd = 1
+    while nd < 19 and ip >= IPOW10[nd]:
+        nd += 1
+    for k in range(nd - 1, -1, -1):
+        out[p + k] = 48 + ip % 10
+        ip //= 10
+    p += nd
+    if fp != 0:
+        while fp % 10 == 0:
+            fp //= 10
+            d -= 1
+        out[p] = _DOT
+        p += 1
+        for k in range(d - 1, -1, -1):
+            out[p + k] = 48 + fp % 10
+            fp //= 10
+        p += d
+    return p
+
+
+@njit(cache=True)
+def _value_end(buf, j, end):
+    """End of a number ``[-+]?(digits[.digits] | .digits)`` starting at j (the reference's word
+    regex), or -1 if there is none."""
+    if j < end and (buf[j] == _MINUS or buf[j] == _PLUS):
+        j += 1
+    nd = 0
+    while j < end and 48 <= buf[j] <= 57:
+        j += 1
+        nd += 1
+    if j < end and buf[j] == _DOT:
+        j += 1
+        while j < end and 48 <= buf[j] <= 57:
+            j += 1
+            nd += 1
+    return j if nd > 0 else -1
+
+
+@njit(cache=True)
+def _scan_decimal(buf, a, b):
+    """The number text buf[a:b] as (mantissa, decimals), exact; (0, -1) beyond 17 digits."""
+    neg = buf[a] == _MINUS
+    if buf[a] == _MINUS or buf[a] == _PLUS:
+        a += 1
+    mant = np.int64(0)
+    nd = 0
+    dec = 0
+    seen_dot = False
+    for j in range(a, b):
+        c = buf[j]
+        if c == _DOT:
+            seen_dot = True
+            continue
+        if nd == 0 and c == 48:
+            if seen_dot:
+                dec += 1
+            continue        # leading zeros carry no digit
+        mant = mant * 10 + (c - 48)
+        nd += 1
+        if seen_dot:
+            dec += 1
+        if nd > 17:
+            return np.int64(0), -1
+    return (-mant if neg else mant), dec
+
+
+@njit(cache=True)
+def _n_digits(v):
+    v = abs(v)
+    nd = 1
+    while nd < 19 and v >= IPOW10[nd]:
+        nd += 1
+    return nd
+
+
+@njit(cache=True)
+def _put_bytes(out, p, src, a, b):
+    for k in range(b - a):
+        out[p + k] = src[a + k]
+    return p + (b - a)
+
+
+@njit(cache=True)
+def _put_code(out, p, code, code_ptr, txt_id, txt_buf, txt_ptr, nl):
+    """The instruction lines of ``code``, each with the file's line ending."""
+    for t in range(code_ptr[code], code_ptr[code + 1]):
+        k = txt_id[t]
+        p = _put_bytes(out, p, txt_buf, txt_ptr[k], txt_ptr[k + 1])
+        p = _put_bytes(out, p, nl, 0, nl.shape[0])
+    return p
+
+
+@njit(cache=True)
+def _split_row(out, p, buf, a, b, r, e0, e1, cut_frac, cut_code, code_ptr, txt_id, txt_buf, txt_ptr, nl,
+               start_mm, end_mm, offset_mm, rel_xyz, rel_e, inch, tok_a, tok_b, tok_axis):
+    """Write line buf[a:b] (step r) split at the cuts e0..e1 (sorted by fraction) with their lines
+    between the pieces, as ``emit._Emitter.rewrite`` does without rotation. Returns (position
+    after it, lines added), or (-1, 0) when the line is left to the reference implementation."""
+    # body: the line without its ending; code: up to the first ';', right-stripped
+    body = b
+    while body > a and (buf[body - 1] == 10 or buf[body - 1] == 13):
+        body -= 1
+    code = a
+    while code < body and buf[code] != _SEMI:
+        code += 1
+    while code > a and (buf[code - 1] == _SP or buf[code - 1] == 9):
+        code -= 1
+    # plain form only: "G<digits>[.<digits>]" then " <LETTER><number>" words, each letter once
+    if code - a < 2 or buf[a] != 71:
+        return -1, 0
+    j = _value_end(buf, a + 1, code)
+    if j < 0 or buf[a + 1] == _MINUS or buf[a + 1] == _PLUS or buf[a + 1] == _DOT or buf[j - 1] == _DOT:
+        return -1, 0
+    n_tok = 0
+    seen = 0
+    axis_tok = np.full(4, -1, np.int64)
+    while j < code:
+        if buf[j] != _SP or j + 1 >= code:
+            return -1, 0
+        L = buf[j + 1]
+        if not (65 <= L <= 90) or (seen >> (L - 65)) & 1:
+            return -1, 0
+        seen |= 1 << (L - 65)
+        v = _value_end(buf, j + 2, code)
+        if v < 0 or (v < code and buf[v] != _SP):
+            return -1, 0
+        tok_a[n_tok] = j + 1
+        tok_b[n_tok] = v
+        ax = _AXIS_OF_LETTER[L - 65]
+        tok_axis[n_tok] = ax
+        if ax >= 0:
+            axis_tok[ax] = n_tok
+        n_tok += 1
+        j = v
+    g_end = _value_end(buf, a + 1, code)      # the G word as written
+    scale = 25.4 if inch[r] else 1.0
+    extra = 2 if inch[r] else 0
+    sums = np.zeros(4, np.int64)
+    vals = np.zeros(4, np.int64)        # this piece's numbers, in units of 10**-digits
+    digits = np.zeros(4, np.int64)
+    added = 0
+    e = e0
+    k = 0
+    while True:
+        last = e >= e1
+        f = 1.0 if last else cut_frac[e]
+        g_last = e
+        if not last:
+            while g_last + 1 < e1 and cut_frac[g_last + 1] - f <= _MERGE_FRACTION:
+                g_last += 1
+        # the numbers of this piece
+        for ax in range(4):
+            t = axis_tok[ax]
+            if t < 0:
+                continue
+            rel = rel_e[r] if ax == 3 else rel_xyz[r]
+            d = DECIMALS_SPLIT[ax] + extra
+            if last and not rel:
+                continue                          # the original text
+            if last:
+                # the original text minus the pieces written, exactly (Decimal in the reference)
+                mant, dec = _scan_decimal(buf, tok_a[t] + 1, tok_b[t])
+                if dec < 0:
+                    return -1, 0
+                D = max(dec, d)
+                if _n_digits(mant) + D - dec > 17 or _n_digits(sums[ax]) + D - d > 17:
+                    return -1, 0
+                vals[ax] = mant * IPOW10[D - dec] - sums[ax] * IPOW10[D - d]
+                digits[ax] = D
+                continue
+            a0 = start_mm[r, ax]
+            q = a0 + f * (end_mm[r, ax] - a0)
+            if rel:
+                x = (q - a0) / scale - sums[ax] / POW10[d]
+            else:
+                x = (q - offset_mm[r, ax]) / scale
+            n, ok = _round_scaled(x, d)
+            if not ok:
+                return -1, 0
+            vals[ax] = n
+            digits[ax] = d
+            if rel:
+                sums[ax] += n
+        # the text of this piece
+        p = _put_bytes(out, p, buf, a, g_end)
+        if k == 0:
+            for t in range(n_tok):
+                out[p] = _SP
+                out[p + 1] = buf[tok_a[t]]
+                p += 2
+                ax = tok_axis[t]
+                if ax >= 0:
+                    p = _put_scaled(out, p, vals[ax], digits[ax])
+                else:
+                    p = _put_bytes(out, p, buf, tok_a[t] + 1, tok_b[t])
+            p = _put_bytes(out, p, buf, code, body)           # the comment, as written
+        else:
+            for ax in range(4):
+                t = axis_tok[ax]
+                if t < 0:
+                    continue
+                out[p] = _SP
+                out[p + 1] = _LETTER_OF_AXIS[ax]
+                p += 2
+                rel = rel_e[r] if ax == 3 else rel_xyz[r]
+                if last and not rel:
+                    p = _put_bytes(out, p, buf, tok_a[t] + 1, tok_b[t])
+                else:
+                    p = _put_scaled(out, p, vals[ax], digits[ax])
+        if last:
+            p = _put_bytes(out, p, buf, body, b)              # the line's own ending
+            return p, added
+        p = _put_bytes(out, p, nl, 0, nl.shape[0])
+        added += 1
+        for c in range(e, g_last + 1):
+            for t in range(code_ptr[cut_code[c]], code_ptr[cut_code[c] + 1]):
+                kk = txt_id[t]
+                p = _put_bytes(out, p, txt_buf, txt_ptr[kk], txt_ptr[kk + 1])
+                p = _put_bytes(out, p, nl, 0, nl.shape[0])
+                added += 1
+        e = g_last + 1
+        k += 1
+
+
+@njit(cache=True)
+def render_plain(buf, line_start, ins_slot, ins_code, split_rows, split_line, cut_ptr, cut_frac, cut_code,
+                 code_ptr, txt_id, txt_buf, txt_ptr, nl, kind_arc, start_mm, end_mm, offset_mm, rel_xyz,
+                 rel_e, inch, split_here, out, left_at):
+    """Write the output into ``out``: before line i the instruction lines of the ``ins_code``
+    entries with ``ins_slot == i`` (sorted by slot), then line i -- copied, or, for line
+    ``split_line[k]`` (sorted), step ``split_rows[k]`` split at its cuts
+    ``cut_ptr[k]:cut_ptr[k+1]``. A split move the kernel leaves to the reference gets
+    ``left_at[k]`` = where its text belongs (else -1); ``split_here`` False leaves them all (the
+    tests compare the two). Returns (bytes written, lines added by the splits written here)."""
+    n_lines = line_start.shape[0] - 1
+    n_ins = ins_slot.shape[0]
+    n_split = split_rows.shape[0]
+    tok_a = np.empty(64, np.int64)
+    tok_b = np.empty(64, np.int64)
+    tok_axis = np.empty(64, np.int64)
+    p = 0
+    ki = 0
+    ks = 0
+    added = 0
+    li = 0
+    while True:
+        while ki < n_ins and ins_slot[ki] == li:
+            p = _put_code(out, p, ins_code[ki], code_ptr, txt_id, txt_buf, txt_ptr, nl)
+            ki += 1
+        if li >= n_lines:
+            break
+        sl = split_line[ks] if ks < n_split else n_lines
+        if sl == li:
+            r = split_rows[ks]
+            q = -1
+            if split_here and not kind_arc[r]:
+                q, n_add = _split_row(out, p, buf, line_start[li], line_start[li + 1], r, cut_ptr[ks],
+                                      cut_ptr[ks + 1], cut_frac, cut_code, code_ptr, txt_id, txt_buf,
+                                      txt_ptr, nl, start_mm, end_mm, offset_mm, rel_xyz, rel_e, inch,
+                                      tok_a, tok_b, tok_axis)
+            if q < 0:
+                left_at[ks] = p
+            else:
+                left_at[ks] = -1
+                p = q
+                added += n_add
+            ks += 1
+            li += 1
+            continue
+        nxt = sl
+        if ki < n_ins and ins_slot[ki] < nxt:
+            nxt = ins_slot[ki]
+        p = _put_bytes(out, p, buf, line_start[li], line_start[nxt])
+        li = nxt
+    return p, added
