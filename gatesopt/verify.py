@@ -233,6 +233,8 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
             run_k, run_end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
             # the common case, one split move: the whole run is a move of the original
             whole = _near(original_moves, np.concatenate([s[run_k], e[run_end]], axis=1), tol_mm)
+            # ... unless its first piece is an original move by itself (see the loop below)
+            whole &= ~_near(original_moves, np.concatenate([s[run_k], e[run_k]], axis=1), tol_mm)
             mark = np.zeros(len(join) + 1, np.int64)
             np.add.at(mark, run_k[whole], 1)
             np.add.at(mark, run_end[whole], -1)
