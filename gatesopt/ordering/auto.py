@@ -24,8 +24,6 @@ from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 EXACT_MAX_CANDS = 160
 #: below this per-group limit (a spent budget) the exact step is not even built
 MIN_EXACT_S = 0.05
-#: share of the group's time limit the iterated local search may use before the exact step
-ILS_SHARE = 0.25
 #: stop after the MILP's LP cutting-plane rounds if they leave more than this gap
 GIVE_UP_GAP = None   # measured: with 0.15, free-mode Cura groups lost most proofs the branch loop finds
 
@@ -44,7 +42,7 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
     # escape the local optimum before anything else: a better incumbent is what lets the exact
     # step (or the bound) prove it, and what a fallback group keeps
     exact_next = group.n_cands <= exact_max_cands and time_limit_s >= MIN_EXACT_S
-    share = ILS_SHARE if exact_next else 1.0
+    share = ils.WARM_START_SHARE if exact_next else 1.0
     order = ils.improve_ils(group, heur.order, deadline=t0 + share * time_limit_s)
     obj = group.path_cost_mm(order)
     if obj < heur.objective_mm - 1e-9:

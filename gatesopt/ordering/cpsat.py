@@ -15,6 +15,7 @@ import numpy as np
 from ortools.sat.python import cp_model
 
 from .bounds import lower_bound_mm
+from .ils import warm_start
 from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
 #: integer cost scale: 1 unit = 0.1 µm of travel (rounding error <= n * 0.05 µm per path)
@@ -46,9 +47,7 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None, num_workers: i
     if triv is not None:
         return GroupSolution.make(triv.order, triv.objective_mm, triv.bound_mm, triv.status,
                                   triv.solve_s, "cpsat")
-    if hint is None:                 # a quarter of the limit for the local search's incumbent
-        from .ils import warm_start
-        hint = warm_start(group, deadline=t0 + 0.25 * time_limit_s)
+    hint = warm_start(group, hint, t0, time_limit_s)
     return _solve_circuit(group, t0, time_limit_s, hint, num_workers, seed, closed=False)
 
 
@@ -153,20 +152,17 @@ def _solve_circuit(group: Group, t0, time_limit_s, hint, num_workers, seed, clos
         order = np.asarray(order, np.int64)
         # integer rounding: each of the n links is off by at most 0.5 unit
         bound = max(solver.BestObjectiveBound() / SCALE - (n + 1) * 0.5 / SCALE, lower_bound_mm(group))
-    else:  # no solution within the limit: keep the hint (or nothing) and the cheap bound
-        if hint is None:
-            from .greedy import solve as greedy_solve
-            hint = greedy_solve(group)
+    else:  # no solution within the limit: keep the hint (solve always passes one), cheap bound
         order = np.asarray(getattr(hint, "order", hint), np.int64)
         bound = lower_bound_mm(group)
         status = "fallback"
     group.check_order(order)
     obj = group.path_cost_mm(order)
-    if hint is not None:             # integer costs: the model's optimum may be a hair longer
-        h_order = np.asarray(getattr(hint, "order", hint), np.int64)
-        h_obj = group.path_cost_mm(h_order)
-        if h_obj < obj - 1e-9:
-            order, obj = h_order, h_obj
+    # integer costs: the model's optimum may be a hair longer than the hint in float travel
+    h_order = np.asarray(getattr(hint, "order", hint), np.int64)
+    h_obj = group.path_cost_mm(h_order)
+    if h_obj < obj - 1e-9:
+        order, obj = h_order, h_obj
     if status == "optimal" or obj - bound <= OPTIMAL_ABS_TOL_MM:
         status = "optimal"
     return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "cpsat")

@@ -23,7 +23,7 @@ import time
 import numba
 import numpy as np
 
-from .greedy import _EPS, _orient_dp, _path_cost, clusters, improve
+from .greedy import _EPS, _orient_dp, _path_cost, clusters, improve, nearest_neighbour
 from .problem import Group
 
 #: kicks per curve in the group, and the cap. Measured on the 12 hardest groups of
@@ -35,6 +35,8 @@ MAX_KICKS = 3000
 MAX_SEGMENT = 30
 #: largest group (candidates) the link matrix is built for (m^2 doubles: 2000 -> 32 MB)
 MAX_CANDS = 2000
+#: share of an exact formulation's time limit its warm start (this search) may use
+WARM_START_SHARE = 0.25
 #: neighbour-list length: a move must create a link to one of the K nearest candidates
 NEIGHBOURS = 10
 
@@ -317,7 +319,9 @@ def improve_ils(group: Group, order, *, kicks: int | None = None, seed: int = 0,
                 int(kicks), MAX_SEGMENT, int(seed), deadline_ns)
 
 
-def warm_start(group: Group, deadline: float | None = None) -> np.ndarray:
-    """The exact formulations' default incumbent: nearest neighbour, then ``improve_ils``."""
-    from .greedy import nearest_neighbour
-    return improve_ils(group, nearest_neighbour(group), deadline=deadline)
+def warm_start(group: Group, hint, t0: float, time_limit_s: float):
+    """The exact formulations' incumbent: ``hint`` if given, else nearest neighbour then
+    ``improve_ils`` within WARM_START_SHARE of the limit that started at ``t0``."""
+    if hint is not None:
+        return hint
+    return improve_ils(group, nearest_neighbour(group), deadline=t0 + WARM_START_SHARE * time_limit_s)

@@ -5,8 +5,8 @@ Assignment-style model over {depot} + candidates with in/out degree equal to the
 solve–separate–re-solve loop (HiGHS has no lazy-constraint callback): every cycle that misses the
 depot, over curves K, gets the cut "the path leaves S", S = every candidate of the curves in K.
 Each MILP of the loop is a relaxation of the ordering problem, so its dual bound is a valid lower
-bound even when the loop stops at the time limit. The greedy path (hint) is passed to HiGHS as
-the incumbent of every solve; it satisfies every cut.
+bound even when the loop stops at the time limit. The warm start (the hint, or ``ils.warm_start``)
+is passed to HiGHS as the incumbent of every solve; it satisfies every cut.
 """
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ import numpy as np
 from .._native import native_stdout_to_stderr
 
 from .bounds import lower_bound_mm
+from .ils import warm_start
 from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
 _OPT = highspy.HighsModelStatus.kOptimal
@@ -386,9 +387,7 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     if triv is not None:
         return GroupSolution.make(triv.order, triv.objective_mm, triv.bound_mm, triv.status,
                                   triv.solve_s, "milp")
-    if hint is None:                 # a quarter of the limit for the local search's incumbent
-        from .ils import warm_start
-        hint = warm_start(group, deadline=t0 + 0.25 * time_limit_s)
+    hint = warm_start(group, hint, t0, time_limit_s)
     best = np.asarray(getattr(hint, "order", hint), np.int64)
     best_obj = group.path_cost_mm(best)
     bound = lower_bound_mm(group)
