@@ -231,10 +231,16 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
             # runs of joinable pieces: rows k..j_end with cand[k:j_end] all true
             edge = np.diff(np.concatenate(([0], cand.astype(np.int8), [0])))
             run_k, run_end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+            # a piece that is an original move by itself is never the start of a join: joining it
+            # to the next could only coincide with some *other* move (A+B = C reversed, on a path
+            # that doubles back on itself)
+            in_runs = np.flatnonzero(cand | np.concatenate(([False], cand[:-1])))
+            piece_is_move = np.zeros(len(rows), bool)
+            piece_is_move[in_runs] = _near(
+                original_moves, np.concatenate([s[in_runs], e[in_runs]], axis=1), tol_mm)
             # the common case, one split move: the whole run is a move of the original
             whole = _near(original_moves, np.concatenate([s[run_k], e[run_end]], axis=1), tol_mm)
-            # ... unless its first piece is an original move by itself (see the loop below)
-            whole &= ~_near(original_moves, np.concatenate([s[run_k], e[run_k]], axis=1), tol_mm)
+            whole &= ~piece_is_move[run_k]
             mark = np.zeros(len(join) + 1, np.int64)
             np.add.at(mark, run_k[whole], 1)
             np.add.at(mark, run_end[whole], -1)
@@ -245,12 +251,7 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
                 i = k
                 while i < j_end:
                     best = None
-                    d, _ = tree.query(np.concatenate([s[i], e[i]]), k=1, p=np.inf,
-                                      distance_upper_bound=tol_mm)
-                    if np.isfinite(d):
-                        # the piece is an original move by itself: joining it to the next could
-                        # only coincide with some *other* move (A+B = C reversed, on a path that
-                        # doubles back on itself)
+                    if piece_is_move[i]:
                         i += 1
                         continue
                     for j in range(j_end, i, -1):

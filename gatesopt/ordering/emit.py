@@ -77,6 +77,11 @@ COMB_TRIM_MM = 0.3
 _WALL_FEATURE = re.compile(r"wall|perimeter|shell|skirt|brim", re.I)
 
 
+def _cross_z(o, v, w):
+    """z of (v - o) x (w - o): which side of the line o -> v the point w lies on."""
+    return (v[..., 0] - o[..., 0]) * (w[..., 1] - o[..., 1]) - (v[..., 1] - o[..., 1]) * (w[..., 0] - o[..., 0])
+
+
 class WallCrossing:
     """Does a straight travel cross a wall of its layer? (A combing slicer's reason to retract.)
 
@@ -118,11 +123,8 @@ class WallCrossing:
         lo, hi = np.minimum(p, q), np.maximum(p, q)
         near = ((np.maximum(a, b) >= lo) & (np.minimum(a, b) <= hi)).all(axis=1)
         a, b = a[near], b[near]
-
-        def cross(o, v, w):     # z of (v - o) x (w - o)
-            return (v[..., 0] - o[..., 0]) * (w[..., 1] - o[..., 1]) - (v[..., 1] - o[..., 1]) * (w[..., 0] - o[..., 0])
-        o1, o2 = cross(p, q, a), cross(p, q, b)
-        o3, o4 = cross(a, b, p), cross(a, b, q)
+        o1, o2 = _cross_z(p, q, a), _cross_z(p, q, b)
+        o3, o4 = _cross_z(a, b, p), _cross_z(a, b, q)
         return bool(np.any((o1 * o2 <= 0) & (o3 * o4 <= 0) & ((o1 != 0) | (o2 != 0))))
 
 
