@@ -53,6 +53,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     # earlier group's geometry costs next to nothing; the others in proportion to their curves
     weight = _budget_weights(problem) if budget_s is not None else None
     weight_left = float(weight.sum()) if weight is not None else 0.0
+    over_s, n_timed = 0.0, 0
+    n_left = sum(1 for g in range(problem.n_groups) if not problem.group_fixed[g])
     for g in range(problem.n_groups):
         end = None
         if g + 1 < problem.n_groups and problem.group_fixed[g + 1]:
@@ -67,10 +69,17 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             gs = cache.get(key)
             if gs is None:
                 limit = time_limit_s
-                if budget_s is not None and weight[g] > 0:
-                    share = weight[g] / max(weight_left, weight[g])
-                    limit = min(limit, max(0.0, (budget_s - (time.perf_counter() - t0)) * share))
+                if budget_s is not None:
+                    # what each group took beyond its limit so far (greedy passes, bounds, model
+                    # building) is reserved for the groups still to come
+                    reserve = over_s / max(n_timed, 1) * n_left
+                    left = max(0.0, budget_s - (time.perf_counter() - t0) - reserve)
+                    share = weight[g] / max(weight_left, weight[g]) if weight[g] > 0 else 1.0
+                    limit = min(limit, left * share)
+                t_g = time.perf_counter()
                 gs = fn(grp, time_limit_s=limit, **kwargs)
+                over_s += max(0.0, time.perf_counter() - t_g - limit)
+                n_timed += 1
                 cache[key] = gs
             else:
                 gs = GroupSolution.make(gs.order, gs.objective_mm, gs.bound_mm, gs.status, 0.0,
@@ -85,6 +94,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                 if ident_obj < gs.objective_mm - 1e-9:      # never worse than the slicer's order
                     opts = opts[::-1]
         plans.append((grp, opts))
+        n_left -= not problem.group_fixed[g]
         pos = grp.exit_xy(opts[0].order)
         if weight is not None:
             weight_left -= weight[g]

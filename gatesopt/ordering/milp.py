@@ -19,6 +19,7 @@ from .._native import native_stdout_to_stderr
 
 from .bounds import lower_bound_mm
 from .ils import warm_start
+from . import symmetric
 from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
 _OPT = highspy.HighsModelStatus.kOptimal
@@ -147,202 +148,6 @@ class _Model:
         return (1.0, highspy.kHighsInf, cols, np.ones(len(cols)))
 
 
-class _SymModel:
-    """Undirected model when every curve is an open curve with its two directions or a loop with
-    one seam (formulations/ordering.md, "milp, symmetric"): nodes S, E, each open curve's two end
-    points (joined by the curve itself, a fixed edge) and each loop's seam. The path S -> ... -> E
-    plus the fixed edge E-S is a tour: a symmetric TSP with fixed edges, whose LP relaxation with
-    subtour cuts (Held–Karp) is far tighter than the directed model's, where a curve may be half
-    forwards and half backwards."""
-
-    def __init__(self, group: Group):
-        self.group = group
-        n = group.n_curves
-        cc = group.cand_curve
-        counts = np.bincount(cc, minlength=n)
-        first_cand = np.full(n, -1)
-        for k in range(group.n_cands - 1, -1, -1):
-            first_cand[cc[k]] = k
-        pos = [group.start_xy, group.end_xy if group.end_xy is not None else np.zeros(2)]
-        node_curve = [-1, -2]
-        self.curve_nodes = []
-        for c in range(n):
-            k = first_cand[c]
-            if counts[c] == 1:                                  # loop: one node, degree 2
-                self.curve_nodes.append((len(pos),))
-                pos.append(group.cand_entry_xy[k]); node_curve.append(c)
-            else:                                               # open: entry of k, exit of k
-                self.curve_nodes.append((len(pos), len(pos) + 1))
-                pos += [group.cand_entry_xy[k], group.cand_exit_xy[k]]; node_curve += [c, c]
-        self.pos = np.asarray(pos, float)
-        self.node_curve = np.asarray(node_curve)
-        self.first_cand = first_cand
-        N = len(pos)
-        self.N = N
-        iu, ju = np.triu_indices(N, 1)
-        keep = (self.node_curve[iu] != self.node_curve[ju]) & ~((iu == 0) & (ju == 1))
-        self.eu, self.ev = iu[keep], ju[keep]
-        cost = np.hypot(*(self.pos[self.eu] - self.pos[self.ev]).T)
-        if group.end_xy is None:
-            cost[(self.eu == 1) | (self.ev == 1)] = 0.0         # the path just ends
-        self.A = len(cost)
-        h = highspy.Highs()
-        h.setOptionValue("output_flag", False)
-        h.setOptionValue("mip_rel_gap", 1e-9)
-        h.setOptionValue("mip_abs_gap", 1e-5)
-        h.setOptionValue("random_seed", 0)
-        h.addCols(self.A, cost, np.zeros(self.A), np.ones(self.A), 0, np.zeros(0, np.int32),
-                  np.zeros(0, np.int32), np.zeros(0))
-        ints = np.arange(self.A, dtype=np.int32)
-        h.changeColsIntegrality(self.A, ints, np.ones(self.A, np.uint8))
-        self.h = h
-        deg = np.ones(N)
-        for nodes in self.curve_nodes:
-            if len(nodes) == 1:
-                deg[nodes[0]] = 2.0
-        ends = np.concatenate([self.eu, self.ev])
-        edge = np.concatenate([np.arange(self.A), np.arange(self.A)])
-        srt = np.argsort(ends, kind="stable")
-        b = np.searchsorted(ends[srt], np.arange(N + 1))
-        rows = [(deg[v], deg[v], edge[srt[b[v]:b[v + 1]]], np.ones(b[v + 1] - b[v])) for v in range(N)]
-        self.add_rows(rows)
-        self.fixed_r = [nodes[0] for nodes in self.curve_nodes if len(nodes) == 2] + [0]
-        self.fixed_c = [nodes[1] for nodes in self.curve_nodes if len(nodes) == 2] + [1]
-
-    add_rows = _Model.add_rows
-
-    @property
-    def n_int(self) -> int:
-        return self.A
-
-    def _edge_index(self):
-        if not hasattr(self, "_eidx"):
-            self._eidx = {(int(u), int(v)): i for i, (u, v) in enumerate(zip(self.eu, self.ev))}
-        return self._eidx
-
-    def columns_of(self, order: np.ndarray) -> np.ndarray:
-        g = self.group
-        col = np.zeros(self.A)
-        eidx = self._edge_index()
-        prev = 0
-        for k in order:
-            c = int(g.cand_curve[k])
-            nodes = self.curve_nodes[c]
-            if len(nodes) == 1:
-                a = b = nodes[0]
-            else:
-                fwd = k == self.first_cand[c]
-                a, b = (nodes[0], nodes[1]) if fwd else (nodes[1], nodes[0])
-            col[eidx[min(prev, a), max(prev, a)]] = 1
-            prev = b
-        col[eidx[min(prev, 1), max(prev, 1)]] = 1
-        return col
-
-    def _cuts_from(self, on: np.ndarray) -> list:
-        r = np.concatenate([self.eu[on], self.fixed_r])
-        c = np.concatenate([self.ev[on], self.fixed_c])
-        ncomp, lab = _components(self.N, r, c)
-        if ncomp == 1:
-            return []
-        cuts = []
-        for comp in range(ncomp):
-            inside = lab == comp
-            cross = np.nonzero(inside[self.eu] != inside[self.ev])[0]
-            cuts.append((2.0, highspy.kHighsInf, cross, np.ones(len(cross))))
-        return cuts
-
-    def lp_cuts(self, col: np.ndarray) -> list:
-        cuts = self._cuts_from(col > 1e-6)
-        return cuts if cuts else self._min_cuts(col)
-
-    def _min_cuts(self, col: np.ndarray, max_cuts: int = 40) -> list:
-        """Exact separation for a fractional point with connected support: a minimum S-v cut
-        (max flow, capacities x scaled to integers; fixed edges count 1) below 2 is a violated
-        subtour cut x(δ(U)) >= 2 - fixed(δ(U))."""
-        from scipy.sparse import csr_matrix
-        from scipy.sparse.csgraph import maximum_flow
-        scale = 10 ** 6
-        on = col > 1e-9
-        r = np.concatenate([self.eu[on], self.ev[on], self.fixed_r, self.fixed_c])
-        c = np.concatenate([self.ev[on], self.eu[on], self.fixed_c, self.fixed_r])
-        w = np.concatenate([col[on], col[on], np.ones(2 * len(self.fixed_r))])
-        cap = csr_matrix((np.rint(w * scale).astype(np.int32), (r, c)), shape=(self.N, self.N))
-        cap.sum_duplicates()
-        fixed_u = np.asarray(self.fixed_r)
-        fixed_v = np.asarray(self.fixed_c)
-        cuts, seen = [], set()
-        deadline = getattr(self, "deadline", np.inf)
-        for t in range(2, self.N):
-            if time.perf_counter() > deadline:
-                break
-            res = maximum_flow(cap, 0, t)
-            if res.flow_value >= 2 * scale - 1000:
-                continue
-            # the sink side: nodes that cannot be reached from S in the residual graph
-            flow = res.flow.tocsr() if hasattr(res, "flow") else res.residual
-            resid = cap - flow
-            resid.data[resid.data < 1] = 0
-            resid.eliminate_zeros()
-            from scipy.sparse.csgraph import breadth_first_order
-            reach = np.zeros(self.N, bool)
-            reach[breadth_first_order(resid, 0, directed=True, return_predecessors=False)] = True
-            key = reach.tobytes()
-            if key in seen:
-                continue
-            seen.add(key)
-            cross = np.nonzero(reach[self.eu] != reach[self.ev])[0]
-            n_fixed = int((reach[fixed_u] != reach[fixed_v]).sum())
-            cuts.append((2.0 - n_fixed, highspy.kHighsInf, cross, np.ones(len(cross))))
-            if len(cuts) >= max_cuts:
-                break
-        return cuts
-
-    def decode(self, col: np.ndarray):
-        """(candidate path from S, [] or [subtour marker]) from an integer solution."""
-        on = col > 0.5
-        cuts = self._cuts_from(on)
-        if cuts:
-            return np.zeros(0, np.int64), cuts
-        adj = {}
-        for u, v in zip(self.eu[on].tolist(), self.ev[on].tolist()):
-            adj.setdefault(u, []).append(v)
-            adj.setdefault(v, []).append(u)
-        g = self.group
-        order, came, cur = [], 0, adj[0][0]
-        while cur != 1 and len(order) <= g.n_curves:
-            c = int(self.node_curve[cur])
-            nodes = self.curve_nodes[c]
-            k0 = int(self.first_cand[c])
-            if len(nodes) == 1:                     # loop: leave by its other travel edge
-                k, out = k0, cur
-                nxt = [v for v in adj[cur] if v != came][0]
-            else:                                   # open: traverse to the other end point
-                k = k0 if cur == nodes[0] else int(g.cand_flip[k0])
-                out = nodes[1] if cur == nodes[0] else nodes[0]
-                nxt = adj[out][0]
-            order.append(k)
-            came, cur = out, nxt
-        return np.asarray(order, np.int64), []
-
-    def cut(self, row) -> tuple:
-        return row
-
-
-def symmetric_ok(group: Group) -> bool:
-    """Every curve: one candidate entering and leaving at one point (a loop's seam), or exactly
-    two candidates that are each other's reverse."""
-    cc = group.cand_curve
-    counts = np.bincount(cc, minlength=group.n_curves)
-    if counts.max(initial=0) > 2:
-        return False
-    one = counts[cc] == 1
-    if not np.allclose(group.cand_entry_xy[one], group.cand_exit_xy[one]):
-        return False
-    two = np.nonzero(counts[cc] == 2)[0]
-    f = group.cand_flip[two]
-    return bool(np.all(f != two) and np.allclose(group.cand_entry_xy[two], group.cand_exit_xy[f]))
-
-
 def _lp_rounds(model, t0: float, time_limit_s: float, max_rounds: int = 60) -> float:
     """Cutting planes on the LP relaxation first (cheap): cut every connected component of the
     fractional solution's support that misses the depot. Returns the last LP bound (valid)."""
@@ -391,7 +196,13 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     best = np.asarray(getattr(hint, "order", hint), np.int64)
     best_obj = group.path_cost_mm(best)
     bound = lower_bound_mm(group)
-    model = _SymModel(group) if symmetric_ok(group) else _Model(group)
+    if symmetric.applies(group):
+        order, obj, lp_bound, proven = symmetric.solve(group, best, t0 + time_limit_s)
+        group.check_order(order)
+        bound = max(bound, lp_bound)
+        status = "optimal" if proven or obj - bound <= OPTIMAL_ABS_TOL_MM else "feasible"
+        return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "milp")
+    model = _Model(group)
     h = model.h
     status = "fallback"
     bound = max(bound, _lp_rounds(model, t0, time_limit_s))

@@ -1,0 +1,637 @@
+"""Exact ordering as a symmetric TSP with fixed edges (formulations/ordering.md, "milp, symmetric
+model"): an LP over a sparse set of travel edges with subtour and blossom cuts, column pricing,
+reduced-cost fixing, then HiGHS branch-and-bound on what is left.
+
+When every curve is an open curve with its two directions or a loop with one seam, the
+orientation choice disappears into an undirected graph: nodes S (the start), E (the end), both
+end points of each open curve (joined by the curve itself: a *fixed* edge) and the seam of each
+loop. The path S -> ... -> E plus the fixed edge E-S is a tour. The LP relaxation with subtour
+cuts (Held–Karp) is far tighter than the directed model's; blossoms (2-matching combs) close most
+of what is left on infill, where long fixed edges make odd cycles of half-edges cheap.
+
+Only the few shortest travel edges of each node are columns at first: real layers have hundreds
+of end points and a dense model has ~N^2/2 columns, most of which no good path uses. Missing edges
+enter when their reduced cost is negative (column generation); at the end every missing edge's
+reduced cost ``rc_e`` proves that no path cheaper than the incumbent uses it when
+``rc_e > UB - LB`` (reduced-cost fixing), so the branch-and-bound runs on the sparse graph and its
+optimum is the optimum of the whole problem.
+"""
+from __future__ import annotations
+
+import time
+
+import highspy
+import numba
+import numpy as np
+
+from .._native import native_stdout_to_stderr
+from .problem import Group
+
+_OPT = highspy.HighsModelStatus.kOptimal
+_EPS = 1e-6
+
+#: travel edges per node in the first LP (nearest other-curve end points)
+K_NEIGHBOURS = 8
+#: no branch-and-bound when reduced-cost fixing leaves more columns than this per node: the
+#: root gap is then too wide for HiGHS to close within seconds (measured: 166 k columns for a
+#: 312-curve group with an 11 % root gap, nothing closed in 20 s)
+MAX_BRANCH_COLUMNS_PER_NODE = 40
+#: ILS kicks per curve spent on a path built from an LP or subtour point (it starts close to
+#: the optimum; the warm start's search already spent its share)
+POLISH_KICKS_PER_CURVE = 1
+#: at most this many priced-in columns per pricing round, per node of the graph
+PRICE_PER_NODE = 1
+
+
+def applies(group: Group) -> bool:
+    """Every curve: one candidate entering and leaving at one point (a loop's seam), or exactly
+    two candidates that are each other's reverse."""
+    cc = group.cand_curve
+    counts = np.bincount(cc, minlength=group.n_curves)
+    if counts.max(initial=0) > 2:
+        return False
+    one = counts[cc] == 1
+    if not np.allclose(group.cand_entry_xy[one], group.cand_exit_xy[one]):
+        return False
+    two = np.nonzero(counts[cc] == 2)[0]
+    f = group.cand_flip[two]
+    return bool(np.all(f != two) and np.allclose(group.cand_entry_xy[two], group.cand_exit_xy[f]))
+
+
+class SymmetricModel:
+    """Nodes 0 = S, 1 = E, then the end points of the curves; HiGHS rows 0..N-1 are the degree
+    equations ``x(δ(v)) = deg_v`` (1 beside a fixed edge, 2 for a loop's seam), the rest cuts."""
+
+    def __init__(self, group: Group, incumbent: np.ndarray):
+        self.group = group
+        n = group.n_curves
+        cc = group.cand_curve
+        counts = np.bincount(cc, minlength=n)
+        first_cand = np.full(n, -1)
+        for k in range(group.n_cands - 1, -1, -1):
+            first_cand[cc[k]] = k
+        pos = [group.start_xy, group.end_xy if group.end_xy is not None else np.zeros(2)]
+        node_curve = [-1, -2]
+        curve_nodes = []
+        for c in range(n):
+            k = first_cand[c]
+            if counts[c] == 1:                                  # loop: one node, degree 2
+                curve_nodes.append((len(pos),))
+                pos.append(group.cand_entry_xy[k]); node_curve.append(c)
+            else:                                               # open: entry of k, exit of k
+                curve_nodes.append((len(pos), len(pos) + 1))
+                pos += [group.cand_entry_xy[k], group.cand_exit_xy[k]]; node_curve += [c, c]
+        self.curve_nodes, self.first_cand = curve_nodes, first_cand
+        self.pos = np.asarray(pos, float)
+        self.node_curve = np.asarray(node_curve)
+        N = self.N = len(pos)
+        self.deg = np.array([2.0 if len(nd) == 1 else 1.0 for nd in curve_nodes])
+        self.deg = np.concatenate([[1.0, 1.0], np.repeat(self.deg, [len(nd) for nd in curve_nodes])])
+        # full cost matrix; inf where no travel edge exists (same curve, S-E, the diagonal)
+        C = np.hypot(*(self.pos[:, None, :] - self.pos[None, :, :]).transpose(2, 0, 1))
+        if group.end_xy is None:
+            C[1, :] = C[:, 1] = 0.0                            # the path just ends
+        C[self.node_curve[:, None] == self.node_curve[None, :]] = np.inf
+        C[0, 1] = C[1, 0] = np.inf
+        self.C = C
+        two = [nd for nd in curve_nodes if len(nd) == 2]
+        self.fixed_u = np.array([nd[0] for nd in two] + [0], np.int64)
+        self.fixed_v = np.array([nd[1] for nd in two] + [1], np.int64)
+        # columns (u < v) and cuts (node mask "inside", row index N + i)
+        self.eu = np.zeros(0, np.int64)
+        self.ev = np.zeros(0, np.int64)
+        self.present = np.zeros((N, N), bool)
+        self.cut_inside: list[np.ndarray] = []
+        h = self.h = highspy.Highs()
+        h.setOptionValue("output_flag", False)
+        h.setOptionValue("mip_rel_gap", 1e-9)
+        h.setOptionValue("mip_abs_gap", 1e-5)
+        h.setOptionValue("random_seed", 0)
+        h.addRows(N, self.deg, self.deg, 0, np.zeros(N, np.int32), np.zeros(0, np.int32), np.zeros(0))
+        # first columns: each node's nearest neighbours, every edge at E, the incumbent's edges
+        k = min(K_NEIGHBOURS, N - 1)
+        near = np.argsort(C, axis=1)[:, :k]
+        r = np.repeat(np.arange(N), k)
+        c = near.ravel()
+        inc = self.tour_edges(incumbent)
+        r = np.concatenate([r, np.full(N, 1), inc[:, 0]])
+        c = np.concatenate([c, np.arange(N), inc[:, 1]])
+        self.add_columns(r, c)
+
+    # -- columns and rows -------------------------------------------------------------------
+
+    def add_columns(self, r, c) -> int:
+        r, c = np.asarray(r, np.int64), np.asarray(c, np.int64)
+        u, v = np.minimum(r, c), np.maximum(r, c)
+        ok = np.isfinite(self.C[u, v]) & ~self.present[u, v]
+        key = np.unique(u[ok] * self.N + v[ok])
+        u, v = key // self.N, key % self.N
+        if len(u) == 0:
+            return 0
+        self.present[u, v] = self.present[v, u] = True
+        # entries: the two degree rows, and every cut row the edge crosses (coefficient 1: a new
+        # column is never a blossom's tooth)
+        K = len(u)
+        rows_all, cols_all = [u, v], [np.arange(K), np.arange(K)]
+        if self.cut_inside:
+            ins = np.asarray(self.cut_inside)                   # (cuts, N)
+            j, r = np.nonzero((ins[:, u] != ins[:, v]).T)
+            rows_all.append(self.N + r)
+            cols_all.append(j)
+        rows_all, cols_all = np.concatenate(rows_all), np.concatenate(cols_all)
+        o = np.argsort(cols_all, kind="stable")
+        idx = rows_all[o].astype(np.int32)
+        starts = np.searchsorted(cols_all[o], np.arange(K)).astype(np.int32)
+        self.h.addCols(K, self.C[u, v], np.zeros(K), np.ones(K), len(idx), starts, idx,
+                       np.ones(len(idx)))
+        self.eu = np.concatenate([self.eu, u])
+        self.ev = np.concatenate([self.ev, v])
+        return len(u)
+
+    def add_cut(self, inside: np.ndarray, teeth: np.ndarray | None = None) -> None:
+        """Subtour cut ``x(δ(U)) >= 2`` or, with ``teeth`` (edges of δ(H) at 1), the blossom
+        ``x(δ(H) \\ T) - x(T) >= 1 - |T|``; fixed edges are constants moved to the right."""
+        cross = inside[self.eu] != inside[self.ev]
+        coef = np.ones(len(self.eu))
+        fixed_cross = inside[self.fixed_u] != inside[self.fixed_v]
+        if teeth is None:
+            rhs = 2.0 - fixed_cross.sum()
+        else:
+            tooth_col, tooth_fixed = teeth
+            coef[tooth_col] = -1.0
+            n_t = len(tooth_col) + int(tooth_fixed.sum())
+            rhs = 1.0 - n_t - int((fixed_cross & ~tooth_fixed).sum()) + int(tooth_fixed.sum())
+        cols = np.nonzero(cross)[0].astype(np.int32)
+        self.h.addRow(float(rhs), highspy.kHighsInf, len(cols), cols, coef[cols])
+        self.cut_inside.append(inside.copy())
+
+    def tour_edges(self, order: np.ndarray) -> np.ndarray:
+        """The travel edges of a candidate order, as (u, v) node pairs."""
+        g = self.group
+        out, prev = [], 0
+        for k in order:
+            c = int(g.cand_curve[k])
+            nodes = self.curve_nodes[c]
+            if len(nodes) == 1:
+                a = b = nodes[0]
+            else:
+                a, b = (nodes[0], nodes[1]) if k == self.first_cand[c] else (nodes[1], nodes[0])
+            out.append((prev, a))
+            prev = b
+        out.append((prev, 1))
+        return np.asarray(out, np.int64)
+
+    def columns_of(self, order: np.ndarray) -> np.ndarray:
+        e = self.tour_edges(order)
+        u, v = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
+        index = {(a, b): j for j, (a, b) in enumerate(zip(self.eu.tolist(), self.ev.tolist()))}
+        col = np.zeros(len(self.eu))
+        for a, b in zip(u.tolist(), v.tolist()):
+            col[index[a, b]] = 1.0
+        return col
+
+    # -- separation ---------------------------------------------------------------------------
+
+    def _support_components(self, on: np.ndarray):
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        r = np.concatenate([self.eu[on], self.fixed_u])
+        c = np.concatenate([self.ev[on], self.fixed_v])
+        g = coo_matrix((np.ones(len(r)), (r, c)), shape=(self.N, self.N))
+        return connected_components(g, directed=False)
+
+    def separate(self, x: np.ndarray, deadline: float, integer: bool = False) -> int:
+        """Add violated cuts for the point ``x``; returns how many. Components of the support
+        first; a connected support gets exact subtour separation by minimum cuts and the
+        odd-component blossom heuristic."""
+        ncomp, lab = self._support_components(x > _EPS)
+        if ncomp > 1:
+            for comp in range(ncomp):
+                self.add_cut(lab == comp)
+            return ncomp
+        if integer:
+            return 0
+        n = self._min_cuts(x, deadline)
+        return n + self._blossoms(x)
+
+    def _min_cuts(self, x: np.ndarray, deadline: float, max_cuts: int = 40) -> int:
+        """A minimum S-v cut (capacities x, fixed edges 1) below 2 is a violated subtour cut
+        ``x(δ(U)) >= 2 - fixed(δ(U))``. Edges at 1 (fixed ones included) are shrunk first
+        (Padberg–Rinaldi: with x_uv = 1 moving v to u's side never increases a cut, as
+        x(δ(v)) = 2), then one max flow per sink not already behind a found cut."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        on = x > 1e-9
+        ones = x >= 1 - 1e-9
+        r = np.concatenate([self.eu[ones], self.fixed_u])
+        c = np.concatenate([self.ev[ones], self.fixed_v])
+        n_sh, lab = connected_components(coo_matrix((np.ones(len(r)), (r, c)), shape=(self.N, self.N)),
+                                         directed=False)
+        if n_sh <= 2:
+            return 0
+        # relabel so that S's super node is 0
+        perm = np.arange(n_sh)
+        perm[[0, lab[0]]] = perm[[lab[0], 0]]
+        lab = perm[lab]
+        u, v = lab[self.eu[on]], lab[self.ev[on]]
+        keep = u != v
+        w = coo_matrix((x[on][keep], (np.minimum(u, v)[keep], np.maximum(u, v)[keep])),
+                       shape=(n_sh, n_sh)).tocsr()
+        w.sum_duplicates()
+        wc = w.tocoo()
+        u, v, w = wc.row.astype(np.int64), wc.col.astype(np.int64), wc.data
+        # directed residual arcs u->v and v->u, each with capacity w, paired by ``rev``
+        tail = np.concatenate([u, v])
+        head = np.concatenate([v, u])
+        m = len(u)
+        rev = np.concatenate([np.arange(m, 2 * m), np.arange(m)])
+        srt = np.argsort(tail, kind="stable")
+        inv = np.empty_like(srt)
+        inv[srt] = np.arange(len(srt))
+        indptr = np.searchsorted(tail[srt], np.arange(n_sh + 1)).astype(np.int64)
+        cuts = _subtour_cuts(n_sh, indptr, head[srt].astype(np.int64), np.concatenate([w, w])[srt],
+                             inv[rev[srt]].astype(np.int64), max_cuts,
+                             float(deadline - time.perf_counter()))
+        for reach in cuts:
+            self.add_cut(reach[lab])
+        return len(cuts)
+
+    def _blossoms(self, x: np.ndarray) -> int:
+        """Odd-component heuristic (Padberg–Hong): a handle H = a connected component of the
+        fractional edges; its teeth are the edges at 1 (fixed edges included) leaving H. With an
+        odd number of disjoint teeth the blossom ``x(δ(H) \\ T) - x(T) >= 1 - |T|`` is violated
+        by 1 - x(δ(H) \\ T). Teeth meeting outside H pull their common end point into H."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        frac = (x > _EPS) & (x < 1 - _EPS)
+        if not frac.any():
+            return 0
+        ones = np.nonzero(x >= 1 - _EPS)[0]
+        # edges at one: travel columns and fixed edges, as (u, v, column or -1)
+        one_u = np.concatenate([self.eu[ones], self.fixed_u])
+        one_v = np.concatenate([self.ev[ones], self.fixed_v])
+        one_col = np.concatenate([ones, np.full(len(self.fixed_u), -1)])
+        g = coo_matrix((np.ones(frac.sum()), (self.eu[frac], self.ev[frac])), shape=(self.N, self.N))
+        ncomp, lab = connected_components(g, directed=False)
+        touched = np.zeros(self.N, bool)
+        touched[self.eu[frac]] = touched[self.ev[frac]] = True
+        n_cuts = 0
+        for comp in np.unique(lab[touched]):
+            inside = lab == comp
+            if inside.sum() < 3:
+                continue
+            for _ in range(self.N):
+                cross = inside[one_u] != inside[one_v]
+                outer = np.where(inside[one_u[cross]], one_v[cross], one_u[cross])
+                vals, cnt = np.unique(outer, return_counts=True)
+                if (cnt > 1).any():
+                    inside[vals[cnt > 1]] = True
+                    continue
+                break
+            if cross.sum() < 3 or cross.sum() % 2 == 0:
+                continue
+            col = one_col[cross]
+            tooth_col = col[col >= 0]
+            tooth_fixed = inside[self.fixed_u] != inside[self.fixed_v]     # all at 1
+            others = (inside[self.eu] != inside[self.ev]) & (x > _EPS)
+            others[tooth_col] = False
+            if x[others].sum() >= 1 - 1e-4:
+                continue
+            self.add_cut(inside, (tooth_col, tooth_fixed))
+            n_cuts += 1
+        return n_cuts
+
+    # -- duals ------------------------------------------------------------------------------
+
+    def reduced_costs(self) -> np.ndarray:
+        """Reduced cost of every edge under the current LP duals (HiGHS: rc = c - A^T y); inf
+        where no edge exists. Cut rows cross an edge iff exactly one of its ends is inside; a
+        missing edge is never a tooth (teeth are columns at 1)."""
+        y = np.asarray(self.h.getSolution().row_dual)
+        yd, yc = y[:self.N], y[self.N:]
+        rc = self.C - yd[:, None] - yd[None, :]
+        if len(yc):
+            act = np.abs(yc) > 1e-12
+            if act.any():
+                M = np.asarray(self.cut_inside)[act].astype(float)      # (cuts, N)
+                w = yc[act]
+                a = w @ M                                               # sum_r y_r [u in r]
+                Q = M.T @ (w[:, None] * M)                              # sum_r y_r [u in r][v in r]
+                rc -= a[:, None] + a[None, :] - 2.0 * Q
+        return rc
+
+    def lp_bound(self, obj: float, rc: np.ndarray) -> float:
+        """Valid lower bound from the restricted LP: obj + sum of the negative reduced costs of
+        missing edges (each x_e <= 1), halved for the symmetric duplicates."""
+        miss = ~self.present & np.isfinite(rc)
+        neg = np.minimum(rc[miss], 0.0)
+        return float(obj + 0.5 * neg.sum())
+
+    def price(self, rc: np.ndarray) -> int:
+        miss = ~self.present & np.isfinite(rc)
+        iu, iv = np.nonzero(np.triu(miss & (rc < -1e-7), 1))
+        if len(iu) == 0:
+            return 0
+        keep = np.argsort(rc[iu, iv])[:max(PRICE_PER_NODE * self.N, 20)]
+        return self.add_columns(iu[keep], iv[keep])
+
+    # -- decoding -----------------------------------------------------------------------------
+
+    def decode(self, x: np.ndarray) -> np.ndarray | None:
+        """Candidate order from an integer point, or None if it has subtours."""
+        on = x > 0.5
+        ncomp, _ = self._support_components(on)
+        if ncomp > 1:
+            return None
+        return self.decode_edges(self.eu[on], self.ev[on])
+
+    def decode_edges(self, eu, ev) -> np.ndarray:
+        """Candidate order of the tour whose travel edges are (eu, ev)."""
+        adj: dict[int, list[int]] = {}
+        for u, v in zip(np.asarray(eu).tolist(), np.asarray(ev).tolist()):
+            adj.setdefault(u, []).append(v)
+            adj.setdefault(v, []).append(u)
+        g = self.group
+        order, came, cur = [], 0, adj[0][0]
+        while cur != 1 and len(order) <= g.n_curves:
+            c = int(self.node_curve[cur])
+            nodes = self.curve_nodes[c]
+            k0 = int(self.first_cand[c])
+            if len(nodes) == 1:                     # loop: leave by its other travel edge
+                k, out = k0, cur
+                nxt = [v for v in adj[cur] if v != came][0]
+            else:                                   # open: traverse to the other end point
+                k = k0 if cur == nodes[0] else int(g.cand_flip[k0])
+                out = nodes[1] if cur == nodes[0] else nodes[0]
+                nxt = adj[out][0]
+            order.append(k)
+            came, cur = out, nxt
+        return np.asarray(order, np.int64)
+
+    def tour_from(self, x: np.ndarray) -> np.ndarray:
+        """A path built from an LP or subtour point: greedy edge matching (Kruskal-like: an edge
+        enters if both ends still need a travel edge and it closes no cycle) over the columns by
+        ``x`` descending, then cost; what is left is joined by the cheapest edges of the whole
+        graph. Gives the exact step an incumbent near the LP optimum (ILS polishes it)."""
+        key = np.lexsort((self.C[self.eu, self.ev], -np.round(x, 6)))
+        cols = key[x[key] > _EPS]
+        u, v = _match(self.N, self.deg.astype(np.int64), self.fixed_u, self.fixed_v,
+                      self.eu[cols], self.ev[cols], self.C)
+        return self.decode_edges(u, v)
+
+    # -- the solve ----------------------------------------------------------------------------
+
+    def _run(self, deadline: float) -> bool:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            return False
+        self.h.setOptionValue("time_limit", float(left))
+        with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
+            self.h.run()
+        return True
+
+    def root(self, deadline: float, max_rounds: int = 500) -> float:
+        """Cutting planes and pricing on the LP until neither finds anything (or time is up).
+        Returns a valid lower bound (0 if no LP was solved); ``self.complete`` tells whether the
+        LP of the whole graph was solved to optimality."""
+        self.complete = False
+        bound = 0.0
+        for _ in range(max_rounds):
+            if not self._run(deadline) or self.h.getModelStatus() != _OPT:
+                break
+            x = np.asarray(self.h.getSolution().col_value)
+            obj = float(self.h.getInfo().objective_function_value)
+            rc = self.reduced_costs()
+            bound = max(bound, self.lp_bound(obj, rc))
+            if self.separate(x, deadline):
+                continue
+            if self.price(rc):
+                continue
+            self.complete = True
+            self.rc = rc
+            break
+        return bound
+
+    def branch(self, best: np.ndarray, best_obj: float, bound: float, deadline: float):
+        """Branch-and-bound on the sparse graph after reduced-cost fixing. Needs ``root`` to have
+        completed: an edge whose reduced cost exceeds ``best_obj - bound`` is in no path cheaper
+        than ``best`` (any path using it costs at least ``bound + rc_e``), so missing edges below
+        that enter as columns, present ones above it are fixed at 0, and the optimum of what is
+        left is the optimum of the whole problem. Integer points with subtours get component
+        cuts, are patched into a path (a new incumbent tightens the fixing) and the MIP is solved
+        again. Returns (order, objective, bound, proven)."""
+        h = self.h
+        rc = self.rc
+        col_rc = np.asarray(h.getSolution().col_dual, float)    # exact for teeth too
+        n_old = len(col_rc)
+        gap = best_obj - bound + 1e-6
+        iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(rc) & (rc <= gap), 1))
+        if n_old + len(iu) > MAX_BRANCH_COLUMNS_PER_NODE * self.N:
+            return best, best_obj, bound, False         # a gap this wide does not close in seconds
+        self.add_columns(iu, iv)
+        col_rc = np.concatenate([col_rc, rc[self.eu[n_old:], self.ev[n_old:]]])
+        ncol = len(self.eu)
+        idx = np.arange(ncol, dtype=np.int32)
+        h.changeColsIntegrality(ncol, idx, np.ones(ncol, np.uint8))
+        fixed = np.zeros(ncol, bool)
+        proven = False
+        while True:
+            fix = np.nonzero((col_rc > best_obj - bound + 1e-6) & ~fixed)[0].astype(np.int32)
+            if len(fix):
+                h.changeColsBounds(len(fix), fix, np.zeros(len(fix)), np.zeros(len(fix)))
+                fixed[fix] = True
+            sol = highspy.HighsSolution()
+            sol.col_value = self.columns_of(best).tolist()
+            sol.value_valid = True
+            h.setSolution(sol)
+            if not self._run(deadline):
+                break
+            ms = h.getModelStatus()
+            info = h.getInfo()
+            if info.primal_solution_status == 0:
+                break
+            x = np.asarray(h.getSolution().col_value)
+            order = self.decode(x)
+            if order is None:                       # subtours: patch into a path, cut, again
+                best, best_obj = self._polish(self.tour_from(x), best, best_obj, deadline)
+                if ms != _OPT or best_obj - bound <= 1e-6:
+                    break
+                self.separate(x, deadline, integer=True)
+                continue
+            obj = self.group.path_cost_mm(order)
+            if obj < best_obj:
+                best, best_obj = order, obj
+            if np.isfinite(info.mip_dual_bound):
+                bound = max(bound, min(float(info.mip_dual_bound), best_obj))
+            proven = ms == _OPT
+            break
+        return best, best_obj, bound, proven
+
+    def _polish(self, order, best, best_obj, deadline):
+        """ILS from ``order``; the better of it and ``best``."""
+        from .ils import improve_ils
+        if order is None or len(order) != self.group.n_curves:
+            return best, best_obj
+        order = improve_ils(self.group, order, kicks=POLISH_KICKS_PER_CURVE * self.group.n_curves,
+                            deadline=deadline)
+        obj = self.group.path_cost_mm(order)
+        return (order, obj) if obj < best_obj - 1e-9 else (best, best_obj)
+
+
+def solve(group: Group, incumbent: np.ndarray, deadline: float):
+    """Root LP (cuts and pricing); a path built from the LP point and polished by ILS may improve
+    the incumbent; then branch-and-bound if a gap is left. Returns (order, objective, bound,
+    proven optimal)."""
+    from .problem import OPTIMAL_ABS_TOL_MM
+    best = np.asarray(incumbent, np.int64)
+    best_obj = group.path_cost_mm(best)
+    model = SymmetricModel(group, best)
+    bound = model.root(deadline)
+    if best_obj - bound > OPTIMAL_ABS_TOL_MM and model.complete:
+        x = np.asarray(model.h.getSolution().col_value)
+        best, best_obj = model._polish(model.tour_from(x), best, best_obj, deadline)
+    if best_obj - bound <= OPTIMAL_ABS_TOL_MM:
+        return best, best_obj, bound, True
+    if not model.complete:
+        return best, best_obj, bound, False
+    return model.branch(best, best_obj, bound, deadline)
+
+
+@numba.njit(cache=True)
+def _subtour_cuts(n, indptr, head, cap, rev, max_cuts, seconds):
+    """For every sink t (not yet on the far side of a found cut): Edmonds–Karp from node 0, stopped
+    as soon as the flow reaches 2; a smaller maximum flow gives the source side of a minimum cut
+    (the nodes still reachable in the residual graph). Returns those sides as boolean rows."""
+    out = np.zeros((max_cuts, n), np.bool_)
+    n_out = 0
+    done = np.zeros(n, np.bool_)
+    parent = np.empty(n, np.int64)
+    queue = np.empty(n, np.int64)
+    with numba.objmode(t0="f8"):
+        t0 = time.perf_counter()
+    for t in range(1, n):
+        if done[t]:
+            continue
+        if t % 16 == 0:
+            with numba.objmode(now="f8"):
+                now = time.perf_counter()
+            if now - t0 > seconds:
+                break
+        r = cap.copy()
+        flow = 0.0
+        while flow < 2.0 - 1e-6:
+            parent[:] = -2
+            parent[0] = -1
+            qh, qt = 0, 1
+            queue[0] = 0
+            while qh < qt and parent[t] == -2:
+                a = queue[qh]
+                qh += 1
+                for e in range(indptr[a], indptr[a + 1]):
+                    b = head[e]
+                    if parent[b] == -2 and r[e] > 1e-9:
+                        parent[b] = e
+                        queue[qt] = b
+                        qt += 1
+            if parent[t] == -2:
+                break
+            # bottleneck along the path, then push
+            f = 2.0 - flow
+            b = t
+            while b != 0:
+                e = parent[b]
+                if r[e] < f:
+                    f = r[e]
+                b = head[rev[e]]
+            b = t
+            while b != 0:
+                e = parent[b]
+                r[e] -= f
+                r[rev[e]] += f
+                b = head[rev[e]]
+            flow += f
+        if flow >= 2.0 - 1e-6:
+            continue
+        # source side: reachable from 0 in the residual graph (the last BFS, run to the end)
+        reach = np.zeros(n, np.bool_)
+        reach[0] = True
+        qh, qt = 0, 1
+        queue[0] = 0
+        while qh < qt:
+            a = queue[qh]
+            qh += 1
+            for e in range(indptr[a], indptr[a + 1]):
+                b = head[e]
+                if not reach[b] and r[e] > 1e-9:
+                    reach[b] = True
+                    queue[qt] = b
+                    qt += 1
+        for b in range(n):
+            if not reach[b]:
+                done[b] = True
+        out[n_out] = reach
+        n_out += 1
+        if n_out >= max_cuts:
+            break
+    return out[:n_out]
+
+
+@numba.njit(cache=True)
+def _find(parent, a):
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@numba.njit(cache=True)
+def _match(n, deg, fixed_u, fixed_v, pref_u, pref_v, C):
+    """Greedy edge matching to one Hamiltonian cycle through the fixed edges: first the preferred
+    edges in their order, then the cheapest remaining edges between fragment ends. Returns the
+    travel edges (u, v)."""
+    parent = np.arange(n)
+    need = deg.copy()
+    for i in range(len(fixed_u)):
+        parent[_find(parent, fixed_u[i])] = _find(parent, fixed_v[i])
+    out_u = np.empty(n, np.int64)
+    out_v = np.empty(n, np.int64)
+    k = 0
+    n_edges = 0
+    for i in range(n):
+        n_edges += deg[i]
+    n_edges //= 2                       # travel edges of the tour
+    for i in range(len(pref_u)):
+        a, b = pref_u[i], pref_v[i]
+        if need[a] == 0 or need[b] == 0:
+            continue
+        ra, rb = _find(parent, a), _find(parent, b)
+        if ra == rb and k + 1 < n_edges:
+            continue
+        parent[ra] = rb
+        need[a] -= 1
+        need[b] -= 1
+        out_u[k] = a
+        out_v[k] = b
+        k += 1
+    while k < n_edges:                  # join fragments: cheapest edge between free ends
+        best, ba, bb = np.inf, -1, -1
+        for a in range(n):
+            if need[a] == 0:
+                continue
+            ra = _find(parent, a)
+            for b in range(a + 1, n):
+                if need[b] == 0 or not np.isfinite(C[a, b]):
+                    continue
+                if _find(parent, b) == ra and k + 1 < n_edges:
+                    continue
+                if C[a, b] < best:
+                    best, ba, bb = C[a, b], a, b
+        if ba < 0:
+            break
+        parent[_find(parent, ba)] = _find(parent, bb)
+        need[ba] -= 1
+        need[bb] -= 1
+        out_u[k] = ba
+        out_v[k] = bb
+        k += 1
+    return out_u[:k], out_v[:k]
