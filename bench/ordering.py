@@ -89,7 +89,7 @@ def report(args) -> str:
     rows = list(last.values())
     # one section per configuration: formulation, per-group limit, per-file budget (or none)
     configs = sorted({(r["formulation"], r["time_limit_s"], r.get("budget_s") or 0) for r in rows},
-                     key=lambda c: (c[0], -c[2] if c[2] else -1e9, c[1]))
+                     key=lambda c: (c[0], 0 if c[2] else 1, c[1]))
     runs = {}
     for form, tl, bud in configs:
         runs.setdefault((tl, bud), []).append(form)
