@@ -50,3 +50,25 @@ def native_stdout_to_stderr():
             _flush_c()
             os.dup2(saved, out_fd)
             os.close(saved)
+
+
+def run_highs(h, deadline: float | None = None, start=None) -> bool:
+    """Run the HiGHS model ``h`` with native stdout on stderr: until ``deadline`` (a
+    ``time.perf_counter()`` value; None: the model's own time limit), from the start solution
+    ``start`` (column values) if given. Returns False, without running, when the deadline has
+    passed."""
+    import time
+    if deadline is not None:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            return False
+        h.setOptionValue("time_limit", float(left))
+    if start is not None:
+        import highspy
+        sol = highspy.HighsSolution()
+        sol.col_value = list(start)
+        sol.value_valid = True
+        h.setSolution(sol)
+    with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
+        h.run()
+    return True

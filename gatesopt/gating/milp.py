@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._native import native_stdout_to_stderr
+from .._native import run_highs
 
 from ..program import X, Y
 from . import dp
@@ -460,13 +460,9 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     h.passModel(lp)
     hv = hint_vector(problem, model, start)
     if hv is not None:
-        full = _full_start(model, M, *hv)
-        sol0 = highspy.HighsSolution()
-        sol0.col_value = list(full)
-        sol0.value_valid = True
-        h.setSolution(sol0)
-    with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
-        h.run()
+        run_highs(h, start=_full_start(model, M, *hv))
+    else:
+        run_highs(h)
     status = h.getModelStatus()
     info = h.getInfo()
     mapped = _status_map().get(status, "fallback")

@@ -30,23 +30,23 @@ STATUS = {
 }
 
 
-def _trivial(group: Group, t0: float) -> GroupSolution | None:
+def _trivial(group: Group, t0: float, method: str) -> GroupSolution | None:
+    """The answer for a group of 0 or 1 curves (no solver needed), else None."""
     if group.n_curves == 0:
-        return GroupSolution.make([], 0.0, 0.0, "optimal", time.perf_counter() - t0, "exact")
+        return GroupSolution.make([], 0.0, 0.0, "optimal", time.perf_counter() - t0, method)
     if group.n_curves == 1:
         c = group.start_cost_mm() + group.end_cost_mm()
         k = int(np.argmin(c))
-        return GroupSolution.make([k], c[k], c[k], "optimal", time.perf_counter() - t0, "exact")
+        return GroupSolution.make([k], c[k], c[k], "optimal", time.perf_counter() - t0, method)
     return None
 
 
 def solve(group: Group, *, time_limit_s: float = 10.0, hint=None, num_workers: int = 2,
           seed: int = 0) -> GroupSolution:
     t0 = time.perf_counter()
-    triv = _trivial(group, t0)
+    triv = _trivial(group, t0, "cpsat")
     if triv is not None:
-        return GroupSolution.make(triv.order, triv.objective_mm, triv.bound_mm, triv.status,
-                                  triv.solve_s, "cpsat")
+        return triv
     hint = warm_start(group, hint, t0, time_limit_s)
     return _solve_circuit(group, t0, time_limit_s, hint, num_workers, seed, closed=False)
 

@@ -7,6 +7,10 @@ depot, over curves K, gets the cut "the path leaves S", S = every candidate of t
 Each MILP of the loop is a relaxation of the ordering problem, so its dual bound is a valid lower
 bound even when the loop stops at the time limit. The warm start (the hint, or ``ils.warm_start``)
 is passed to HiGHS as the incumbent of every solve; it satisfies every cut.
+
+Groups of open curves and fixed-seam loops (``symmetric.applies``) go to the undirected model of
+``symmetric.py`` instead (formulations/ordering.md, "milp, symmetric model"); this directed model
+serves the rest (several seam candidates per loop).
 """
 from __future__ import annotations
 
@@ -15,7 +19,7 @@ import time
 import highspy
 import numpy as np
 
-from .._native import native_stdout_to_stderr
+from .._native import run_highs
 
 from .bounds import lower_bound_mm
 from .ils import warm_start
@@ -126,7 +130,7 @@ class _Model:
         la = np.nonzero(col[self.o_last:self.o_last + m] > 1e-6)[0]
         r = np.concatenate([self.us[on], fi, la])
         c = np.concatenate([self.vs[on], np.full(len(fi), m), np.full(len(la), m)])
-        ncomp, lab = _components(m + 1, r, c)
+        ncomp, lab = symmetric.components(m + 1, r, c)
         used = col[self.o_y:self.o_y + m] > 1e-6
         cuts = []
         for comp in range(ncomp):
@@ -158,12 +162,8 @@ def _lp_rounds(model, t0: float, time_limit_s: float, max_rounds: int = 60) -> f
     h.changeColsIntegrality(n_int, idx, np.zeros(n_int, np.uint8))       # continuous
     bound = 0.0
     for _ in range(max_rounds):
-        left = time_limit_s - (time.perf_counter() - t0)
-        if left <= 0:
+        if not run_highs(h, t0 + time_limit_s):
             break
-        h.setOptionValue("time_limit", float(left))
-        with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
-            h.run()
         if h.getModelStatus() != _OPT:
             break
         bound = max(bound, float(h.getInfo().objective_function_value))
@@ -175,23 +175,15 @@ def _lp_rounds(model, t0: float, time_limit_s: float, max_rounds: int = 60) -> f
     return bound
 
 
-def _components(n_nodes, r, c):
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    g = coo_matrix((np.ones(len(r)), (r, c)), shape=(n_nodes, n_nodes))
-    return connected_components(g, directed=False)
-
-
 def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
           give_up_gap: float | None = None) -> GroupSolution:
     """``give_up_gap``: stop after the LP rounds if their bound leaves a larger relative gap (the
     branch-and-cut loop rarely closes such gaps within seconds; ``auto`` uses 0.15)."""
     t0 = time.perf_counter()
     from .cpsat import _trivial
-    triv = _trivial(group, t0)
+    triv = _trivial(group, t0, "milp")
     if triv is not None:
-        return GroupSolution.make(triv.order, triv.objective_mm, triv.bound_mm, triv.status,
-                                  triv.solve_s, "milp")
+        return triv
     hint = warm_start(group, hint, t0, time_limit_s)
     best = np.asarray(getattr(hint, "order", hint), np.int64)
     best_obj = group.path_cost_mm(best)
@@ -211,16 +203,8 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     if give_up_gap is not None and best_obj > 0 and (best_obj - bound) / best_obj > give_up_gap:
         return GroupSolution.make(best, best_obj, bound, "feasible", time.perf_counter() - t0, "milp")
     while True:
-        left = time_limit_s - (time.perf_counter() - t0)
-        if left <= 0:
+        if not run_highs(h, t0 + time_limit_s, start=model.columns_of(best)):
             break
-        h.setOptionValue("time_limit", float(left))
-        sol = highspy.HighsSolution()
-        sol.col_value = model.columns_of(best).tolist()
-        sol.value_valid = True
-        h.setSolution(sol)
-        with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
-            h.run()
         ms = h.getModelStatus()
         info = h.getInfo()
         if np.isfinite(info.mip_dual_bound):

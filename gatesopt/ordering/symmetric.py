@@ -24,8 +24,8 @@ import highspy
 import numba
 import numpy as np
 
-from .._native import native_stdout_to_stderr
-from .problem import Group
+from .._native import run_highs
+from .problem import OPTIMAL_ABS_TOL_MM, Group
 
 _OPT = highspy.HighsModelStatus.kOptimal
 _EPS = 1e-6
@@ -41,6 +41,14 @@ MAX_BRANCH_COLUMNS_PER_NODE = 40
 POLISH_KICKS_PER_CURVE = 1
 #: at most this many priced-in columns per pricing round, per node of the graph
 PRICE_PER_NODE = 1
+
+
+def components(n_nodes: int, r, c):
+    """Connected components (count, label per node) of the undirected graph with edges (r, c)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    g = coo_matrix((np.ones(len(r)), (r, c)), shape=(n_nodes, n_nodes))
+    return connected_components(g, directed=False)
 
 
 def applies(group: Group) -> bool:
@@ -193,12 +201,8 @@ class SymmetricModel:
     # -- separation ---------------------------------------------------------------------------
 
     def _support_components(self, on: np.ndarray):
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-        r = np.concatenate([self.eu[on], self.fixed_u])
-        c = np.concatenate([self.ev[on], self.fixed_v])
-        g = coo_matrix((np.ones(len(r)), (r, c)), shape=(self.N, self.N))
-        return connected_components(g, directed=False)
+        return components(self.N, np.concatenate([self.eu[on], self.fixed_u]),
+                          np.concatenate([self.ev[on], self.fixed_v]))
 
     def separate(self, x: np.ndarray, deadline: float, integer: bool = False) -> int:
         """Add violated cuts for the point ``x``; returns how many. Components of the support
@@ -220,13 +224,8 @@ class SymmetricModel:
         (Padberg–Rinaldi: with x_uv = 1 moving v to u's side never increases a cut, as
         x(δ(v)) = 2), then one max flow per sink not already behind a found cut."""
         from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
         on = x > 1e-9
-        ones = x >= 1 - 1e-9
-        r = np.concatenate([self.eu[ones], self.fixed_u])
-        c = np.concatenate([self.ev[ones], self.fixed_v])
-        n_sh, lab = connected_components(coo_matrix((np.ones(len(r)), (r, c)), shape=(self.N, self.N)),
-                                         directed=False)
+        n_sh, lab = self._support_components(x >= 1 - 1e-9)
         if n_sh <= 2:
             return 0
         # relabel so that S's super node is 0
@@ -261,8 +260,6 @@ class SymmetricModel:
         fractional edges; its teeth are the edges at 1 (fixed edges included) leaving H. With an
         odd number of disjoint teeth the blossom ``x(δ(H) \\ T) - x(T) >= 1 - |T|`` is violated
         by 1 - x(δ(H) \\ T). Teeth meeting outside H pull their common end point into H."""
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
         frac = (x > _EPS) & (x < 1 - _EPS)
         if not frac.any():
             return 0
@@ -271,8 +268,7 @@ class SymmetricModel:
         one_u = np.concatenate([self.eu[ones], self.fixed_u])
         one_v = np.concatenate([self.ev[ones], self.fixed_v])
         one_col = np.concatenate([ones, np.full(len(self.fixed_u), -1)])
-        g = coo_matrix((np.ones(frac.sum()), (self.eu[frac], self.ev[frac])), shape=(self.N, self.N))
-        ncomp, lab = connected_components(g, directed=False)
+        ncomp, lab = components(self.N, self.eu[frac], self.ev[frac])
         touched = np.zeros(self.N, bool)
         touched[self.eu[frac]] = touched[self.ev[frac]] = True
         n_cuts = 0
@@ -381,15 +377,6 @@ class SymmetricModel:
 
     # -- the solve ----------------------------------------------------------------------------
 
-    def _run(self, deadline: float) -> bool:
-        left = deadline - time.perf_counter()
-        if left <= 0:
-            return False
-        self.h.setOptionValue("time_limit", float(left))
-        with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
-            self.h.run()
-        return True
-
     def root(self, deadline: float, max_rounds: int = 500) -> float:
         """Cutting planes and pricing on the LP until neither finds anything (or time is up).
         Returns a valid lower bound (0 if no LP was solved); ``self.complete`` tells whether the
@@ -397,7 +384,7 @@ class SymmetricModel:
         self.complete = False
         bound = 0.0
         for _ in range(max_rounds):
-            if not self._run(deadline) or self.h.getModelStatus() != _OPT:
+            if not run_highs(self.h, deadline) or self.h.getModelStatus() != _OPT:
                 break
             x = np.asarray(self.h.getSolution().col_value)
             obj = float(self.h.getInfo().objective_function_value)
@@ -440,11 +427,7 @@ class SymmetricModel:
             if len(fix):
                 h.changeColsBounds(len(fix), fix, np.zeros(len(fix)), np.zeros(len(fix)))
                 fixed[fix] = True
-            sol = highspy.HighsSolution()
-            sol.col_value = self.columns_of(best).tolist()
-            sol.value_valid = True
-            h.setSolution(sol)
-            if not self._run(deadline):
+            if not run_highs(h, deadline, start=self.columns_of(best)):
                 break
             ms = h.getModelStatus()
             info = h.getInfo()
@@ -482,7 +465,6 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     """Root LP (cuts and pricing); a path built from the LP point and polished by ILS may improve
     the incumbent; then branch-and-bound if a gap is left. Returns (order, objective, bound,
     proven optimal)."""
-    from .problem import OPTIMAL_ABS_TOL_MM
     best = np.asarray(incumbent, np.int64)
     best_obj = group.path_cost_mm(best)
     model = SymmetricModel(group, best)
