@@ -152,6 +152,36 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
                        solve_s=solve_s, message=f"CP-SAT {solver.StatusName(st)}; returned the dp/hint start")
     xs = np.array([solver.BooleanValue(v) for v in x], bool)
     ys = np.array([solver.BooleanValue(v) for v in y], bool)
+    lines_note = ""
+    if st == cp.OPTIMAL and solver.ObjectiveValue() - solver.BestObjectiveBound() >= 1.0:
+        # relative_gap_limit stopped the search with room for a line less at the same energy (a
+        # gap of 1 unit is one line, see W). Second stage: energy held at what was found, fewest
+        # lines (the lexicographic order of formulations/gating.md section 4, exactly).
+        energy = [(int(c), v) for c, v in zip(q(model.x_energy_j).tolist(), x) if c]
+        energy += [(int(c), v) for c, v in zip(q(model.z_energy_j).tolist(), z) if c]
+        energy += [(int(c), v) for c, v in zip(q(model.a_energy_j).tolist(), a) if c]
+        found = sum(c * solver.BooleanValue(v) for c, v in energy)
+        if energy:
+            m.Add(cp.LinearExpr.WeightedSum([v for _, v in energy], [c for c, _ in energy]) <= found)
+        xl = np.round(model.x_lines).astype(np.int64).tolist()
+        lines = [(c, v) for c, v in zip(xl, x) if c] + [(1, v) for v in z + w]
+        m.Minimize(cp.LinearExpr.WeightedSum([v for _, v in lines], [c for c, _ in lines]))
+        m.ClearHints()
+        for v in x + y + z + w + a:
+            m.AddHint(v, int(solver.BooleanValue(v)))
+        used = time.perf_counter() - t0
+        second = cp.CpSolver()
+        second.parameters.num_workers = nw
+        second.parameters.cp_model_presolve = False
+        second.parameters.random_seed = int(problem.options.seed)
+        # at most as long again as the first stage took, within what is left of the limit
+        left = used if time_limit_s is None else min(used, float(time_limit_s) - used)
+        second.parameters.max_time_in_seconds = max(left, 0.05)
+        st2 = second.Solve(m)
+        if st2 in (cp.OPTIMAL, cp.FEASIBLE):
+            xs = np.array([second.BooleanValue(v) for v in x], bool)
+            ys = np.array([second.BooleanValue(v) for v in y], bool)
+            lines_note = f"; fewest lines at that energy: {second.StatusName(st2)}"
     k = int(model.angles[int(np.argmax(ys))])
     # bound: objective units -> J. obj = energy_units * W + lines with 0 <= lines <= lines_ub, so
     # energy_units >= floor(bound / W); each rounded coefficient is off by <= unit / 2
@@ -160,4 +190,5 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     bound = model.energy_before_j + bound_units * unit - slack
     return solution_from_gaps(problem, "cpsat", mapped, k, model.gaps[xs], solve_s=solve_s, bound=bound,
                               message=f"CP-SAT {solver.StatusName(st)}; {nx} gap variables, {ny} angle(s), "
-                                      f"{len(model.pruned)} pruned by bound; energy unit {unit:.3g} J")
+                                      f"{len(model.pruned)} pruned by bound; energy unit {unit:.3g} J"
+                                      + lines_note)
