@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from . import dp, greedy, ils, milp, symmetric
 from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
@@ -30,6 +32,11 @@ SYMMETRIC_MAX_CANDS = 1000
 #: measured on 86 real groups of 17-170 curves: the same 83 proven with 0, 2 or 15 kicks per curve,
 #: and 15 cost 20 % more time in all)
 SYMMETRIC_WARM_KICKS_PER_CURVE = 2
+#: up to this many curves the subset DP goes first; above it (up to ``dp.fits``, ~16 curves) the
+#: DP takes 20-50 ms and the symmetric model is tried first where it applies (Cura bunny's 40
+#: groups of 13-16 curves: DP 1.37 s, greedy + symmetric 0.51 s, all 40 proven), the DP after it
+#: if the model did not prove the group in time
+DP_FIRST_CURVES = 12
 #: below this per-group limit (a spent budget) the exact step is not even built
 MIN_EXACT_S = 0.05
 #: the same for the symmetric model, plus a share per curve: below it (a budget spread thin over
@@ -37,6 +44,32 @@ MIN_EXACT_S = 0.05
 #: (real groups of 20-60 curves are often proven in 10-30 ms, of ~100 curves in 0.1-0.5 s)
 MIN_SYMMETRIC_S = 0.01
 MIN_SYMMETRIC_S_PER_CURVE = 0.002
+
+
+_WARM = False
+
+
+def warm_up() -> None:
+    """Load every compiled kernel auto may call (numba caches, HiGHS) once per process, on a
+    made-up group of 14 lines: the first real group would otherwise pay ~0.35 s for it, and a
+    shared budget would read that as an overrun to expect from every group still to come."""
+    global _WARM
+    if _WARM:
+        return
+    _WARM = True
+    from .polylines import from_polylines
+    rng = np.random.default_rng(0)
+    lines = [rng.uniform(0, 50, (2, 2)) for _ in range(DP_FIRST_CURVES + 2)]
+    prob = from_polylines([lines, lines[:DP_FIRST_CURVES]])
+    solve(prob.group(0, prob.origin_xy), time_limit_s=1.0)                # greedy, ILS, model
+    solve(prob.group(1, prob.origin_xy), time_limit_s=1.0)                # DP
+    dp.solve(prob.group(0, prob.origin_xy))
+
+
+def exact_time_s(n_curves):
+    """The least per-group limit at which the exact step is tried on a group of ``n_curves``
+    (numpy arrays too): what a shared budget must give a group it wants proven."""
+    return MIN_SYMMETRIC_S + MIN_SYMMETRIC_S_PER_CURVE * n_curves
 #: stop after the MILP's LP cutting-plane rounds if they leave more than this gap
 GIVE_UP_GAP = None   # measured: with 0.15, free-mode Cura groups lost most proofs the branch loop finds
 
@@ -44,7 +77,11 @@ GIVE_UP_GAP = None   # measured: with 0.15, free-mode Cura groups lost most proo
 def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
           exact_max_cands: int = EXACT_MAX_CANDS) -> GroupSolution:
     t0 = time.perf_counter()
-    if dp.fits(group):                             # small: exact by DP over subsets, sub-millisecond
+    sym = symmetric.applies(group)
+    sym_next = (sym and group.n_cands <= SYMMETRIC_MAX_CANDS
+                and time_limit_s >= exact_time_s(group.n_curves))
+    if dp.fits(group) and (group.n_curves <= DP_FIRST_CURVES or not sym_next):
+        # small: exact by DP over subsets, sub-millisecond up to ~12 curves
         ex = dp.solve(group)
         return GroupSolution.make(ex.order, ex.objective_mm, ex.bound_mm, "optimal",
                                   time.perf_counter() - t0, "auto:dp")
@@ -55,14 +92,18 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
     # escape the local optimum before anything else: a better incumbent is what lets the exact
     # step (or the bound) prove it, and what a fallback group keeps. Before the symmetric model a
     # short search is enough: that model builds its own incumbent from the LP point
-    sym = symmetric.applies(group)
-    sym_next = (sym and group.n_cands <= SYMMETRIC_MAX_CANDS
-                and time_limit_s >= MIN_SYMMETRIC_S + MIN_SYMMETRIC_S_PER_CURVE * group.n_curves)
     exact_next = sym_next or (not sym and group.n_cands <= exact_max_cands
                               and time_limit_s >= MIN_EXACT_S)
     share = ils.WARM_START_SHARE if exact_next else 1.0
     kicks = SYMMETRIC_WARM_KICKS_PER_CURVE * group.n_curves if sym_next else None
-    order = ils.improve_ils(group, heur.order, kicks=kicks, deadline=t0 + share * time_limit_s)
+    deadline = t0 + share * time_limit_s
+    if not exact_next and time.perf_counter() >= deadline:
+        # a budget's heuristic share, spent by the greedy path: ILS would still pay for its own
+        # local search and link matrix (about as much again) before its first kick
+        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "fallback",
+                                  time.perf_counter() - t0, "auto:greedy")
+    order = ils.improve_ils(group, heur.order, kicks=kicks, deadline=deadline,
+                            local_optimum=heur.method == "greedy")
     obj = group.path_cost_mm(order)
     if obj < heur.objective_mm - 1e-9:
         status = "optimal" if obj - heur.bound_mm <= OPTIMAL_ABS_TOL_MM else "feasible"
@@ -78,6 +119,10 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
     if ex.objective_mm > heur.objective_mm:        # never worse than the warm start
         ex = GroupSolution.make(heur.order, heur.objective_mm, max(ex.bound_mm, heur.bound_mm),
                                 "feasible", ex.solve_s, ex.method)
+    if ex.status != "optimal" and dp.fits(group):  # the model did not prove it in time: the DP will
+        d = dp.solve(group)
+        return GroupSolution.make(d.order, d.objective_mm, d.bound_mm, "optimal",
+                                  time.perf_counter() - t0, "auto:dp")
     status = ex.status if ex.status != "fallback" else "fallback"
     return GroupSolution.make(ex.order, ex.objective_mm, max(ex.bound_mm, heur.bound_mm), status,
                               time.perf_counter() - t0, "auto:milp")

@@ -35,6 +35,11 @@ def nearest_neighbour(group: Group, first: int | None = None) -> np.ndarray:
     m, n = group.n_cands, group.n_curves
     if n == 0:
         return np.zeros(0, np.int64)
+    if m <= NN_SCAN_MAX_CANDS:
+        return _nn_scan(np.ascontiguousarray(group.cand_entry_xy, np.float64),
+                        np.ascontiguousarray(group.cand_exit_xy, np.float64),
+                        np.asarray(group.cand_curve, np.int64), n,
+                        float(group.start_xy[0]), float(group.start_xy[1]), -1 if first is None else int(first))
     order = np.empty(n, np.int64)
     curve_used = np.zeros(n, bool)
     avail_idx = np.arange(m)                    # candidates of curves not yet used (tree rows)
@@ -68,6 +73,39 @@ def nearest_neighbour(group: Group, first: int | None = None) -> np.ndarray:
             avail_idx = avail_idx[~curve_used[group.cand_curve[avail_idx]]]
             tree = cKDTree(group.cand_entry_xy[avail_idx])
             n_tree_used = 0
+    return order
+
+
+# Up to this many candidates a plain scan over all of them per step (compiled, O(n * m)) beats
+# the KD-tree's per-query Python overhead: on the Cura bunny's 1082 groups (median 44 curves)
+# the tree version took 2.7 of the greedy's 5.3 s.
+NN_SCAN_MAX_CANDS = 3000
+
+
+@numba.njit(cache=True)
+def _nn_scan(ent, ext, cand_curve, n, sx, sy, first):
+    """Nearest neighbour by scanning every candidate of a curve not yet printed; ties go to the
+    lowest candidate index (the KD-tree version's order for equal distances)."""
+    m = len(cand_curve)
+    order = np.empty(n, np.int64)
+    used = np.zeros(n, np.bool_)
+    px, py = sx, sy
+    for step in range(n):
+        best = -1
+        if step == 0 and first >= 0:
+            best = first
+        else:
+            bd = np.inf
+            for k in range(m):
+                if used[cand_curve[k]]:
+                    continue
+                d = (ent[k, 0] - px) ** 2 + (ent[k, 1] - py) ** 2
+                if d < bd:
+                    bd = d
+                    best = k
+        order[step] = best
+        used[cand_curve[best]] = True
+        px, py = ext[best, 0], ext[best, 1]
     return order
 
 
@@ -290,8 +328,10 @@ def improve(group: Group, order: np.ndarray, *, closed: bool = False, max_rounds
         new = _orient_dp(group.cand_curve[order], cand_start, cand_list, ent, ext, sx, sy, he, ex, ey)
         c_new = _path_cost(new, ent, ext, sx, sy, False, he, ex, ey)
         c_old = _path_cost(order, ent, ext, sx, sy, False, he, ex, ey)
-        order = new if c_new < c_old else order
-        c = min(c_new, c_old)
+        if c_new >= c_old - _EPS:
+            break               # the orientations were already optimal: a local optimum of both
+        order = new
+        c = c_new
         if c >= best - _EPS:
             break
         best = c

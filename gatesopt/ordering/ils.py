@@ -298,11 +298,14 @@ def link_matrix(group: Group, k: int = NEIGHBOURS):
 
 
 def improve_ils(group: Group, order, *, kicks: int | None = None, seed: int = 0,
-                deadline: float | None = None) -> np.ndarray:
+                deadline: float | None = None, local_optimum: bool = False) -> np.ndarray:
     """The best path found by ``kicks`` kicks from ``order`` after its own local search (default:
     KICKS_PER_CURVE per curve, at most MAX_KICKS); never longer than ``improve(order)``. Groups
-    above MAX_CANDS candidates get the plain local search only."""
-    order = improve(group, np.asarray(order, np.int64))
+    above MAX_CANDS candidates get the plain local search only. ``local_optimum``: ``order`` is
+    already the output of ``improve`` (the greedy path), so that pass is not repeated."""
+    order = np.asarray(order, np.int64)
+    if not local_optimum:
+        order = improve(group, order)
     n = group.n_curves
     if n < 4 or group.n_cands > MAX_CANDS:
         return order

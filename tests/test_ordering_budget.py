@@ -1,0 +1,102 @@
+"""Budget plan (layers._BudgetPlan), auto's order of DP and symmetric model for 13-16 curves, and
+the compiled kernels that replaced library calls (nearest-neighbour scan, union-find components):
+each against the behaviour it must keep."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gatesopt.ordering import auto, dp, greedy, layers, symmetric
+from gatesopt.ordering.polylines import from_polylines
+from gatesopt.ordering.problem import OrderingOptions
+
+from test_ordering import random_problem
+
+
+def _layers_of(sizes, seed=0):
+    """One group per layer, random open lines (no two groups alike)."""
+    rng = np.random.default_rng(seed)
+    return [[rng.uniform(0, 60, (2, 2)) for _ in range(n)] for n in sizes]
+
+
+def test_plan_gives_the_smallest_groups_their_exact_time_first():
+    sizes = [80, 20, 150, 30, 5, 60]          # 5 curves: the DP's, no claim on the budget
+    prob = from_polylines(_layers_of(sizes), options=OrderingOptions(mode="free"))
+    plan = layers._BudgetPlan(prob)
+    exact = {n: float(auto.exact_time_s(n)) for n in sizes}
+    heur = {n: layers.HEURISTIC_S_PER_CURVE * n for n in sizes}
+    # enough for the exact time of 20 and 30, heuristic for the rest, and 1 ms to spare
+    left = exact[20] + exact[30] + heur[80] + heur[150] + heur[60] + 0.001
+    scale = left / (left - 0.001)
+    assert plan.limit(1, left) == pytest.approx(exact[20] * scale)
+    assert plan.limit(3, left) == pytest.approx(exact[30] * scale)
+    assert plan.limit(0, left) == pytest.approx(heur[80] * scale)
+    assert plan.limit(0, left) < auto.exact_time_s(80)     # auto will not start the model on it
+    assert plan.limit(4, left) == left                      # no claim: capped by what is left
+    # once 20 and 30 are done, the time they left unused pays the exact time of 60 too
+    plan.done(1), plan.done(3)
+    left = exact[60] + heur[80] + heur[150] + 0.001
+    assert plan.limit(5, left) >= exact[60]
+    assert plan.limit(2, left) < exact[150]
+
+
+def test_plan_scales_down_when_even_the_heuristic_share_does_not_fit():
+    sizes = [40, 50]
+    prob = from_polylines(_layers_of(sizes, seed=1), options=OrderingOptions(mode="free"))
+    plan = layers._BudgetPlan(prob)
+    heur = [layers.HEURISTIC_S_PER_CURVE * n for n in sizes]
+    left = 0.5 * sum(heur)
+    assert plan.limit(0, left) == pytest.approx(heur[0] * 0.5)
+    assert plan.limit(0, left) + plan.limit(1, left) == pytest.approx(left)
+
+
+def test_budgeted_solve_proves_small_groups_before_large_ones():
+    # a budget that pays for proofs of the small groups only: they must come out proven
+    auto.warm_up()          # kernel loading: once per process, not what this test is about
+    sizes = [200, 20, 200, 22, 24]
+    prob = from_polylines(_layers_of(sizes, seed=2), options=OrderingOptions(mode="free"))
+    sol = layers.solve(prob, "auto", time_limit_s=2.0, budget_s=0.4)
+    by_size = {n: g for n, g in zip(sizes, sol.groups)}
+    assert all(by_size[n].status == "optimal" for n in (20, 22, 24)), [g.method for g in sol.groups]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_auto_tries_the_model_before_the_dp_above_12_curves_and_stays_exact(seed):
+    prob = random_problem(700 + seed, 14, closed_share=0.0, clustered=seed % 2 == 0)
+    grp = prob.group(0, prob.origin_xy)
+    assert dp.fits(grp) and symmetric.applies(grp)
+    opt = dp.solve(grp).objective_mm
+    a = auto.solve(grp, time_limit_s=5.0)
+    assert a.status == "optimal" and a.method in ("auto:milp", "auto:bound", "auto:ils+bound")
+    assert a.objective_mm == pytest.approx(opt, abs=1e-6)
+    # no time for the model: the DP, still exact
+    b = auto.solve(grp, time_limit_s=1e-4)
+    assert b.status == "optimal" and b.method == "auto:dp"
+    assert b.objective_mm == pytest.approx(opt, abs=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_nearest_neighbour_scan_equals_the_kd_tree_walk(seed, monkeypatch):
+    prob = random_problem(seed, 40 + 10 * seed, closed_share=0.3, move_seams=seed % 2 == 1)
+    grp = prob.group(0, prob.origin_xy)
+    scan = greedy.nearest_neighbour(grp)
+    first = int(grp.n_cands // 2)
+    scan_first = greedy.nearest_neighbour(grp, first=first)
+    monkeypatch.setattr(greedy, "NN_SCAN_MAX_CANDS", -1)      # force the KD-tree walk
+    np.testing.assert_array_equal(scan, greedy.nearest_neighbour(grp))
+    np.testing.assert_array_equal(scan_first, greedy.nearest_neighbour(grp, first=first))
+    assert scan_first[0] == first
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_components_equal_scipy(seed):
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    rng = np.random.default_rng(seed)
+    n = 30 + 20 * seed
+    m = rng.integers(0, 2 * n)
+    r, c = rng.integers(0, n, m), rng.integers(0, n, m)
+    k, lab = symmetric.components(n, r, c)
+    k2, lab2 = connected_components(coo_matrix((np.ones(m), (r, c)), shape=(n, n)), directed=False)
+    assert k == k2
+    np.testing.assert_array_equal(lab, lab2)
