@@ -5,7 +5,7 @@ exactly there. Otherwise the greedy path (nearest neighbour + 2-opt/Or-opt + ori
 bound of ``bounds.py`` first — on real layers many groups are proven optimal right there (their
 greedy path uses each curve's cheapest links). Otherwise ILS, then the exact step of ``milp.py``
 within the per-group time limit: the symmetric model (``symmetric.py``: sparse LP with subtour and
-blossom cuts, pricing, reduced-cost fixing, branch-and-bound) for groups of open curves and
+blossom cuts, pricing, reduced-cost fixing, branch-and-cut) for groups of open curves and
 fixed-seam loops up to ``SYMMETRIC_MAX_CANDS`` candidates, the directed model up to
 ``exact_max_cands``; the rest keep the ILS path with status "fallback" and the cheap bound's gap.
 

@@ -85,7 +85,7 @@ NN_SCAN_MAX_CANDS = 3000
 @numba.njit(cache=True)
 def _nn_scan(ent, ext, cand_curve, n, sx, sy, first):
     """Nearest neighbour by scanning every candidate of a curve not yet printed; ties go to the
-    lowest candidate index (the KD-tree version's order for equal distances)."""
+    lowest candidate index."""
     m = len(cand_curve)
     order = np.empty(n, np.int64)
     used = np.zeros(n, np.bool_)

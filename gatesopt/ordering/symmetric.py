@@ -1,6 +1,6 @@
 """Exact ordering as a symmetric TSP with fixed edges (formulations/ordering.md, "milp, symmetric
 model"): an LP over a sparse set of travel edges with subtour and blossom cuts, column pricing,
-reduced-cost fixing, then HiGHS branch-and-bound on what is left.
+reduced-cost fixing, then our own branch-and-cut on what is left (HiGHS solves the LPs).
 
 When every curve is an open curve with its two directions or a loop with one seam, the
 orientation choice disappears into an undirected graph: nodes S (the start), E (the end), both
@@ -13,7 +13,7 @@ Only the few shortest travel edges of each node are columns at first: real layer
 of end points and a dense model has ~N^2/2 columns, most of which no good path uses. Missing edges
 enter when their reduced cost is negative (column generation); at the end every missing edge's
 reduced cost ``rc_e`` proves that no path cheaper than the incumbent uses it when
-``rc_e > UB - LB`` (reduced-cost fixing), so the branch-and-bound runs on the sparse graph and its
+``rc_e > UB - LB`` (reduced-cost fixing), so the branch-and-cut runs on the sparse graph and its
 optimum is the optimum of the whole problem.
 """
 from __future__ import annotations
@@ -32,9 +32,10 @@ _EPS = 1e-6
 
 #: travel edges per node in the first LP (nearest other-curve end points)
 K_NEIGHBOURS = 8
-#: no branch-and-bound when reduced-cost fixing leaves more columns than this per node: the
-#: root gap is then too wide for HiGHS to close within seconds (measured: 166 k columns for a
-#: 312-curve group with an 11 % root gap, nothing closed in 20 s)
+#: no branching when reduced-cost fixing leaves more columns than this per node: the root gap
+#: is then too wide to close within seconds (measured with HiGHS's MIP, before our own
+#: branch-and-cut: 166 k columns for a 312-curve group with an 11 % root gap, nothing closed in
+#: 20 s)
 MAX_BRANCH_COLUMNS_PER_NODE = 40
 #: ILS kicks per curve spent on a path built from an LP or subtour point (it starts close to
 #: the optimum; the warm start's search already spent its share)
@@ -130,15 +131,7 @@ class SymmetricModel:
         self.cut_inside: list[np.ndarray] = []
         h = self.h = highspy.Highs()
         h.setOptionValue("output_flag", False)
-        h.setOptionValue("mip_rel_gap", 1e-9)
-        h.setOptionValue("mip_abs_gap", 1e-5)
         h.setOptionValue("random_seed", 0)
-        # for the branch step: HiGHS restarted its root up to 5 times on these small MIPs (each
-        # reduced-cost fixing round drops 10-20 % of the columns) and strong-branched at the root;
-        # without both, 153 bunny groups of 13-69 curves took 11.4 s of MIP instead of 12.6 s and
-        # a 30-curve group 0.75 s instead of 1.1 s per MIP
-        h.setOptionValue("mip_allow_restart", False)
-        h.setOptionValue("mip_pscost_minreliable", 0)
         h.addRows(N, self.deg, self.deg, 0, np.zeros(N, np.int32), np.zeros(0, np.int32), np.zeros(0))
         # first columns: each node's nearest neighbours, every edge at E, the incumbent's edges
         k = min(K_NEIGHBOURS, N - 1)
@@ -421,55 +414,104 @@ class SymmetricModel:
             break
         return bound
 
-    def branch(self, best: np.ndarray, best_obj: float, bound: float, deadline: float):
-        """Branch-and-bound on the sparse graph after reduced-cost fixing. Needs ``root`` to have
+    def branch(self, best: np.ndarray, best_obj: float, bound: float, deadline: float,
+               max_nodes: int = 100_000):
+        """Branch-and-cut on the sparse graph after reduced-cost fixing. Needs ``root`` to have
         completed: an edge whose reduced cost exceeds ``best_obj - bound`` is in no path cheaper
         than ``best`` (any path using it costs at least ``bound + rc_e``), so missing edges below
-        that enter as columns, present ones above it are fixed at 0, and the optimum of what is
-        left is the optimum of the whole problem. Integer points with subtours get component
-        cuts, are patched into a path (a new incumbent tightens the fixing) and the MIP is solved
-        again. Returns (order, objective, bound, proven)."""
+        that enter as columns, present ones above it are fixed at 0 (again whenever the
+        incumbent improves), and the optimum of what is left is the optimum of the whole
+        problem. Best-bound node selection; each node's LP is hot-started from the last one (only
+        column bounds change); subtour and blossom separation at every node (valid for every
+        path, so the cuts stay for all nodes); branching on the edge closest to 1/2; a path built
+        from each fractional point (``tour_from``) may improve the incumbent. Returns (order,
+        objective, bound, proven)."""
+        import heapq
         h = self.h
         rc = self.rc
-        col_rc = np.asarray(h.getSolution().col_dual, float)    # exact for teeth too
+        col_rc = np.asarray(h.getSolution().col_dual, float)
         n_old = len(col_rc)
         gap = best_obj - bound + 1e-6
         iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(rc) & (rc <= gap), 1))
         if n_old + len(iu) > MAX_BRANCH_COLUMNS_PER_NODE * self.N:
-            return best, best_obj, bound, False         # a gap this wide does not close in seconds
+            return best, best_obj, bound, False
         self.add_columns(iu, iv)
         col_rc = np.concatenate([col_rc, rc[self.eu[n_old:], self.ev[n_old:]]])
+        root_bound = bound
         ncol = len(self.eu)
-        idx = np.arange(ncol, dtype=np.int32)
-        h.changeColsIntegrality(ncol, idx, np.ones(ncol, np.uint8))
-        fixed = np.zeros(ncol, bool)
-        proven = False
-        while True:
-            fix = np.nonzero((col_rc > best_obj - bound + 1e-6) & ~fixed)[0].astype(np.int32)
-            if len(fix):
-                h.changeColsBounds(len(fix), fix, np.zeros(len(fix)), np.zeros(len(fix)))
-                fixed[fix] = True
-            if not run_highs(h, deadline, start=self.columns_of(best)):
+        upper = np.ones(ncol)                   # global upper bounds (0: fixed by reduced cost)
+
+        def fix_by_reduced_cost():
+            drop = np.nonzero((col_rc > best_obj - root_bound + 1e-6) & (upper > 0))[0]
+            upper[drop] = 0.0
+
+        fix_by_reduced_cost()
+        applied: dict[int, float] = {}          # node bounds currently set in HiGHS: col -> value
+        heap = [(bound, 0, ())]                 # (parent's LP bound, tiebreak, fixings)
+        count = 1
+        nodes = 0
+        while heap:
+            if time.perf_counter() > deadline or nodes >= max_nodes:
                 break
-            ms = h.getModelStatus()
-            info = h.getInfo()
-            if info.primal_solution_status == 0:
-                break
-            x = np.asarray(h.getSolution().col_value)
-            order = self.decode(x)
-            if order is None:                       # subtours: patch into a path, cut, again
-                best, best_obj = self._polish(self.tour_from(x), best, best_obj, deadline)
-                if ms != _OPT or best_obj - bound <= 1e-6:
-                    break
-                self.separate(x, deadline, integer=True)
+            node_bound, _, fixings = heapq.heappop(heap)
+            if node_bound >= best_obj - OPTIMAL_ABS_TOL_MM:
                 continue
-            obj = self.group.path_cost_mm(order)
-            if obj < best_obj:
-                best, best_obj = order, obj
-            if np.isfinite(info.mip_dual_bound):
-                bound = max(bound, min(float(info.mip_dual_bound), best_obj))
-            proven = ms == _OPT
-            break
+            nodes += 1
+            # bounds: global ones, then this node's fixings (only what changed is sent)
+            want = dict(fixings)
+            cols = [c for c in applied if c not in want] + [c for c in want if applied.get(c) != want[c]]
+            if cols:
+                cols_a = np.asarray(cols, np.int32)
+                lo = np.array([want.get(c, 0.0) for c in cols])
+                hi = np.array([want[c] if c in want else upper[c] for c in cols])
+                h.changeColsBounds(len(cols_a), cols_a, lo, hi)
+            applied = want
+            if len(upper) and (upper == 0).any():
+                z = np.nonzero(upper == 0)[0]
+                z = z[[c not in want for c in z.tolist()]].astype(np.int32)
+                if len(z):
+                    h.changeColsBounds(len(z), z, np.zeros(len(z)), np.zeros(len(z)))
+            lp_obj, x = None, None
+            for _ in range(50):
+                if not run_highs(h, deadline):
+                    break
+                if h.getModelStatus() != _OPT:
+                    break
+                lp_obj = float(h.getInfo().objective_function_value)
+                if lp_obj >= best_obj - OPTIMAL_ABS_TOL_MM:
+                    break
+                x = np.asarray(h.getSolution().col_value)
+                if not self.separate(x, deadline):
+                    break
+                x = None
+            if time.perf_counter() > deadline:
+                heapq.heappush(heap, (node_bound, count, fixings))
+                break
+            if x is None or lp_obj is None or lp_obj >= best_obj - OPTIMAL_ABS_TOL_MM:
+                continue                        # infeasible, pruned by bound (or cut loop ended)
+            frac = np.nonzero((x > _EPS) & (x < 1 - _EPS))[0]
+            if len(frac) == 0:                  # integral, connected (separation found nothing)
+                order = self.decode(x)
+                if order is not None:
+                    obj = self.group.path_cost_mm(order)
+                    if obj < best_obj - 1e-9:
+                        best, best_obj = order, obj
+                        fix_by_reduced_cost()
+                continue
+            order = self.tour_from(x)
+            if order is not None and len(order) == self.group.n_curves:
+                obj = self.group.path_cost_mm(order)
+                if obj < best_obj - 1e-9:
+                    best, best_obj = order, obj
+                    fix_by_reduced_cost()
+            # branch on the edge closest to 1/2, the longer one on ties
+            e = frac[np.lexsort((-self.C[self.eu[frac], self.ev[frac]], np.abs(x[frac] - 0.5)))[0]]
+            for val in (1.0, 0.0):
+                heapq.heappush(heap, (lp_obj, count, fixings + ((int(e), val),)))
+                count += 1
+        open_bound = min((b for b, _, _ in heap), default=best_obj)
+        bound = max(bound, min(open_bound, best_obj))
+        proven = best_obj - bound <= OPTIMAL_ABS_TOL_MM
         return best, best_obj, bound, proven
 
     def _polish(self, order, best, best_obj, deadline):
@@ -485,7 +527,7 @@ class SymmetricModel:
 
 def solve(group: Group, incumbent: np.ndarray, deadline: float):
     """Root LP (cuts and pricing); a path built from the LP point and polished by ILS may improve
-    the incumbent; then branch-and-bound if a gap is left. Returns (order, objective, bound,
+    the incumbent; then branch-and-cut if a gap is left. Returns (order, objective, bound,
     proven optimal)."""
     best = np.asarray(incumbent, np.int64)
     best_obj = group.path_cost_mm(best)
