@@ -105,3 +105,13 @@ def test_ils_escapes_the_greedy_trap_on_a_real_layer():
     assert a.bound_mm <= a.objective_mm + 1e-6
     m = milp.solve(grp, time_limit_s=1.0)               # its default incumbent is the ILS path
     assert m.objective_mm <= 42.790 + 1e-3
+
+
+@pytest.mark.parametrize("m", [1, 2, 5, 11, 60])
+def test_nearest_lists_equal_a_full_row_sort(m):
+    from gatesopt.ordering.ils import _nearest
+    rng = np.random.default_rng(m)
+    far = rng.uniform(0, 1, (m, m))
+    far[np.arange(m), np.arange(m)] = np.inf
+    for k in range(0, min(10, m - 1) + 1):
+        np.testing.assert_array_equal(_nearest(far, k), np.argsort(far, axis=1, kind="stable")[:, :k])

@@ -289,8 +289,8 @@ def link_matrix(group: Group, k: int = NEIGHBOURS):
     far = D.copy()
     far[group.cand_curve[:, None] == group.cand_curve[None, :]] = np.inf
     k = min(k, group.n_cands - 1)
-    near_out = np.argsort(far, axis=1, kind="stable")[:, :k]
-    near_in = np.argsort(far.T, axis=1, kind="stable")[:, :k]
+    near_out = _nearest(far, k)
+    near_in = _nearest(far.T, k)
     # (in a group with < k other candidates a list may name the curve's own: every move is
     # re-scored exactly, so such an entry only costs a wasted try)
     return (D, np.ascontiguousarray(ds, float), np.ascontiguousarray(de, float),
@@ -328,3 +328,15 @@ def warm_start(group: Group, hint, t0: float, time_limit_s: float):
     if hint is not None:
         return hint
     return improve_ils(group, nearest_neighbour(group), deadline=t0 + WARM_START_SHARE * time_limit_s)
+
+
+def _nearest(far: np.ndarray, k: int) -> np.ndarray:
+    """Per row, the columns of the k smallest values, nearest first. A partial selection, then a
+    sort of those k only: the full row sort took 1.3 of the 10 s of a budgeted Cura bunny run."""
+    if k <= 0:
+        return np.zeros((far.shape[0], 0), np.int64)
+    if k >= far.shape[1]:
+        return np.argsort(far, axis=1, kind="stable")
+    part = np.argpartition(far, k - 1, axis=1)[:, :k]
+    return np.take_along_axis(part, np.argsort(np.take_along_axis(far, part, axis=1), axis=1,
+                                               kind="stable"), axis=1)
