@@ -100,3 +100,54 @@ def test_components_equal_scipy(seed):
     k2, lab2 = connected_components(coo_matrix((np.ones(m), (r, c)), shape=(n, n)), directed=False)
     assert k == k2
     np.testing.assert_array_equal(lab, lab2)
+
+
+def _walls_and_infill(n_layers=20, seed=5):
+    """Safe-mode-like problem: each layer a fixed group (walls) then a free group (infill), so every
+    free group's start is known in advance (the helper process's groups)."""
+    rng = np.random.default_rng(seed)
+    groups, fixed = [], []
+    for i in range(n_layers):
+        groups.append([rng.uniform(0, 60, (3, 2)) for _ in range(3)])
+        fixed.append(len(groups) - 1)
+        groups.append([rng.uniform(0, 60, (2, 2)) for _ in range(10 + i % 7)])
+    return from_polylines(groups, options=OrderingOptions(mode="free"), fixed_layers=fixed)
+
+
+def test_helper_process_gives_the_same_answer_as_one_process(monkeypatch):
+    import time
+    from gatesopt.ordering import helper
+    prob = _walls_and_infill()
+    assert len(helper.anchored(prob)) >= helper.HELPER_MIN_GROUPS
+    one = layers.solve(prob, "greedy", time_limit_s=1.0, workers=1)
+    # the main process is made slow (the helper, a fresh interpreter, is not): the helper must
+    # answer most groups, and its answers must be the ones one process finds
+    calls = []
+
+    def slow_greedy(grp, **kw):
+        calls.append(grp.n_curves)
+        time.sleep(0.25)
+        return greedy.solve(grp, **kw)
+
+    monkeypatch.setitem(layers.FORMULATIONS, "greedy", slow_greedy)
+    two = layers.solve(prob, "greedy", time_limit_s=1.0, workers=2)
+    assert len(calls) < len(helper.anchored(prob)), "the helper answered no group"
+    np.testing.assert_array_equal(one.curve_order, two.curve_order)
+    np.testing.assert_array_equal(one.curve_reversed, two.curve_reversed)
+    assert one.travel_after_mm == pytest.approx(two.travel_after_mm)
+
+
+def test_a_helper_that_dies_leaves_the_main_process_to_finish(monkeypatch):
+    import subprocess
+    import sys
+    from gatesopt.ordering import helper
+    real = subprocess.Popen
+
+    def broken(args, **kw):     # the helper exits at once, before answering anything
+        return real([sys.executable, "-c", "import sys; sys.exit(3)"], **kw)
+
+    monkeypatch.setattr(helper.subprocess, "Popen", broken)
+    prob = _walls_and_infill(seed=6)
+    one = layers.solve(prob, "greedy", time_limit_s=1.0, workers=1)
+    two = layers.solve(prob, "greedy", time_limit_s=1.0, workers=2)
+    np.testing.assert_array_equal(one.curve_order, two.curve_order)

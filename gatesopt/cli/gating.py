@@ -208,8 +208,9 @@ def run_solve(args) -> int:
         program = parse(sys.stdin.buffer.read(), source="<stdin>")
     else:
         program = parse(inp)
+    from .ordering import default_workers
     result = run(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
-                 order=not args.no_order, gating=not args.no_gating)
+                 order=not args.no_order, gating=not args.no_gating, order_workers=default_workers())
     s = result.summary()
     if not result.report.ok:
         if out != "-":      # stderr keeps the one line a slicer shows

@@ -36,9 +36,17 @@ def register(sub) -> None:
                    help="time limit per group for the exact formulations (default 2 s)")
     p.add_argument("--budget", type=float, default=None, metavar="S",
                    help="cap the whole solve at about S seconds (groups share what is left)")
+    p.add_argument("--workers", type=int, choices=(1, 2), default=default_workers(),
+                   help="processes: 2 lets a second one solve the groups whose start is known "
+                        "in advance (default: 2 if this machine has 2 cores or more)")
     p.add_argument("--json", metavar="REPORT.json", help="also write the report as JSON")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=run)
+
+
+def default_workers() -> int:
+    import os
+    return 2 if (os.cpu_count() or 1) >= 2 else 1
 
 
 def run(args) -> int:
@@ -54,7 +62,7 @@ def run(args) -> int:
     if args.budget is not None and not (math.isfinite(args.budget) and args.budget > 0):
         raise GatesoptError(f"--budget must be > 0 s, not {args.budget}")
     result = order_program(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
-                           budget_s=args.budget)
+                           budget_s=args.budget, workers=args.workers)
     s = result.summary
     if not result.ok:
         print(format_report(s))

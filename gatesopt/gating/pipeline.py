@@ -63,12 +63,12 @@ class RunResult:
         return d
 
 
-def _order(program: Program, time_limit_s: float):
+def _order(program: Program, time_limit_s: float, workers: int = 1):
     """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note, problem)."""
     try:
         ordering = importlib.import_module("gatesopt.ordering")
         problem = ordering.build(program)
-        solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s)
+        solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s, workers=workers)
         text = ordering.emit(program, problem, solution)
     except (ImportError, AttributeError, NotImplementedError) as exc:
         return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})", None
@@ -94,14 +94,14 @@ def _solve_interruptible(problem, formulation: str, time_limit_s, notes: list):
 
 def run(program: Program, options: GatingOptions | None = None, *, formulation: str = "dp",
         time_limit_s: float | None = None, order: bool = True, gating: bool = True,
-        order_time_limit_s: float = 2.0) -> RunResult:
+        order_time_limit_s: float = 2.0, order_workers: int = 1) -> RunResult:
     """Rewrite ``program``: optional curve ordering, then power gating; verify the result."""
     t0 = time.perf_counter()
     o = options or GatingOptions()
     notes = []
     base, ordered, order_problem = program, False, None
     if order:
-        base, ordered, note, order_problem = _order(program, order_time_limit_s)
+        base, ordered, note, order_problem = _order(program, order_time_limit_s, order_workers)
         if note:
             notes.append(note)
     ordered_base = base

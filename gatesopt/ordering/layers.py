@@ -17,6 +17,7 @@ import time
 import numpy as np
 
 from . import auto, cpsat, dp, greedy, milp, tsp
+from .helper import Helper
 from .problem import GroupSolution, OrderingProblem, OrderingSolution
 
 #: groups up to this many curves are settled by the subset DP (``dp.fits``) in milliseconds
@@ -36,12 +37,15 @@ FORMULATIONS = {
 
 
 def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: float = 2.0,
-          budget_s: float | None = None, **kwargs) -> OrderingSolution:
+          budget_s: float | None = None, workers: int = 1, **kwargs) -> OrderingSolution:
     """Order every group; ``time_limit_s`` is per group (exact formulations only); ``budget_s``
     caps the whole solve: each group gets at most its share of what is left (groups the DP or the
-    bound settle take next to nothing)."""
+    bound settle take next to nothing). ``workers = 2``: a second process solves the groups
+    whose start is known before the chain reaches them (``helper.Helper``), from the back."""
     if formulation not in FORMULATIONS:
         raise ValueError(f"unknown formulation {formulation!r}: one of {sorted(FORMULATIONS)}")
+    if workers not in (1, 2):
+        raise ValueError(f"workers must be 1 or 2, not {workers!r}")
     fn = FORMULATIONS[formulation]
     t0 = time.perf_counter()
     n = problem.n_curves
@@ -51,57 +55,34 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     sols = []
     pos = np.asarray(problem.origin_xy, float)
     plans = []      # per group: [(GroupSolution, Group)] options: the solver's path, the slicer's
-    cache = {}      # identical groups recur layer after layer (same infill, same start): solve once
     # the budget goes by plan (_BudgetPlan): a group the DP settles, a fixed group or a repeat of
     # an earlier group's geometry costs next to nothing; of the others the smallest get the time
     # an exact proof needs, the rest the greedy path's
-    plan = _BudgetPlan(problem) if budget_s is not None else None
-    if plan is not None and formulation == "auto":
-        auto.warm_up()      # inside the budget, but not in any group's overrun
-    over_s, n_timed = 0.0, 0
-    n_left = sum(1 for g in range(problem.n_groups) if not problem.group_fixed[g])
-    for g in range(problem.n_groups):
-        end = None
-        if g + 1 < problem.n_groups and problem.group_fixed[g + 1]:
-            end = problem.curve_start_xy[problem.group_curve_start[g + 1]]
-        grp = problem.group(g, pos, end)
-        if problem.group_fixed[g] or grp.n_curves == 0:
-            order = np.arange(grp.n_cands)      # one candidate per curve, in the slicer's order
-            obj = grp.path_cost_mm(order)
-            opts = [GroupSolution.make(order, obj, obj, "optimal", 0.0, "fixed")]
-        else:
-            key = _key(grp)
-            gs = cache.get(key)
-            if gs is None:
-                limit = time_limit_s
-                if budget_s is not None:
-                    # what each group took beyond its limit so far (greedy passes, bounds, model
-                    # building) is reserved for the groups still to come
-                    reserve = over_s / max(n_timed, 1) * n_left
-                    left = max(0.0, budget_s - (time.perf_counter() - t0) - reserve)
-                    limit = min(limit, plan.limit(g, left))
-                t_g = time.perf_counter()
-                gs = fn(grp, time_limit_s=limit, **kwargs)
-                over_s += max(0.0, time.perf_counter() - t_g - limit)
-                n_timed += 1
-                cache[key] = gs
+    helper = (Helper.start(problem, formulation, time_limit_s, budget_s, t0, kwargs)
+              if workers == 2 else None)
+    try:
+        runner = _GroupRunner(problem, fn, time_limit_s, budget_s, t0, kwargs,
+                              shared=helper.shared if helper else None,
+                              other_alive=(lambda: not helper.dead) if helper else None)
+        for g in range(problem.n_groups):
+            end = _end_of(problem, g)
+            grp = problem.group(g, pos, end)
+            if problem.group_fixed[g] or grp.n_curves == 0:
+                order = np.arange(grp.n_cands)      # one candidate per curve, in the slicer's order
+                obj = grp.path_cost_mm(order)
+                opts = [GroupSolution.make(order, obj, obj, "optimal", 0.0, "fixed")]
             else:
-                gs = GroupSolution.make(gs.order, gs.objective_mm, gs.bound_mm, gs.status, 0.0,
-                                        gs.method + "+cached")
-            grp.check_order(gs.order)
-            ident = np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
-            opts = [gs]
-            if len(ident) == grp.n_curves and not np.array_equal(ident, gs.order):
-                ident_obj = grp.path_cost_mm(ident)
-                opts.append(GroupSolution.make(ident, ident_obj, gs.bound_mm, gs.status, gs.solve_s,
-                                               gs.method + "+kept"))
-                if ident_obj < gs.objective_mm - 1e-9:      # never worse than the slicer's order
-                    opts = opts[::-1]
-        plans.append((grp, opts))
-        n_left -= not problem.group_fixed[g]
-        pos = grp.exit_xy(opts[0].order)
-        if plan is not None:
-            plan.done(g)
+                gs = helper.take(g) if helper else None
+                if gs is None:
+                    gs = runner.run(g, grp)
+                grp.check_order(gs.order)
+                opts = _options(grp, gs)
+            plans.append((grp, opts))
+            runner.passed(g)
+            pos = grp.exit_xy(opts[0].order)
+    finally:
+        if helper:
+            helper.stop()
     choice = _chain(problem, plans)
     for g, (grp, opts) in enumerate(plans):
         gs = opts[choice[g]]
@@ -115,6 +96,73 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     after = _travel(problem, np.asarray(order_out, np.int64), reversed_, seam)
     return OrderingSolution(np.asarray(order_out, np.int64), reversed_, seam, tuple(sols),
                             problem.original_travel_mm(), after, time.perf_counter() - t0, formulation)
+
+
+def _end_of(problem: OrderingProblem, g: int):
+    """Where group g's path must travel on to: the next group's entry if that one is fixed."""
+    if g + 1 < problem.n_groups and problem.group_fixed[g + 1]:
+        return problem.curve_start_xy[problem.group_curve_start[g + 1]]
+    return None
+
+
+def _options(grp, gs: GroupSolution) -> list:
+    """A group's candidate paths for the chain DP: the solver's and, if different, the slicer's
+    (first when shorter: never worse than the slicer's order)."""
+    ident = np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
+    opts = [gs]
+    if len(ident) == grp.n_curves and not np.array_equal(ident, gs.order):
+        ident_obj = grp.path_cost_mm(ident)
+        opts.append(GroupSolution.make(ident, ident_obj, gs.bound_mm, gs.status, gs.solve_s,
+                                       gs.method + "+kept"))
+        if ident_obj < gs.objective_mm - 1e-9:
+            opts = opts[::-1]
+    return opts
+
+
+class _GroupRunner:
+    """Solves one group at a time under the budget plan, with the cache of repeated geometry and
+    the overrun reserve; used by the main process and by the helper process alike."""
+
+    def __init__(self, problem, fn, time_limit_s, budget_s, t0, kwargs, shared=None,
+                 other_alive=None):
+        self.problem, self.fn, self.time_limit_s, self.budget_s = problem, fn, time_limit_s, budget_s
+        self.t0, self.kwargs = t0, kwargs
+        self.cache = {}     # identical groups recur layer after layer (same infill, same start)
+        # the budget goes by plan (_BudgetPlan): a group the DP settles, a fixed group or a repeat
+        # of an earlier group's geometry costs next to nothing; of the others the smallest get the
+        # time an exact proof needs, the rest the greedy path's
+        self.plan = _BudgetPlan(problem, shared) if budget_s is not None else None
+        # with a helper both processes spend the time left at once, while both are running
+        self.other_alive = other_alive if other_alive is not None else (lambda: shared is not None)
+        if self.plan is not None and fn is auto.solve:
+            auto.warm_up()      # inside the budget, but not in any group's overrun
+        self.over_s, self.n_timed = 0.0, 0
+
+    def run(self, g: int, grp) -> GroupSolution:
+        key = _key(grp)
+        gs = self.cache.get(key)
+        if gs is not None:
+            return GroupSolution.make(gs.order, gs.objective_mm, gs.bound_mm, gs.status, 0.0,
+                                      gs.method + "+cached")
+        limit = self.time_limit_s
+        if self.plan is not None:
+            # what each group took beyond its limit so far (greedy passes, bounds, model building)
+            # is reserved for the groups still to come; with a helper process both spend the
+            # time left at once
+            reserve = self.over_s / max(self.n_timed, 1) * self.plan.n_pending()
+            cpus = 2 if self.other_alive() else 1
+            left = max(0.0, cpus * (self.budget_s - (time.perf_counter() - self.t0)) - reserve)
+            limit = min(limit, self.plan.limit(g, left))
+        t_g = time.perf_counter()
+        gs = self.fn(grp, time_limit_s=limit, **self.kwargs)
+        self.over_s += max(0.0, time.perf_counter() - t_g - limit)
+        self.n_timed += 1
+        self.cache[key] = gs
+        return gs
+
+    def passed(self, g: int) -> None:
+        if self.plan is not None:
+            self.plan.done(g)
 
 
 def _budget_weights(problem: OrderingProblem) -> np.ndarray:
@@ -143,7 +191,7 @@ class _BudgetPlan:
     by time left / time planned, so what finished early (most proofs take a fraction of their
     time) flows to the groups after it, and every re-plan promotes the next smallest."""
 
-    def __init__(self, problem: OrderingProblem):
+    def __init__(self, problem: OrderingProblem, shared=None):
         w = _budget_weights(problem)
         self.claims = w > 0
         n = w[self.claims]
@@ -151,27 +199,37 @@ class _BudgetPlan:
         n = w[self.groups]
         self.exact_s = auto.exact_time_s(n)
         self.heuristic_s = HEURISTIC_S_PER_CURVE * n
-        self.pending = np.ones(len(self.groups), bool)
+        # per group, 1 once solved (or taken by the other process when shared with a helper)
+        self.done_mask = np.zeros(problem.n_groups, np.int8) if shared is None else shared
         self.rank = np.empty(problem.n_groups, np.int64)
         self.rank[self.groups] = np.arange(len(self.groups))
+
+    @property
+    def pending(self) -> np.ndarray:
+        """Per claim (sorted by size), whether it is still to be solved."""
+        return self.done_mask[self.groups] == 0
+
+    def n_pending(self) -> int:
+        return int(np.count_nonzero(self.pending))
 
     def limit(self, g: int, left_s: float) -> float:
         """Time for group ``g`` out of ``left_s`` seconds left for it and the groups after it."""
         if not self.claims[g]:
             return left_s          # DP, repeat: takes next to nothing, capped by what is left
-        e, h = self.exact_s[self.pending], self.heuristic_s[self.pending]
+        pending = self.pending
+        pending[self.rank[g]] = True
+        e, h = self.exact_s[pending], self.heuristic_s[pending]
         # the longest prefix (smallest groups) that can have its exact time, the rest heuristic
         cost = np.cumsum(e - h) + h.sum()
         n_exact = int(np.searchsorted(cost, left_s, side="right"))
         planned = cost[n_exact - 1] if n_exact else h.sum()
         i = int(self.rank[g])
-        pos = int(np.count_nonzero(self.pending[:i]))   # g's place among the pending groups
+        pos = int(np.count_nonzero(pending[:i]))        # g's place among the pending groups
         mine = self.exact_s[i] if pos < n_exact else self.heuristic_s[i]
         return float(mine * left_s / planned) if planned > 0 else left_s
 
     def done(self, g: int) -> None:
-        if self.claims[g]:
-            self.pending[self.rank[g]] = False
+        self.done_mask[g] = 1
 
 
 def _travel(problem: OrderingProblem, order, reversed_, seam) -> float:

@@ -51,12 +51,13 @@ def travel_stats(program: Program) -> dict:
 
 def order_program(program: Program, options: OrderingOptions | None = None, *,
                   formulation: str = "auto", time_limit_s: float = 2.0,
-                  budget_s: float | None = None) -> OrderResult:
+                  budget_s: float | None = None, workers: int = 1) -> OrderResult:
     """Re-order ``program``'s curves and verify the result (see module docstring)."""
     t0 = time.perf_counter()
     options = options or OrderingOptions()
     problem = build(program, options)
-    solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=budget_s)
+    solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=budget_s,
+                     workers=workers)
     text = emit(program, problem, solution)
     out = parse(text, source=f"{program.source} (re-ordered)")
     findings = tuple(check(program, out))
@@ -82,6 +83,7 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     summary = {
         "source": program.source, "formulation": formulation, "order_mode": options.mode,
         "move_seams": options.move_seams, "time_limit_s": time_limit_s, "budget_s": budget_s,
+        "workers": workers,
         "travel_before_mm": before["travel_mm"], "travel_after_mm": after["travel_mm"],
         "travel_change_pct": pct(after["travel_mm"], before["travel_mm"]),
         "travel_time_before_s": before["travel_s"], "travel_time_after_s": after["travel_s"],
