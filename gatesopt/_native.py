@@ -62,7 +62,10 @@ def run_highs(h, deadline: float | None = None, start=None) -> bool:
         left = deadline - time.perf_counter()
         if left <= 0:
             return False
-        h.setOptionValue("time_limit", float(left))
+        # HiGHS's time_limit is checked against the run time the instance has accumulated over
+        # all its runs (getRunTime), not this run's: a model solved again and again (cuts, node
+        # LPs) would otherwise stop at "time limit" long before the deadline
+        h.setOptionValue("time_limit", float(h.getRunTime() + left))
     if start is not None:
         import highspy
         sol = highspy.HighsSolution()

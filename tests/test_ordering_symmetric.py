@@ -142,3 +142,46 @@ def test_branch_and_cut_closes_root_gaps_to_the_dp_optimum():
         assert proven and obj == pytest.approx(opt, abs=OPTIMAL_ABS_TOL_MM)
         assert b <= opt + 1e-6
     assert branched >= 5, branched
+
+
+def test_a_node_lp_stopped_by_highs_is_never_taken_for_pruned(monkeypatch):
+    """Only an LP that proves something (infeasible, or a bound at the incumbent) may discard a
+    node: a node LP that HiGHS stopped (time limit) leaves the group unproven. (HiGHS's time limit
+    once counted the instance's earlier runs, and such nodes were dropped: false proofs.)"""
+    import highspy
+    from gatesopt._native import native_stdout_to_stderr
+    checked = 0
+    for seed in range(40):
+        prob = random_problem(3000 + seed, 13 + seed % 3, closed_share=0.0, clustered=seed % 3 != 0)
+        grp = prob.group(0, prob.origin_xy)
+        start = greedy.nearest_neighbour(grp)
+        model = symmetric.SymmetricModel(grp, start)
+        bound = model.root(time.perf_counter() + 30)
+        start_obj = grp.path_cost_mm(start)
+        if start_obj - bound <= 0.05 * start_obj:
+            continue
+
+        class Stopped:                  # every node LP ends with HiGHS's "time limit"
+            def __init__(self, h):
+                self._h = h
+
+            def __getattr__(self, name):
+                return getattr(self._h, name)
+
+            def getModelStatus(self):
+                return highspy.HighsModelStatus.kTimeLimit
+
+        def run(h, deadline=None, start=None):
+            with native_stdout_to_stderr():
+                h._h.run()
+            return True
+
+        model.h = Stopped(model.h)
+        monkeypatch.setattr(symmetric, "run_highs", run)
+        order, obj, b, proven = model.branch(start, start_obj, bound, time.perf_counter() + 30)
+        monkeypatch.undo()
+        assert not proven and b <= obj - OPTIMAL_ABS_TOL_MM
+        checked += 1
+        if checked >= 3:
+            break
+    assert checked >= 1

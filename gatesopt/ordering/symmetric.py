@@ -28,6 +28,7 @@ from .._native import run_highs
 from .problem import OPTIMAL_ABS_TOL_MM, Group
 
 _OPT = highspy.HighsModelStatus.kOptimal
+_INFEASIBLE = highspy.HighsModelStatus.kInfeasible
 _EPS = 1e-6
 
 #: travel edges per node in the first LP (nearest other-curve end points)
@@ -42,6 +43,8 @@ MAX_BRANCH_COLUMNS_PER_NODE = 40
 POLISH_KICKS_PER_CURVE = 1
 #: at most this many priced-in columns per pricing round, per node of the graph
 PRICE_PER_NODE = 1
+#: separation rounds per branch-and-cut node (then it is branched on its last LP point)
+MAX_NODE_CUT_ROUNDS = 50
 
 
 def components(n_nodes: int, r, c):
@@ -471,24 +474,31 @@ class SymmetricModel:
                 z = z[[c not in want for c in z.tolist()]].astype(np.int32)
                 if len(z):
                     h.changeColsBounds(len(z), z, np.zeros(len(z)), np.zeros(len(z)))
-            lp_obj, x = None, None
-            for _ in range(50):
+            lp_obj, x, outcome = None, None, "branch"
+            for _ in range(MAX_NODE_CUT_ROUNDS):
                 if not run_highs(h, deadline):
+                    outcome = "stopped"
                     break
-                if h.getModelStatus() != _OPT:
+                ms = h.getModelStatus()
+                if ms == _INFEASIBLE:
+                    outcome = "pruned"
+                    break
+                if ms != _OPT:                  # time limit or anything else: not settled
+                    outcome = "stopped"
                     break
                 lp_obj = float(h.getInfo().objective_function_value)
-                if lp_obj >= best_obj - OPTIMAL_ABS_TOL_MM:
-                    break
                 x = np.asarray(h.getSolution().col_value)
+                if lp_obj >= best_obj - OPTIMAL_ABS_TOL_MM:
+                    outcome = "pruned"
+                    break
                 if not self.separate(x, deadline):
                     break
-                x = None
-            if time.perf_counter() > deadline:
+            # (cut rounds used up: the last LP point and its value, a valid bound, are branched on)
+            if outcome == "stopped":            # only an LP that proves something discards a node
                 heapq.heappush(heap, (node_bound, count, fixings))
                 break
-            if x is None or lp_obj is None or lp_obj >= best_obj - OPTIMAL_ABS_TOL_MM:
-                continue                        # infeasible, pruned by bound (or cut loop ended)
+            if outcome == "pruned":
+                continue
             frac = np.nonzero((x > _EPS) & (x < 1 - _EPS))[0]
             if len(frac) == 0:                  # integral, connected (separation found nothing)
                 order = self.decode(x)
