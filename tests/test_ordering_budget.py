@@ -71,6 +71,7 @@ def test_budgeted_solve_gives_small_groups_the_exact_time_first(monkeypatch):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_auto_tries_the_model_before_the_dp_above_12_curves_and_stays_exact(seed):
+    auto.warm_up()          # on a fresh clone the first call compiles the kernels (seconds)
     prob = random_problem(700 + seed, 14, closed_share=0.0, clustered=seed % 2 == 0)
     grp = prob.group(0, prob.origin_xy)
     assert dp.fits(grp) and symmetric.applies(grp)
@@ -135,7 +136,7 @@ def test_helper_process_gives_the_same_answer_as_one_process(monkeypatch):
 
     def slow_greedy(grp, **kw):
         calls.append(grp.n_curves)
-        time.sleep(0.25)
+        time.sleep(0.4)         # 20 groups: 8 s, time for a fresh interpreter to compile and answer
         return greedy.solve(grp, **kw)
 
     monkeypatch.setitem(layers.FORMULATIONS, "greedy", slow_greedy)
