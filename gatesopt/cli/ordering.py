@@ -87,7 +87,9 @@ def format_report(s: dict) -> str:
         f"file          {s['source']}",
         f"formulation   {s['formulation']}   mode {s['order_mode']}"
         + ("   seams may move" if s["move_seams"] else "   seams kept")
-        + f"   time limit {s['time_limit_s']:g} s per group",
+        + f"   time limit {s['time_limit_s']:g} s per group"
+        + (f", budget {s['budget_s']:g} s" if s.get("budget_s") else "")
+        + (f", {s['workers']} processes" if s.get("workers", 1) > 1 else ""),
         f"travel        {s['travel_before_mm']:,.1f} mm -> {s['travel_after_mm']:,.1f} mm"
         f"   ({pct(s['travel_after_mm'], s['travel_before_mm'])})",
         f"travel time   {s['travel_time_before_s']:,.1f} s -> {s['travel_time_after_s']:,.1f} s"
