@@ -44,6 +44,8 @@ MIN_EXACT_S = 0.05
 #: (real groups of 20-60 curves are often proven in 10-30 ms, of ~100 curves in 0.1-0.5 s)
 MIN_SYMMETRIC_S = 0.01
 MIN_SYMMETRIC_S_PER_CURVE = 0.002
+#: stop after the MILP's LP cutting-plane rounds if they leave more than this gap
+GIVE_UP_GAP = None   # measured: with 0.15, free-mode Cura groups lost most proofs the branch loop finds
 
 
 _WARM = False
@@ -63,15 +65,12 @@ def warm_up() -> None:
     prob = from_polylines([lines, lines[:DP_FIRST_CURVES]])
     solve(prob.group(0, prob.origin_xy), time_limit_s=1.0)                # greedy, ILS, model
     solve(prob.group(1, prob.origin_xy), time_limit_s=1.0)                # DP
-    dp.solve(prob.group(0, prob.origin_xy))
 
 
 def exact_time_s(n_curves):
     """The least per-group limit at which the exact step is tried on a group of ``n_curves``
     (numpy arrays too): what a shared budget must give a group it wants proven."""
     return MIN_SYMMETRIC_S + MIN_SYMMETRIC_S_PER_CURVE * n_curves
-#: stop after the MILP's LP cutting-plane rounds if they leave more than this gap
-GIVE_UP_GAP = None   # measured: with 0.15, free-mode Cura groups lost most proofs the branch loop finds
 
 
 def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
@@ -123,6 +122,5 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         d = dp.solve(group)
         return GroupSolution.make(d.order, d.objective_mm, d.bound_mm, "optimal",
                                   time.perf_counter() - t0, "auto:dp")
-    status = ex.status if ex.status != "fallback" else "fallback"
-    return GroupSolution.make(ex.order, ex.objective_mm, max(ex.bound_mm, heur.bound_mm), status,
+    return GroupSolution.make(ex.order, ex.objective_mm, max(ex.bound_mm, heur.bound_mm), ex.status,
                               time.perf_counter() - t0, "auto:milp")

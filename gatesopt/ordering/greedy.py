@@ -320,7 +320,6 @@ def improve(group: Group, order: np.ndarray, *, closed: bool = False, max_rounds
             return _orient_dp(group.cand_curve[order], *clusters(group), ent, ext, sx, sy, he, ex, ey)
         return order
     cand_start, cand_list = clusters(group)
-    best = _path_cost(order, ent, ext, sx, sy, closed, he, ex, ey)
     for _ in range(max_rounds):
         order = _local_search(order, ent, ext, group.cand_flip, sx, sy, closed, max_passes, he, ex, ey)
         if closed:
@@ -330,11 +329,7 @@ def improve(group: Group, order: np.ndarray, *, closed: bool = False, max_rounds
         c_old = _path_cost(order, ent, ext, sx, sy, False, he, ex, ey)
         if c_new >= c_old - _EPS:
             break               # the orientations were already optimal: a local optimum of both
-        order = new
-        c = c_new
-        if c >= best - _EPS:
-            break
-        best = c
+        order = new             # shorter: search its neighbourhood again
     return order
 
 

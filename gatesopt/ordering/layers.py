@@ -55,9 +55,6 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     sols = []
     pos = np.asarray(problem.origin_xy, float)
     plans = []      # per group: [(GroupSolution, Group)] options: the solver's path, the slicer's
-    # the budget goes by plan (_BudgetPlan): a group the DP settles, a fixed group or a repeat of
-    # an earlier group's geometry costs next to nothing; of the others the smallest get the time
-    # an exact proof needs, the rest the greedy path's
     helper = (Helper.start(problem, formulation, time_limit_s, budget_s, t0, kwargs)
               if workers == 2 else None)
     try:

@@ -38,8 +38,8 @@ K_NEIGHBOURS = 8
 #: branch-and-cut: 166 k columns for a 312-curve group with an 11 % root gap, nothing closed in
 #: 20 s)
 MAX_BRANCH_COLUMNS_PER_NODE = 40
-#: ILS kicks per curve spent on a path built from an LP or subtour point (it starts close to
-#: the optimum; the warm start's search already spent its share)
+#: ILS kicks per curve spent on the path built from the root LP point (it starts close to the
+#: optimum; the warm start's search already spent its share)
 POLISH_KICKS_PER_CURVE = 1
 #: at most this many priced-in columns per pricing round, per node of the graph
 PRICE_PER_NODE = 1
@@ -443,13 +443,18 @@ class SymmetricModel:
         root_bound = bound
         ncol = len(self.eu)
         upper = np.ones(ncol)                   # global upper bounds (0: fixed by reduced cost)
+        applied: dict[int, float] = {}          # node bounds currently set in HiGHS: col -> value
 
         def fix_by_reduced_cost():
+            """Fix at 0 what the incumbent's gap excludes; a column the current node fixes keeps
+            its node bound until the node is left (then it is restored to ``upper``)."""
             drop = np.nonzero((col_rc > best_obj - root_bound + 1e-6) & (upper > 0))[0]
             upper[drop] = 0.0
+            drop = np.asarray([c for c in drop.tolist() if c not in applied], np.int32)
+            if len(drop):
+                h.changeColsBounds(len(drop), drop, np.zeros(len(drop)), np.zeros(len(drop)))
 
         fix_by_reduced_cost()
-        applied: dict[int, float] = {}          # node bounds currently set in HiGHS: col -> value
         heap = [(bound, 0, ())]                 # (parent's LP bound, tiebreak, fixings)
         count = 1
         nodes = 0
@@ -460,7 +465,8 @@ class SymmetricModel:
             if node_bound >= best_obj - OPTIMAL_ABS_TOL_MM:
                 continue
             nodes += 1
-            # bounds: global ones, then this node's fixings (only what changed is sent)
+            # this node's fixings; the previous node's that it lacks go back to the global bounds
+            # (only what changed is sent)
             want = dict(fixings)
             cols = [c for c in applied if c not in want] + [c for c in want if applied.get(c) != want[c]]
             if cols:
@@ -468,12 +474,8 @@ class SymmetricModel:
                 lo = np.array([want.get(c, 0.0) for c in cols])
                 hi = np.array([want[c] if c in want else upper[c] for c in cols])
                 h.changeColsBounds(len(cols_a), cols_a, lo, hi)
-            applied = want
-            if len(upper) and (upper == 0).any():
-                z = np.nonzero(upper == 0)[0]
-                z = z[[c not in want for c in z.tolist()]].astype(np.int32)
-                if len(z):
-                    h.changeColsBounds(len(z), z, np.zeros(len(z)), np.zeros(len(z)))
+            applied.clear()
+            applied.update(want)
             lp_obj, x, outcome = None, None, "branch"
             for _ in range(MAX_NODE_CUT_ROUNDS):
                 if not run_highs(h, deadline):
