@@ -115,8 +115,8 @@ def report(args) -> str:
              "not measured distances to the optimum. `--budget 10` caps `layers.solve` at about 10 s per "
              "file (kernel warm-up, greedy paths, bounds and exact steps; what a group takes beyond its "
              "limit is reserved for the groups after it, so a file can end slightly above). "
-             "`--workers 2`: a second process solves the groups whose start is known in advance "
-             "(formulations/ordering.md, \"Helper process\"). Without `--budget` every group gets the full per-group "
+             "`--workers 2`: a second process solves the chain of groups from the back "
+             "(formulations/ordering.md, \"Two processes\"). Without `--budget` every group gets the full per-group "
              "limit: that run shows what the exact step proves when time is not the constraint. "
              "Peers (LKH via elkai, OR-Tools routing) are in the next section.", ""]
     for form, tl, bud, w in configs:

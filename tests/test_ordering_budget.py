@@ -128,7 +128,7 @@ def test_helper_process_gives_the_same_answer_as_one_process(monkeypatch):
     import time
     from gatesopt.ordering import helper
     prob = _walls_and_infill()
-    assert len(helper.anchored(prob)) >= helper.HELPER_MIN_GROUPS
+    assert len(helper.groups_to_solve(prob)) >= helper.HELPER_MIN_GROUPS
     one = layers.solve(prob, "greedy", time_limit_s=1.0, workers=1)
     # the main process is made slow (the helper, a fresh interpreter, is not): the helper must
     # answer most groups, and its answers must be the ones one process finds
@@ -141,7 +141,7 @@ def test_helper_process_gives_the_same_answer_as_one_process(monkeypatch):
 
     monkeypatch.setitem(layers.FORMULATIONS, "greedy", slow_greedy)
     two = layers.solve(prob, "greedy", time_limit_s=1.0, workers=2)
-    assert len(calls) < len(helper.anchored(prob)), "the helper answered no group"
+    assert len(calls) < len(helper.groups_to_solve(prob)), "the helper answered no group"
     np.testing.assert_array_equal(one.curve_order, two.curve_order)
     np.testing.assert_array_equal(one.curve_reversed, two.curve_reversed)
     assert one.travel_after_mm == pytest.approx(two.travel_after_mm)
@@ -161,3 +161,80 @@ def test_a_helper_that_dies_leaves_the_main_process_to_finish(monkeypatch):
     one = layers.solve(prob, "greedy", time_limit_s=1.0, workers=1)
     two = layers.solve(prob, "greedy", time_limit_s=1.0, workers=2)
     np.testing.assert_array_equal(one.curve_order, two.curve_order)
+
+
+def _brute_free_start(grp):
+    """Shortest path over every order and direction, without the travel into the first curve."""
+    import itertools
+    best = np.inf
+    cands = [np.flatnonzero(grp.cand_curve == c) for c in range(grp.n_curves)]
+    for perm in itertools.permutations(range(grp.n_curves)):
+        for pick in itertools.product(*[cands[c] for c in perm]):
+            o = np.asarray(pick)
+            best = min(best, grp.path_cost_mm(o) - float(np.hypot(*(grp.cand_entry_xy[o[0]] - grp.start_xy))))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_backwards_group_costs_the_path_without_its_first_travel(seed):
+    rng = np.random.default_rng(seed)
+    lines = [rng.uniform(0, 40, (2, 2)) for _ in range(6)] + [np.array([[5.0, 5], [9, 5], [9, 9], [5, 5]])]
+    prob = from_polylines([lines], options=OrderingOptions(mode="free"))
+    end = rng.uniform(0, 40, 2)
+    grp = prob.group(0, rng.uniform(0, 40, 2), end)
+    back = grp.backwards()
+    assert back.end_xy is None and np.array_equal(back.start_xy, end)
+    for _ in range(20):
+        order = np.array([rng.choice(np.flatnonzero(grp.cand_curve == c)) for c in rng.permutation(grp.n_curves)])
+        first = float(np.hypot(*(grp.cand_entry_xy[order[0]] - grp.start_xy)))
+        assert back.path_cost_mm(order[::-1]) == pytest.approx(grp.path_cost_mm(order) - first)
+    with pytest.raises(ValueError):
+        prob.group(0, end).backwards()
+
+
+def _chain_only(n_layers=24, seed=7):
+    """Free mode without fixed groups: every group's start is the previous group's end, so only
+    the first group's start is known in advance."""
+    rng = np.random.default_rng(seed)
+    return from_polylines([[rng.uniform(0, 60, (2, 2)) for _ in range(4 + i % 2)] for i in range(n_layers)],
+                          options=OrderingOptions(mode="free"))
+
+
+def test_helper_solves_the_chain_from_the_back(monkeypatch):
+    import time
+    prob = _chain_only()
+    calls = []
+
+    def slow_dp(grp, **kw):             # the main process only: the helper is a fresh interpreter
+        calls.append(grp.n_curves)
+        time.sleep(0.4)
+        return dp.solve(grp, **kw)
+
+    monkeypatch.setitem(layers.FORMULATIONS, "dp", slow_dp)
+    two = layers.solve(prob, "dp", workers=2)
+    assert len(calls) < prob.n_groups, "the helper answered no group"
+    back = [g for g, gs in enumerate(two.groups) if gs.method.endswith("+back")]
+    assert back, "no group was solved from the back"
+    checked = 0
+    for g in back:
+        gs, nxt = two.groups[g], (two.groups[g + 1] if g + 1 < prob.n_groups else None)
+        if nxt is None or "+kept" in nxt.method or "+kept" in gs.method:
+            continue
+        # proven optimal for its end (the entry of the next group's path), its start free
+        entry = prob.group(g + 1, np.zeros(2)).cand_entry_xy[nxt.order[0]]
+        grp = prob.group(g, np.zeros(2), entry)
+        assert gs.status == "optimal"
+        assert gs.objective_mm == pytest.approx(_brute_free_start(grp), abs=1e-6)
+        first = float(np.hypot(*(grp.cand_entry_xy[gs.order[0]] - grp.start_xy)))
+        assert grp.path_cost_mm(gs.order) - first == pytest.approx(gs.objective_mm, abs=1e-6)
+        checked += 1
+    assert checked >= 3
+    # the file's last group was solved from a guessed start and scored from the real one: its
+    # bound must hold from there
+    last, prev = two.groups[-1], two.groups[-2]
+    if "+kept" not in prev.method:
+        start = prob.group(prob.n_groups - 2, np.zeros(2)).cand_exit_xy[prev.order[-1]]
+        grp = prob.group(prob.n_groups - 1, start)
+        assert last.objective_mm == pytest.approx(grp.path_cost_mm(last.order))
+        assert last.bound_mm <= dp.solve(grp).objective_mm + 1e-6
+    assert two.travel_after_mm <= two.travel_before_mm + 1e-9

@@ -37,8 +37,8 @@ def register(sub) -> None:
     p.add_argument("--budget", type=float, default=None, metavar="S",
                    help="cap the whole solve at about S seconds (groups share what is left)")
     p.add_argument("--workers", type=int, choices=(1, 2), default=default_workers(),
-                   help="processes: 2 lets a second one solve the groups whose start is known "
-                        "in advance (default: 2 if this machine has 2 cores or more)")
+                   help="processes: 2 lets a second one solve the chain of groups from the back "
+                        "(default: 2 if this machine has 2 cores or more)")
     p.add_argument("--json", metavar="REPORT.json", help="also write the report as JSON")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=run)

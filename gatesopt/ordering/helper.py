@@ -1,14 +1,20 @@
-"""A second process for ``layers.solve(..., workers=2)``: the groups whose start is known before
-the chain reaches them.
+"""A second process for ``layers.solve(..., workers=2)``: the chain solved from both ends.
 
-A group's start is where the previous group ended, so groups are solved in print order. But the
-first group, and every group after a fixed one, start at a point no solution changes (the fixed
-group's exit; its end is the next fixed group's entry): in safe mode most groups (walls are
-fixed; the Cura bunny: 538 of its 951 groups of > 12 curves). The helper solves those from the
-back while the main process walks the chain from the front; each writes where it is into shared
-memory, the main process takes the helper's answers when it reaches those groups, and the helper
-stops where they meet. The budget plan's "done" marks are shared too, so both plan over the same
-groups, and both spend the time left at once (``layers._GroupRunner``).
+A group's start is where the previous group ended, so the main process solves groups in print
+order. The helper walks the same chain from the back: each group it solves must end at the entry
+of the path it chose for the group after it (or at the next fixed group's entry), and starts
+where the group before it ends if that is known in advance (the first group; any group after a
+fixed one: walls are fixed in safe mode). Otherwise the start is left free: the group is solved
+as ``Group.backwards()`` (the same path walked from its end), which is exactly as good a chain
+as the main process's, mirrored (the main process's groups leave their end free, the helper's
+their start). Only the last group of the file, if its start is not known, is solved from a
+guessed start (where the slicer came from); the main process re-scores it from the real one.
+
+Both write where they are into shared memory; the main process takes the helper's answers when
+it reaches those groups, ends its last own group at the entry of the helper's first if that is
+known by then, and the helper stops where they meet. The budget plan's "done" marks are shared
+too, so both plan over the same groups, and both spend the time left at once
+(``layers._GroupRunner``).
 
 The helper is a fresh interpreter started with ``subprocess`` (``python -c``), not
 ``multiprocessing``: "fork" after HiGHS has started its threads can deadlock, and "spawn"
@@ -31,21 +37,32 @@ import time
 
 import numpy as np
 
-#: fewer groups with a known start than this: no helper (its start-up, ~1.5 s for a fresh
-#: interpreter with the imports and kernels, would not pay)
+#: fewer groups to solve than this: no helper (its start-up, ~1.5 s for a fresh interpreter with
+#: the imports and kernels, would not pay)
 HELPER_MIN_GROUPS = 16
 _HEAD = struct.Struct("<q")
 
 
-def anchored(problem) -> list[int]:
-    """Groups to solve whose start does not depend on another group's solution."""
-    out = []
-    for g in range(problem.n_groups):
-        if problem.group_fixed[g] or len(problem.group_curves(g)) <= 1:
-            continue
-        if g == 0 or (problem.group_fixed[g - 1] and len(problem.group_curves(g - 1)) > 0):
-            out.append(g)
-    return out
+def groups_to_solve(problem) -> list[int]:
+    """Groups a solver works on (not fixed, not empty), in print order."""
+    return [g for g in range(problem.n_groups)
+            if not problem.group_fixed[g] and len(problem.group_curves(g)) > 0]
+
+
+def known_start(problem, g: int):
+    """Where group g starts if no solution decides it (the first group, or the group after a
+    fixed one: that group's last curve's end), else None."""
+    if g == 0:
+        return np.asarray(problem.origin_xy, float)
+    if problem.group_fixed[g - 1] and len(problem.group_curves(g - 1)) > 0:
+        return problem.curve_end_xy[problem.group_curves(g - 1)[-1]]
+    return None
+
+
+def _slicer_start(problem, g: int):
+    """Where the slicer's own order came from before group g's first curve."""
+    c = int(problem.group_curve_start[g]) - 1
+    return np.asarray(problem.origin_xy, float) if c < 0 else problem.curve_end_xy[c]
 
 
 def _views(buf, n_groups):
@@ -67,7 +84,7 @@ class Helper:
 
     @classmethod
     def start(cls, problem, formulation, time_limit_s, budget_s, t0, kwargs):
-        todo = anchored(problem)
+        todo = groups_to_solve(problem)
         if len(todo) < HELPER_MIN_GROUPS:
             return None
         from multiprocessing import shared_memory
@@ -110,27 +127,36 @@ class Helper:
             if item is None:
                 self.dead = True
                 return
-            g, gs = item
-            self.results[g] = gs
+            g, opts, entry, guess = item
+            self.results[g] = (opts, entry, guess)
             if block:
                 return
 
+    def entry_of(self, g: int):
+        """Where the helper's path for group g begins, if it has answered g (the main process
+        then ends group g - 1 there), else None."""
+        self._drain(block=False)
+        got = self.results.get(g)
+        return None if got is None else got[1]
+
     def take(self, g: int):
-        """The helper's answer for group g if it has one or is working on it (then wait for it);
-        None: the main process solves g itself."""
+        """The helper's answer for group g, (options, guessed start or None), if it has one or is
+        working on it (then wait for it): it has passed every group from its position on. None:
+        the main process solves g itself."""
         self.at[0] = g
         self._drain(block=False)
-        while g not in self.results and not self.dead and self.at[1] == g:
+        while g not in self.results and not self.dead and 0 <= self.at[1] <= g:
             self._drain(block=True)
-        return self.results.pop(g, None)
+        got = self.results.pop(g, None)
+        return None if got is None else (got[0], got[2])
 
     def stop(self) -> None:
-        self.at[0] = 1 << 40                    # the helper stops after its current group
-        try:
-            self.proc.wait(timeout=2.0)
-        except subprocess.TimeoutExpired:
+        # every answer the main process needed has been taken: a group the helper is still on
+        # is nobody's (the main process solved it), so the helper is not waited for
+        self.at[0] = 1 << 40
+        if self.proc.poll() is None:
             self.proc.kill()
-            self.proc.wait()
+        self.proc.wait()
         self.reader.join(timeout=1.0)
         self.proc.stdout.close()
         del self.shared, self.at
@@ -143,11 +169,10 @@ class Helper:
 
 
 def main() -> None:
-    """The helper process: solve the anchored groups from the back until the main process
-    reaches them."""
+    """The helper process: solve the groups from the back until the main process reaches them."""
     from multiprocessing import resource_tracker, shared_memory
 
-    from .layers import FORMULATIONS, _end_of, _GroupRunner
+    from .layers import FORMULATIONS, _end_of, _GroupRunner, _options, solve_backwards
     results = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)                               # stray prints (HiGHS, numba) go to stderr
     with open(sys.argv[1], "rb") as f:
@@ -157,6 +182,7 @@ def main() -> None:
     resource_tracker.unregister(shm._name, "shared_memory")
     done, at = _views(shm.buf, problem.n_groups)
     t0 = time.perf_counter()
+    entry = {}          # g -> where the path chosen for group g begins
     try:
         budget_s = None if budget_end is None else max(0.0, budget_end - time.time())
         runner = _GroupRunner(problem, FORMULATIONS[formulation], time_limit_s, budget_s, t0,
@@ -165,11 +191,23 @@ def main() -> None:
             at[1] = g
             if g <= at[0]:
                 break
-            pos = (np.asarray(problem.origin_xy, float) if g == 0
-                   else problem.curve_end_xy[problem.group_curves(g - 1)[-1]])
-            gs = runner.run(g, problem.group(g, pos, _end_of(problem, g)))
+            end = _end_of(problem, g)
+            if end is None:
+                end = entry.get(g + 1)
+            start, guess = known_start(problem, g), None
+            if start is None and end is not None:
+                grp, opts = solve_backwards(runner, problem, g, end)
+            else:
+                if start is None:       # the file's last group: no end, no known start
+                    start = guess = _slicer_start(problem, g)
+                grp = problem.group(g, start, end)
+                gs = runner.run(g, grp)
+                grp.check_order(gs.order)
+                opts = _options(grp, gs)
             runner.passed(g)
-            body = pickle.dumps((g, gs))
+            first = opts[0].order
+            entry[g] = grp.cand_entry_xy[first[0]] if len(first) else end
+            body = pickle.dumps((g, opts, entry[g], guess))
             results.write(_HEAD.pack(len(body)) + body)
             results.flush()
     finally:

@@ -18,7 +18,8 @@ import numpy as np
 
 from . import auto, cpsat, dp, greedy, milp, tsp
 from .helper import Helper
-from .problem import GroupSolution, OrderingProblem, OrderingSolution
+from .problem import (OPTIMAL_ABS_TOL_MM, GroupSolution, OrderingProblem, OrderingSolution,
+                      path_travel_mm)
 
 #: groups up to this many curves are settled by the subset DP (``dp.fits``) in milliseconds
 DP_CURVES = 12
@@ -40,8 +41,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
           budget_s: float | None = None, workers: int = 1, **kwargs) -> OrderingSolution:
     """Order every group; ``time_limit_s`` is per group (exact formulations only); ``budget_s``
     caps the whole solve: each group gets at most its share of what is left (groups the DP or the
-    bound settle take next to nothing). ``workers = 2``: a second process solves the groups
-    whose start is known before the chain reaches them (``helper.Helper``), from the back."""
+    bound settle take next to nothing). ``workers = 2``: a second process solves the chain from the
+    back (``helper.Helper``) until it meets the main process."""
     if formulation not in FORMULATIONS:
         raise ValueError(f"unknown formulation {formulation!r}: one of {sorted(FORMULATIONS)}")
     if workers not in (1, 2):
@@ -63,17 +64,25 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                               other_alive=(lambda: not helper.dead) if helper else None)
         for g in range(problem.n_groups):
             end = _end_of(problem, g)
+            if end is None and helper:
+                end = helper.entry_of(g + 1)    # the next group's path, if the helper has it
             grp = problem.group(g, pos, end)
             if problem.group_fixed[g] or grp.n_curves == 0:
                 order = np.arange(grp.n_cands)      # one candidate per curve, in the slicer's order
                 obj = grp.path_cost_mm(order)
                 opts = [GroupSolution.make(order, obj, obj, "optimal", 0.0, "fixed")]
             else:
-                gs = helper.take(g) if helper else None
-                if gs is None:
+                answer = helper.take(g) if helper else None
+                if answer is None:
                     gs = runner.run(g, grp)
-                grp.check_order(gs.order)
-                opts = _options(grp, gs)
+                    grp.check_order(gs.order)
+                    opts = _options(grp, gs)
+                else:
+                    opts, guess = answer
+                    if guess is not None:
+                        opts = _rescored(grp, opts, guess)
+                    for gs in opts:
+                        grp.check_order(gs.order)
             plans.append((grp, opts))
             runner.passed(g)
             pos = grp.exit_xy(opts[0].order)
@@ -102,10 +111,13 @@ def _end_of(problem: OrderingProblem, g: int):
     return None
 
 
-def _options(grp, gs: GroupSolution) -> list:
+def _options(grp, gs: GroupSolution, backwards: bool = False) -> list:
     """A group's candidate paths for the chain DP: the solver's and, if different, the slicer's
-    (first when shorter: never worse than the slicer's order)."""
+    (first when shorter: never worse than the slicer's order). ``backwards``: ``grp`` is a
+    ``Group.backwards()`` problem (the slicer's order is walked from its last curve)."""
     ident = np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
+    if backwards:
+        ident = ident[::-1]
     opts = [gs]
     if len(ident) == grp.n_curves and not np.array_equal(ident, gs.order):
         ident_obj = grp.path_cost_mm(ident)
@@ -114,6 +126,37 @@ def _options(grp, gs: GroupSolution) -> list:
         if ident_obj < gs.objective_mm - 1e-9:
             opts = opts[::-1]
     return opts
+
+
+def solve_backwards(runner, problem: OrderingProblem, g: int, end_xy) -> tuple:
+    """Group g with its end fixed (the next group's entry) and its start free: solved as
+    ``Group.backwards()``. Returns (forward Group, options in forward order). Each option is
+    proven for that problem: the travel into its first curve belongs to the group before, whose
+    own end is then chosen to be this path's entry (formulations/ordering.md, "Two processes")."""
+    fwd = problem.group(g, end_xy, end_xy)      # (its start is not used)
+    back = fwd.backwards()
+    gs = runner.run(g, back)
+    back.check_order(gs.order)
+    opts = [GroupSolution.make(o.order[::-1].copy(), o.objective_mm, o.bound_mm, o.status, o.solve_s,
+                               o.method + "+back")
+            for o in _options(back, gs, backwards=True)]
+    return fwd, opts
+
+
+def _rescored(grp, opts, guess_xy) -> list:
+    """Options solved from a guessed start, scored from the real one (``grp.start_xy``): a path
+    from the real start costs at least its cost from the guess minus the distance between the
+    two (triangle inequality), so the bound stays valid; "optimal" stays only if it still closes."""
+    shift = float(np.hypot(*(np.asarray(grp.start_xy) - guess_xy)))
+    out = []
+    for o in opts:
+        obj = grp.path_cost_mm(o.order)
+        bound = max(0.0, o.bound_mm - shift)
+        status = o.status
+        if status == "optimal" and obj - bound > OPTIMAL_ABS_TOL_MM:
+            status = "feasible"
+        out.append(GroupSolution.make(o.order, obj, bound, status, o.solve_s, o.method))
+    return out
 
 
 class _GroupRunner:
@@ -231,17 +274,15 @@ class _BudgetPlan:
 
 def _travel(problem: OrderingProblem, order, reversed_, seam) -> float:
     """Model travel of a full solution (start of each curve from the end of the one before)."""
-    pos = np.asarray(problem.origin_xy, float)
-    total = 0.0
-    for c in order:
-        a, b = problem.curve_start_xy[c], problem.curve_end_xy[c]
-        if seam[c]:
-            a = b = problem.points_xy[problem.curve_point_start[c] + seam[c]]
-        if reversed_[c]:
-            a, b = b, a
-        total += float(np.hypot(*(a - pos)))
-        pos = b
-    return total
+    order = np.asarray(order, np.int64)
+    a, b = problem.curve_start_xy[order].copy(), problem.curve_end_xy[order].copy()
+    moved = np.flatnonzero(seam[order] != 0)        # a loop entered and left at another vertex
+    if len(moved):
+        c = order[moved]
+        a[moved] = b[moved] = problem.points_xy[problem.curve_point_start[c] + seam[c]]
+    rev = np.asarray(reversed_, bool)[order]
+    a[rev], b[rev] = b[rev], a[rev].copy()
+    return path_travel_mm(problem.origin_xy, a, b)
 
 
 def _chain(problem: OrderingProblem, plans) -> list[int]:

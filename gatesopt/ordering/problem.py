@@ -121,6 +121,18 @@ class Group:
         """Where the path leaves its last curve."""
         return self.cand_exit_xy[order[-1]] if len(order) else self.start_xy
 
+    def backwards(self) -> "Group":
+        """The mirror image of this group for a path whose end is fixed and whose start is free:
+        it starts at ``end_xy`` and ends wherever it likes, each candidate's entry and exit
+        swapped. Candidate indices keep their meaning, so its path k1..kn is this group's path
+        kn..k1, and its cost is that path's cost without the travel into its first curve. (The
+        helper process solves groups this way when only the next group's entry is known.)"""
+        if self.end_xy is None:
+            raise ValueError("a group without an end point has no backwards problem")
+        return Group(np.asarray(self.end_xy, float).copy(), self.cand_curve, self.cand_exit_xy,
+                     self.cand_entry_xy, self.cand_flip, self.n_curves, self.layer, self.label,
+                     self.cand_reversed, self.cand_seam, None)
+
 
 @dataclass(frozen=True, eq=False)
 class GroupSolution:
@@ -239,12 +251,18 @@ class OrderingProblem:
 
     def original_travel_mm(self) -> float:
         """Travel of the slicer's own order under the same Euclidean model."""
-        pos = np.asarray(self.origin_xy, float)
-        total = 0.0
-        for c in range(self.n_curves):
-            total += float(np.hypot(*(self.curve_start_xy[c] - pos)))
-            pos = self.curve_end_xy[c]
-        return total
+        return path_travel_mm(self.origin_xy, self.curve_start_xy, self.curve_end_xy)
+
+
+def path_travel_mm(origin_xy, entry_xy, exit_xy) -> float:
+    """Travel from ``origin_xy`` through points entered at ``entry_xy[i]`` and left at
+    ``exit_xy[i]``, in that order (arrays (n, 2))."""
+    entry_xy = np.asarray(entry_xy, float).reshape(-1, 2)
+    if len(entry_xy) == 0:
+        return 0.0
+    prev = np.vstack([np.asarray(origin_xy, float).reshape(1, 2),
+                      np.asarray(exit_xy, float).reshape(-1, 2)[:-1]])
+    return float(np.hypot(*(entry_xy - prev).T).sum())
 
 
 @dataclass(frozen=True, eq=False)
