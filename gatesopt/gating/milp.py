@@ -459,10 +459,7 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
         h.setOptionValue("time_limit", float(time_limit_s))
     h.passModel(lp)
     hv = hint_vector(problem, model, start)
-    if hv is not None:
-        run_highs(h, start=_full_start(model, M, *hv))
-    else:
-        run_highs(h)
+    run_highs(h, start=None if hv is None else _full_start(model, M, *hv))
     status = h.getModelStatus()
     info = h.getInfo()
     mapped = _status_map().get(status, "fallback")

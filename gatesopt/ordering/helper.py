@@ -52,10 +52,8 @@ def groups_to_solve(problem) -> list[int]:
 def known_start(problem, g: int):
     """Where group g starts if no solution decides it (the first group, or the group after a
     fixed one: that group's last curve's end), else None."""
-    if g == 0:
-        return np.asarray(problem.origin_xy, float)
-    if problem.group_fixed[g - 1] and len(problem.group_curves(g - 1)) > 0:
-        return problem.curve_end_xy[problem.group_curves(g - 1)[-1]]
+    if g == 0 or (problem.group_fixed[g - 1] and len(problem.group_curves(g - 1)) > 0):
+        return _slicer_start(problem, g)
     return None
 
 
@@ -205,8 +203,7 @@ def main() -> None:
                 grp.check_order(gs.order)
                 opts = _options(grp, gs)
             runner.passed(g)
-            first = opts[0].order
-            entry[g] = grp.cand_entry_xy[first[0]] if len(first) else end
+            entry[g] = grp.cand_entry_xy[opts[0].order[0]]     # (groups to solve are not empty)
             body = pickle.dumps((g, opts, entry[g], guess))
             results.write(_HEAD.pack(len(body)) + body)
             results.flush()

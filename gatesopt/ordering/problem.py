@@ -103,12 +103,9 @@ class Group:
         order = np.asarray(order, dtype=np.int64)
         if len(order) == 0:
             return 0.0 if self.end_xy is None else float(np.hypot(*(self.end_xy - self.start_xy)))
-        pts_in = self.cand_entry_xy[order]
-        pts_out = self.cand_exit_xy[order]
-        first = float(np.hypot(*(pts_in[0] - self.start_xy)))
-        links = np.hypot(*(pts_in[1:] - pts_out[:-1]).T).sum()
-        last = 0.0 if self.end_xy is None else float(np.hypot(*(pts_out[-1] - self.end_xy)))
-        return first + float(links) + last
+        travel = path_travel_mm(self.start_xy, self.cand_entry_xy[order], self.cand_exit_xy[order])
+        last = 0.0 if self.end_xy is None else float(np.hypot(*(self.cand_exit_xy[order[-1]] - self.end_xy)))
+        return travel + last
 
     def check_order(self, order: np.ndarray) -> None:
         """Raise ValueError unless ``order`` visits every curve exactly once."""
