@@ -37,6 +37,9 @@ _A = 65
 LX, LY, LZ, LE, LF = 23, 24, 25, 4, 5
 LI, LJ, LR, LP, LS = 8, 9, 17, 15, 18
 LT = 19
+# axes a move may carry that the model has not got: rotary A B C, secondary linear U V W (Mach3 and
+# machinekit flavours write the extruder as A). Flagged per line (parse.py), never modelled
+FOREIGN_AXES = (0, 1, 2, 20, 21, 22)
 
 EXT = 64        # '@': line starts with an extended (Klipper-style) command word
 POW10 = 10.0 ** np.arange(40)
@@ -364,7 +367,8 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
     s_en = np.empty((nmax, 4), np.bool_)
     l_letter = np.zeros(n_lines, np.uint8)
     l_number = np.full(n_lines, np.nan, np.float32)
-    l_flags = np.zeros(n_lines, np.uint8)      # bit 0: an unexpanded {placeholder} was dropped
+    l_flags = np.zeros(n_lines, np.uint8)      # bit 0: an unexpanded {placeholder} was dropped;
+    # bit 1: a G0-G3 line carries an axis the model has not got (A B C U V W)
     # comment markers (grown by doubling): line, code bits, Z, feature-name byte span
     mk_cap = 1024
     mk_line = np.empty(mk_cap, np.int64)
@@ -495,6 +499,9 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                     if value[LF] <= 0.0:
                         return ERR_BAD_FEED, ln, LF, n, arrs, no_markers
                     feed = value[LF] * scale / 60.0
+                for k in FOREIGN_AXES:
+                    if present[k]:
+                        l_flags[ln] |= 2
                 if not any_axis and not arc:
                     continue
                 for q in range(4):

@@ -255,6 +255,13 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     head = data[:65536]                 # the line ending is the file's convention: its head tells
     crlf = head.count(b"\r\n")
     line_ending = "\r\n" if crlf and crlf >= head.count(b"\n") // 2 else "\n"
+    foreign = np.flatnonzero(l_flags & 2)
+    if len(foreign):
+        ln = int(foreign[0])
+        text = data[line_start[ln]:line_start[ln + 1]].decode("utf-8", "replace").strip()
+        warnings.append(f"{name}:{ln + 1 + line_offset}: {text[:60]}: {len(foreign)} moves carry an "
+                        "axis gatesopt does not model (A B C U V W), ignored in the profile; "
+                        "solve and order refuse to rewrite such a file")
     if require_moves and not (end[:, 3] > start[:, 3]).any():
         warnings.append(f"{name}: no extrusion anywhere (E never increases)")
     prog = Program(
@@ -265,7 +272,7 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
         offset_mm=s_off[s], relative_xyz=s_relxyz[s], relative_e=s_rele[s], inch=s_inch[s],
         enabled=s_en[s], feature_names=feature_names, layer_z_mm=layer_z, layer_line=layer_line,
         layer_method=method, line_ending=line_ending, header=header, warnings=tuple(warnings),
-        line_letter=l_letter, line_number=l_number,
+        line_letter=l_letter, line_number=l_number, foreign_axis_lines=foreign,
     )
     for a in (prog.line, prog.kind, prog.start_mm, prog.end_mm, prog.duration_s, prog.enabled):
         a.flags.writeable = False

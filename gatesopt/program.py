@@ -94,6 +94,9 @@ class Program:
     line_ending: str = "\n"
     header: dict = field(default_factory=dict)   # facts read from the slicer's header/config (see parse.py)
     warnings: tuple[str, ...] = ()               # non-fatal findings, each "file:line: message"
+    # 0-based lines of moves that carry an axis the model has not got (A B C U V W: Mach3 and
+    # machinekit write the extruder as A): profiled without it, never rewritten (check_rewritable)
+    foreign_axis_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     # ------------------------------------------------------------------------------------------
     @property
@@ -146,6 +149,18 @@ class Program:
         """All lines with their endings (``"".join(lines()) == to_gcode()``)."""
         text = self.to_gcode()
         return text.splitlines(keepends=True)
+
+    def check_rewritable(self, line_offset: int = 0) -> None:
+        """Raise ``GcodeError`` (file:line of the first one) if a move carries an axis the model
+        has not got: a rewrite splits and re-orders moves by X Y Z E only, so such a word would
+        land on the wrong piece (a Mach3 extruder on A: all the filament in the first 0.03 mm)."""
+        if len(self.foreign_axis_lines):
+            from .errors import GcodeError
+            ln = int(self.foreign_axis_lines[0])
+            raise GcodeError(self.source, ln + 1 + line_offset,
+                             "a move on an axis gatesopt does not model (A B C U V W; Mach3 and "
+                             "machinekit write the extruder as A): not rewritten. Slice with E "
+                             "as the extruder axis", text=self.line_text(ln))
 
     def to_gcode(self) -> str:
         """The program as text, byte-identical to the input (undecodable bytes round-trip too)."""

@@ -195,6 +195,7 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
             for piece, line0 in iter_chunks(path, chunk_bytes):
                 chunks += 1
                 prog = _parse_piece(piece, name, state_in, line0, flavor)
+                prog.check_rewritable(line0)
                 if flavor is None:
                     flavor = prog.header.get("flavor", "") or "marlin"
                 lines_before += prog.n_lines

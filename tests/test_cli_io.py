@@ -109,3 +109,48 @@ def test_a_new_output_gets_the_usual_permissions(tmp_path):
     finally:
         os.umask(old)
     assert stat.S_IMODE(out.stat().st_mode) == 0o644
+
+
+MACH3 = """G21
+G90
+G28
+G92 A0
+G1 Z0.3 F7800
+G1 X90 Y90 F7800
+G1 F1800
+G1 X110 Y90 A1.0
+G1 X110 Y110 A2.0
+G1 X90 Y110 A3.0
+G1 X90 Y90 A4.0
+"""
+
+
+def test_a_file_with_the_extruder_on_axis_a_is_never_rewritten(tmp_path, capsys):
+    # PrusaSlicer's mach3 / machinekit flavours write the extruder as A; splitting such a move for
+    # gating put all its filament on the first piece (found on real slicer output): the file is
+    # profiled with a warning, and every rewrite refuses it with file:line, writing nothing
+    import pytest
+
+    from gatesopt.errors import GcodeError
+    from gatesopt.gating.pipeline import run
+    from gatesopt.stream import gate_stream
+
+    src = tmp_path / "mach3.gcode"
+    src.write_text(MACH3)
+    prog = parse(str(src))
+    assert prog.foreign_axis_lines.tolist() == [7, 8, 9, 10]
+    assert any("mach3.gcode:8:" in w and "axis" in w for w in prog.warnings)
+    for cmd in (["solve", str(src), "-o", str(tmp_path / "s.gcode")],
+                ["solve", str(src), "-o", str(tmp_path / "s.gcode"), "--no-gating"],
+                ["order", str(src), "-o", str(tmp_path / "s.gcode"), "--workers", "1"]):
+        assert main(cmd) == 2
+        err = capsys.readouterr().err
+        assert "mach3.gcode:8: G1 X110 Y90 A1.0:" in err and "axis" in err, err
+        assert not (tmp_path / "s.gcode").exists()
+    with pytest.raises(GcodeError):
+        run(prog, formulation="greedy", order=False)
+    with pytest.raises(GcodeError, match=":8:"):
+        gate_stream(src, tmp_path / "s.gcode")
+    assert not (tmp_path / "s.gcode").exists()
+    assert main(["profile", str(src)]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mach3.gcode"]     # no temp file left

@@ -69,6 +69,27 @@ def test_budgeted_solve_gives_small_groups_the_exact_time_first(monkeypatch):
     assert given[200] < auto.exact_time_s(200), given
 
 
+def test_a_group_never_gets_more_than_the_wall_clock_time_left(monkeypatch):
+    # with a helper both processes spend the time left at once (twice the seconds to share), but
+    # one group runs in one process: its limit must end before the budget, less what the main
+    # process needs for the groups after it (a group of 150 curves alone would get ~2x 0.5 s)
+    sizes = [150, 3, 3]
+    prob = from_polylines(_layers_of(sizes, seed=3), options=OrderingOptions(mode="free"))
+    given = []
+
+    def record(grp, *, time_limit_s, **kw):
+        given.append(time_limit_s)
+        order = np.arange(grp.n_curves) * 2
+        return GroupSolution.make(order, grp.path_cost_mm(order), 0.0, "fallback", 0.0, "stand-in")
+
+    import time
+    runner = layers._GroupRunner(prob, record, 5.0, 0.5, time.perf_counter(), {},
+                                 other_alive=lambda: True)
+    runner.run(0, prob.group(0, prob.origin_xy))
+    after = layers.OVERHEAD_S_PER_CURVE * 6
+    assert 0.4 < given[0] <= 0.5 - after, given
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_auto_tries_the_model_before_the_dp_above_12_curves_and_stays_exact(seed):
     auto.warm_up()          # on a fresh clone the first call compiles the kernels (seconds)

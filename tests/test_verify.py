@@ -8,7 +8,7 @@ import pytest
 
 import gatesopt
 from gatesopt.gating.emit import Switch, render_switches
-from gatesopt.verify import Finding, energy_of, verify
+from gatesopt.verify import Finding, energy_of, read_rotation, verify
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "instances"
 
@@ -130,6 +130,78 @@ def test_rotated_output_verifies():
     rep = verify(p, q)
     assert rep.ok, [str(f) for f in rep.findings]
     assert rep.rotate_deg == 33
+
+
+# reduced from PrusaSlicer 2.5 output (marlin2, complete_objects, a cylinder): gated at 45 deg, the
+# first piece of a split move ends, as written, within the tolerance of an unrelated original
+# vertex (100.029, 102.71); the verifier took that piece for an unrotated row and refused a
+# correct output
+ROTATED_SPLIT = """G21
+G90
+M82
+G28
+G92 E0
+G1 Z0.2 F7800
+G1 X96.619 Y101.637 F7800
+G1 X96.225 Y100 E4.00183
+G1 X100 Y96.225 E4.28625
+G1 X103.775 Y100 E4.57066
+G1 X100 Y103.775 E4.85508
+G1 X102.588 Y101.246 F7800
+G1 E2 F2400
+G1 F1200
+G1 X101.912 Y101.923 E2.04622
+G1 X100.029 Y102.71 E2.46494
+"""
+
+
+def test_a_rotated_piece_ending_on_an_unrelated_vertex_still_verifies():
+    from gatesopt.gating.pipeline import run
+    from gatesopt.gating.problem import GatingOptions
+    from gatesopt.verify import _near
+    p = gatesopt.parse(ROTATED_SPLIT)
+    res = run(p, GatingOptions(rotate=45.0), formulation="dp", order=False)
+    assert res.report.ok, [str(f) for f in res.report.findings]
+    # the coincidence the test is about: a row of the output ends on an original vertex as written
+    out = res.output
+    ext = np.flatnonzero(out.extruding & (out.layer >= 0))
+    verts = np.concatenate([p.start_mm[:, :3], p.end_mm[:, :3]])
+    assert _near(verts, out.end_mm[ext, :3], 1.1e-3).any()
+    # and that piece moved off the line by 0.1 mm is still caught
+    piece = "G1 X100.0282 Y102.711 "
+    assert res.text.count(piece) == 1
+    assert not verify(p, gatesopt.parse(res.text.replace(piece, "G1 X100.0282 Y102.811 "))).ok
+
+
+def test_a_rotated_reordered_output_without_gating_lines_verifies(tmp_path):
+    # re-ordered, rotated, and no motor line worth inserting (Marlin firmware on a tiny print):
+    # the ordering checks, which compare moves in the original's frame, ran on the rotated text
+    # and refused a correct output
+    from gatesopt.cli import main
+    src = tmp_path / "two.gcode"
+    src.write_text("""G21
+G90
+M82
+G28
+G92 E0
+G1 Z0.2 F7800
+G1 X90 Y90 F7800
+G1 X110 Y90 E1 F1800
+G1 X110 Y110 E2
+G1 X90 Y110 E3
+G1 X90 Y90 E4
+G1 X95 Y95 F7800
+G1 X105 Y95 E4.5
+G1 X100 Y105 F7800
+G1 X100 Y100 E4.8
+""")
+    out = tmp_path / "out.gcode"
+    assert main(["solve", str(src), "-o", str(out), "--firmware", "marlin", "--rotate", "45"]) == 0
+    q = gatesopt.parse(str(out))
+    assert read_rotation(q)[0] == 45.0
+    assert not (q.kind == gatesopt.Kind.MOTOR).any()
+    rep = verify(gatesopt.parse(str(src)), q, firmware="marlin")
+    assert rep.ok, [str(f) for f in rep.findings]
 
 
 def test_finding_text():

@@ -478,6 +478,7 @@ def render(program: Program, placed, *, firmware="3dgates", rotate_deg: float = 
     ``snap``: (n, 2) bool, X/Y of a row that must not step (written equal to the previous text);
     default under rotation: rows whose rotated X or Y change is at most ``SNAP_MM``.
     """
+    program.check_rewritable()      # a split line keeps its other words on the first piece
     fw = fwmod.get(firmware)
     if isinstance(placed, PlacedArrays):
         fw.check_motors(placed.motors())

@@ -96,6 +96,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         time_limit_s: float | None = None, order: bool = True, gating: bool = True,
         order_time_limit_s: float = 2.0, order_workers: int = 1) -> RunResult:
     """Rewrite ``program``: optional curve ordering, then power gating; verify the result."""
+    program.check_rewritable()
     t0 = time.perf_counter()
     o = options or GatingOptions()
     notes = []

@@ -16,7 +16,8 @@ slicer's travel (retract, wipe, z-hop, travel, unretract) plus any other lines. 
 
 A gap is a *boundary* when it holds a barrier or the layer changes. Groups never span a boundary.
 ``--order-mode safe`` further splits at every change of feature (``;TYPE:``) and keeps walls,
-ironing, skirt/brim and (without feature comments) closed loops in the slicer's order and
+ironing, skirt/brim and (without feature comments) closed loops, or loops whose end stops short
+of their start by at most ``LOOP_GAP_MM`` (the seam gap slicers clip), in the slicer's order and
 direction; the first layer keeps its order in both modes (adhesion, and start G-code purges).
 """
 from __future__ import annotations
@@ -39,6 +40,9 @@ OBJECT_LABEL = re.compile(rb"\n[^\n]*(?:printing object|; *stop printing object|
 FEATURE_LINE = re.compile(rb"\n(;[ \t]*(?:TYPE:|FEATURE:|feature )[ \t]*)([^\r\n]*)")
 FIXED_FEATURE = re.compile(r"perimeter|wall|ironing|skirt|brim|wipe|prime|tower|shell|inset|outline",
                            re.I)
+#: a curve without a feature comment whose end lies this close to its start is a clipped loop
+#: (a wall) in safe mode
+LOOP_GAP_MM = 0.5
 MOTION_KINDS = (Kind.TRAVEL, Kind.RETRACT, Kind.UNRETRACT, Kind.Z_ONLY, Kind.ARC, Kind.EXTRUDE)
 
 
@@ -233,6 +237,11 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
         closed = closed & ~(has_arc & options.move_seams)
     else:
         pts = np.zeros((0, 2))
+    # a wall where no feature comment says what a curve is: a closed loop, or one whose end stops
+    # just short of its start (Slic3r and PrusaSlicer clip 15 % of the nozzle off a loop's end
+    # against a seam bulge: 0.06-0.1 mm); safe mode keeps such curves' order and direction
+    gap_mm = np.hypot(*(end_xy - start_xy).T) if n else np.zeros(0)
+    wall_like = closed | ((gap_mm <= LOOP_GAP_MM) & (s1 - s0 >= 3))
     layer = program.layer[s0].astype(np.int64)
     feature = program.feature[s0].astype(np.int64)
     fixed_feat = _fixed_features(program) | _pattern_fixed(program)
@@ -248,7 +257,7 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
             elif has_features and feature[c] >= 0:
                 fx = bool(fixed_feat[feature[c]])
             else:
-                fx = bool(closed[c])
+                fx = bool(wall_like[c])
             key = (feature[c], fx)
         else:
             fx = keep
@@ -258,7 +267,7 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
             gstart.append(c)
             glayer.append(lay_c)
             gfixed.append(fx)
-            fname = program.feature_names[feature[c]] if feature[c] >= 0 else ("loops" if closed[c] else "curves")
+            fname = program.feature_names[feature[c]] if feature[c] >= 0 else ("loops" if wall_like[c] else "curves")
             glabel.append(f"L{lay_c} {fname if options.mode == 'safe' else 'all'}")
         prev_key = key
     gstart.append(n)

@@ -319,6 +319,7 @@ def _state_at(req, line: int) -> dict:
 
 def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution) -> str:
     """G-code text with the curves of ``problem`` in the order of ``solution``."""
+    program.check_rewritable()
     lay = problem.layout if problem.layout is not None else layout(program)
     style = travel_style(program, lay)
     walls = WallCrossing(program, problem, lay) if style.comb_max_mm > 0 else None

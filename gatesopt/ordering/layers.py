@@ -26,6 +26,11 @@ DP_CURVES = 12
 #: what a group costs in the budget plan without an exact step: the greedy path (nearest
 #: neighbour, 2-opt, Or-opt; measured 0.04 ms per curve over the Cura bunny's 1082 groups)
 HEURISTIC_S_PER_CURVE = 6e-5
+#: what the main process spends outside the solvers, per curve: building each group, taking the
+#: helper's answers, then ``_chain`` and the travel totals (measured 3-6 us per curve in the loop
+#: and 1-2 us after it on the Cura bunny and two other Cura files); a budget keeps it for the
+#: curves still to come
+OVERHEAD_S_PER_CURVE = 1e-5
 
 FORMULATIONS = {
     "greedy": greedy.solve,
@@ -177,6 +182,7 @@ class _GroupRunner:
         if self.plan is not None and fn is auto.solve:
             auto.warm_up()      # inside the budget, but not in any group's overrun
         self.over_s, self.n_timed = 0.0, 0
+        self.n_curves_from = problem.n_curves - problem.group_curve_start   # per group, to the end
 
     def run(self, g: int, grp) -> GroupSolution:
         key = _key(grp)
@@ -189,16 +195,25 @@ class _GroupRunner:
             # what each group took beyond its limit so far (greedy passes, bounds, model building)
             # is reserved for the groups still to come; with a helper process both spend the
             # time left at once
-            reserve = self.over_s / max(self.n_timed, 1) * self.plan.n_pending()
+            mean_over = self.over_s / max(self.n_timed, 1)
+            wall_left = self.budget_s - (time.perf_counter() - self.t0) - self.rest_s(g)
             cpus = 2 if self.other_alive() else 1
-            left = max(0.0, cpus * (self.budget_s - (time.perf_counter() - self.t0)) - reserve)
-            limit = min(limit, self.plan.limit(g, left))
+            left = max(0.0, cpus * wall_left - mean_over * self.plan.n_pending())
+            # the two processes pool their time, but one group runs on one of them: it must end
+            # (with its expected overrun) before the budget does, or the file ends late
+            limit = min(limit, self.plan.limit(g, left), max(0.0, wall_left - mean_over))
         t_g = time.perf_counter()
         gs = self.fn(grp, time_limit_s=limit, **self.kwargs)
         self.over_s += max(0.0, time.perf_counter() - t_g - limit)
         self.n_timed += 1
         self.cache[key] = gs
         return gs
+
+    def rest_s(self, g: int) -> float:
+        """What the main process needs after group g outside any solver: passing the groups
+        after it (building each group, taking the helper's answers) and the end of the solve
+        (``_chain``, travel totals)."""
+        return OVERHEAD_S_PER_CURVE * float(self.n_curves_from[g + 1])
 
     def passed(self, g: int) -> None:
         if self.plan is not None:

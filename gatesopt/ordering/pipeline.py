@@ -53,6 +53,7 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
                   formulation: str = "auto", time_limit_s: float = 2.0,
                   budget_s: float | None = None, workers: int = 1) -> OrderResult:
     """Re-order ``program``'s curves and verify the result (see module docstring)."""
+    program.check_rewritable()
     t0 = time.perf_counter()
     options = options or OrderingOptions()
     problem = build(program, options)

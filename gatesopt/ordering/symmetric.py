@@ -401,15 +401,26 @@ class SymmetricModel:
         LP of the whole graph was solved to optimality."""
         self.complete = False
         bound = 0.0
+        t_round = 0.0                           # the longest round so far
         for _ in range(max_rounds):
+            t = time.perf_counter()
             if not run_highs(self.h, deadline) or self.h.getModelStatus() != _OPT:
                 break
             x = np.asarray(self.h.getSolution().col_value)
             obj = float(self.h.getInfo().objective_function_value)
+            # the reduced costs of the whole graph (a dense N x N pass with every cut row) serve
+            # pricing and the bound: they wait until separation finds nothing, unless the next
+            # round might not finish in time (then this round's bound is the one kept). On 173
+            # Cura bunny groups: 309 passes instead of 3007
+            last_chance = time.perf_counter() + 2 * t_round > deadline
+            if last_chance:
+                bound = max(bound, self.lp_bound(obj, self.reduced_costs()))
+            found = self.separate(x, deadline)
+            t_round = max(t_round, time.perf_counter() - t)
+            if found:
+                continue
             rc = self.reduced_costs()
             bound = max(bound, self.lp_bound(obj, rc))
-            if self.separate(x, deadline):
-                continue
             if self.price(rc):
                 continue
             self.complete = True
