@@ -39,6 +39,10 @@ def register(sub) -> None:
     p.add_argument("--workers", type=int, choices=(1, 2), default=default_workers(),
                    help="processes: 2 lets a second one solve the chain of groups from the back "
                         "(default: 2 if this machine has 2 cores or more)")
+    p.add_argument("--allow-slower-layers", action="store_true",
+                   help="keep a layer's new order even if its rebuilt travels (retractions, "
+                        "z-hops) make it take longer than the slicer's (default: such a layer "
+                        "keeps the slicer's order)")
     p.add_argument("--json", metavar="REPORT.json", help="also write the report as JSON")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=run)
@@ -62,7 +66,8 @@ def run(args) -> int:
     if args.budget is not None and not (math.isfinite(args.budget) and args.budget > 0):
         raise GatesoptError(f"--budget must be > 0 s, not {args.budget}")
     result = order_program(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
-                           budget_s=args.budget, workers=args.workers)
+                           budget_s=args.budget, workers=args.workers,
+                           time_guard=not args.allow_slower_layers)
     s = result.summary
     if not result.ok:
         print(format_report(s))
@@ -94,6 +99,8 @@ def format_report(s: dict) -> str:
         f"   ({pct(s['travel_after_mm'], s['travel_before_mm'])})",
         f"travel time   {s['travel_time_before_s']:,.1f} s -> {s['travel_time_after_s']:,.1f} s"
         f"   ({pct(s['travel_time_after_s'], s['travel_time_before_s'])})",
+        f"print time    {s['print_time_before_s']:,.1f} s -> {s['print_time_after_s']:,.1f} s"
+        f"   ({pct(s['print_time_after_s'], s['print_time_before_s'])}; travels, retractions, z-hops)",
         f"travels       {s['travels_before']:,} -> {s['travels_after']:,}"
         f"   retractions {s['retractions_before']:,} -> {s['retractions_after']:,}",
         f"curves        {s['curves']:,} in {s['groups']:,} groups; {s['groups_reordered']:,} re-orderable "
@@ -101,7 +108,8 @@ def format_report(s: dict) -> str:
         f"groups        optimal {s['groups_optimal']:,}   feasible at limit {s['groups_feasible']:,}"
         f"   fallback {s['groups_fallback']:,}   worst gap {100 * s['worst_gap']:.2f} %",
         f"layers        optimal {s['layers_optimal']:,}   feasible at limit {s['layers_feasible']:,}"
-        f"   fallback {s['layers_fallback']:,}   order kept {s['layers_kept']:,}",
+        f"   fallback {s['layers_fallback']:,}   order kept {s['layers_kept']:,}"
+        + (f" ({s['layers_kept_slower']:,} of them: slower re-ordered)" if s.get("layers_kept_slower") else ""),
         f"solve         {s['solve_s']:.2f} s   (whole run {s['wall_s']:.2f} s)",
         f"verified      {'yes' if s['verified'] else 'NO'}",
     ]

@@ -69,12 +69,15 @@ def _order(program: Program, time_limit_s: float, workers: int = 1):
         ordering = importlib.import_module("gatesopt.ordering")
         problem = ordering.build(program)
         solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s, workers=workers)
-        text = ordering.emit(program, problem, solution)
+        from ..ordering.pipeline import emit_guarded
+        _, _, out, slower = emit_guarded(program, problem, solution)
     except (ImportError, AttributeError, NotImplementedError) as exc:
         return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})", None
     except KeyboardInterrupt:   # Ctrl-C: the slicer's own order is a valid answer
         return program, False, "curve ordering interrupted (Ctrl-C): the slicer's order kept", None
-    return parse(text, source=program.source), True, "", problem
+    note = (f"curve ordering: {len(slower)} layers keep the slicer's order (re-ordered they took "
+            "longer: more retractions)" if len(slower) else "")
+    return dataclasses.replace(out, source=program.source), True, note, problem
 
 
 def _solve_interruptible(problem, formulation: str, time_limit_s, notes: list):

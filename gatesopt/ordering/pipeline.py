@@ -6,6 +6,7 @@ the paper's T = L/F; retractions = steps that pull filament back (E decreasing).
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -15,7 +16,7 @@ from ..parse import parse
 from ..program import Kind, Program
 from .build import build
 from .emit import emit
-from .layers import solve
+from .layers import _travel, solve
 from .problem import OrderingOptions, OrderingProblem, OrderingSolution
 from .verify import check
 
@@ -46,24 +47,71 @@ def travel_stats(program: Program) -> dict:
     starts = retract & ~np.concatenate(([False], retract[:-1]))
     return {"travel_mm": float(program.length_mm[travel].sum()),
             "travel_s": float(program.duration_s[travel].sum()),
+            # everything from the first layer on (paper time model): extrusion is the same in
+            # both files, so a change is travel, retractions and z-hops together
+            "print_s": float(program.duration_s[printing].sum()),
             "travels": int(travel.sum()), "retractions": int(starts.sum())}
+
+
+def layer_times_s(program: Program) -> np.ndarray:
+    """Per layer (0..n_layers-1), the time of every step in it (paper time model)."""
+    m = program.layer >= 0
+    return np.bincount(program.layer[m], weights=program.duration_s[m], minlength=program.n_layers)
+
+
+def keep_layers(problem: OrderingProblem, solution: OrderingSolution, layers) -> OrderingSolution:
+    """``solution`` with the curves of ``layers`` back in the slicer's order and direction.
+    A layer's curves are one contiguous block of the print order, and curve numbers grow with
+    the layer, so sorting the positions they hold restores each block."""
+    order = solution.curve_order.copy()
+    at = np.isin(problem.curve_layer[order], np.asarray(layers, np.int64))
+    order[at] = np.sort(order[at])
+    rev, seam = solution.curve_reversed.copy(), solution.curve_seam.copy()
+    rev[order[at]] = False
+    seam[order[at]] = 0
+    return dataclasses.replace(solution, curve_order=order, curve_reversed=rev, curve_seam=seam,
+                               travel_after_mm=_travel(problem, order, rev, seam))
+
+
+def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingSolution,
+                 time_guard: bool = True):
+    """Emit and re-parse; with ``time_guard``, layers whose re-ordered print takes longer than
+    the slicer's keep its order (emitted again). Returns (solution, text, output, those layers)."""
+    text = emit(program, problem, solution)
+    out = parse(text, source=f"{program.source} (re-ordered)")
+    slower = np.zeros(0, np.int64)
+    if time_guard and out.n_layers == program.n_layers:
+        # the objective is travel distance (Fleming et al.); the emitter rebuilds each travel in
+        # the slicer's style and retracts (and hops) where it is long or crosses a wall, so a
+        # slicer that combed inside walls on longer paths without retracting can be faster
+        slower = np.flatnonzero(layer_times_s(out) > layer_times_s(program) + 1e-6)
+        if len(slower):
+            solution = keep_layers(problem, solution, slower)
+            text = emit(program, problem, solution)
+            out = parse(text, source=f"{program.source} (re-ordered)")
+    return solution, text, out, slower
 
 
 def order_program(program: Program, options: OrderingOptions | None = None, *,
                   formulation: str = "auto", time_limit_s: float = 2.0,
-                  budget_s: float | None = None, workers: int = 1) -> OrderResult:
-    """Re-order ``program``'s curves and verify the result (see module docstring)."""
+                  budget_s: float | None = None, workers: int = 1,
+                  time_guard: bool = True) -> OrderResult:
+    """Re-order ``program``'s curves and verify the result (see module docstring).
+    ``time_guard``: a layer whose re-ordered print takes longer than the slicer's (paper time
+    model: its rebuilt travels retract and hop more often) keeps the slicer's order."""
     program.check_rewritable()
     t0 = time.perf_counter()
     options = options or OrderingOptions()
     problem = build(program, options)
     solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=budget_s,
                      workers=workers)
-    text = emit(program, problem, solution)
-    out = parse(text, source=f"{program.source} (re-ordered)")
+    solution, text, out, slower_layers = emit_guarded(program, problem, solution, time_guard)
     findings = tuple(check(program, out))
     before, after = travel_stats(program), travel_stats(out)
     layers = solution.layer_summary(problem)
+    for row in layers:
+        if row["layer"] in set(slower_layers.tolist()):
+            row["status"] = "kept"          # re-ordered it took longer: the slicer's order
     sizes = np.diff(problem.group_curve_start)
     decided = [(g, gs) for g, gs in enumerate(solution.groups)
                if not problem.group_fixed[g] and sizes[g] >= 2]
@@ -81,6 +129,17 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     def pct(a, b):
         return 100.0 * (a / b - 1.0) if b else 0.0
 
+    slower = []
+    if len(slower_layers):
+        slower.append(f"{len(slower_layers)} layers keep the slicer's order: re-ordered they took "
+                      "longer (rebuilt travels retract and hop where the slicer's combed inside "
+                      "walls; the solver's objective is travel distance)")
+    if after["print_s"] > before["print_s"] + 1e-6:
+        slower.append(f"the re-ordered print takes {after['print_s'] - before['print_s']:.1f} s "
+                      f"longer (paper time model): its travels retract {after['retractions']:,} "
+                      f"times instead of {before['retractions']:,}; the objective counts travel "
+                      "distance only")
+
     summary = {
         "source": program.source, "formulation": formulation, "order_mode": options.mode,
         "move_seams": options.move_seams, "time_limit_s": time_limit_s, "budget_s": budget_s,
@@ -88,6 +147,7 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
         "travel_before_mm": before["travel_mm"], "travel_after_mm": after["travel_mm"],
         "travel_change_pct": pct(after["travel_mm"], before["travel_mm"]),
         "travel_time_before_s": before["travel_s"], "travel_time_after_s": after["travel_s"],
+        "print_time_before_s": before["print_s"], "print_time_after_s": after["print_s"],
         "travels_before": before["travels"], "travels_after": after["travels"],
         "retractions_before": before["retractions"], "retractions_after": after["retractions"],
         "model_travel_before_mm": solution.travel_before_mm,
@@ -99,11 +159,12 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
         "groups_fallback": counts["fallback"],
         "layers_optimal": lay_counts["optimal"], "layers_feasible": lay_counts["feasible"],
         "layers_fallback": lay_counts["fallback"], "layers_kept": lay_counts["kept"],
+        "layers_kept_slower": int(len(slower_layers)),
         "worst_gap": float(max((gs.gap for _, gs in decided), default=0.0)),
         "solve_s": solution.solve_s, "wall_s": time.perf_counter() - t0,
         "verified": not findings, "findings": [str(f) for f in findings],
-        "notes": list(problem.notes[:20]) + ([f"... {len(problem.notes) - 20} more notes"]
-                                             if len(problem.notes) > 20 else []),
+        "notes": slower + list(problem.notes[:20]) + ([f"... {len(problem.notes) - 20} more notes"]
+                                                      if len(problem.notes) > 20 else []),
         "per_layer": layers,
     }
     return OrderResult(program, problem, solution, text, out, findings, summary)
