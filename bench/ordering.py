@@ -149,6 +149,16 @@ def report(args) -> str:
             tb = sum(r["travel_before_mm"] for r in rs)
             ta = sum(r["travel_after_mm"] for r in rs)
             ch = np.array([r["travel_change_pct"] for r in rs if r["travel_before_mm"] > 0])
+            timed = [r for r in rs if "print_time_before_s" in r]
+            pb = sum(r["print_time_before_s"] for r in timed)
+            pa = sum(r["print_time_after_s"] for r in timed)
+            n_slower = sum(r["print_time_after_s"] > r["print_time_before_s"] + 1e-6 for r in timed)
+            kept_slow = sum(r.get("layers_kept_slower", 0) for r in timed)
+            time_line = (f"Print time (paper time model, travels + retractions + z-hops + extrusion): "
+                         f"{pb / 3600:,.2f} -> {pa / 3600:,.2f} h ({100 * (pa / pb - 1):+.2f} %); "
+                         f"files that got slower: {n_slower} of {len(timed)}; layers kept in the "
+                         f"slicer's order because re-ordered they were slower: {kept_slow}. "
+                         if timed and pb > 0 else "")
             lines += ["", f"**{len(rs)} files: travel {tb:,.0f} -> {ta:,.0f} mm ({100 * (ta / tb - 1):+.1f} %); "
                           f"per file median {np.median(ch):+.1f} %, best {ch.min():+.1f} %, worst {ch.max():+.1f} %. "
                           f"Groups proven optimal: {n_opt} of {n_g} ({100 * n_opt / max(n_g, 1):.1f} %); "
@@ -157,6 +167,7 @@ def report(args) -> str:
                           f"Solve time per file: median {np.median([r['solve_s'] for r in rs]):.1f} s, "
                           f"max {max(r['solve_s'] for r in rs):.1f} s; "
                           f"files solved in <= 10 s: {sum(r['solve_s'] <= 10 for r in rs)} of {len(rs)}. "
+                          f"{time_line}"
                           f"Verified: {sum(r['verified'] for r in rs)} of {len(rs)}.**", ""]
             # by slicer family and infill pattern (Fleming Fig. 2)
             fam = {}
