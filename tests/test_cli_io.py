@@ -77,8 +77,11 @@ def test_option_combinations_are_refused(tmp_path, capsys):
     other.write_text("keep me")
     assert main(["solve", str(p), "-o", str(other)]) == 2      # never overwrite without --force
     assert other.read_text() == "keep me"
+    assert main(["solve", str(p), "-o", str(tmp_path / "r.gcode"), "--no-gating", "--rotate", "45"]) == 2
+    assert not (tmp_path / "r.gcode").exists()
     msgs = capsys.readouterr().err
     assert "--in-place" in msgs and "must not be the input" in msgs and "--force" in msgs
+    assert "--rotate 45" in msgs and "--no-gating" in msgs
 
 
 def test_pipes_stdin_to_stdout_messages_on_stderr():

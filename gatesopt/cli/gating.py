@@ -201,6 +201,9 @@ def _solve_paths(args) -> tuple[str, str]:
 
 def run_solve(args) -> int:
     from ..gating.pipeline import run
+    if args.no_gating and args.rotate not in ("auto", "none"):
+        raise GatesoptError(f"--rotate {args.rotate}: the rotation is chosen with the gating, "
+                            "which --no-gating turns off")
     inp, out = _solve_paths(args)
     report_to = sys.stderr if out == "-" else sys.stdout     # stdout carries the G-code
     options = options_from_args(args)
