@@ -86,7 +86,8 @@ def test_a_group_never_gets_more_than_the_wall_clock_time_left(monkeypatch):
     runner = layers._GroupRunner(prob, record, 5.0, 0.5, time.perf_counter(), {},
                                  other_alive=lambda: True)
     runner.run(0, prob.group(0, prob.origin_xy))
-    after = layers.OVERHEAD_S_PER_CURVE * 6
+    after = layers.OVERHEAD_S_PER_CURVE * 6 + layers.TAIL_S_PER_CURVE * 156
+    assert runner.rest_s(0) == pytest.approx(after)
     assert 0.4 < given[0] <= 0.5 - after, given
 
 

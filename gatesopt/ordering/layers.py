@@ -26,11 +26,13 @@ DP_CURVES = 12
 #: what a group costs in the budget plan without an exact step: the greedy path (nearest
 #: neighbour, 2-opt, Or-opt; measured 0.04 ms per curve over the Cura bunny's 1082 groups)
 HEURISTIC_S_PER_CURVE = 6e-5
-#: what the main process spends outside the solvers, per curve: building each group, taking the
-#: helper's answers, then ``_chain`` and the travel totals (measured 3-6 us per curve in the loop
-#: and 1-2 us after it on the Cura bunny and two other Cura files); a budget keeps it for the
-#: curves still to come
-OVERHEAD_S_PER_CURVE = 1e-5
+#: what the main process spends outside the solvers, kept out of a budget: per curve still to
+#: come, building its group and taking the helper's answers (measured 3-6 us per curve on the
+#: Cura bunny and two other Cura files); per curve of the file, ``_chain`` and the travel totals
+#: after the last group (1-2 us); and stopping the helper process (~30 ms)
+OVERHEAD_S_PER_CURVE = 6e-6
+TAIL_S_PER_CURVE = 2e-6
+STOP_HELPER_S = 0.05
 
 FORMULATIONS = {
     "greedy": greedy.solve,
@@ -183,6 +185,7 @@ class _GroupRunner:
             auto.warm_up()      # inside the budget, but not in any group's overrun
         self.over_s, self.n_timed = 0.0, 0
         self.n_curves_from = problem.n_curves - problem.group_curve_start   # per group, to the end
+        self.shared = shared
 
     def run(self, g: int, grp) -> GroupSolution:
         key = _key(grp)
@@ -213,7 +216,9 @@ class _GroupRunner:
         """What the main process needs after group g outside any solver: passing the groups
         after it (building each group, taking the helper's answers) and the end of the solve
         (``_chain``, travel totals)."""
-        return OVERHEAD_S_PER_CURVE * float(self.n_curves_from[g + 1])
+        return (OVERHEAD_S_PER_CURVE * float(self.n_curves_from[g + 1])
+                + TAIL_S_PER_CURVE * float(self.n_curves_from[0])
+                + (STOP_HELPER_S if self.shared is not None else 0.0))
 
     def passed(self, g: int) -> None:
         if self.plan is not None:
