@@ -118,6 +118,10 @@ def report(args) -> str:
              "`--workers 2`: a second process solves the chain of groups from the back "
              "(formulations/ordering.md, \"Two processes\"). Without `--budget` every group gets the full per-group "
              "limit: that run shows what the exact step proves when time is not the constraint. "
+             "The time guard is on (the default; formulations/ordering.md, \"Emit\"): a layer whose "
+             "re-ordered print takes longer than the slicer's (rebuilt travels retract and hop where "
+             "the slicer combed) keeps the slicer's order, so travel is never bought with print time; "
+             "the bold lines give the print time (paper time model) and how many layers it kept. "
              "Peers (LKH via elkai, OR-Tools routing) are in the next section.", ""]
     for form, tl, bud, w in configs:
         for mode in ("safe", "free"):
