@@ -106,7 +106,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             reversed_[c] = bool(grp.cand_reversed[k])
             seam[c] = int(grp.cand_seam[k])
         sols.append(gs)
-    after = _travel(problem, np.asarray(order_out, np.int64), reversed_, seam)
+    after = model_travel_mm(problem, np.asarray(order_out, np.int64), reversed_, seam)
     return OrderingSolution(np.asarray(order_out, np.int64), reversed_, seam, tuple(sols),
                             problem.original_travel_mm(), after, time.perf_counter() - t0, formulation)
 
@@ -292,7 +292,7 @@ class _BudgetPlan:
         self.done_mask[g] = 1
 
 
-def _travel(problem: OrderingProblem, order, reversed_, seam) -> float:
+def model_travel_mm(problem: OrderingProblem, order, reversed_, seam) -> float:
     """Model travel of a full solution (start of each curve from the end of the one before)."""
     order = np.asarray(order, np.int64)
     a, b = problem.curve_start_xy[order].copy(), problem.curve_end_xy[order].copy()

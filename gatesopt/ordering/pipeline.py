@@ -16,7 +16,7 @@ from ..parse import parse
 from ..program import Kind, Program
 from .build import build
 from .emit import emit
-from .layers import _travel, solve
+from .layers import model_travel_mm, solve
 from .problem import OrderingOptions, OrderingProblem, OrderingSolution
 from .verify import check
 
@@ -74,7 +74,7 @@ def keep_layers(problem: OrderingProblem, solution: OrderingSolution, layers) ->
     rev[order[at]] = False
     seam[order[at]] = 0
     return dataclasses.replace(solution, curve_order=order, curve_reversed=rev, curve_seam=seam,
-                               travel_after_mm=_travel(problem, order, rev, seam))
+                               travel_after_mm=model_travel_mm(problem, order, rev, seam))
 
 
 def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingSolution,
@@ -120,8 +120,9 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     findings = tuple(check(program, out))
     before, after = travel_stats(program), travel_stats(out)
     layers = solution.layer_summary(problem)
+    put_back = set(slower_layers.tolist())
     for row in layers:
-        if row["layer"] in set(slower_layers.tolist()):
+        if row["layer"] in put_back:
             row["status"] = "kept"          # re-ordered it took longer: the slicer's order
     sizes = np.diff(problem.group_curve_start)
     decided = [(g, gs) for g, gs in enumerate(solution.groups)
@@ -143,7 +144,7 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     slower = []
     if len(slower_layers):
         slower.append(f"{len(slower_layers)} layers keep the slicer's order: re-ordered they took "
-                      "longer (rebuilt travels retract and hop where the slicer's combed inside "
+                      "longer (rebuilt travels retract and hop where the slicer combed inside "
                       "walls; the solver's objective is travel distance)")
     if after["print_s"] > before["print_s"] + 1e-6:
         slower.append(f"the re-ordered print takes {after['print_s'] - before['print_s']:.1f} s "
