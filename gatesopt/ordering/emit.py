@@ -405,6 +405,9 @@ def _curve(w: _Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int
         w.step(s, reverse)
 
 
+_TRAVEL_KINDS = (int(Kind.TRAVEL), int(Kind.ARC))     # plain ints: an enum lookup per line is slow
+
+
 def _entry_mm(p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> np.ndarray:
     """XYZ where curve c starts when printed ``reverse``d / from vertex ``seam``."""
     if reverse:
@@ -431,7 +434,7 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
         lines = list(lines)
         cls = lay.line_class[lines] if lines else np.zeros(0, np.int8)
         travel_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION
-                      and p.kind[lay.step_of_line[i]] in (Kind.TRAVEL, Kind.ARC)]
+                      and p.kind[lay.step_of_line[i]] in _TRAVEL_KINDS]
         retract_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION
                        and p.end_mm[lay.step_of_line[i], 3] < p.start_mm[lay.step_of_line[i], 3]]
         split_t = travel_pos[-1] if travel_pos else len(lines)
@@ -465,7 +468,11 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
     # gap has emitted when that line is copied must equal what the slicer's gap lines before it
     # moved (net_before)
     gap = np.fromiter((i for lines, _ in line_sets for i in lines), np.int64)
-    markers = p.layer_line[np.isin(p.layer_line, gap)] if len(gap) else np.zeros(0, np.int64)
+    markers = np.zeros(0, np.int64)
+    if len(gap):                # (layer_line is sorted: look only between the gap's ends)
+        lo, hi = np.searchsorted(p.layer_line, (gap.min(), gap.max() + 1))
+        near = p.layer_line[lo:hi]
+        markers = near[np.isin(near, gap)] if len(near) else markers
     net_before = {}
     if len(markers):
         mot = gap[lay.line_class[gap] == LINE_MOTION]
