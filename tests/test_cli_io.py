@@ -82,6 +82,25 @@ def test_option_combinations_are_refused(tmp_path, capsys):
     msgs = capsys.readouterr().err
     assert "--in-place" in msgs and "must not be the input" in msgs and "--force" in msgs
     assert "--rotate 45" in msgs and "--no-gating" in msgs
+    assert main(["solve", str(p), "-o", str(tmp_path / "r.gcode"), "--order-budget", "0"]) == 2
+    assert "--order-budget" in capsys.readouterr().err
+
+
+def test_solve_gives_the_ordering_a_budget(tmp_path, monkeypatch):
+    # `solve` re-orders before gating; on a large file 2 s per group without a cap took minutes
+    import gatesopt.ordering as ordering
+    seen = []
+    real = ordering.solve
+
+    def spy(problem, formulation="auto", **kw):
+        seen.append(kw.get("budget_s"))
+        return real(problem, formulation, **kw)
+
+    monkeypatch.setattr(ordering, "solve", spy)
+    p = _copy(tmp_path)
+    assert main(["solve", str(p), "-o", str(tmp_path / "a.gcode")]) == 0
+    assert main(["solve", str(p), "-o", str(tmp_path / "b.gcode"), "--order-budget", "3"]) == 0
+    assert seen == [10.0, 3.0]
 
 
 def test_pipes_stdin_to_stdout_messages_on_stderr():

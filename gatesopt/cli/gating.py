@@ -60,6 +60,9 @@ def register(sub) -> None:
     _add_common(p)
     p.add_argument("--json", metavar="REPORT.json", help="also write the report as JSON")
     p.add_argument("--no-order", action="store_true", help="do not re-order curves")
+    p.add_argument("--order-budget", type=float, default=10.0, metavar="S",
+                   help="cap the curve ordering at about S seconds (default 10; groups share "
+                        "what is left, as `order --budget`)")
     p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=run_solve)
@@ -201,6 +204,8 @@ def _solve_paths(args) -> tuple[str, str]:
 
 def run_solve(args) -> int:
     from ..gating.pipeline import run
+    if not (math.isfinite(args.order_budget) and args.order_budget > 0):
+        raise GatesoptError(f"--order-budget must be > 0 s, not {args.order_budget}")
     if args.no_gating and args.rotate not in ("auto", "none"):
         raise GatesoptError(f"--rotate {args.rotate}: the rotation is chosen with the gating, "
                             "which --no-gating turns off")
@@ -213,7 +218,8 @@ def run_solve(args) -> int:
         program = parse(inp)
     from .ordering import default_workers
     result = run(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
-                 order=not args.no_order, gating=not args.no_gating, order_workers=default_workers())
+                 order=not args.no_order, gating=not args.no_gating, order_workers=default_workers(),
+                 order_budget_s=args.order_budget)
     s = result.summary()
     if not result.report.ok:
         if out != "-":      # stderr keeps the one line a slicer shows

@@ -63,12 +63,13 @@ class RunResult:
         return d
 
 
-def _order(program: Program, time_limit_s: float, workers: int = 1):
+def _order(program: Program, time_limit_s: float, workers: int = 1, budget_s: float | None = None):
     """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note, problem)."""
     try:
         ordering = importlib.import_module("gatesopt.ordering")
         problem = ordering.build(program)
-        solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s, workers=workers)
+        solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s, workers=workers,
+                                  budget_s=budget_s)
         from ..ordering.pipeline import emit_guarded
         _, _, out, slower = emit_guarded(program, problem, solution)
     except (ImportError, AttributeError, NotImplementedError) as exc:
@@ -97,7 +98,8 @@ def _solve_interruptible(problem, formulation: str, time_limit_s, notes: list):
 
 def run(program: Program, options: GatingOptions | None = None, *, formulation: str = "dp",
         time_limit_s: float | None = None, order: bool = True, gating: bool = True,
-        order_time_limit_s: float = 2.0, order_workers: int = 1) -> RunResult:
+        order_time_limit_s: float = 2.0, order_workers: int = 1,
+        order_budget_s: float | None = None) -> RunResult:
     """Rewrite ``program``: optional curve ordering, then power gating; verify the result."""
     program.check_rewritable()
     t0 = time.perf_counter()
@@ -105,7 +107,8 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     notes = []
     base, ordered, order_problem = program, False, None
     if order:
-        base, ordered, note, order_problem = _order(program, order_time_limit_s, order_workers)
+        base, ordered, note, order_problem = _order(program, order_time_limit_s, order_workers,
+                                                    order_budget_s)
         if note:
             notes.append(note)
     ordered_base = base
