@@ -786,13 +786,12 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
         except ModuleNotFoundError:
             ov = None
         if ov is not None and hasattr(ov, "check"):
-            stripped = _without_motor_lines(output, original)
             if deg % 360.0 != 0.0:
                 # rotated: the ordering checks compare moves in the original's frame (the
                 # geometry check above un-rotates; ``gating.pipeline.run`` runs the ordering
                 # checks on the re-ordered file before rotating it)
                 checks.append("ordering(skipped: rotated)")
-            elif stripped.n_lines == output.n_lines:
+            elif _without_motor_lines(output, original).n_lines == output.n_lines:
                 findings += list(ov.check(original, output))
                 checks.append("ordering")
             else:

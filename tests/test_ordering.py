@@ -13,6 +13,7 @@ from gatesopt.ordering import cpsat, dp, greedy, milp, tsp, auto
 from gatesopt.ordering.bounds import lower_bound_mm
 from gatesopt.ordering.problem import Group
 from gatesopt.ordering.verify import check
+from conftest import PROJECT_INSTANCES
 
 INSTANCES = Path(__file__).resolve().parents[2] / "shared" / "instances"
 
@@ -335,7 +336,7 @@ def test_a_layer_slower_re_ordered_keeps_the_slicers_order(monkeypatch):
     # (found on CuraEngine output: prints 2.4 % slower with 13 % less travel); a layer whose
     # re-ordered print takes longer comes back in the slicer's order, the others stay re-ordered
     from gatesopt.ordering import pipeline
-    prog = gatesopt.parse(str(Path(__file__).resolve().parents[1] / "instances" / "star_lines_m82.gcode"))
+    prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
     free = OrderingOptions(mode="free")
     unguarded = pipeline.order_program(prog, free, time_guard=False)
     guarded = pipeline.order_program(prog, free)

@@ -2,16 +2,14 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import PROJECT_INSTANCES, REPO as ROOT
 
 
 def test_the_library_example_runs(capsys):
     text = (ROOT / "README.md").read_text()
     block = re.search(r"## Library\s+```python\n(.*?)```", text, re.S).group(1)
     assert "ordering.solve" in block and "gating.solve" in block
-    code = block.replace('"print.gcode"', repr(str(ROOT / "instances" / "star_lines_m82.gcode")))
+    code = block.replace('"print.gcode"', repr(str(PROJECT_INSTANCES / "star_lines_m82.gcode")))
     exec(compile(code, "README.md (## Library)", "exec"), {})
     out = capsys.readouterr().out.splitlines()
     assert out[-1] == "[0 2 1] [False False  True]"     # the polyline example's order

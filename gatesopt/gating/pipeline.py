@@ -70,14 +70,13 @@ def _order(program: Program, time_limit_s: float, workers: int = 1, budget_s: fl
         problem = ordering.build(program)
         solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s, workers=workers,
                                   budget_s=budget_s)
-        from ..ordering.pipeline import emit_guarded
+        from ..ordering.pipeline import emit_guarded, kept_slower_note
         _, _, out, slower = emit_guarded(program, problem, solution)
     except (ImportError, AttributeError, NotImplementedError) as exc:
         return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})", None
     except KeyboardInterrupt:   # Ctrl-C: the slicer's own order is a valid answer
         return program, False, "curve ordering interrupted (Ctrl-C): the slicer's order kept", None
-    note = (f"curve ordering: {len(slower)} layers keep the slicer's order (re-ordered they took "
-            "longer: more retractions)" if len(slower) else "")
+    note = f"curve ordering: {kept_slower_note(len(slower))}" if len(slower) else ""
     return dataclasses.replace(out, source=program.source), True, note, problem
 
 

@@ -103,6 +103,13 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     return solution, text, out, kept
 
 
+def kept_slower_note(n_layers: int) -> str:
+    """The report's line for layers the time guard put back (``emit_guarded``)."""
+    return (f"{n_layers} layers keep the slicer's order: re-ordered they took longer (rebuilt "
+            "travels retract and hop where the slicer combed inside walls; the solver's objective "
+            "is travel distance)")
+
+
 def order_program(program: Program, options: OrderingOptions | None = None, *,
                   formulation: str = "auto", time_limit_s: float = 2.0,
                   budget_s: float | None = None, workers: int = 1,
@@ -143,9 +150,7 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
 
     slower = []
     if len(slower_layers):
-        slower.append(f"{len(slower_layers)} layers keep the slicer's order: re-ordered they took "
-                      "longer (rebuilt travels retract and hop where the slicer combed inside "
-                      "walls; the solver's objective is travel distance)")
+        slower.append(kept_slower_note(len(slower_layers)))
     if after["print_s"] > before["print_s"] + 1e-6:
         slower.append(f"the re-ordered print takes {after['print_s'] - before['print_s']:.1f} s "
                       f"longer (paper time model): its travels retract {after['retractions']:,} "
