@@ -374,3 +374,26 @@ def _layer_xy(p, layer):
     """The extruding moves of one layer, in print order."""
     m = (p.layer == layer) & p.extruding
     return np.round(np.concatenate([p.start_mm[m, :2], p.end_mm[m, :2]], axis=1), 4)
+
+
+@pytest.mark.parametrize("name", ["star_lines_m82.gcode", "cyl_lines_zhop.gcode"])
+def test_emit_memo_reuses_unchanged_layers_and_writes_what_a_fresh_emit_writes(name):
+    # the time guard emits again after putting layers back; the memo re-emits only the layers
+    # whose curves or entry state changed, and the text is the one a fresh emit writes
+    from gatesopt.ordering.pipeline import keep_layers
+    prog = gatesopt.parse(str(PROJECT_INSTANCES / name))
+    prob = build(prog, OrderingOptions(mode="free"))
+    sol = solve(prob, "greedy")
+    moved = [L for L in range(prog.n_layers)
+             if not np.array_equal(sol.curve_order[prob.curve_layer[sol.curve_order] == L],
+                                   np.flatnonzero(prob.curve_layer == L))]
+    assert len(moved) >= 3
+    memo: dict = {}
+    assert emit(prog, prob, sol, memo) == emit(prog, prob, sol)
+    n_first = len(memo)
+    assert n_first >= len(moved)
+    back = keep_layers(prob, sol, [moved[1]])
+    assert emit(prog, prob, back, memo) == emit(prog, prob, back)
+    # the layer put back, and at most the next one (entered from another point)
+    assert 1 <= len(memo) - n_first <= 2
+    assert emit(prog, prob, sol, memo) == emit(prog, prob, sol)

@@ -40,13 +40,13 @@ _TYPE_OR_WIPE = re.compile(r"^\s*;\s*(TYPE:|FEATURE:|feature |WIPE_START|WIPE_EN
 
 
 def _num(v: float, nd: int) -> str:
-    s = f"{v:.{nd}f}".rstrip("0").rstrip(".")
+    s = ("%.*f" % (nd, v)).rstrip("0").rstrip(".")
+    if s[:2] == "0.":
+        return s[1:]            # ".5" as PrusaSlicer writes; every firmware reads it
+    if s[:3] == "-0.":
+        return "-" + s[2:]
     if s in ("-0", "", "-"):
-        s = "0"
-    if s.startswith("0.") and nd:
-        s = s[1:]               # ".5" as PrusaSlicer writes; every firmware reads it
-    elif s.startswith("-0."):
-        s = "-" + s[2:]
+        return "0"
     return s
 
 
@@ -193,29 +193,41 @@ class _Writer:
         self.feed = None        # mm/s in force
         self.state: dict = {}
         self.feature = None
-        self.rewritten = 0
+        # per line, what the gap rebuild asks of it, as Python lists: numpy scalar indexing line
+        # by line was ~40 % of the emit
+        cls, step = lay.line_class, lay.step_of_line
+        has = step >= 0
+        motion = (cls == LINE_MOTION) & has
+        s = np.where(has, step, 0)
+        self.line_cls = cls.tolist()
+        self.line_step = step.tolist()
+        self.line_de = np.where(has, program.end_mm[s, 3] - program.start_mm[s, 3], 0.0).tolist()
+        self.line_travel = (motion & np.isin(program.kind[s], _TRAVEL_KINDS)).tolist()
+        self.step_relative_e = program.relative_e.tolist()
+        self.step_feed = program.feed_mm_s.tolist()
+        self.layer_lines = frozenset(program.layer_line.tolist())
+        self.arc_steps = frozenset(np.flatnonzero(program.kind == Kind.ARC).tolist())
 
     # -- copying original lines -------------------------------------------------------------
     def copy_line(self, i: int) -> None:
         p = self.p
         text = p.line_text(i)
-        s = int(self.lay.step_of_line[i])
-        cls = self.lay.line_class[i]
+        s = self.line_step[i]
+        cls = self.line_cls[i]
         if s >= 0:
-            d_e = p.end_mm[s, 3] - p.start_mm[s, 3]
-            new_e = self.e + d_e
-            if not p.relative_e[s]:
+            new_e = self.e + self.line_de[i]
+            if not self.step_relative_e[s]:
                 code, sep, comment = text.partition(";")
-                if _E_WORD.search(code):
+                m = _E_WORD.search(code)
+                if m:
                     want = new_e - self.e_off
                     orig = p.end_mm[s, 3] - p.offset_mm[s, 3]
                     if abs(want - orig) > 1e-7:
-                        code = _E_WORD.sub(lambda m: m.group(1) + _num(want, 6), code, count=1)
+                        code = code[:m.start(2)] + _num(want, 6) + code[m.end(2):]
                         text = code + sep + comment
-                        self.rewritten += 1
             self.e = new_e
             self.xyz = p.end_mm[s, :3].copy()
-            self.feed = float(p.feed_mm_s[s])
+            self.feed = self.step_feed[s]
         else:
             code = text.split(";")[0].strip().upper()
             if code.startswith("G92"):
@@ -240,6 +252,25 @@ class _Writer:
 
     def write(self, text: str) -> None:
         self.out.append(text + self.nl)
+
+    # -- the per-layer memo of ``emit`` -----------------------------------------------------------
+    def entry_key(self) -> tuple:
+        """What a layer's text depends on besides its own curves (E apart: ``_same_entry``)."""
+        return (tuple(self.xyz.tolist()), self.feed, tuple(sorted(self.state.items())),
+                self.feature, self.e - self.e_off, self.e, self.e_off)
+
+    def snapshot(self) -> tuple:
+        return (len(self.out), self.e, self.e_off, self.xyz.copy(), self.feed, dict(self.state),
+                self.feature)
+
+    def extend_from(self, entry: tuple, chunk: list, exit_: tuple) -> None:
+        """Append a memoized layer's text and take its exit state; E moves with the difference
+        between this entry and the memoized one (logical E agrees within MEMO_E_TOL_MM)."""
+        self.out.extend(chunk)
+        d_e, d_off = self.e - entry[5], self.e_off - entry[6]
+        _, e, e_off, xyz, feed, state, feature = exit_
+        self.e, self.e_off = e + d_e, e_off + d_off
+        self.xyz, self.feed, self.state, self.feature = xyz.copy(), feed, dict(state), feature
 
     # -- new moves ------------------------------------------------------------------------------
     def _f(self, feed_mm_s: float) -> str:
@@ -270,7 +301,7 @@ class _Writer:
         d_e = p.end_mm[s, 3] - p.start_mm[s, 3]
         self.e += d_e
         e_val = d_e if p.relative_e[s] else self.e - self.e_off
-        if p.kind[s] == Kind.ARC:
+        if s in self.arc_steps:
             ccw = bool(p.arc_ccw[s]) != reverse
             c = p.arc_center_mm[s]
             cmd = "G3" if ccw else "G2"
@@ -317,8 +348,15 @@ def _state_at(req, line: int) -> dict:
     return st
 
 
-def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution) -> str:
-    """G-code text with the curves of ``problem`` in the order of ``solution``."""
+def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
+         memo: dict | None = None) -> str:
+    """G-code text with the curves of ``problem`` in the order of ``solution``.
+
+    ``memo``: a dict kept between calls on the same program and problem (the time guard emits
+    again after putting a few layers back, ``pipeline.emit_guarded``). A layer whose curves, in
+    the same order and directions, are entered from the same state (previous curve, position,
+    feedrate, state lines, feature, E up to ``MEMO_E_TOL_MM``) gets the text it got before; E
+    words differ from a fresh emit by at most that tolerance, where rounding tips a last digit."""
     program.check_rewritable()
     lay = problem.layout if problem.layout is not None else layout(program)
     style = travel_style(program, lay)
@@ -333,53 +371,36 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution)
     seam = np.asarray(solution.curve_seam, np.int64)
     if len(order) != n or not np.array_equal(np.sort(order), np.arange(n)):
         raise ValueError("solution does not order every curve of the program exactly once")
-    l0, l1, s0 = lay.curve_l0, lay.curve_l1, lay.curve_s0
-    changed = rev | (seam != 0)
-    gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
-    group_first = problem.group_curve_start[gidx]          # original first curve of each curve's group
-    req = _required_state(p, lay)
-    feature_names = p.feature_names
-
-    def gap_lines(c):
-        a = l1[c - 1] + 1 if c > 0 else 0
-        return range(a, l0[c])
+    plan = _Plan(p, problem, lay, style, walls, order, rev, seam)
+    changed, gap_lines = plan.changed, plan.gap_lines
 
     # prefix + first gap: verbatim (the first layer keeps its order, so curve 0 stays first)
     prev = -1
     for i in gap_lines(order[0]) if order[0] == 0 else gap_lines(0):
         w.copy_line(i)
-    for k, c in enumerate(order):
-        c = int(c)
-        if k > 0:
-            if prev == c - 1 and not changed[prev] and not changed[c]:
-                for i in gap_lines(c):
-                    w.copy_line(i)
-            else:
-                lines = []
-                if group_first[c] != group_first[prev]:         # crossing into c's group
-                    f = int(group_first[c])
-                    lines.append((gap_lines(f), True))
-                    if c != f:
-                        lines.append((gap_lines(c), False))
-                elif c != group_first[c]:
-                    lines.append((gap_lines(c), False))
-                _rebuilt_gap(w, p, lay, style, lines, c, _entry_mm(p, lay, c, bool(rev[c]), int(seam[c])),
-                             walls, int(problem.curve_layer[c]))
-        # state the curve saw in the original
-        st = _state_at(req, int(l0[c]))
-        for key, text in st.items():
-            if w.state.get(key) != text:
-                w.write(text)
-                w.state[key] = text
-        fi = int(p.feature[s0[c]])
-        if fi >= 0 and w.feature != feature_names[fi]:
-            w.write(f"{lay.feature_prefix}{feature_names[fi]}")
-            w.feature = feature_names[fi]
-        _curve(w, p, lay, c, bool(rev[c]), int(seam[c]))
-        prev = c
+    # one block of the order per layer (a layer's curves are contiguous in any solution)
+    lay_of = problem.curve_layer[order]
+    cuts = np.flatnonzero(np.diff(lay_of)) + 1
+    starts, ends = np.concatenate(([0], cuts)), np.concatenate((cuts, [n]))
+    for k0, k1 in zip(starts.tolist(), ends.tolist()):
+        key = None
+        if memo is not None:
+            blk = order[k0:k1]
+            key = (int(lay_of[k0]), prev, bool(changed[prev]) if prev >= 0 else False,
+                   blk.tobytes(), rev[blk].tobytes(), seam[blk].tobytes(), w.entry_key())
+            hit = memo.get(key[:-1])
+            if hit is not None and _same_entry(hit[0], key[-1]):
+                w.extend_from(hit[0], hit[1], hit[2])
+                prev = int(order[k1 - 1])
+                continue
+            mark = w.snapshot()
+        for k in range(k0, k1):
+            prev = _emit_curve(plan, w, k, prev)
+        if key is not None:
+            memo[key[:-1]] = (key[-1], w.out[mark[0]:], w.snapshot())
     # state the remainder of the file expects, then the remainder verbatim
-    last = int(l1[n - 1])
-    st = _state_at(req, last + 1)
+    last = plan.l1[n - 1]
+    st = _state_at(plan.req, last + 1)
     for key, text in st.items():
         if w.state.get(key) != text:
             w.write(text)
@@ -387,6 +408,71 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution)
     for i in range(last + 1, p.n_lines):
         w.copy_line(i)
     return "".join(w.out)
+
+
+#: a memoized layer is reused when its entry's logical E (absolute-E files) differs by at most
+#: this: re-ordered layers sum the same E in another order, so E at the next layer's start drifts
+#: by ~1e-12 mm; the output writes E with 6 decimals
+MEMO_E_TOL_MM = 1e-7
+
+
+def _same_entry(memo_entry: tuple, entry: tuple) -> bool:
+    return memo_entry[:4] == entry[:4] and abs(memo_entry[4] - entry[4]) <= MEMO_E_TOL_MM
+
+
+class _Plan:
+    """What ``emit`` knows about the file and the solution, per curve as Python lists (numpy
+    scalar indexing curve by curve was a fifth of the emit)."""
+
+    def __init__(self, p: Program, problem: OrderingProblem, lay: Layout, style: TravelStyle,
+                 walls, order, rev, seam):
+        self.p, self.lay, self.style, self.walls = p, lay, style, walls
+        self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
+        self.changed = (rev | (seam != 0)).tolist()
+        gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
+        # the original first curve of each curve's group
+        self.group_first = problem.group_curve_start[gidx].tolist()
+        self.layer = problem.curve_layer.tolist()
+        self.l0, self.l1 = lay.curve_l0.tolist(), lay.curve_l1.tolist()
+        self.feature = p.feature[lay.curve_s0].tolist()
+        self.req = _required_state(p, lay)
+
+    def gap_lines(self, c: int) -> range:
+        """The original lines between curve c - 1 and curve c."""
+        return range(self.l1[c - 1] + 1 if c > 0 else 0, self.l0[c])
+
+
+def _emit_curve(plan: _Plan, w: _Writer, k: int, prev: int) -> int:
+    """The k-th curve of the new order with the gap before it; returns that curve."""
+    p, lay = plan.p, plan.lay
+    c = plan.order[k]
+    if k > 0:
+        if prev == c - 1 and not plan.changed[prev] and not plan.changed[c]:
+            for i in plan.gap_lines(c):
+                w.copy_line(i)
+        else:
+            lines = []
+            first = plan.group_first[c]
+            if first != plan.group_first[prev]:             # crossing into c's group
+                lines.append((plan.gap_lines(first), True))
+                if c != first:
+                    lines.append((plan.gap_lines(c), False))
+            elif c != first:
+                lines.append((plan.gap_lines(c), False))
+            _rebuilt_gap(w, p, lay, plan.style, lines, c,
+                         _entry_mm(p, lay, c, plan.rev[c], plan.seam[c]), plan.walls, plan.layer[c])
+    # state the curve saw in the original
+    st = _state_at(plan.req, plan.l0[c])
+    for key, text in st.items():
+        if w.state.get(key) != text:
+            w.write(text)
+            w.state[key] = text
+    fi = plan.feature[c]
+    if fi >= 0 and w.feature != p.feature_names[fi]:
+        w.write(f"{lay.feature_prefix}{p.feature_names[fi]}")
+        w.feature = p.feature_names[fi]
+    _curve(w, p, lay, c, plan.rev[c], plan.seam[c])
+    return c
 
 
 def _curve(w: _Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> None:
@@ -430,24 +516,23 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
     boundary_retracted = early_push = False
     r_boundary = r_internal = 0.0
     net = 0.0
+    cls_of, de_of, travel_of = w.line_cls, w.line_de, w.line_travel
+    gap: list[int] = []
     for lines, boundary in line_sets:
         lines = list(lines)
-        cls = lay.line_class[lines] if lines else np.zeros(0, np.int8)
-        travel_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION
-                      and p.kind[lay.step_of_line[i]] in _TRAVEL_KINDS]
-        retract_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION
-                       and p.end_mm[lay.step_of_line[i], 3] < p.start_mm[lay.step_of_line[i], 3]]
+        gap += lines
+        cls = [cls_of[i] for i in lines]
+        travel_pos = [j for j, i in enumerate(lines) if travel_of[i]]
+        retract_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION and de_of[i] < 0]
         split_t = travel_pos[-1] if travel_pos else len(lines)
         split_r = min(retract_pos[0], split_t) if retract_pos else split_t
-        push_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION
-                    and p.end_mm[lay.step_of_line[i], 3] > p.start_mm[lay.step_of_line[i], 3]]
+        push_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION and de_of[i] > 0]
         split_u = push_pos[-1] if push_pos else len(lines)
         if boundary and push_pos and push_pos[-1] < split_t:
             early_push = True           # the slicer unretracted before its last travel
         for j, i in enumerate(lines):
             if cls[j] == LINE_MOTION:
-                st = lay.step_of_line[i]
-                d_e = p.end_mm[st, 3] - p.start_mm[st, 3]
+                d_e = de_of[i]
                 net += d_e
                 if d_e < 0:
                     if boundary:
@@ -467,14 +552,10 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
     # E per layer must not change: where a layer's first line lies inside these gaps, what this
     # gap has emitted when that line is copied must equal what the slicer's gap lines before it
     # moved (net_before)
-    gap = np.fromiter((i for lines, _ in line_sets for i in lines), np.int64)
-    markers = np.zeros(0, np.int64)
-    if len(gap):                # (layer_line is sorted: look only between the gap's ends)
-        lo, hi = np.searchsorted(p.layer_line, (gap.min(), gap.max() + 1))
-        near = p.layer_line[lo:hi]
-        markers = near[np.isin(near, gap)] if len(near) else markers
     net_before = {}
-    if len(markers):
+    markers = [i for i in gap if i in w.layer_lines]
+    if markers:
+        gap = np.asarray(gap, np.int64)
         mot = gap[lay.line_class[gap] == LINE_MOTION]
         st = lay.step_of_line[mot]
         de = p.end_mm[st, 3] - p.start_mm[st, 3]

@@ -81,7 +81,8 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
                  time_guard: bool = True):
     """Emit and re-parse; with ``time_guard``, layers whose re-ordered print takes longer than
     the slicer's keep its order (emitted again). Returns (solution, text, output, those layers)."""
-    text = emit(program, problem, solution)
+    memo: dict = {}                     # layers that did not change are not emitted again
+    text = emit(program, problem, solution, memo)
     out = parse(text, source=f"{program.source} (re-ordered)")
     kept = np.zeros(0, np.int64)
     if not time_guard or out.n_layers != program.n_layers:
@@ -98,7 +99,7 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
             break
         kept = np.union1d(kept, slower)
         solution = keep_layers(problem, solution, kept)
-        text = emit(program, problem, solution)
+        text = emit(program, problem, solution, memo)
         out = parse(text, source=f"{program.source} (re-ordered)")
     return solution, text, out, kept
 
