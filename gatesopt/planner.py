@@ -344,6 +344,10 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
 _DHMS_RE = re.compile(r"(\d+(?:\.\d+)?)\s*([dhms])")
 _PRUSA_RE = re.compile(rb"^; estimated printing time(?: \(normal mode\))? = ([^\r\n]+)", re.M)
 _CURA_RE = re.compile(rb"^;TIME:(\d+(?:\.\d*)?)\s*$", re.M)
+#: what CuraEngine run from the command line writes as ``;TIME:`` (the Cura front end replaces it
+#: after slicing); the engine's own estimate is then its last ``;TIME_ELAPSED:`` marker
+_CURA_PLACEHOLDER_S = 6666.0
+_CURA_ELAPSED_RE = re.compile(rb"^;TIME_ELAPSED:(\d+(?:\.\d*)?)\s*$", re.M)
 _IDEAMAKER_RE = re.compile(rb"^;Print Time: *(\d+(?:\.\d*)?)", re.M)
 _S3D_RE = re.compile(rb"^;\s*Build time: *([^\r\n]+)", re.M)
 _S3D_PART_RE = re.compile(r"(\d+(?:\.\d+)?)\s*(hour|minute|second|hr|min|sec)", re.I)
@@ -362,7 +366,8 @@ def slicer_estimate_s(program: Program) -> float | None:
     """The print time the slicer wrote into the file (seconds), or None.
 
     PrusaSlicer / SuperSlicer / OrcaSlicer / Bambu / Creality Print ``; estimated printing time
-    (normal mode) = 1h 2m 3s``; Cura ``;TIME:3723``; ideaMaker ``;Print Time: 3723``; Simplify3D
+    (normal mode) = 1h 2m 3s``; Cura ``;TIME:3723`` (CuraEngine from the command line writes
+    ``;TIME:6666``, a placeholder: its last ``;TIME_ELAPSED:`` then); ideaMaker ``;Print Time: 3723``; Simplify3D
     ``;   Build time: 1 hours 2 minutes``; KISSlicer ``; Estimated Build Time: 62.05 minutes``.
     """
     data = program.data
@@ -370,6 +375,17 @@ def slicer_estimate_s(program: Program) -> float | None:
     if m:
         return _dhms(m.group(1).decode("ascii", "replace"))
     m = _CURA_RE.search(data, 0, 65536)
+    if m is None or float(m.group(1)) == _CURA_PLACEHOLDER_S:
+        # CuraEngine from the command line: a placeholder (or no header); the per-layer
+        # elapsed-time markers carry its estimate, the last one near the end of the file
+        tail = max(0, len(data) - 1_000_000)
+        last = None
+        for last in _CURA_ELAPSED_RE.finditer(data, tail):
+            pass
+        if last is not None:
+            return float(last.group(1))
+        if m is not None:
+            return None                 # the placeholder is no estimate
     if m:
         return float(m.group(1))
     m = _IDEAMAKER_RE.search(data, 0, 65536) or _IDEAMAKER_RE.search(data)

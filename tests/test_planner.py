@@ -419,7 +419,7 @@ def test_limits_default_profile_recorded():
 def test_slicer_estimate_formats():
     cases = {
         "; estimated printing time (normal mode) = 1d 2h 3m 4s": 93784.0,
-        ";TIME:6666": 6666.0,
+        ";TIME:3723": 3723.0,
         ";Print Time: 744": 744.0,
         ";   Build time: 1 hours 2 minutes": 3720.0,
         "; Calculated-during-export Build Time: 10.5 minutes": 630.0,
@@ -428,6 +428,18 @@ def test_slicer_estimate_formats():
         p = make_program((0, 0, 0, 0), [("move", (10, 0, 0, 0), 30)], (line,))
         assert planner.slicer_estimate_s(p) == pytest.approx(want)
     assert planner.slicer_estimate_s(make_program((0, 0, 0, 0), [("move", (1, 0, 0, 0), 3)])) is None
+
+
+def test_curaengine_command_line_placeholder_is_not_taken_for_an_estimate():
+    # CuraEngine run from the command line writes ;TIME:6666 (the Cura front end fills it in);
+    # its estimate is then the last ;TIME_ELAPSED: marker (found on CuraEngine 4.13 output)
+    moves = [("move", (10, 0, 0, 0), 30)]
+    elapsed = (";TIME:6666", ";LAYER:0", ";TIME_ELAPSED:12.5", ";LAYER:1", ";TIME_ELAPSED:1028.153066")
+    assert planner.slicer_estimate_s(make_program((0, 0, 0, 0), moves, elapsed)) == pytest.approx(1028.153066)
+    # no header at all: the markers still say it
+    assert planner.slicer_estimate_s(make_program((0, 0, 0, 0), moves, elapsed[1:])) == pytest.approx(1028.153066)
+    # the placeholder alone is no estimate
+    assert planner.slicer_estimate_s(make_program((0, 0, 0, 0), moves, (";TIME:6666",))) is None
 
 
 # ------------------------------------------------------------------------------------------------
