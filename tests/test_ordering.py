@@ -397,3 +397,27 @@ def test_emit_memo_reuses_unchanged_layers_and_writes_what_a_fresh_emit_writes(n
     # the layer put back, and at most the next one (entered from another point)
     assert 1 <= len(memo) - n_first <= 2
     assert emit(prog, prob, sol, memo) == emit(prog, prob, sol)
+
+
+def test_progress_is_called_after_every_group_with_the_proofs_so_far():
+    from gatesopt.ordering import pipeline
+    prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
+    calls = []
+    res = pipeline.order_program(prog, OrderingOptions(mode="free"), progress=lambda *a: calls.append(a))
+    n = res.problem.n_groups
+    assert [c[0] for c in calls] == list(range(1, n + 1))
+    assert all(c[1] == n for c in calls)
+    proven = [c[2] for c in calls]
+    assert proven == sorted(proven)
+    assert proven[-1] == res.summary["groups_optimal"] > 0
+
+
+def test_cli_progress_bar_shows_groups_and_proofs():
+    import io
+    from gatesopt.cli.ordering import group_progress
+    out = io.StringIO()
+    with group_progress(True, stream=out, mininterval=0) as update:
+        update(3, 10, 2)
+    assert "3/10" in out.getvalue() and "proven 2" in out.getvalue()
+    with group_progress(False) as update:
+        assert update is None

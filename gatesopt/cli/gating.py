@@ -216,10 +216,12 @@ def run_solve(args) -> int:
         program = parse(sys.stdin.buffer.read(), source="<stdin>")
     else:
         program = parse(inp)
-    from .ordering import default_workers
-    result = run(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
-                 order=not args.no_order, gating=not args.no_gating, order_workers=default_workers(),
-                 order_budget_s=args.order_budget)
+    from .ordering import default_workers, group_progress
+    with group_progress(sys.stderr.isatty() and not args.no_order) as progress:
+        result = run(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
+                     order=not args.no_order, gating=not args.no_gating,
+                     order_workers=default_workers(), order_budget_s=args.order_budget,
+                     order_progress=progress)
     s = result.summary()
     if not result.report.ok:
         if out != "-":      # stderr keeps the one line a slicer shows

@@ -7,6 +7,7 @@ file without ``--force``.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
@@ -65,9 +66,11 @@ def run(args) -> int:
     options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
     if args.budget is not None and not (math.isfinite(args.budget) and args.budget > 0):
         raise GatesoptError(f"--budget must be > 0 s, not {args.budget}")
-    result = order_program(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
-                           budget_s=args.budget, workers=args.workers,
-                           time_guard=not args.allow_slower_layers)
+    with group_progress(sys.stderr.isatty()) as progress:
+        result = order_program(program, options, formulation=args.formulation,
+                               time_limit_s=args.time_limit, budget_s=args.budget,
+                               workers=args.workers, time_guard=not args.allow_slower_layers,
+                               progress=progress)
     s = result.summary
     if not result.ok:
         print(format_report(s))
@@ -83,6 +86,29 @@ def run(args) -> int:
     if args.json:
         write_atomic(args.json, json.dumps(s, indent=2, default=float) + "\n")
     return 0
+
+
+@contextlib.contextmanager
+def group_progress(enabled: bool, stream=None, mininterval: float = 0.25):
+    """A progress bar over the ordering's groups on stderr (``progress`` for ``layers.solve``:
+    groups done, proven so far, time left), or None when not ``enabled`` (not a terminal)."""
+    if not enabled:
+        yield None
+        return
+    from tqdm import tqdm
+    bar = tqdm(total=1, unit="group", desc="ordering", leave=False, dynamic_ncols=True,
+               file=stream or sys.stderr, mininterval=mininterval)
+
+    def update(done: int, total: int, proven: int) -> None:
+        if bar.total != total:
+            bar.total = total
+        bar.set_postfix_str(f"proven {proven:,}", refresh=False)
+        bar.update(done - bar.n)
+
+    try:
+        yield update
+    finally:
+        bar.close()
 
 
 def format_report(s: dict) -> str:

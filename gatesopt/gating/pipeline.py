@@ -63,13 +63,14 @@ class RunResult:
         return d
 
 
-def _order(program: Program, time_limit_s: float, workers: int = 1, budget_s: float | None = None):
+def _order(program: Program, time_limit_s: float, workers: int = 1, budget_s: float | None = None,
+           progress=None):
     """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note, problem)."""
     try:
         ordering = importlib.import_module("gatesopt.ordering")
         problem = ordering.build(program)
         solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s, workers=workers,
-                                  budget_s=budget_s)
+                                  budget_s=budget_s, progress=progress)
         from ..ordering.pipeline import emit_guarded, kept_slower_note
         _, _, out, slower = emit_guarded(program, problem, solution)
     except (ImportError, AttributeError, NotImplementedError) as exc:
@@ -98,8 +99,9 @@ def _solve_interruptible(problem, formulation: str, time_limit_s, notes: list):
 def run(program: Program, options: GatingOptions | None = None, *, formulation: str = "dp",
         time_limit_s: float | None = None, order: bool = True, gating: bool = True,
         order_time_limit_s: float = 2.0, order_workers: int = 1,
-        order_budget_s: float | None = None) -> RunResult:
-    """Rewrite ``program``: optional curve ordering, then power gating; verify the result."""
+        order_budget_s: float | None = None, order_progress=None) -> RunResult:
+    """Rewrite ``program``: optional curve ordering, then power gating; verify the result.
+    ``order_progress``: called after each ordering group (``ordering.layers.solve``)."""
     program.check_rewritable()
     t0 = time.perf_counter()
     o = options or GatingOptions()
@@ -107,7 +109,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     base, ordered, order_problem = program, False, None
     if order:
         base, ordered, note, order_problem = _order(program, order_time_limit_s, order_workers,
-                                                    order_budget_s)
+                                                    order_budget_s, order_progress)
         if note:
             notes.append(note)
     ordered_base = base

@@ -45,11 +45,13 @@ FORMULATIONS = {
 
 
 def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: float = 2.0,
-          budget_s: float | None = None, workers: int = 1, **kwargs) -> OrderingSolution:
+          budget_s: float | None = None, workers: int = 1, progress=None,
+          **kwargs) -> OrderingSolution:
     """Order every group; ``time_limit_s`` is per group (exact formulations only); ``budget_s``
     caps the whole solve: each group gets at most its share of what is left (groups the DP or the
     bound settle take next to nothing). ``workers = 2``: a second process solves the chain from the
-    back (``helper.Helper``) until it meets the main process."""
+    back (``helper.Helper``) until it meets the main process. ``progress``: called as
+    ``progress(groups_done, n_groups, groups_proven)`` after each group (the CLI draws a bar)."""
     if formulation not in FORMULATIONS:
         raise ValueError(f"unknown formulation {formulation!r}: one of {sorted(FORMULATIONS)}")
     if workers not in (1, 2):
@@ -63,6 +65,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     sols = []
     pos = np.asarray(problem.origin_xy, float)
     plans = []      # per group: [(GroupSolution, Group)] options: the solver's path, the slicer's
+    proven = 0      # re-orderable groups proven so far (for ``progress``)
     helper = (Helper.start(problem, formulation, time_limit_s, budget_s, t0, kwargs)
               if workers == 2 else None)
     try:
@@ -92,6 +95,9 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                         grp.check_order(gs.order)
             plans.append((grp, opts))
             runner.passed(g)
+            if progress is not None:
+                proven += opts[0].status == "optimal" and not problem.group_fixed[g] and grp.n_curves >= 2
+                progress(g + 1, problem.n_groups, proven)
             pos = grp.exit_xy(opts[0].order)
     finally:
         if helper:

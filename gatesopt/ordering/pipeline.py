@@ -114,16 +114,17 @@ def kept_slower_note(n_layers: int) -> str:
 def order_program(program: Program, options: OrderingOptions | None = None, *,
                   formulation: str = "auto", time_limit_s: float = 2.0,
                   budget_s: float | None = None, workers: int = 1,
-                  time_guard: bool = True) -> OrderResult:
+                  time_guard: bool = True, progress=None) -> OrderResult:
     """Re-order ``program``'s curves and verify the result (see module docstring).
     ``time_guard``: a layer whose re-ordered print takes longer than the slicer's (paper time
-    model: its rebuilt travels retract and hop more often) keeps the slicer's order."""
+    model: its rebuilt travels retract and hop more often) keeps the slicer's order.
+    ``progress``: passed to ``layers.solve`` (called after each group)."""
     program.check_rewritable()
     t0 = time.perf_counter()
     options = options or OrderingOptions()
     problem = build(program, options)
     solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=budget_s,
-                     workers=workers)
+                     workers=workers, progress=progress)
     solution, text, out, slower_layers = emit_guarded(program, problem, solution, time_guard)
     findings = tuple(check(program, out))
     before, after = travel_stats(program), travel_stats(out)
