@@ -38,6 +38,7 @@ def main() -> int:
     s1, s2 = summarize(rows[1]), summarize(rows[2])
     speedup = times[1] / times[2]
     same = all(_stable(x) == _stable(y) for x, y in zip(rows[1], rows[2]))
+    walls = [float(r["wall_s"]) for r in rows[1] if r.get("wall_s") not in ("", None)] or [0.0]
     md = [f"Command: `python bench/batch.py --formulation {a.formulation}` ({platform.machine()}, "
           f"{os.cpu_count()} cores, Python {platform.python_version()}, {time.strftime('%Y-%m-%d')}): "
           f"every file of ../shared/instances through ordering + gating ({a.formulation}) + verify.", "",
@@ -46,7 +47,15 @@ def main() -> int:
         md.append(f"| {jobs} | {n} | {s['verified']} | {s['errors']} | {times[jobs]:.1f} | {n / times[jobs]:.3f} |")
     md += ["", f"2 jobs / 1 job throughput: **{speedup:.2f}x** (target: within 10 % of 2x, i.e. >= 1.80x). "
            f"Rows identical between the runs (timing columns aside): {'yes' if same else 'NO'}.",
-           "The work per file is uneven (0.1 s to 25 s), so the last large files bound the 2-job wall time."]
+           f"The work per file is uneven ({min(walls):.1f} s to {max(walls):.1f} s in the 1-job run); "
+           "with 2 jobs the largest files go first (`gatesopt.batch.largest_first`), so no large file "
+           "is left running alone at the end."]
+    if not same:
+        md += ["Why the rows differ between the two runs: curve ordering gives each group a wall-clock "
+               "time limit, so on a loaded machine a group may be proven optimal in one run and returned "
+               "as \"feasible\" in the other, with another (equally verified) order. With ordering off "
+               "the rows are identical, and the process pool and a Dask LocalCluster give identical rows "
+               "(tests/test_batch_report.py)."]
     text = "\n".join(md)
     print(text)
     if a.write:

@@ -240,8 +240,32 @@ def _with(options: BatchOptions, **changes) -> BatchOptions:
     return BatchOptions(**d)
 
 
+def text_size(path) -> int:
+    """Bytes of G-code text in ``path``: a gzip file's own record of its uncompressed size (its
+    last 4 bytes, modulo 4 GiB), else the file's size."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if path.suffix == ".gz" and size >= 18:
+            with open(path, "rb") as f:
+                f.seek(-4, os.SEEK_END)
+                return int.from_bytes(f.read(4), "little")
+        return size
+    except OSError:
+        return 0
+
+
+def largest_first(work: list) -> list:
+    """``work`` with the largest files first: with several workers, a large file started last
+    would be the only one still running (longest processing time first, Graham 1969)."""
+    return sorted(work, key=lambda item: -text_size(item[0]))
+
+
 def _execute(work, jobs: int, dask: str | None):
-    """Yield ((file, formulation), row) as results arrive."""
+    """Yield ((file, formulation), row) as results arrive; with more than one worker the largest
+    files go first (``largest_first``)."""
+    if jobs > 1 or dask:
+        work = largest_first(work)
     if dask:
         from distributed import Client, LocalCluster, as_completed as dask_completed
         if dask == "local":
