@@ -56,7 +56,7 @@ def run(args) -> None:
                 groups = [{"n": int(sizes[g]), "status": gs.status, "gap": gs.gap,
                            "solve_s": gs.solve_s, "method": gs.method}
                           for g, gs in enumerate(res.solution.groups)
-                          if not res.problem.group_fixed[g] and sizes[g] >= 2]
+                          if res.problem.group_reorderable[g]]
                 s.update(file=name, slicer=man[name]["slicer"], infill=man[name]["infill_pattern"],
                          parse_s=parse_s, run_s=time.perf_counter() - t, group_rows=groups)
                 s.pop("per_layer", None)

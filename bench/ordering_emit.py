@@ -48,12 +48,8 @@ def best_of(fn, repeat: int) -> tuple[float, object]:
 def largest(n: int) -> list[Path]:
     with open(SHARED / "MANIFEST.tsv", newline="") as f:
         rows = list(csv.DictReader(f, delimiter="\t"))
-    key = "lines" if rows and "lines" in rows[0] else None
-    if key:
-        rows.sort(key=lambda r: -int(r[key] or 0))
-        return [SHARED / r["file"] for r in rows[:n]]
-    files = sorted(SHARED.glob("*.gcode*"), key=lambda p: -p.stat().st_size)
-    return files[:n]
+    rows.sort(key=lambda r: -int(r["lines"]))
+    return [SHARED / r["file"] for r in rows[:n]]
 
 
 def measure(path: Path, repeat: int, put_back_pct: float) -> dict:

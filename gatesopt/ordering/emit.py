@@ -260,15 +260,15 @@ class _Writer:
                 self.feature, self.e - self.e_off, self.e, self.e_off)
 
     def snapshot(self) -> tuple:
-        return (len(self.out), self.e, self.e_off, self.xyz.copy(), self.feed, dict(self.state),
-                self.feature)
+        """The state a memoized layer leaves behind (``extend_from`` takes it)."""
+        return (self.e, self.e_off, self.xyz.copy(), self.feed, dict(self.state), self.feature)
 
     def extend_from(self, entry: tuple, chunk: list, exit_: tuple) -> None:
         """Append a memoized layer's text and take its exit state; E moves with the difference
         between this entry and the memoized one (logical E agrees within MEMO_E_TOL_MM)."""
         self.out.extend(chunk)
         d_e, d_off = self.e - entry[5], self.e_off - entry[6]
-        _, e, e_off, xyz, feed, state, feature = exit_
+        e, e_off, xyz, feed, state, feature = exit_
         self.e, self.e_off = e + d_e, e_off + d_off
         self.xyz, self.feed, self.state, self.feature = xyz.copy(), feed, dict(state), feature
 
@@ -393,11 +393,11 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
                 w.extend_from(hit[0], hit[1], hit[2])
                 prev = int(order[k1 - 1])
                 continue
-            mark = w.snapshot()
+            start = len(w.out)
         for k in range(k0, k1):
             prev = _emit_curve(plan, w, k, prev)
         if key is not None:
-            memo[key[:-1]] = (key[-1], w.out[mark[0]:], w.snapshot())
+            memo[key[:-1]] = (key[-1], w.out[start:], w.snapshot())
     # state the remainder of the file expects, then the remainder verbatim
     last = plan.l1[n - 1]
     st = _state_at(plan.req, last + 1)

@@ -66,6 +66,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     pos = np.asarray(problem.origin_xy, float)
     plans = []      # per group: [(GroupSolution, Group)] options: the solver's path, the slicer's
     proven = 0      # re-orderable groups proven so far (for ``progress``)
+    reorderable = problem.group_reorderable
     helper = (Helper.start(problem, formulation, time_limit_s, budget_s, t0, kwargs)
               if workers == 2 else None)
     try:
@@ -96,7 +97,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             plans.append((grp, opts))
             runner.passed(g)
             if progress is not None:
-                proven += opts[0].status == "optimal" and not problem.group_fixed[g] and grp.n_curves >= 2
+                proven += bool(reorderable[g]) and opts[0].status == "optimal"
                 progress(g + 1, problem.n_groups, proven)
             pos = grp.exit_xy(opts[0].order)
     finally:

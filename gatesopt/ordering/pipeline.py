@@ -134,8 +134,8 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
         if row["layer"] in put_back:
             row["status"] = "kept"          # re-ordered it took longer: the slicer's order
     sizes = np.diff(problem.group_curve_start)
-    decided = [(g, gs) for g, gs in enumerate(solution.groups)
-               if not problem.group_fixed[g] and sizes[g] >= 2]
+    reorderable = problem.group_reorderable
+    decided = [(g, gs) for g, gs in enumerate(solution.groups) if reorderable[g]]
     counts = {"optimal": 0, "feasible": 0, "fallback": 0}
     for _, gs in decided:
         counts[gs.status if gs.status in counts else "fallback"] += 1

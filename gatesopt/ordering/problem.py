@@ -207,6 +207,11 @@ class OrderingProblem:
     def n_layers(self) -> int:
         return int(self.group_layer.max()) + 1 if self.n_groups else 0
 
+    @property
+    def group_reorderable(self) -> np.ndarray:
+        """(G,) bool: groups a solver decides (not fixed, >= 2 curves): what reports count."""
+        return ~np.asarray(self.group_fixed, bool) & (np.diff(self.group_curve_start) >= 2)
+
     def group_curves(self, g: int) -> np.ndarray:
         return np.arange(self.group_curve_start[g], self.group_curve_start[g + 1])
 
