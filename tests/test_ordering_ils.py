@@ -58,6 +58,25 @@ def test_ils_is_valid_never_worse_and_deterministic(seed):
     assert np.array_equal(a, b)
 
 
+def test_ils_stops_at_its_target():
+    """``target_mm`` (a lower bound from the caller): a search that starts at or below it does
+    not kick at all, so the path comes back as it went in; without a target, kicks that tie or
+    improve are taken and the same path does change."""
+    for seed in range(4):
+        prob = random_problem(700 + seed, 40, closed_share=0.2)
+        grp = prob.group(0, prob.origin_xy)
+        local = greedy.improve(grp, greedy.nearest_neighbour(grp))
+        cost = grp.path_cost_mm(local)
+        kept = ils.improve_ils(grp, local, kicks=300, local_optimum=True, target_mm=cost + 1e-6)
+        assert np.array_equal(kept, local)
+        moved = ils.improve_ils(grp, local, kicks=300, local_optimum=True)
+        assert not np.array_equal(moved, local)
+        # a target it reaches on the way: it stops there, at or below the target
+        half = cost - 0.5 * (cost - grp.path_cost_mm(moved))
+        stopped = ils.improve_ils(grp, local, kicks=300, local_optimum=True, target_mm=half)
+        assert grp.path_cost_mm(moved) <= grp.path_cost_mm(stopped) <= half
+
+
 def test_ils_reaches_the_dp_optimum_on_small_groups():
     """Groups of 12 open and closed curves: the exact DP says what optimal is."""
     hits, total, greedy_hits = 0, 0, 0

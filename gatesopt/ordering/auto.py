@@ -102,7 +102,8 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "fallback",
                                   time.perf_counter() - t0, "auto:greedy")
     order = ils.improve_ils(group, heur.order, kicks=kicks, deadline=deadline,
-                            local_optimum=heur.method == "greedy")
+                            local_optimum=heur.method == "greedy",
+                            target_mm=heur.bound_mm + OPTIMAL_ABS_TOL_MM)
     obj = group.path_cost_mm(order)
     if obj < heur.objective_mm - 1e-9:
         status = "optimal" if obj - heur.bound_mm <= OPTIMAL_ABS_TOL_MM else "feasible"

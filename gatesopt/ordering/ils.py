@@ -231,7 +231,7 @@ def _descend(seq, posof, cc, flip, D, ds, de, near_out, near_in, active):
 
 @numba.njit(cache=True)
 def _ils(seq, cc, cand_start, cand_list, ent, ext, flip, sx, sy, has_end, ex, ey,
-         D, ds, de, near_out, near_in, kicks, max_seg, seed, deadline_ns):
+         D, ds, de, near_out, near_in, kicks, max_seg, seed, deadline_ns, target):
     np.random.seed(seed)
     n = len(seq)
     n_curves = len(cand_start) - 1
@@ -243,6 +243,8 @@ def _ils(seq, cc, cand_start, cand_list, ent, ext, flip, sx, sy, has_end, ex, ey
     active = np.zeros(n_curves, np.bool_)
     curve_seq = np.empty(n, np.int64)
     for it in range(kicks):
+        if best_cost <= target:
+            break
         if deadline_ns > 0 and (it & 15) == 0:
             with numba.objmode(now="int64"):
                 now = time.perf_counter_ns()
@@ -298,7 +300,8 @@ def link_matrix(group: Group, k: int = NEIGHBOURS):
 
 
 def improve_ils(group: Group, order, *, kicks: int | None = None, seed: int = 0,
-                deadline: float | None = None, local_optimum: bool = False) -> np.ndarray:
+                deadline: float | None = None, local_optimum: bool = False,
+                target_mm: float = -np.inf) -> np.ndarray:
     """The best path found by ``kicks`` kicks from ``order`` after its own local search (default:
     KICKS_PER_CURVE per curve, at most MAX_KICKS); never longer than ``improve(order)``. Groups
     above MAX_CANDS candidates get the plain local search only. ``local_optimum``: ``order`` is
@@ -319,7 +322,7 @@ def improve_ils(group: Group, order, *, kicks: int | None = None, seed: int = 0,
     return _ils(order, group.cand_curve.astype(np.int64), cand_start, cand_list,
                 group.cand_entry_xy, group.cand_exit_xy, group.cand_flip.astype(np.int64),
                 float(group.start_xy[0]), float(group.start_xy[1]), he, ex, ey, D, ds, de, near_out, near_in,
-                int(kicks), MAX_SEGMENT, int(seed), deadline_ns)
+                int(kicks), MAX_SEGMENT, int(seed), deadline_ns, float(target_mm))
 
 
 def warm_start(group: Group, hint, t0: float, time_limit_s: float):

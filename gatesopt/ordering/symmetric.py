@@ -537,13 +537,14 @@ class SymmetricModel:
         proven = best_obj - bound <= OPTIMAL_ABS_TOL_MM
         return best, best_obj, bound, proven
 
-    def _polish(self, order, best, best_obj, deadline):
-        """ILS from ``order``; the better of it and ``best``."""
+    def _polish(self, order, best, best_obj, bound, deadline):
+        """ILS from ``order``, stopped once it reaches ``bound`` (then proven optimal); the
+        better of it and ``best``."""
         from .ils import improve_ils
         if order is None or len(order) != self.group.n_curves:
             return best, best_obj
         order = improve_ils(self.group, order, kicks=POLISH_KICKS_PER_CURVE * self.group.n_curves,
-                            deadline=deadline)
+                            deadline=deadline, target_mm=bound + OPTIMAL_ABS_TOL_MM)
         obj = self.group.path_cost_mm(order)
         return (order, obj) if obj < best_obj - 1e-9 else (best, best_obj)
 
@@ -558,7 +559,7 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     bound = model.root(deadline)
     if best_obj - bound > OPTIMAL_ABS_TOL_MM and model.complete:
         x = np.asarray(model.h.getSolution().col_value)
-        best, best_obj = model._polish(model.tour_from(x), best, best_obj, deadline)
+        best, best_obj = model._polish(model.tour_from(x), best, best_obj, bound, deadline)
     if best_obj - bound <= OPTIMAL_ABS_TOL_MM:
         return best, best_obj, bound, True
     if not model.complete:
