@@ -1,4 +1,5 @@
-"""Curve-ordering emit: speed against the parser, and the time guard's re-emit with the memo.
+"""Curve-ordering emit and verify: speed against the parser, and the time guard's re-emit with
+the memo.
 
 On the ``--files`` largest instances of ../shared/instances (by line count): the greedy order
 in free mode (deterministic, so every run emits the same text), then the best of ``--repeat``
@@ -8,12 +9,14 @@ runs of
 - ``ordering.emit`` of the whole re-ordered file,
 - after putting back ``--put-back`` % of its re-ordered layers (``pipeline.keep_layers``, what the
   time guard does with layers that got slower): the emit again without the memo and with the
-  memo the first emit filled (``emit(..., memo)``, as ``pipeline.emit_guarded`` does).
+  memo the first emit filled (``emit(..., memo)``, as ``pipeline.emit_guarded`` does),
+- ``ordering.verify.check`` of the re-ordered output against the original (what every ``order``
+  and ``solve`` run ends with).
 
 Both emits of the last step are checked to give the same text.
 
     python bench/ordering_emit.py
-    python bench/ordering_emit.py --write      # replace "## Curve-ordering emit" in docs/BENCHMARKS.md
+    python bench/ordering_emit.py --write      # replace "## Curve-ordering emit and verify" in docs/BENCHMARKS.md
 """
 from __future__ import annotations
 
@@ -29,11 +32,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 SHARED = ROOT.parent / "shared" / "instances"
-SECTION = "## Curve-ordering emit"
+SECTION = "## Curve-ordering emit and verify"
 
 import gatesopt  # noqa: E402
 from gatesopt.ordering import OrderingOptions, build, emit, solve  # noqa: E402
 from gatesopt.ordering.pipeline import keep_layers  # noqa: E402
+from gatesopt.ordering.verify import check  # noqa: E402
 
 
 def best_of(fn, repeat: int) -> tuple[float, object]:
@@ -57,6 +61,9 @@ def measure(path: Path, repeat: int, put_back_pct: float) -> dict:
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
     t_emit, text = best_of(lambda: emit(prog, prob, sol), repeat)
+    out = gatesopt.parse(text)
+    t_verify, findings = best_of(lambda: check(prog, out), repeat)
+    assert not findings, findings
     lay_of = prob.curve_layer[sol.curve_order]
     moved = [L for L in np.unique(prob.curve_layer)
              if not np.array_equal(sol.curve_order[lay_of == L], np.flatnonzero(prob.curve_layer == L))]
@@ -75,7 +82,7 @@ def measure(path: Path, repeat: int, put_back_pct: float) -> dict:
     t_memo = min(r[0] for r in runs)
     return {"file": path.name, "lines": prog.n_lines, "parse_s": t_parse, "emit_s": t_emit,
             "layers_moved": len(moved), "put_back": k, "fresh_s": t_fresh, "memo_s": t_memo,
-            "same": runs[0][1] == fresh}
+            "same": runs[0][1] == fresh, "verify_s": t_verify}
 
 
 def main() -> None:
@@ -95,7 +102,7 @@ def main() -> None:
         print(f"{r['file']}: {r['lines']:,} lines, parse {r['parse_s']:.2f} s, emit {r['emit_s']:.2f} s "
               f"({r['emit_s'] / r['parse_s']:.1f}x parse); {r['put_back']} of {r['layers_moved']} layers "
               f"put back: emit {r['fresh_s']:.2f} s, with the memo {r['memo_s']:.2f} s, same text "
-              f"{r['same']}", flush=True)
+              f"{r['same']}; verify {r['verify_s']:.2f} s", flush=True)
     cmd = "python bench/ordering_emit.py" + (" " + " ".join(a for a in sys.argv[1:] if a != "--write")
                                              if len(sys.argv) > 1 else "")
     lines = [SECTION, "",
@@ -103,15 +110,17 @@ def main() -> None:
              f"{time.strftime('%Y-%m-%d')}, best of {args.repeat}; greedy order, free mode). The "
              "parse of the same file is the peer; the last two columns are the time guard's second "
              f"emit after putting back {args.put_back:g} % of the re-ordered layers, without and "
-             "with the memo of the first emit (`ordering.emit(..., memo)`); both give the same text.",
+             "with the memo of the first emit (`ordering.emit(..., memo)`); both give the same text. "
+             "Verify: `ordering.verify.check` of the re-ordered output against the original.",
              "", "| file | lines | parse s | emit s | emit / parse | emit k lines/s | layers put back "
-             "| re-emit s | with memo s | memo speed-up | same text |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "| re-emit s | with memo s | memo speed-up | same text | verify s | verify / parse |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['file']} | {r['lines']:,} | {r['parse_s']:.2f} | {r['emit_s']:.2f} | "
                      f"{r['emit_s'] / r['parse_s']:.1f} | {r['lines'] / r['emit_s'] / 1e3:.0f} | "
                      f"{r['put_back']} of {r['layers_moved']} | {r['fresh_s']:.2f} | {r['memo_s']:.2f} | "
-                     f"{r['fresh_s'] / r['memo_s']:.1f}x | {r['same']} |")
+                     f"{r['fresh_s'] / r['memo_s']:.1f}x | {r['same']} | {r['verify_s']:.2f} | "
+                     f"{r['verify_s'] / r['parse_s']:.1f} |")
     text = "\n".join(lines) + "\n"
     print()
     print(text)

@@ -268,6 +268,21 @@ def test_verify_catches_a_moved_extrusion():
     assert any(f.check == "geometry" for f in check(prog, gatesopt.parse(text)))
 
 
+def test_verify_catches_an_extrusion_moved_across_a_barrier():
+    # layer 1's fan command comes after its 4th infill line; put it before that line: the same
+    # moves, the same commands in the same order, but one line now extrudes after the barrier
+    lines = gatesopt.parse(_handmade_gcode()).to_gcode().splitlines()
+    prog = gatesopt.parse("\n".join(lines) + "\n")
+    fan = lines.index("M106 S128")
+    line = [i for i, t in enumerate(lines) if t.startswith("G1 X30 Y16 E")][1]
+    assert line < fan
+    moved = lines[:line] + ["M106 S128"] + lines[line:fan] + lines[fan + 1:]
+    found = check(prog, gatesopt.parse("\n".join(moved) + "\n"))
+    # the bin before the barrier lost that line's E, the bin after it gained it
+    assert [f.check for f in found] == ["barriers", "barriers"]
+    assert all(f.message.startswith("layer 1, after barrier line") for f in found)
+
+
 def test_fan_barrier_is_respected():
     prog = gatesopt.parse(_handmade_gcode())
     prob = build(prog, OrderingOptions(mode="free"))

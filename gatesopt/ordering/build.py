@@ -35,8 +35,10 @@ LINE_MOTION, LINE_NEUTRAL, LINE_STATE, LINE_BARRIER, LINE_FATAL, LINE_CURVE = ra
 STATE_M = (201, 203, 204, 205, 220, 221, 900)   # fan M106/M107 is a barrier (verify keeps its order)
 FATAL_M = (0, 1, 25, 125, 600, 601, 602, 701, 702)
 STATE_EXT = (b"SET_VELOCITY_LIMIT", b"SET_PRESSURE_ADVANCE", b"M204")
-OBJECT_LABEL = re.compile(rb"\n[^\n]*(?:printing object|; *stop printing object|;MESH:|EXCLUDE_OBJECT|M486)",
-                          re.I)
+#: what marks a line as an object label (anywhere in it, in any case): ``; printing object``,
+#: ``; stop printing object``, Cura's ``;MESH:``, EXCLUDE_OBJECT, M486. Found with ``bytes.find``
+#: in the lower-cased text: a case-insensitive regex took 0.27 s on a 6 MB file, this 0.02 s
+OBJECT_LABEL_WORDS = (b"printing object", b";mesh:", b"exclude_object", b"m486")
 FEATURE_LINE = re.compile(rb"\n(;[ \t]*(?:TYPE:|FEATURE:|feature )[ \t]*)([^\r\n]*)")
 FIXED_FEATURE = re.compile(r"perimeter|wall|ironing|skirt|brim|wipe|prime|tower|shell|inset|outline",
                            re.I)
@@ -104,9 +106,15 @@ def layout(program: Program) -> Layout:
         if head in STATE_EXT:
             cls[i] = LINE_STATE
     # object labels written as comments are barriers (M486 / EXCLUDE_OBJECT are barriers already)
-    starts = [mm.start() for mm in OBJECT_LABEL.finditer(b"\n" + program.data)]
-    if starts:
-        lab = np.searchsorted(program.line_start, np.asarray(starts), side="right") - 1
+    at = []
+    low = program.data.lower()
+    for word in OBJECT_LABEL_WORDS:
+        i = low.find(word)
+        while i >= 0:
+            at.append(i)
+            i = low.find(word, i + 1)
+    if at:
+        lab = np.unique(np.searchsorted(program.line_start, np.asarray(at), side="right") - 1)
         lab = lab[cls[lab] == LINE_NEUTRAL]
         cls[lab] = LINE_BARRIER
     kind = program.kind
