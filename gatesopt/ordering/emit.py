@@ -555,11 +555,10 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
     net_before = {}
     markers = [i for i in gap if i in w.layer_lines]
     if markers:
-        gap = np.asarray(gap, np.int64)
-        mot = gap[lay.line_class[gap] == LINE_MOTION]
-        st = lay.step_of_line[mot]
-        de = p.end_mm[st, 3] - p.start_mm[st, 3]
-        net_before = {int(m): float(de[mot < m].sum()) for m in markers}
+        mot = [i for i in gap if cls_of[i] == LINE_MOTION]
+        de = np.asarray([de_of[i] for i in mot], float)
+        mot = np.asarray(mot, np.int64)
+        net_before = {m: float(de[mot < m].sum()) for m in markers}
     emitted = 0.0
 
     def move_e(d_e: float, feed_mm_s: float = style.unretract_feed_mm_s) -> None:

@@ -94,13 +94,12 @@ def _layers_differing(layer_a, qa, layer_b, qb) -> np.ndarray:
         k = np.column_stack([layer, q])
         return k[np.lexsort(k.T[::-1])]
     a, b = sorted_rows(layer_a, qa), sorted_rows(layer_b, qb)
-    layers = np.union1d(np.unique(layer_a), np.unique(layer_b))
+    layers = np.union1d(layer_a, layer_b)
     a_at = np.searchsorted(a[:, 0], layers, side="left"), np.searchsorted(a[:, 0], layers, side="right")
     b_at = np.searchsorted(b[:, 0], layers, side="left"), np.searchsorted(b[:, 0], layers, side="right")
     differ = []
     for i, L in enumerate(layers.tolist()):
-        blk_a, blk_b = a[a_at[0][i]:a_at[1][i]], b[b_at[0][i]:b_at[1][i]]
-        if blk_a.shape != blk_b.shape or not np.array_equal(blk_a, blk_b):
+        if not np.array_equal(a[a_at[0][i]:a_at[1][i]], b[b_at[0][i]:b_at[1][i]]):   # shape too
             differ.append(L)
     return np.asarray(differ, layers.dtype)
 
