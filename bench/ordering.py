@@ -47,10 +47,11 @@ def run(args) -> None:
         parse_s = time.perf_counter() - t
         for mode in args.modes.split(","):
             for form in args.formulations.split(","):
-                t = time.perf_counter()
+                # the whole run counts the parse, as `gatesopt order` does (--budget included)
+                t = time.perf_counter() - parse_s
                 res = order_program(prog, OrderingOptions(mode=mode), formulation=form,
                                     time_limit_s=args.time_limit, budget_s=args.budget,
-                                    workers=args.workers)
+                                    workers=args.workers, started_s=t)
                 s = dict(res.summary)
                 sizes = np.diff(res.problem.group_curve_start)
                 groups = [{"n": int(sizes[g]), "status": gs.status, "gap": gs.gap,
@@ -108,13 +109,16 @@ def report(args) -> str:
              "(DP, bound or MILP), *feasible* = exact solver stopped at the per-group time limit with "
              "a gap, *fallback* = not given to an exact step (too large, or too little of the budget "
              "left: ILS path, gap to the cheap bound). "
-             "Time = solve only (build, emit, verify excluded) / the whole pipeline.", "",
+             "*solve s* = the solve only; *run s* = the whole run: parse, build, solve, emit with the "
+             "time guard's passes, re-parse, verify.", "",
              "Issue 4 targets: >= 95 % of real groups proven optimal, the rest within 2 %, an instance "
              "in <= 10 s on 2 cores; compare the bold lines below. The gaps of unproven groups are to "
              "their lower bound (the MILP's, or the cheap bound of `bounds.py` for fallback groups), "
-             "not measured distances to the optimum. `--budget 10` caps `layers.solve` at about 10 s per "
-             "file (kernel warm-up, greedy paths, bounds and exact steps; what a group takes beyond its "
-             "limit is reserved for the groups after it, so a file can end slightly above). "
+             "not measured distances to the optimum. `--budget 10` is for the whole run of a file, parse "
+             "to verified output, as `gatesopt order --budget 10`: the solve gets 10 s less what "
+             "parse and build took and an estimate of the rest (`pipeline.solve_budget_s`: 19 us per "
+             "line of the file + 0.15 s), and spends it on kernel warm-up, greedy paths, bounds and "
+             "exact steps (what a group takes beyond its limit is reserved for the groups after it). "
              "`--workers 2`: a second process solves the chain of groups from the back "
              "(formulations/ordering.md, \"Two processes\"). Without `--budget` every group gets the full per-group "
              "limit: that run shows what the exact step proves when time is not the constraint. "
@@ -170,7 +174,9 @@ def report(args) -> str:
                           f"<= 2 % for {int((gaps <= 0.02).sum())} of {len(gaps)}. "
                           f"Solve time per file: median {np.median([r['solve_s'] for r in rs]):.1f} s, "
                           f"max {max(r['solve_s'] for r in rs):.1f} s; "
-                          f"files solved in <= 10 s: {sum(r['solve_s'] <= 10 for r in rs)} of {len(rs)}. "
+                          f"files solved in <= 10 s: {sum(r['solve_s'] <= 10 for r in rs)} of {len(rs)}; "
+                          f"whole run (parse to verified output) per file: max {max(r['run_s'] for r in rs):.1f} s, "
+                          f"<= 10 s for {sum(r['run_s'] <= 10 for r in rs)} of {len(rs)}. "
                           f"{time_line}"
                           f"Verified: {sum(r['verified'] for r in rs)} of {len(rs)}.**", ""]
             # by slicer family and infill pattern (Fleming Fig. 2)

@@ -434,5 +434,11 @@ def test_cli_progress_bar_shows_groups_and_proofs():
     with group_progress(True, stream=out, mininterval=0) as update:
         update(3, 10, 2)
     assert "3/10" in out.getvalue() and "proven 2" in out.getvalue()
+    # under a budget the bar says when the budget ends, not tqdm's extrapolated estimate
+    import time
+    out = io.StringIO()
+    with group_progress(True, stream=out, mininterval=0, deadline_s=time.perf_counter() + 60) as update:
+        update(3, 10, 2)
+    assert "budget ends in" in out.getvalue() and "<" not in out.getvalue()
     with group_progress(False) as update:
         assert update is None

@@ -260,3 +260,39 @@ def test_helper_solves_the_chain_from_the_back(monkeypatch):
         assert last.objective_mm == pytest.approx(grp.path_cost_mm(last.order))
         assert last.bound_mm <= dp.solve(grp).objective_mm + 1e-6
     assert two.travel_after_mm <= two.travel_before_mm + 1e-9
+
+
+def test_a_budget_is_for_the_whole_run_and_the_solve_gets_what_the_rest_leaves():
+    from gatesopt.ordering.pipeline import (FINISH_FIXED_S, FINISH_S_PER_LINE, MIN_SOLVE_SHARE,
+                                            solve_budget_s)
+    assert solve_budget_s(None, 10 ** 6, 3.0) is None
+    assert solve_budget_s(10.0, 100_000, 0.5) == pytest.approx(
+        10.0 - 0.5 - FINISH_FIXED_S - 100_000 * FINISH_S_PER_LINE)
+    # a file whose emit alone would take longer than the budget: the solve keeps its share
+    assert solve_budget_s(10.0, 10 ** 8, 0.5) == pytest.approx(MIN_SOLVE_SHARE * 10.0)
+
+
+def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
+    import time
+
+    import gatesopt
+    from gatesopt.ordering import pipeline
+
+    from conftest import PROJECT_INSTANCES
+    prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
+    seen = []
+    real = pipeline.solve
+
+    def spy(problem, formulation="auto", **kw):
+        seen.append(kw["budget_s"])
+        return real(problem, formulation, **kw)
+
+    monkeypatch.setattr(pipeline, "solve", spy)
+    est = pipeline.FINISH_FIXED_S + pipeline.FINISH_S_PER_LINE * prog.n_lines
+    res = pipeline.order_program(prog, OrderingOptions(mode="free"), budget_s=10.0)
+    # a parse that took 4 s before order_program was called counts against the budget
+    pipeline.order_program(prog, OrderingOptions(mode="free"), budget_s=10.0,
+                           started_s=time.perf_counter() - 4.0)
+    pipeline.order_program(prog, OrderingOptions(mode="free"))
+    assert seen[0] <= 10.0 - est and seen[1] <= 10.0 - est - 4.0 and seen[2] is None
+    assert res.ok and res.summary["budget_s"] == 10.0 and res.summary["solve_budget_s"] == seen[0]

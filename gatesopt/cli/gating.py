@@ -12,6 +12,7 @@ import math
 import os
 import sys
 import tempfile
+import time
 
 from ..errors import GatesoptError
 from ..parse import parse
@@ -61,8 +62,9 @@ def register(sub) -> None:
     p.add_argument("--json", metavar="REPORT.json", help="also write the report as JSON")
     p.add_argument("--no-order", action="store_true", help="do not re-order curves")
     p.add_argument("--order-budget", type=float, default=10.0, metavar="S",
-                   help="cap the curve ordering at about S seconds (default 10; groups share "
-                        "what is left, as `order --budget`)")
+                   help="finish the curve ordering (build, solve, emit) in about S seconds "
+                        "(default 10; the solve gets what an estimate of the emit leaves, as "
+                        "`order --budget`)")
     p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=run_solve)
@@ -217,7 +219,9 @@ def run_solve(args) -> int:
     else:
         program = parse(inp)
     from .ordering import default_workers, group_progress
-    with group_progress(sys.stderr.isatty() and not args.no_order) as progress:
+    # the ordering starts now: its budget ends order_budget seconds from here
+    with group_progress(sys.stderr.isatty() and not args.no_order,
+                        deadline_s=time.perf_counter() + args.order_budget) as progress:
         result = run(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
                      order=not args.no_order, gating=not args.no_gating,
                      order_workers=default_workers(), order_budget_s=args.order_budget,

@@ -11,6 +11,7 @@ import contextlib
 import json
 import math
 import sys
+import time
 
 from ..errors import GatesoptError
 from ..parse import parse
@@ -36,7 +37,8 @@ def register(sub) -> None:
     p.add_argument("--time-limit", type=float, default=2.0, metavar="S",
                    help="time limit per group for the exact formulations (default 2 s)")
     p.add_argument("--budget", type=float, default=None, metavar="S",
-                   help="cap the whole solve at about S seconds (groups share what is left)")
+                   help="finish in about S seconds, from reading the file to the verified output: the "
+                        "solve gets what an estimate of the rest leaves (groups share it)")
     p.add_argument("--workers", type=int, choices=(1, 2), default=default_workers(),
                    help="processes: 2 lets a second one solve the chain of groups from the back "
                         "(default: 2 if this machine has 2 cores or more)")
@@ -59,18 +61,20 @@ def run(args) -> int:
     from ..ordering.pipeline import order_program
     if not (math.isfinite(args.time_limit) and args.time_limit > 0):
         raise GatesoptError(f"--time-limit must be > 0 s, not {args.time_limit}")
+    if args.budget is not None and not (math.isfinite(args.budget) and args.budget > 0):
+        raise GatesoptError(f"--budget must be > 0 s, not {args.budget}")
     _check_paths(args.file, args.output, args.force)
     if args.json:
         _check_paths(args.file, args.json, args.force)
+    started_s = time.perf_counter()         # a --budget counts from here
     program = parse(args.file)
     options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
-    if args.budget is not None and not (math.isfinite(args.budget) and args.budget > 0):
-        raise GatesoptError(f"--budget must be > 0 s, not {args.budget}")
-    with group_progress(sys.stderr.isatty()) as progress:
+    deadline_s = None if args.budget is None else started_s + args.budget
+    with group_progress(sys.stderr.isatty(), deadline_s=deadline_s) as progress:
         result = order_program(program, options, formulation=args.formulation,
                                time_limit_s=args.time_limit, budget_s=args.budget,
                                workers=args.workers, time_guard=not args.allow_slower_layers,
-                               progress=progress)
+                               progress=progress, started_s=started_s)
     s = result.summary
     if not result.ok:
         print(format_report(s))
@@ -89,20 +93,29 @@ def run(args) -> int:
 
 
 @contextlib.contextmanager
-def group_progress(enabled: bool, stream=None, mininterval: float = 0.25):
+def group_progress(enabled: bool, stream=None, mininterval: float = 0.25,
+                   deadline_s: float | None = None):
     """A progress bar over the ordering's groups on stderr (``progress`` for ``layers.solve``:
-    groups done, proven so far, time left), or None when not ``enabled`` (not a terminal)."""
+    groups done, proven so far), or None when not ``enabled`` (not a terminal). With a budget,
+    ``deadline_s`` (a ``time.perf_counter()`` reading: when the budget ends) replaces tqdm's
+    estimate, which extrapolates the rate of the groups so far: under a budget the groups left
+    get what is left, whatever the rate."""
     if not enabled:
         yield None
         return
     from tqdm import tqdm
+    bar_format = (None if deadline_s is None
+                  else "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} [{elapsed}{postfix}]")
     bar = tqdm(total=1, unit="group", desc="ordering", leave=False, dynamic_ncols=True,
-               file=stream or sys.stderr, mininterval=mininterval)
+               file=stream or sys.stderr, mininterval=mininterval, bar_format=bar_format)
 
     def update(done: int, total: int, proven: int) -> None:
         if bar.total != total:
             bar.total = total
-        bar.set_postfix_str(f"proven {proven:,}", refresh=False)
+        post = f"proven {proven:,}"
+        if deadline_s is not None:
+            post += f", budget ends in {max(0.0, deadline_s - time.perf_counter()):.0f} s"
+        bar.set_postfix_str(post, refresh=False)
         bar.update(done - bar.n)
 
     try:
@@ -119,7 +132,7 @@ def format_report(s: dict) -> str:
         f"formulation   {s['formulation']}   mode {s['order_mode']}"
         + ("   seams may move" if s["move_seams"] else "   seams kept")
         + f"   time limit {s['time_limit_s']:g} s per group"
-        + (f", budget {s['budget_s']:g} s" if s.get("budget_s") else "")
+        + (f", budget {s['budget_s']:g} s for the whole run" if s.get("budget_s") else "")
         + (f", {s['workers']} processes" if s.get("workers", 1) > 1 else ""),
         f"travel        {s['travel_before_mm']:,.1f} mm -> {s['travel_after_mm']:,.1f} mm"
         f"   ({pct(s['travel_after_mm'], s['travel_before_mm'])})",
@@ -136,7 +149,9 @@ def format_report(s: dict) -> str:
         f"layers        optimal {s['layers_optimal']:,}   feasible at limit {s['layers_feasible']:,}"
         f"   fallback {s['layers_fallback']:,}   order kept {s['layers_kept']:,}"
         + (f" ({s['layers_kept_slower']:,} of them: slower re-ordered)" if s.get("layers_kept_slower") else ""),
-        f"solve         {s['solve_s']:.2f} s   (whole run {s['wall_s']:.2f} s)",
+        f"solve         {s['solve_s']:.2f} s"
+        + (f" of the {s['solve_budget_s']:.2f} s the budget left it" if s.get("solve_budget_s") else "")
+        + f"   (whole run {s['wall_s']:.2f} s)",
         f"verified      {'yes' if s['verified'] else 'NO'}",
     ]
     if s.get("output"):

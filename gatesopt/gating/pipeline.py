@@ -67,11 +67,15 @@ def _order(program: Program, time_limit_s: float, workers: int = 1, budget_s: fl
            progress=None):
     """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note, problem)."""
     try:
+        t0 = time.perf_counter()
         ordering = importlib.import_module("gatesopt.ordering")
+        from ..ordering.pipeline import emit_guarded, kept_slower_note, solve_budget_s
         problem = ordering.build(program)
+        # the budget covers the ordering (build, solve, emit); the solve gets what it leaves
         solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s, workers=workers,
-                                  budget_s=budget_s, progress=progress)
-        from ..ordering.pipeline import emit_guarded, kept_slower_note
+                                  budget_s=solve_budget_s(budget_s, program.n_lines,
+                                                          time.perf_counter() - t0),
+                                  progress=progress)
         _, _, out, slower = emit_guarded(program, problem, solution)
     except (ImportError, AttributeError, NotImplementedError) as exc:
         return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})", None
