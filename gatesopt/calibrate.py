@@ -21,7 +21,6 @@ import io
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
 from .energy import Profile, load_profile
 from .errors import GatesoptError
@@ -201,6 +200,9 @@ def fit(program: Program, log: PowerLog, *, prior: str | Profile = "component_ex
     # min ||A x - y||^2 + sum_k lam_k^2 (x_k - x0_k)^2 subject to x >= 0
     col_rms = np.sqrt((A ** 2).mean(axis=0))
     lam = np.sqrt(len(y)) * np.maximum(col_rms, 1e-6) * np.array([1e3 if fixed[nm] else ridge for nm in PARAMS])
+    # imported here: scipy.optimize takes ~0.5 s to import, and every `gatesopt` command loads
+    # this module when the CLI registers its subcommands
+    from scipy.optimize import lsq_linear
     res = lsq_linear(np.vstack([A, np.diag(lam)]), np.concatenate([y, lam * x0]), bounds=(0.0, np.inf))
     x = res.x
     pred = A @ x

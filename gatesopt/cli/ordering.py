@@ -57,6 +57,7 @@ def default_workers() -> int:
 
 
 def run(args) -> int:
+    started_s = time.perf_counter()     # a --budget counts from here: imports, parse, all of it
     from ..ordering import OrderingOptions
     from ..ordering.pipeline import order_program
     if not (math.isfinite(args.time_limit) and args.time_limit > 0):
@@ -66,7 +67,6 @@ def run(args) -> int:
     _check_paths(args.file, args.output, args.force)
     if args.json:
         _check_paths(args.file, args.json, args.force)
-    started_s = time.perf_counter()         # a --budget counts from here
     program = parse(args.file)
     options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
     deadline_s = None if args.budget is None else started_s + args.budget
