@@ -88,15 +88,15 @@ def test_option_combinations_are_refused(tmp_path, capsys):
 
 def test_solve_gives_the_ordering_a_budget(tmp_path, monkeypatch):
     # `solve` re-orders before gating; on a large file 2 s per group without a cap took minutes
-    import gatesopt.ordering as ordering
+    from gatesopt.ordering import pipeline as ordering_pipeline
     seen = []
-    real = ordering.solve
+    real = ordering_pipeline.solve
 
     def spy(problem, formulation="auto", **kw):
         seen.append(kw.get("budget_s"))
         return real(problem, formulation, **kw)
 
-    monkeypatch.setattr(ordering, "solve", spy)
+    monkeypatch.setattr(ordering_pipeline, "solve", spy)
     p = _copy(tmp_path)
     assert main(["solve", str(p), "-o", str(tmp_path / "a.gcode")]) == 0
     assert main(["solve", str(p), "-o", str(tmp_path / "b.gcode"), "--order-budget", "3"]) == 0

@@ -163,11 +163,11 @@ def test_ctrl_c_during_an_exact_solve_still_gives_a_verified_answer(monkeypatch)
 
 
 def test_ctrl_c_during_ordering_keeps_the_slicer_order(monkeypatch):
-    import gatesopt.ordering as ordering
+    from gatesopt.ordering import pipeline as ordering_pipeline
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
-    monkeypatch.setattr(ordering, "solve", interrupted)
+    monkeypatch.setattr(ordering_pipeline, "solve", interrupted)
     program = parse(PROJECT_INSTANCES / "square_lines.gcode")
     res = run(program, GatingOptions(rotate="none"), formulation="dp", order=True)
     assert res.report.ok and not res.ordered

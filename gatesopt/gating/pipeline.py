@@ -67,21 +67,16 @@ def _order(program: Program, time_limit_s: float, workers: int = 1, budget_s: fl
            progress=None):
     """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note, problem)."""
     try:
-        t0 = time.perf_counter()
-        ordering = importlib.import_module("gatesopt.ordering")
-        from ..ordering.pipeline import emit_guarded, kept_slower_note, solve_budget_s
-        problem = ordering.build(program)
-        # the budget covers the ordering (build, solve, emit); the solve gets what it leaves
-        solution = ordering.solve(problem, "auto", time_limit_s=time_limit_s, workers=workers,
-                                  budget_s=solve_budget_s(budget_s, program.n_lines,
-                                                          time.perf_counter() - t0),
-                                  progress=progress)
-        _, _, out, slower = emit_guarded(program, problem, solution)
+        t0 = time.perf_counter()      # the budget covers the ordering: imports, build, solve, emit
+        pipeline = importlib.import_module("gatesopt.ordering.pipeline")
+        problem, _, _, _, out, slower = pipeline.reorder(
+            program, formulation="auto", time_limit_s=time_limit_s, budget_s=budget_s,
+            workers=workers, progress=progress, started_s=t0)
     except (ImportError, AttributeError, NotImplementedError) as exc:
         return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})", None
     except KeyboardInterrupt:   # Ctrl-C: the slicer's own order is a valid answer
         return program, False, "curve ordering interrupted (Ctrl-C): the slicer's order kept", None
-    note = f"curve ordering: {kept_slower_note(len(slower))}" if len(slower) else ""
+    note = f"curve ordering: {pipeline.kept_slower_note(len(slower))}" if len(slower) else ""
     return dataclasses.replace(out, source=program.source), True, note, problem
 
 

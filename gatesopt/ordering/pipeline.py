@@ -138,6 +138,23 @@ def solve_budget_s(budget_s: float | None, n_lines: int, spent_s: float) -> floa
     return max(MIN_SOLVE_SHARE * budget_s, left)
 
 
+def reorder(program: Program, options: OrderingOptions | None = None, *,
+            formulation: str = "auto", time_limit_s: float = 2.0,
+            budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
+            progress=None, started_s: float | None = None):
+    """build -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
+    ``started_s``, default now) -> ``emit_guarded``, without verifying (``order_program`` does;
+    gating's pipeline verifies its own output). Returns (problem, the solve's budget, solution,
+    text, parsed output, layers the time guard put back)."""
+    t0 = time.perf_counter() if started_s is None else started_s
+    problem = build(program, options or OrderingOptions())
+    solve_budget = solve_budget_s(budget_s, program.n_lines, time.perf_counter() - t0)
+    solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=solve_budget,
+                     workers=workers, progress=progress)
+    solution, text, out, kept = emit_guarded(program, problem, solution, time_guard)
+    return problem, solve_budget, solution, text, out, kept
+
+
 def order_program(program: Program, options: OrderingOptions | None = None, *,
                   formulation: str = "auto", time_limit_s: float = 2.0,
                   budget_s: float | None = None, workers: int = 1,
@@ -153,11 +170,9 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     program.check_rewritable()
     t0 = time.perf_counter() if started_s is None else started_s
     options = options or OrderingOptions()
-    problem = build(program, options)
-    solve_budget = solve_budget_s(budget_s, program.n_lines, time.perf_counter() - t0)
-    solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=solve_budget,
-                     workers=workers, progress=progress)
-    solution, text, out, slower_layers = emit_guarded(program, problem, solution, time_guard)
+    problem, solve_budget, solution, text, out, slower_layers = reorder(
+        program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
+        workers=workers, time_guard=time_guard, progress=progress, started_s=t0)
     findings = tuple(check(program, out))
     before, after = travel_stats(program), travel_stats(out)
     layers = solution.layer_summary(problem)
