@@ -186,6 +186,60 @@ def _rotated_run(near_undo: np.ndarray, near_raw: np.ndarray) -> np.ndarray:
     return out
 
 
+PARTITION_MAX_PIECES = 64   # longer runs of joinable pieces take the greedy reading
+
+
+def _best_partition(original_moves: np.ndarray, s: np.ndarray, e: np.ndarray, k: int, j_end: int,
+                    tol_mm: float) -> np.ndarray:
+    """Which joints of the run of pieces k..j_end (rows of ``s``/``e``) to join: (j_end - k,) bool.
+
+    A run is ambiguous when its pieces can be read more than one way: on a path that doubles
+    back, two original moves A, B in a row are also, joined, a third one (C reversed); and a move
+    that retraces an original move can be split exactly where that move ended, so its first piece
+    is an original move too. The reading taken splits the run into consecutive groups, each
+    joined into one segment, with (1) the fewest groups that are no move of the original, then
+    (2) the most groups -- a piece that is a move by itself stays one, as the slicer wrote it.
+    A shortest path over the run's joints (dynamic programming, O(n^2) lookups)."""
+    n = j_end - k + 1
+    join = np.zeros(n - 1, bool)
+    if n > PARTITION_MAX_PIECES:
+        # greedy reading: from each piece, the longest stretch that is a move of the original
+        from scipy.spatial import cKDTree
+        tree = cKDTree(original_moves)
+        i = k
+        while i < j_end:
+            best = None
+            for j in range(j_end, i, -1):
+                d, _ = tree.query(np.concatenate([s[i], e[j]]), k=1, p=np.inf, distance_upper_bound=tol_mm)
+                if np.isfinite(d):
+                    best = j
+                    break
+            if best is None:
+                i += 1
+                continue
+            join[i - k:best - k] = True
+            i = best + 1
+        return join
+    ii, jj = np.triu_indices(n)
+    is_move = np.zeros((n, n), bool)
+    is_move[ii, jj] = _near(original_moves, np.concatenate([s[k + ii], e[k + jj]], axis=1), tol_mm)
+    # cost[j] = (groups that are no move, -groups) of the best reading of pieces 0..j-1
+    cost = [(0, 0)] + [None] * n
+    back = [0] * (n + 1)
+    for j in range(1, n + 1):
+        for i in range(j):
+            c = cost[i]
+            cand = (c[0] + (0 if is_move[i, j - 1] else 1), c[1] - 1)
+            if cost[j] is None or cand < cost[j]:
+                cost[j], back[j] = cand, i
+    j = n
+    while j > 0:
+        i = back[j]
+        join[i:j - 1] = True
+        j = i
+    return join
+
+
 def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm: float = GEOMETRY_TOL_MM,
               vertices: np.ndarray | None = None, original_moves: np.ndarray | None = None):
     """Extruded segments: (layer, key (k, 10), first row, E) with key = start xyz, end xyz, centre
@@ -243,18 +297,17 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
         same = ext[:-1] & ext[1:] & cont & only_motor
         line_ok = ~arc[:-1] & ~arc[1:] & forward & (off_chord <= tol_mm)
         arc_ok = arc[:-1] & arc[1:] & (ccw[:-1] == ccw[1:]) & np.all(np.abs(c[:-1] - c[1:]) <= tol_mm, axis=1)
-        # Rebuild the original moves from runs of joinable pieces: from each piece, join the
-        # longest stretch of the run that is a move of the original (so a line inserted *between*
-        # two original moves keeps them two, and a split move becomes one again).
+        # Rebuild the original moves from runs of joinable pieces: join the stretches of a run
+        # that are moves of the original (so a line inserted *between* two original moves keeps
+        # them two, and a split move becomes one again).
         cand = same & (line_ok | arc_ok)
         if original_moves is not None and cand.any():
-            from scipy.spatial import cKDTree
             # runs of joinable pieces: rows k..j_end with cand[k:j_end] all true
             edge = np.diff(np.concatenate(([0], cand.astype(np.int8), [0])))
             run_k, run_end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
-            # a piece that is an original move by itself is never the start of a join: joining it
-            # to the next could only coincide with some *other* move (A+B = C reversed, on a path
-            # that doubles back on itself)
+            # a run whose first piece is an original move by itself is ambiguous (A+B = C
+            # reversed on a path that doubles back; a retracing move split where the move it
+            # retraces ended): _best_partition reads it
             in_runs = np.flatnonzero(cand | np.concatenate(([False], cand[:-1])))
             piece_is_move = np.zeros(len(rows), bool)
             piece_is_move[in_runs] = _near(
@@ -266,26 +319,8 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
             np.add.at(mark, run_k[whole], 1)
             np.add.at(mark, run_end[whole], -1)
             join |= np.cumsum(mark[:-1]) > 0
-            if not whole.all():
-                tree = cKDTree(original_moves)
             for k, j_end in zip(run_k[~whole].tolist(), run_end[~whole].tolist()):
-                i = k
-                while i < j_end:
-                    best = None
-                    if piece_is_move[i]:
-                        i += 1
-                        continue
-                    for j in range(j_end, i, -1):
-                        d, _ = tree.query(np.concatenate([s[i], e[j]]), k=1, p=np.inf,
-                                          distance_upper_bound=tol_mm)
-                        if np.isfinite(d):
-                            best = j
-                            break
-                    if best is None:
-                        i += 1
-                        continue
-                    join[i:best] = True
-                    i = best + 1
+                join[k:j_end] = _best_partition(original_moves, s, e, k, j_end, tol_mm)
         else:
             join[:] = cand
         # a closed loop whose seam was moved inside a straight side (a re-ordering may start a

