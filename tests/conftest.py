@@ -6,6 +6,15 @@ import gzip
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# The property tests (parser, pipeline and gating fuzz) draw the same examples on every run, so a
+# CI failure is a change in the code, never a new random draw. To search further, run with
+# `pytest --hypothesis-profile=explore` (new random examples each run); a failure found that way
+# is kept as a plain regression test (tests/test_verify_doubling_back.py has two).
+settings.register_profile("default", derandomize=True, database=None)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile("default")
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_INSTANCES = REPO.parent / "shared" / "instances"
