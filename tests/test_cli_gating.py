@@ -128,3 +128,21 @@ def test_solve_real_file_with_rotation(tmp_path):
     assert d["rotation_deg"] == 45 and d["verified"]
     assert out.read_text().startswith("; gatesopt: rotate_deg=45 ")
     assert gatesopt.parse(out).n_layers == gatesopt.parse(SHARED / "real_slic3r131_stars.gcode").n_layers
+
+
+@pytest.mark.parametrize("flag, name", [("--plot", "cmp.png"), ("--json", "cmp.json")])
+def test_compare_does_not_overwrite_a_report_without_force(square, tmp_path, capsys, flag, name):
+    target = tmp_path / name
+    target.write_bytes(b"the user's file\n")
+    argv = ["compare", str(square), "--formulations", "dp", "--rotate", "none", flag, str(target)]
+    assert main(argv) == 2
+    assert "exists; pass --force" in capsys.readouterr().err
+    assert target.read_bytes() == b"the user's file\n"
+    assert main(argv + ["--force"]) == 0
+    assert target.read_bytes() != b"the user's file\n"
+
+
+def test_compare_refuses_a_plot_that_is_no_png_before_solving(square, tmp_path, capsys):
+    assert main(["compare", str(square), "--plot", str(tmp_path / "cmp.txt")]) == 2
+    assert "the plot is written as PNG" in capsys.readouterr().err
+    assert not (tmp_path / "cmp.txt").exists()

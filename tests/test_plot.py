@@ -98,3 +98,15 @@ def test_importing_gatesopt_does_not_import_matplotlib():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
+
+
+def test_profile_does_not_overwrite_a_plot_without_force(tmp_path, capsys):
+    from gatesopt.cli import main
+    target = tmp_path / "p.png"
+    target.write_bytes(b"the user's picture")
+    argv = ["profile", str(INSTANCES / "square_lines.gcode"), "--plot", str(target)]
+    assert main(argv) == 2
+    assert "exists; pass --force" in capsys.readouterr().err
+    assert target.read_bytes() == b"the user's picture"
+    assert main(argv + ["--force"]) == 0
+    assert target.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -78,6 +78,7 @@ def register(sub) -> None:
     _add_common(c)
     c.add_argument("--plot", metavar="OUT.png", help="bar chart of the saving per formulation")
     c.add_argument("--json", metavar="OUT.json", help="write the rows as JSON")
+    c.add_argument("--force", action="store_true", help="overwrite an existing plot or JSON file")
     c.set_defaults(func=run_compare)
 
 
@@ -111,6 +112,17 @@ def options_from_args(args):
         end_late_s=args.end_late_ms / 1e3, max_added_time_pct=args.max_added_time_pct,
         max_added_lines_pct=args.max_added_lines_pct, profile=args.profile, bed_size_mm=bed,
         num_workers=args.threads)
+
+
+def check_new_file(path: str, inputs, force: bool, png: bool = False) -> None:
+    """Before any work: ``path`` (a report or plot the command will write) is none of ``inputs``,
+    its folder exists, and an existing file is overwritten only with ``force``; ``png``: the
+    name ends in .png (``gatesopt.plot._check_path``)."""
+    if png:
+        from ..plot import _check_path
+        _check_path(path)
+    for inp in inputs:
+        _check_paths(inp, path, force)
 
 
 def _check_paths(inp: str, out: str, force: bool) -> None:
@@ -338,6 +350,12 @@ def plot_compare(rows: list[dict], path: str) -> None:
 def run_compare(args) -> int:
     options = options_from_args(args)
     forms = [f.strip() for f in args.formulations.split(",") if f.strip()]
+    if args.plot:
+        check_new_file(args.plot, args.files, args.force, png=True)
+    if args.json:
+        check_new_file(args.json, args.files, args.force)
+        if args.plot and os.path.abspath(args.plot) == os.path.abspath(args.json):
+            raise GatesoptError(f"{args.plot}: --plot and --json must name different files")
     rows = []
     for path in args.files:
         program = parse(path)
@@ -346,8 +364,6 @@ def run_compare(args) -> int:
     if args.plot:
         plot_compare(rows, args.plot)
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(rows, f, indent=2, default=_jsonable)
-            f.write("\n")
+        write_atomic(args.json, json.dumps(rows, indent=2, default=_jsonable) + "\n")
     bad = [r for r in rows if "verified" in r and not r["verified"]]
     return 1 if bad else 0

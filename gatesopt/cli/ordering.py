@@ -10,12 +10,13 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import sys
 import time
 
 from ..errors import GatesoptError
 from ..parse import parse
-from .gating import _check_paths, write_atomic
+from .gating import _check_paths, check_new_file, write_atomic
 
 FORMULATIONS = ("greedy", "tsp", "cpsat", "milp", "auto")
 
@@ -47,7 +48,12 @@ def register(sub) -> None:
                         "z-hops) make it take longer than the slicer's (default: such a layer "
                         "keeps the slicer's order)")
     p.add_argument("--json", metavar="REPORT.json", help="also write the report as JSON")
-    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.add_argument("--plot", metavar="OUT.png",
+                   help="also draw one layer's travels before and after, and every layer's travel")
+    p.add_argument("--plot-layer", type=int, metavar="N",
+                   help="the layer --plot draws (0-based, as in the JSON report; default: the layer "
+                        "whose travel was cut the most)")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.set_defaults(func=run)
 
 
@@ -67,7 +73,16 @@ def run(args) -> int:
     _check_paths(args.file, args.output, args.force)
     if args.json:
         _check_paths(args.file, args.json, args.force)
+    if args.plot_layer is not None and not args.plot:
+        raise GatesoptError("--plot-layer needs --plot OUT.png")
+    if args.plot:
+        check_new_file(args.plot, [args.file], args.force, png=True)
+        if os.path.abspath(args.plot) in {os.path.abspath(x) for x in (args.output, args.json) if x}:
+            raise GatesoptError(f"{args.plot}: --plot must name a file of its own")
     program = parse(args.file)
+    if args.plot_layer is not None and not 0 <= args.plot_layer < program.n_layers:
+        raise GatesoptError(f"{args.file}: --plot-layer {args.plot_layer}: layers are 0 to "
+                            f"{program.n_layers - 1}")
     options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
     deadline_s = None if args.budget is None else started_s + args.budget
     with group_progress(sys.stderr.isatty(), deadline_s=deadline_s) as progress:
@@ -89,6 +104,9 @@ def run(args) -> int:
     print(format_report(s))
     if args.json:
         write_atomic(args.json, json.dumps(s, indent=2, default=float) + "\n")
+    if args.plot:
+        from ..ordering.plot import plot_ordering
+        print(f"plot          {plot_ordering(program, result.output, args.plot, layer=args.plot_layer)}")
     return 0
 
 

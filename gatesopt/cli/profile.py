@@ -22,6 +22,7 @@ def register(sub) -> None:
     p.add_argument("--per-layer", action="store_true", help="add a table by layer")
     p.add_argument("--plot", metavar="OUT.png",
                    help="write energy over time (the paper's Fig. 4) and the energy-sector chart (Fig. 5)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing plot file")
     p.add_argument("--stream", action="store_true",
                    help="read the file chunk by chunk in bounded memory (automatic above 256 MB); "
                         "no --plot, no per-step data")
@@ -74,6 +75,9 @@ def run_stream(args) -> int:
 
 
 def run(args) -> int:
+    if args.plot:
+        from .gating import check_new_file
+        check_new_file(args.plot, [] if args.file == "-" else [args.file], args.force, png=True)
     if _wants_stream(args):
         return run_stream(args)
     program = _read(args.file)

@@ -36,12 +36,20 @@ class OrderResult:
         return not self.findings
 
 
+def travel_mask(program: Program) -> np.ndarray:
+    """(n_steps,) bool: the travel moves the report counts: every non-extruding XY move
+    (straight or arc) from the first layer on."""
+    d = program.delta_mm
+    xy = np.hypot(d[:, 0], d[:, 1])
+    return ((program.layer >= 0) & ~program.extruding & np.isin(program.kind, (Kind.TRAVEL, Kind.ARC))
+            & (xy > 0))
+
+
 def travel_stats(program: Program) -> dict:
     """Travel distance/time, travel moves and retractions from the first layer on."""
     d = program.delta_mm
-    xy = np.hypot(d[:, 0], d[:, 1])
     printing = program.layer >= 0
-    travel = printing & ~program.extruding & np.isin(program.kind, (Kind.TRAVEL, Kind.ARC)) & (xy > 0)
+    travel = travel_mask(program)
     retract = printing & (d[:, 3] < 0)
     # a retraction spread over several wipe moves counts once
     starts = retract & ~np.concatenate(([False], retract[:-1]))
