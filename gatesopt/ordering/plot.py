@@ -82,11 +82,10 @@ def plot_ordering(original: Program, output: Program, path, *, layer: int | None
     segs = [layer_segments(prog, layer) for _, prog, _, _ in panels]
     pts = np.concatenate([s.reshape(-1, 2) for pair in segs for s in pair] + [np.zeros((0, 2))])
     for (ax, _, label, mm), (ext, trv) in zip(panels, segs):
-        ax.add_collection(LineCollection(ext, colors=EXTRUSION_COLOR, linewidths=0.6,
-                                         label=f"extrusion ({len(ext):,} moves)"))
-        ax.add_collection(LineCollection(trv, colors=TRAVEL_COLOR, linewidths=0.9, alpha=0.85,
-                                         label=f"travel ({len(trv):,} moves)"))
-        ax.set_title(f"layer {layer}, {label}: travel {float(mm[layer]):,.1f} mm", fontsize=10)
+        ax.add_collection(LineCollection(ext, colors=EXTRUSION_COLOR, linewidths=0.6))
+        ax.add_collection(LineCollection(trv, colors=TRAVEL_COLOR, linewidths=0.9, alpha=0.85))
+        ax.set_title(f"layer {layer}, {label}\ntravel {float(mm[layer]):,.1f} mm in {len(trv):,} moves "
+                     f"({len(ext):,} extrusions)", fontsize=10)
         if len(pts):
             lo, hi = pts.min(axis=0), pts.max(axis=0)
             pad = 0.03 * max(float((hi - lo).max()), 1.0)
@@ -94,8 +93,12 @@ def plot_ordering(original: Program, output: Program, path, *, layer: int | None
             ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_aspect("equal")
         ax.set_xlabel("X (mm)")
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.11), ncol=2, fontsize=8, frameon=False)
     ax_b.set_ylabel("Y (mm)")
+    # one legend for both layer panels, under them (equal-aspect axes move with the layer's shape)
+    from matplotlib.lines import Line2D
+    fig.legend([Line2D([], [], color=EXTRUSION_COLOR, linewidth=1.2), Line2D([], [], color=TRAVEL_COLOR, linewidth=1.2)],
+               ["extrusion", "travel"], loc="lower center", bbox_to_anchor=(0.33, 0.01), ncol=2,
+               fontsize=9, frameon=False)
 
     xs = np.arange(original.n_layers)
     ax_l.plot(xs, before, color=EXTRUSION_COLOR, linewidth=1.0, label=f"slicer's order: {total_b:,.0f} mm")
