@@ -183,7 +183,7 @@ def travel_style(program: Program, lay: Layout) -> TravelStyle:
 class _Writer:
     """Output text plus the machine state the output has reached."""
 
-    def __init__(self, program: Program, lay: Layout):
+    def __init__(self, program: Program, lay: Layout, lists: tuple | None = None):
         self.p, self.lay = program, lay
         self.nl = program.line_ending
         self.out: list[str] = []
@@ -193,20 +193,23 @@ class _Writer:
         self.feed = None        # mm/s in force
         self.state: dict = {}
         self.feature = None
-        # per line, what the gap rebuild asks of it, as Python lists: numpy scalar indexing line
-        # by line was ~40 % of the emit
+        (self.line_cls, self.line_step, self.line_de, self.line_travel, self.step_relative_e,
+         self.step_feed, self.layer_lines, self.arc_steps) = lists or self.per_line(program, lay)
+
+    @staticmethod
+    def per_line(program: Program, lay: Layout) -> tuple:
+        """Per line, what the gap rebuild asks of it, as Python lists (numpy scalar indexing line
+        by line was ~40 % of the emit); the same for every emit of one program and problem."""
         cls, step = lay.line_class, lay.step_of_line
         has = step >= 0
         motion = (cls == LINE_MOTION) & has
         s = np.where(has, step, 0)
-        self.line_cls = cls.tolist()
-        self.line_step = step.tolist()
-        self.line_de = np.where(has, program.end_mm[s, 3] - program.start_mm[s, 3], 0.0).tolist()
-        self.line_travel = (motion & np.isin(program.kind[s], _TRAVEL_KINDS)).tolist()
-        self.step_relative_e = program.relative_e.tolist()
-        self.step_feed = program.feed_mm_s.tolist()
-        self.layer_lines = frozenset(program.layer_line.tolist())
-        self.arc_steps = frozenset(np.flatnonzero(program.kind == Kind.ARC).tolist())
+        return (cls.tolist(), step.tolist(),
+                np.where(has, program.end_mm[s, 3] - program.start_mm[s, 3], 0.0).tolist(),
+                (motion & np.isin(program.kind[s], _TRAVEL_KINDS)).tolist(),
+                program.relative_e.tolist(), program.feed_mm_s.tolist(),
+                frozenset(program.layer_line.tolist()),
+                frozenset(np.flatnonzero(program.kind == Kind.ARC).tolist()))
 
     # -- copying original lines -------------------------------------------------------------
     def copy_line(self, i: int) -> None:
@@ -359,9 +362,6 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     words differ from a fresh emit by at most that tolerance, where rounding tips a last digit."""
     program.check_rewritable()
     lay = problem.layout if problem.layout is not None else layout(program)
-    style = travel_style(program, lay)
-    walls = WallCrossing(program, problem, lay) if style.comb_max_mm > 0 else None
-    w = _Writer(program, lay)
     p = program
     n = len(lay.curve_s0)
     if n == 0:
@@ -371,7 +371,18 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     seam = np.asarray(solution.curve_seam, np.int64)
     if len(order) != n or not np.array_equal(np.sort(order), np.arange(n)):
         raise ValueError("solution does not order every curve of the program exactly once")
-    plan = _Plan(p, problem, lay, style, walls, order, rev, seam)
+    # what depends on the program and problem only (travel style, walls and their per-layer
+    # segments, per-line and per-curve lists) is made once per memo, not once per guard pass
+    fixed = memo.get(_FIXED) if memo is not None else None
+    if fixed is None:
+        style = travel_style(program, lay)
+        walls = WallCrossing(program, problem, lay) if style.comb_max_mm > 0 else None
+        fixed = (style, walls, _Writer.per_line(program, lay), _Plan.per_curve(p, problem, lay))
+        if memo is not None:
+            memo[_FIXED] = fixed
+    style, walls, lists, per_curve = fixed
+    w = _Writer(program, lay, lists)
+    plan = _Plan(p, lay, style, walls, order, rev, seam, per_curve)
     changed, gap_lines = plan.changed, plan.gap_lines
 
     # prefix + first gap: verbatim (the first layer keeps its order, so curve 0 stays first)
@@ -410,6 +421,8 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     return "".join(w.out)
 
 
+_FIXED = "fixed"                # the memo's entry for what every emit of the program shares
+
 #: a memoized layer is reused when its entry's logical E (absolute-E files) differs by at most
 #: this: re-ordered layers sum the same E in another order, so E at the next layer's start drifts
 #: by ~1e-12 mm; the output writes E with 6 decimals
@@ -424,18 +437,21 @@ class _Plan:
     """What ``emit`` knows about the file and the solution, per curve as Python lists (numpy
     scalar indexing curve by curve was a fifth of the emit)."""
 
-    def __init__(self, p: Program, problem: OrderingProblem, lay: Layout, style: TravelStyle,
-                 walls, order, rev, seam):
+    def __init__(self, p: Program, lay: Layout, style: TravelStyle, walls, order, rev, seam,
+                 per_curve: tuple):
         self.p, self.lay, self.style, self.walls = p, lay, style, walls
         self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
         self.changed = (rev | (seam != 0)).tolist()
+        self.group_first, self.layer, self.l0, self.l1, self.feature, self.req = per_curve
+
+    @staticmethod
+    def per_curve(p: Program, problem: OrderingProblem, lay: Layout) -> tuple:
+        """What does not depend on the order: each curve's group's original first curve, layer,
+        first and last line, feature, and the state lines in force at any line."""
         gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
-        # the original first curve of each curve's group
-        self.group_first = problem.group_curve_start[gidx].tolist()
-        self.layer = problem.curve_layer.tolist()
-        self.l0, self.l1 = lay.curve_l0.tolist(), lay.curve_l1.tolist()
-        self.feature = p.feature[lay.curve_s0].tolist()
-        self.req = _required_state(p, lay)
+        return (problem.group_curve_start[gidx].tolist(), problem.curve_layer.tolist(),
+                lay.curve_l0.tolist(), lay.curve_l1.tolist(), p.feature[lay.curve_s0].tolist(),
+                _required_state(p, lay))
 
     def gap_lines(self, c: int) -> range:
         """The original lines between curve c - 1 and curve c."""
