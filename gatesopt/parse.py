@@ -264,6 +264,14 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
                         "solve and order refuse to rewrite such a file")
     if require_moves and not (end[:, 3] > start[:, 3]).any():
         warnings.append(f"{name}: no extrusion anywhere (E never increases)")
+    m101 = re.search(rb"(?m)^[ \t]*M101\b", data) if b"M101" in data else None
+    if m101:
+        # BFB / early RepRap firmware switch the extruder on and off (M101 / M103, Cura's "BFB"
+        # flavour) instead of moving E: every move reads as a travel here
+        ln = data.count(b"\n", 0, m101.start())
+        warnings.append(f"{name}:{ln + 1 + line_offset}: M101: the extruder is switched on and off "
+                        "(M101/M103) instead of moved with E words: gatesopt models extrusion by E "
+                        "only, so the moves it prints count as travel and no curve is re-ordered")
     prog = Program(
         source=name, data=data, line_start=line_start,
         line=step_line, kind=kind, start_mm=start, end_mm=end, feed_mm_s=s_feed[s],

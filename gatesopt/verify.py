@@ -189,55 +189,65 @@ def _rotated_run(near_undo: np.ndarray, near_raw: np.ndarray) -> np.ndarray:
 PARTITION_MAX_PIECES = 64   # longer runs of joinable pieces take the greedy reading
 
 
-def _best_partition(original_moves: np.ndarray, s: np.ndarray, e: np.ndarray, k: int, j_end: int,
-                    tol_mm: float) -> np.ndarray:
-    """Which joints of the run of pieces k..j_end (rows of ``s``/``e``) to join: (j_end - k,) bool.
+def _read_runs(original_moves: np.ndarray, s: np.ndarray, e: np.ndarray, runs, tol_mm: float,
+               join: np.ndarray) -> None:
+    """Set ``join`` over the runs of pieces (k, j_end) (rows of ``s``/``e``) that can be read
+    more than one way.
 
     A run is ambiguous when its pieces can be read more than one way: on a path that doubles
     back, two original moves A, B in a row are also, joined, a third one (C reversed); and a move
     that retraces an original move can be split exactly where that move ended, so its first piece
     is an original move too. The reading taken splits the run into consecutive groups, each
     joined into one segment, with (1) the fewest groups that are no move of the original, then
-    (2) the most groups -- a piece that is a move by itself stays one, as the slicer wrote it.
-    A shortest path over the run's joints (dynamic programming, O(n^2) lookups)."""
-    n = j_end - k + 1
-    join = np.zeros(n - 1, bool)
-    if n > PARTITION_MAX_PIECES:
-        # greedy reading: from each piece, the longest stretch that is a move of the original
+    (2) the most groups -- a piece that is a move by itself stays one, as the slicer wrote it:
+    a shortest path over the run's joints (dynamic programming). Every stretch of every run is
+    looked up in one batch (one hash and k-d tree over the original's moves, not one per run).
+    A run longer than ``PARTITION_MAX_PIECES`` takes the greedy reading: from each piece, the
+    longest stretch that is a move of the original."""
+    short = [(k, j) for k, j in runs if j - k + 1 <= PARTITION_MAX_PIECES]
+    long_ = [(k, j) for k, j in runs if j - k + 1 > PARTITION_MAX_PIECES]
+    if short:
+        pairs = [np.triu_indices(j - k + 1) for k, j in short]
+        first = np.concatenate([k + ii for (k, _), (ii, _) in zip(short, pairs)])
+        last = np.concatenate([k + jj for (k, _), (_, jj) in zip(short, pairs)])
+        found = _near(original_moves, np.concatenate([s[first], e[last]], axis=1), tol_mm)
+        at = 0
+        for (k, j_end), (ii, jj) in zip(short, pairs):
+            n = j_end - k + 1
+            is_move = np.zeros((n, n), bool)
+            is_move[ii, jj] = found[at:at + len(ii)]
+            at += len(ii)
+            # cost[j] = (groups that are no move, -groups) of the best reading of pieces 0..j-1
+            cost = [(0, 0)] + [None] * n
+            back = [0] * (n + 1)
+            for j in range(1, n + 1):
+                for i in range(j):
+                    c = (cost[i][0] + (0 if is_move[i, j - 1] else 1), cost[i][1] - 1)
+                    if cost[j] is None or c < cost[j]:
+                        cost[j], back[j] = c, i
+            j = n
+            while j > 0:
+                i = back[j]
+                join[k + i:k + j - 1] = True
+                j = i
+    if long_:
         from scipy.spatial import cKDTree
         tree = cKDTree(original_moves)
-        i = k
-        while i < j_end:
-            best = None
-            for j in range(j_end, i, -1):
-                d, _ = tree.query(np.concatenate([s[i], e[j]]), k=1, p=np.inf, distance_upper_bound=tol_mm)
-                if np.isfinite(d):
-                    best = j
-                    break
-            if best is None:
-                i += 1
-                continue
-            join[i - k:best - k] = True
-            i = best + 1
-        return join
-    ii, jj = np.triu_indices(n)
-    is_move = np.zeros((n, n), bool)
-    is_move[ii, jj] = _near(original_moves, np.concatenate([s[k + ii], e[k + jj]], axis=1), tol_mm)
-    # cost[j] = (groups that are no move, -groups) of the best reading of pieces 0..j-1
-    cost = [(0, 0)] + [None] * n
-    back = [0] * (n + 1)
-    for j in range(1, n + 1):
-        for i in range(j):
-            c = cost[i]
-            cand = (c[0] + (0 if is_move[i, j - 1] else 1), c[1] - 1)
-            if cost[j] is None or cand < cost[j]:
-                cost[j], back[j] = cand, i
-    j = n
-    while j > 0:
-        i = back[j]
-        join[i:j - 1] = True
-        j = i
-    return join
+        for k, j_end in long_:
+            i = k
+            while i < j_end:
+                best = None
+                for j in range(j_end, i, -1):
+                    d, _ = tree.query(np.concatenate([s[i], e[j]]), k=1, p=np.inf,
+                                      distance_upper_bound=tol_mm)
+                    if np.isfinite(d):
+                        best = j
+                        break
+                if best is None:
+                    i += 1
+                    continue
+                join[i:best] = True
+                i = best + 1
 
 
 def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm: float = GEOMETRY_TOL_MM,
@@ -307,7 +317,7 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
             run_k, run_end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
             # a run whose first piece is an original move by itself is ambiguous (A+B = C
             # reversed on a path that doubles back; a retracing move split where the move it
-            # retraces ended): _best_partition reads it
+            # retraces ended): _read_runs reads it
             in_runs = np.flatnonzero(cand | np.concatenate(([False], cand[:-1])))
             piece_is_move = np.zeros(len(rows), bool)
             piece_is_move[in_runs] = _near(
@@ -319,8 +329,8 @@ def _segments(program: Program, undo_deg: float = 0.0, center=(0.0, 0.0), tol_mm
             np.add.at(mark, run_k[whole], 1)
             np.add.at(mark, run_end[whole], -1)
             join |= np.cumsum(mark[:-1]) > 0
-            for k, j_end in zip(run_k[~whole].tolist(), run_end[~whole].tolist()):
-                join[k:j_end] = _best_partition(original_moves, s, e, k, j_end, tol_mm)
+            _read_runs(original_moves, s, e, list(zip(run_k[~whole].tolist(), run_end[~whole].tolist())),
+                       tol_mm, join)
         else:
             join[:] = cand
         # a closed loop whose seam was moved inside a straight side (a re-ordering may start a

@@ -296,3 +296,12 @@ def test_stray_characters_inside_a_g_command_are_an_error_but_text_commands_are_
         parse("G1 X0 F600\nG1 X1 # Y2\n")
     p = parse("M117 Printing 1/10 #%&\nG1 X1 F600\nM118 E1 ok: 50%\n")
     assert p.n_steps == 1
+
+
+def test_extrusion_by_m101_m103_is_warned_about():
+    # Cura's BFB flavour: the extruder is switched on (M101) and off (M103), moves carry no E;
+    # the start G-code's prime used to keep every warning quiet
+    text = "G28\nG1 F200 E3\nG92 E0\nG1 Z0.3 F900\nM108 S8.5\nM101\nG1 X10 Y10 F900\nG1 X20 Y10\nM103\n"
+    prog = parse(text)
+    assert any(":6: M101: the extruder is switched on and off" in w for w in prog.warnings)
+    assert not any("M101" in w for w in parse(text.replace("M101\n", "")).warnings)
