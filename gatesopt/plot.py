@@ -54,7 +54,8 @@ def _time_unit(total_s: float) -> tuple[float, str]:
     return 3600.0, "h"
 
 
-def _check_path(path) -> Path:
+def check_png_path(path) -> Path:
+    """``path`` as a Path, if it names a .png in a writable folder (else ``PlotError``)."""
     p = Path(os.fspath(path))
     if p.suffix.lower() != ".png":
         raise PlotError(f"{p}: the plot is written as PNG: give a file name ending in .png")
@@ -75,7 +76,7 @@ def plot_profile(report: EnergyReport, path, *, bins: int = 2000, title: str | N
     Large files are binned to ``bins`` time bins (mean power per bin). Raises ``PlotError`` (a
     ``GatesoptError``) for a path that is not a writable ``.png`` or a report with no time.
     """
-    p = _check_path(path)
+    p = check_png_path(path)
     if not report.time_s > 0:
         raise PlotError(f"{report.source}: nothing to plot: the print takes no time")
     from matplotlib.backends.backend_agg import FigureCanvasAgg   # lazy: see module docstring
@@ -135,6 +136,11 @@ def plot_profile(report: EnergyReport, path, *, bins: int = 2000, title: str | N
     ax_s.set_aspect("equal")
 
     fig.subplots_adjust(left=0.05, right=0.80, bottom=0.11, top=0.85, wspace=0.28)
+    return save_png(fig, p)
+
+
+def save_png(fig, p: Path) -> Path:
+    """Write ``fig`` to ``p`` (checked by ``check_png_path``) as PNG; ``PlotError`` if it cannot."""
     try:
         fig.savefig(p, format="png", dpi=DPI)
     except OSError as exc:

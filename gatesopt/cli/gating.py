@@ -117,10 +117,10 @@ def options_from_args(args):
 def check_new_file(path: str, inputs, force: bool, png: bool = False) -> None:
     """Before any work: ``path`` (a report or plot the command will write) is none of ``inputs``,
     its folder exists, and an existing file is overwritten only with ``force``; ``png``: the
-    name ends in .png (``gatesopt.plot._check_path``)."""
+    name ends in .png (``gatesopt.plot.check_png_path``)."""
     if png:
-        from ..plot import _check_path
-        _check_path(path)
+        from ..plot import check_png_path
+        check_png_path(path)
     for inp in inputs:
         _check_paths(inp, path, force)
 

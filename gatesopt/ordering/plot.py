@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..plot import DPI, PlotError, _check_path
+from ..plot import DPI, PlotError, check_png_path, save_png
 from ..program import Program
 from .pipeline import travel_mask
 
@@ -54,7 +54,7 @@ def plot_ordering(original: Program, output: Program, path, *, layer: int | None
     travel of every layer before and after. ``layer`` (0-based, as in the JSON report's
     ``per_layer``): default ``default_layer``. Raises ``PlotError`` (a ``GatesoptError``) for a path
     that is not a writable ``.png``, files whose layers differ or a layer out of range."""
-    p = _check_path(path)
+    p = check_png_path(path)
     if original.n_layers == 0:
         raise PlotError(f"{original.source}: nothing to plot: no layers found")
     if output.n_layers != original.n_layers:
@@ -113,8 +113,4 @@ def plot_ordering(original: Program, output: Program, path, *, layer: int | None
     ax_l.legend(loc="upper center", bbox_to_anchor=(0.5, -0.11), ncol=3, fontsize=8, frameon=False)
 
     fig.subplots_adjust(left=0.05, right=0.98, bottom=0.19, top=0.88, wspace=0.25)
-    try:
-        fig.savefig(p, format="png", dpi=DPI)
-    except OSError as exc:
-        raise PlotError(f"{p}: cannot write: {exc.strerror or exc}") from None
-    return p
+    return save_png(fig, p)
