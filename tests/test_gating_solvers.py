@@ -441,3 +441,43 @@ def test_real_file_budget(stars):
     # both exact methods prove the same optimum (within their 1e-6 relative gap)
     assert c.status == "optimal" and math.isclose(c.energy_j, m.energy_j, rel_tol=2e-6)
     assert c.bound <= m.energy_j + 1e-6 and m.bound <= c.energy_j + 1e-6
+
+
+def sequential_squares_gcode(deg=17.0, n_layers=8) -> str:
+    """Two turned squares printed one after the other (PrusaSlicer "complete_objects", Cura "one at
+    a time"): the second starts again at the bed once the first is finished."""
+    one = rotated_square_gcode(deg, n_layers).splitlines()
+    body = one[one.index(";LAYER_CHANGE"):one.index("G1 X0 Y200 F6000")]
+    e_last = float(body[-1].split("E")[1].split()[0])
+    second = []
+    for line in body:                       # the same square 40 mm further in X, E continuing
+        if line.startswith("G1 X"):
+            parts = line.split()
+            parts[1] = f"X{float(parts[1][1:]) + 40:.3f}"
+            line = " ".join(parts)
+        if " E" in line:
+            head, tail = line.split(" E")
+            val, *rest = tail.split()
+            line = " ".join([head, f"E{float(val) + e_last:.5f}", *rest])
+        second.append(line)
+    return "\n".join(one[:one.index("G1 X0 Y200 F6000")] + ["G1 Z10 F600"] + second
+                     + ["G1 X0 Y200 F6000", "M84"]) + "\n"
+
+
+def test_sequential_print_is_not_rotated():
+    """The slicer checked the print head's clearance for the objects where they stand: rotated,
+    the head (an asymmetric shape) could hit an object printed before. ``auto`` keeps 0 deg and
+    says why; an explicit angle is refused with the file and line where the print goes back down."""
+    from gatesopt.parse import parse
+    prog = parse(sequential_squares_gcode(), source="seq.gcode")
+    p = build(prog, GatingOptions(bed_size_mm=(220, 220)))
+    assert list(p.angles_deg) == [0.0]
+    assert any("one at a time" in n and "rotation kept at 0 deg" in n for n in p.notes)
+    # the first extrusion of the second square: lift, layer change, Z, travel, then this line
+    line = next(i for i, t in enumerate(prog.lines()) if t.startswith("G1 Z10")) + 1 + 4
+    with pytest.raises(InfeasibleError, match=rf"seq\.gcode:{line}: objects are printed one at a time"):
+        build(prog, GatingOptions(rotate=73.0, bed_size_mm=(220, 220)))
+    # the same squares layer by layer (no return to the bed) are rotated as before
+    together = parse(rotated_square_gcode(n_layers=8))
+    q = build(together, GatingOptions(bed_size_mm=(220, 220)))
+    assert not q.notes and math.isclose(solve(q, "dp").rotation_deg % 90.0, 73.0, abs_tol=0.01)

@@ -116,6 +116,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     em = None
     if gating:
         problem = build(base, o)
+        notes += list(problem.notes)
         sol = _solve_interruptible(problem, formulation, time_limit_s, notes)
         deg = sol.rotation_deg
         if deg % 360.0 != 0.0:

@@ -206,6 +206,7 @@ class GatingProblem:
     energy_before_j: float = 0.0
     time_before_s: float = 0.0
     header: dict = field(default_factory=dict, repr=False)
+    notes: tuple[str, ...] = ()    # what the user should know about the choices made (rotation)
 
     @property
     def n_steps(self) -> int:
@@ -659,6 +660,38 @@ def _rotate_rows(program: Program) -> tuple[int, int]:
     return lo, hi
 
 
+#: an extrusion this far below the highest one before it means the print went back down to the
+#: bed: objects printed one after the other (PrusaSlicer "complete_objects", Cura "one at a
+#: time"). Z-hops do not extrude and a layer is at most ~0.3 mm, so 1 mm is no ordinary layer.
+SEQUENTIAL_DROP_MM = 1.0
+
+
+def _sequential_drop(program: Program, lo: int, hi: int):
+    """(row, z_mm, z_max_mm) of the first extrusion in rows [lo, hi) that lies more than
+    SEQUENTIAL_DROP_MM below an earlier extrusion, or None. Such a print was laid out by the
+    slicer so that the print head (an asymmetric shape: Cura's head polygon, the gantry) clears
+    the objects already printed, in this position on the bed: a rotation does not keep that."""
+    ext = np.flatnonzero(program.extruding[lo:hi]) + lo
+    if len(ext) < 2:
+        return None
+    z = program.end_mm[ext, 2]
+    high = np.maximum.accumulate(z)
+    down = np.flatnonzero(z[1:] < high[:-1] - SEQUENTIAL_DROP_MM)
+    if not len(down):
+        return None
+    i = int(down[0]) + 1
+    return int(ext[i]), float(z[i]), float(high[i - 1])
+
+
+def _sequential_words(drop) -> str:
+    return (f"objects are printed one at a time (the print goes back down to Z={drop[1]:g} "
+            f"after Z={drop[2]:g})")
+
+
+def _where(program: Program, row: int) -> str:
+    return f"{program.source}:{int(program.line[row]) + 1}"
+
+
 def _stall_program(program: Program) -> Program:
     """The program with every row turned into a Kind.MOTOR row at rest: the profile then prices a
     firmware stall at that step exactly as the verifier will price the re-parsed instruction."""
@@ -731,7 +764,17 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
 
     gated = o.motor_index
     asym = (X in gated) != (Y in gated) or not np.array_equal(rate[:, X], rate[:, Y])
-    if o.rotate == "none" or hi <= lo or not (X in gated or Y in gated):
+    notes = []
+    drop = _sequential_drop(program, lo, hi)
+    if drop is not None and o.rotate not in ("auto", "none") and float(o.rotate) % 360.0 != 0.0:
+        raise InfeasibleError(f"{_where(program, drop[0])}: {_sequential_words(drop)}; "
+                              f"rotating it by {float(o.rotate):g} deg could drive the print head into "
+                              f"an object already printed: use --rotate none")
+    if drop is not None and o.rotate == "auto":
+        notes.append(f"rotation kept at 0 deg: {_sequential_words(drop)} "
+                     f"({_where(program, drop[0])}); rotated, the print head could hit an object "
+                     f"already printed")
+    if o.rotate == "none" or hi <= lo or not (X in gated or Y in gated) or drop is not None:
         cands = [0.0]
     elif o.rotate == "auto":
         cands = _candidate_angles(program.start_mm, program.end_mm, dur, steps0, arc, lo, hi, center, o, asym)
@@ -806,7 +849,8 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
         angle_straight_moves=ro(np.array(straight, np.int64)), angle_saving_ub_j=ro(ub),
         angle_built=ro(has_gaps),
         **{k: ro(v) for k, v in gaps.items()},
-        energy_before_j=energy_before, time_before_s=T, header=dict(program.header))
+        energy_before_j=energy_before, time_before_s=T, header=dict(program.header),
+        notes=tuple(notes))
 
 
 def _readonly(a):
