@@ -142,6 +142,26 @@ def test_compare_does_not_overwrite_a_report_without_force(square, tmp_path, cap
     assert target.read_bytes() != b"the user's file\n"
 
 
+def test_solve_report_never_replaces_the_input_the_output_or_a_users_file(square, tmp_path, capsys):
+    out = tmp_path / "out.gcode"
+    before = square.read_bytes()
+    # --json naming the input or the output is refused before any work
+    assert main(["solve", str(square), "-o", str(out), "--no-order", "--json", str(square)]) == 2
+    assert "the output must not be the input file" in capsys.readouterr().err
+    assert main(["solve", str(square), "-o", str(out), "--no-order", "--json", str(out)]) == 2
+    assert "-o and --json must name different files" in capsys.readouterr().err
+    assert square.read_bytes() == before and not out.exists()
+    # an existing report is replaced only with --force
+    rj = tmp_path / "r.json"
+    rj.write_bytes(b"the user's file\n")
+    argv = ["solve", str(square), "-o", str(out), "--no-order", "--rotate", "none", "--json", str(rj)]
+    assert main(argv) == 2
+    assert "exists; pass --force" in capsys.readouterr().err
+    assert rj.read_bytes() == b"the user's file\n" and not out.exists()
+    assert main(argv + ["--force"]) == 0
+    assert json.loads(rj.read_text())["output"] == str(out)
+
+
 def test_compare_refuses_a_plot_that_is_no_png_before_solving(square, tmp_path, capsys):
     assert main(["compare", str(square), "--plot", str(tmp_path / "cmp.txt")]) == 2
     assert "the plot is written as PNG" in capsys.readouterr().err

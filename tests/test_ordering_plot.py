@@ -96,8 +96,9 @@ def test_cli_order_plot(tmp_path, capsys):
     (["--plot-layer", "2"], "--plot-layer needs --plot"),
     (["--plot", "{tmp}/p.png", "--plot-layer", "10"], "--plot-layer 10: layers are 0 to 9"),
     (["--plot", "{tmp}/p.svg"], "the plot is written as PNG"),
-    (["--plot", "{tmp}/o.gcode"], "the plot is written as PNG"),
-    (["--plot", "{tmp}/j.png", "--json", "{tmp}/j.png"], "--plot must name a file of its own"),
+    (["--plot", "{tmp}/o.gcode"], "-o and --plot must name different files"),
+    (["--plot", "{tmp}/j.png", "--json", "{tmp}/j.png"], "--json and --plot must name different files"),
+    (["--json", "{tmp}/o.gcode"], "-o and --json must name different files"),
 ])
 def test_cli_order_plot_refuses_bad_arguments_before_solving(tmp_path, capsys, args, message):
     out = tmp_path / "o.gcode"

@@ -125,6 +125,19 @@ def check_new_file(path: str, inputs, force: bool, png: bool = False) -> None:
         _check_paths(inp, path, force)
 
 
+def check_distinct(named: dict) -> None:
+    """Before any work: the files one command writes (``{"--json": path, ...}``; None and "-"
+    skipped) are different files; else the last write would silently replace the first."""
+    seen = {}
+    for flag, path in named.items():
+        if not path or path == "-":
+            continue
+        key = os.path.abspath(path)
+        if key in seen:
+            raise GatesoptError(f"{path}: {seen[key]} and {flag} must name different files")
+        seen[key] = flag
+
+
 def _check_paths(inp: str, out: str, force: bool) -> None:
     if os.path.abspath(inp) == os.path.abspath(out) or (
             os.path.exists(out) and os.path.exists(inp) and os.path.samefile(inp, out)):
@@ -224,6 +237,10 @@ def run_solve(args) -> int:
         raise GatesoptError(f"--rotate {args.rotate}: the rotation is chosen with the gating, "
                             "which --no-gating turns off")
     inp, out = _solve_paths(args)
+    if args.json:
+        # the report must not replace the input, the output or a file the user did not give up
+        check_distinct({"-o": None if args.in_place else out, "--json": args.json})
+        check_new_file(args.json, [inp] if inp != "-" else [], args.force)
     report_to = sys.stderr if out == "-" else sys.stdout     # stdout carries the G-code
     options = options_from_args(args)
     if inp == "-":
@@ -256,9 +273,7 @@ def run_solve(args) -> int:
     s["output"] = out
     print(format_solve_report(s), file=report_to)
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(s, f, indent=2, default=_jsonable)
-            f.write("\n")
+        write_atomic(args.json, json.dumps(s, indent=2, default=_jsonable) + "\n")
     return 0
 
 
@@ -350,12 +365,11 @@ def plot_compare(rows: list[dict], path: str) -> None:
 def run_compare(args) -> int:
     options = options_from_args(args)
     forms = [f.strip() for f in args.formulations.split(",") if f.strip()]
+    check_distinct({"--plot": args.plot, "--json": args.json})
     if args.plot:
         check_new_file(args.plot, args.files, args.force, png=True)
     if args.json:
         check_new_file(args.json, args.files, args.force)
-        if args.plot and os.path.abspath(args.plot) == os.path.abspath(args.json):
-            raise GatesoptError(f"{args.plot}: --plot and --json must name different files")
     rows = []
     for path in args.files:
         program = parse(path)

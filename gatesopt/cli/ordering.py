@@ -10,13 +10,12 @@ from __future__ import annotations
 import contextlib
 import json
 import math
-import os
 import sys
 import time
 
 from ..errors import GatesoptError
 from ..parse import parse
-from .gating import _check_paths, check_new_file, write_atomic
+from .gating import _check_paths, check_distinct, check_new_file, write_atomic
 
 FORMULATIONS = ("greedy", "tsp", "cpsat", "milp", "auto")
 
@@ -71,14 +70,13 @@ def run(args) -> int:
     if args.budget is not None and not (math.isfinite(args.budget) and args.budget > 0):
         raise GatesoptError(f"--budget must be > 0 s, not {args.budget}")
     _check_paths(args.file, args.output, args.force)
+    check_distinct({"-o": args.output, "--json": args.json, "--plot": args.plot})
     if args.json:
         _check_paths(args.file, args.json, args.force)
     if args.plot_layer is not None and not args.plot:
         raise GatesoptError("--plot-layer needs --plot OUT.png")
     if args.plot:
         check_new_file(args.plot, [args.file], args.force, png=True)
-        if os.path.abspath(args.plot) in {os.path.abspath(x) for x in (args.output, args.json) if x}:
-            raise GatesoptError(f"{args.plot}: --plot must name a file of its own")
     program = parse(args.file)
     if args.plot_layer is not None and not 0 <= args.plot_layer < program.n_layers:
         raise GatesoptError(f"{args.file}: --plot-layer {args.plot_layer}: layers are 0 to "
