@@ -30,8 +30,9 @@ EXACT_MAX_CANDS = 160
 SYMMETRIC_MAX_CANDS = 1000
 #: ILS kicks per curve before the symmetric model (it builds its own incumbent from the LP point;
 #: measured on 86 real groups of 17-170 curves: the same 83 proven with 0, 2 or 15 kicks per curve,
-#: and 15 cost 20 % more time in all)
-SYMMETRIC_WARM_KICKS_PER_CURVE = 2
+#: and 15 cost 20 % more time in all; on 219 Cura bunny groups of 13-49 curves, all proven either
+#: way, 0 kicks took 4.7-4.8 s of CPU and 2 kicks 6.6-7.0 s)
+SYMMETRIC_WARM_KICKS_PER_CURVE = 0
 #: up to this many curves the subset DP goes first; above it (up to ``dp.fits``, ~16 curves) the
 #: DP takes 20-50 ms and the symmetric model is tried first where it applies (Cura bunny's 40
 #: groups of 13-16 curves: DP 1.37 s, greedy + symmetric 0.51 s, all 40 proven), the DP after it
@@ -79,8 +80,11 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
     sym = symmetric.applies(group)
     sym_next = (sym and group.n_cands <= SYMMETRIC_MAX_CANDS
                 and time_limit_s >= exact_time_s(group.n_curves))
-    if dp.fits(group) and (group.n_curves <= DP_FIRST_CURVES or not sym_next):
-        # small: exact by DP over subsets, sub-millisecond up to ~12 curves
+    if dp.fits(group) and (group.n_curves <= DP_FIRST_CURVES
+                           or (not sym_next and dp.time_s(group) <= time_limit_s)):
+        # small: exact by DP over subsets, sub-millisecond up to ~12 curves. Above, the DP takes
+        # 10-140 ms and cannot be stopped: under a budget's small share it would take the time of
+        # several proofs by the model from the groups after it
         ex = dp.solve(group)
         return GroupSolution.make(ex.order, ex.objective_mm, ex.bound_mm, "optimal",
                                   time.perf_counter() - t0, "auto:dp")
@@ -119,7 +123,8 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
     if ex.objective_mm > heur.objective_mm:        # never worse than the warm start
         ex = GroupSolution.make(heur.order, heur.objective_mm, max(ex.bound_mm, heur.bound_mm),
                                 "feasible", ex.solve_s, ex.method)
-    if ex.status != "optimal" and dp.fits(group):  # the model did not prove it in time: the DP will
+    if ex.status != "optimal" and dp.fits(group) and dp.time_s(group) <= time_limit_s:
+        # the model did not prove it in time: the DP will, in at most about one limit more
         d = dp.solve(group)
         return GroupSolution.make(d.order, d.objective_mm, d.bound_mm, "optimal",
                                   time.perf_counter() - t0, "auto:dp")

@@ -33,6 +33,15 @@ HEURISTIC_S_PER_CURVE = 6e-5
 OVERHEAD_S_PER_CURVE = 6e-6
 TAIL_S_PER_CURVE = 2e-6
 STOP_HELPER_S = 0.05
+#: what a group takes beyond its limit (the greedy path and the cheap bound run whatever the
+#: limit; model building; a last ILS kick), per curve: measured 33-46 us on the Cura bunny under
+#: a 5.4 s budget, where most groups get next to no limit. The reserve for the groups to come is
+#: the rate measured so far, per curve, starting from this prior as if measured on
+#: OVERRUN_PRIOR_CURVES curves: one slow group early (the helper process starting beside it,
+#: a busy machine: 0.17 s over on a 183-curve group) made the former per-group mean reserve
+#: the whole budget for the ~900 groups after it, and none of them was given an exact step
+OVERRUN_S_PER_CURVE = 3.5e-5
+OVERRUN_PRIOR_CURVES = 5000
 
 FORMULATIONS = {
     "greedy": greedy.solve,
@@ -190,7 +199,8 @@ class _GroupRunner:
         self.other_alive = other_alive if other_alive is not None else (lambda: shared is not None)
         if self.plan is not None and fn is auto.solve:
             auto.warm_up()      # inside the budget, but not in any group's overrun
-        self.over_s, self.n_timed = 0.0, 0
+        self.over_s = OVERRUN_S_PER_CURVE * OVERRUN_PRIOR_CURVES     # the prior, as if measured
+        self.curves_timed = OVERRUN_PRIOR_CURVES
         self.n_curves_from = problem.n_curves - problem.group_curve_start   # per group, to the end
         self.shared = shared
 
@@ -202,20 +212,21 @@ class _GroupRunner:
                                       gs.method + "+cached")
         limit = self.time_limit_s
         if self.plan is not None:
-            # what each group took beyond its limit so far (greedy passes, bounds, model building)
-            # is reserved for the groups still to come; with a helper process both spend the
-            # time left at once
-            mean_over = self.over_s / max(self.n_timed, 1)
+            # what groups took beyond their limit so far (greedy passes, bounds, model building),
+            # per curve, is reserved for the groups still to come; with a helper process both
+            # spend the time left at once
+            rate = self.over_s / self.curves_timed
             wall_left = self.budget_s - (time.perf_counter() - self.t0) - self.rest_s(g)
             cpus = 2 if self.other_alive() else 1
-            left = max(0.0, cpus * wall_left - mean_over * self.plan.n_pending())
+            left = max(0.0, cpus * wall_left - rate * self.plan.pending_curves())
             # the two processes pool their time, but one group runs on one of them: it must end
             # (with its expected overrun) before the budget does, or the file ends late
-            limit = min(limit, self.plan.limit(g, left), max(0.0, wall_left - mean_over))
+            limit = min(limit, self.plan.limit(g, left),
+                        max(0.0, wall_left - rate * grp.n_curves))
         t_g = time.perf_counter()
         gs = self.fn(grp, time_limit_s=limit, **self.kwargs)
         self.over_s += max(0.0, time.perf_counter() - t_g - limit)
-        self.n_timed += 1
+        self.curves_timed += grp.n_curves
         self.cache[key] = gs
         return gs
 
@@ -264,6 +275,7 @@ class _BudgetPlan:
         n = w[self.claims]
         self.groups = np.flatnonzero(self.claims)[np.argsort(n, kind="stable")]  # smallest first
         n = w[self.groups]
+        self.curves = n
         self.exact_s = auto.exact_time_s(n)
         self.heuristic_s = HEURISTIC_S_PER_CURVE * n
         # per group, 1 once solved (or taken by the other process when shared with a helper)
@@ -276,8 +288,8 @@ class _BudgetPlan:
         """Per claim (sorted by size), whether it is still to be solved."""
         return self.done_mask[self.groups] == 0
 
-    def n_pending(self) -> int:
-        return int(np.count_nonzero(self.pending))
+    def pending_curves(self) -> float:
+        return float(self.curves[self.pending].sum())
 
     def limit(self, g: int, left_s: float) -> float:
         """Time for group ``g`` out of ``left_s`` seconds left for it and the groups after it."""
