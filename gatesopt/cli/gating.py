@@ -27,7 +27,8 @@ def _add_common(p) -> None:
     p.add_argument("--motors", default="X,Y", metavar="X,Y",
                    help="motors to gate, comma separated (default X,Y; Z and E opt-in)")
     p.add_argument("--rotate", default="auto", metavar="auto|none|DEG",
-                   help="rotate the model on the bed: auto (best angle), none, or degrees ccw")
+                   help="rotate the model on the bed: auto (best angle), none, or degrees ccw "
+                        "(a print of objects one at a time is never rotated)")
     p.add_argument("--start-ahead-ms", type=float, default=1.8,
                    help="switch a motor on at least this long before it steps (default 1.8, paper)")
     p.add_argument("--end-late-ms", type=float, default=1.0,
