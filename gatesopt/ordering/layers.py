@@ -38,7 +38,7 @@ STOP_HELPER_S = 0.05
 #: a 5.4 s budget, where most groups get next to no limit. The reserve for the groups to come is
 #: the rate measured so far, per curve, starting from this prior as if measured on
 #: OVERRUN_PRIOR_CURVES curves: one slow group early (the helper process starting beside it,
-#: a busy machine: 0.17 s over on a 183-curve group) made the former per-group mean reserve
+#: a busy machine: 0.17 s for a 183-curve group given 11 ms) made the former per-group mean reserve
 #: the whole budget for the ~900 groups after it, and none of them was given an exact step
 OVERRUN_S_PER_CURVE = 3.5e-5
 OVERRUN_PRIOR_CURVES = 5000
