@@ -72,7 +72,7 @@ def run(args) -> int:
     _check_paths(args.file, args.output, args.force)
     check_distinct({"-o": args.output, "--json": args.json, "--plot": args.plot})
     if args.json:
-        _check_paths(args.file, args.json, args.force)
+        check_new_file(args.json, [args.file], args.force)
     if args.plot_layer is not None and not args.plot:
         raise GatesoptError("--plot-layer needs --plot OUT.png")
     if args.plot:
