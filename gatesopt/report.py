@@ -200,13 +200,19 @@ def rotation_sweep(path, angles=tuple(range(0, 360, 30)), formulation: str = "dp
     from .gating.solve import solve
     from .parse import parse
     program = parse(path)
-    out = []
+    out, refused = [], []
     for a in angles:
         try:
             sol = solve(build(program, GatingOptions(rotate=float(a))), formulation)
-        except GatesoptError:
-            continue        # e.g. the rotated print does not fit the bed
+        except GatesoptError as e:
+            refused.append(str(e))      # e.g. the rotated print does not fit the bed
+            continue
         out.append((float(a), float(sol.energy_j)))
+    if len(out) < 2 and refused:
+        # one point is no sweep: say why instead of drawing it (a print of objects one at a
+        # time is never rotated; a plate filled to the edge fits only as sliced)
+        raise GatesoptError(f"{path}: no rotation sweep: {len(refused)} of {len(angles)} angles "
+                            f"refused, the first: {refused[0]}")
     return out
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import gzip
 import os
+import re
 from collections import defaultdict
 from pathlib import Path
 
@@ -60,6 +61,12 @@ def iter_chunks(path, chunk_bytes: int = DEFAULT_CHUNK_BYTES):
         yield rest, line0
 
 
+def _warning_kind(message: str) -> str:
+    """A parse warning without its place and counts: each chunk finds the same M101 or foreign
+    axis again, and the user needs to read it once (with the first line where it applies)."""
+    return re.sub(r"\d+", "#", message)
+
+
 def _parse_piece(piece: bytes, name: str, state, line0: int, flavor: str | None):
     return parse(piece, source=name, state=state, line_offset=line0, flavor=flavor, require_moves=False)
 
@@ -81,7 +88,7 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
     layer_t, layer_e, layer_z = [], [], []
     n_lines = n_steps = n_moves = 0
     flavor = None
-    warnings = []
+    warnings, warned = [], set()
     method = ""
     any_moves = False
     last_ext_z = np.nan         # Z where the previous chunk's last extrusion ended
@@ -90,7 +97,10 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
         prog = _parse_piece(piece, name, state, line0, flavor)
         if flavor is None:      # the header (first chunk) says which G90/G91 semantics apply
             flavor = prog.header.get("flavor", "") or "marlin"
-        warnings += list(prog.warnings)
+        for w in prog.warnings:
+            if _warning_kind(w) not in warned:
+                warned.add(_warning_kind(w))
+                warnings.append(w)
         n_lines += prog.n_lines
         if prog.n_steps == 0:
             continue

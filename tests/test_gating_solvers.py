@@ -481,3 +481,22 @@ def test_sequential_print_is_not_rotated():
     together = parse(rotated_square_gcode(n_layers=8))
     q = build(together, GatingOptions(bed_size_mm=(220, 220)))
     assert not q.notes and math.isclose(solve(q, "dp").rotation_deg % 90.0, 73.0, abs_tol=0.01)
+
+
+def test_rotation_sweep_refuses_a_sequential_print(tmp_path):
+    """``gatesopt report --sweep`` (the paper's Fig. 14) on a print of objects one at a time: one
+    angle is no sweep, and the user is told why instead of getting a figure with a single point."""
+    from gatesopt.errors import GatesoptError
+    from gatesopt.report import rotation_sweep
+    seq = tmp_path / "seq.gcode"
+    seq.write_text(sequential_squares_gcode())
+    with pytest.raises(GatesoptError, match=r"no rotation sweep: 3 of 4 angles refused.*one at a time"):
+        rotation_sweep(seq, angles=(0, 30, 60, 90))
+    flat = tmp_path / "flat.gcode"
+    flat.write_text(rotated_square_gcode(n_layers=8))
+    sweep = rotation_sweep(flat, angles=(0, 30, 73))
+    assert [a for a, _ in sweep] == [0.0, 30.0, 73.0]
+    # the square is turned by 17 deg: at 73 deg its sides run along the axes and one motor can be
+    # gated on each; at 0 and 30 deg both motors move on every side (the same energy)
+    energy = dict(sweep)
+    assert energy[73.0] < energy[0.0] == energy[30.0]

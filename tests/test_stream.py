@@ -48,6 +48,20 @@ def test_error_line_numbers_count_from_the_whole_file(tmp_path):
         profile_stream(p, chunk_bytes=2048)
 
 
+def test_a_warning_found_in_every_chunk_is_given_once(tmp_path):
+    """A BFB file (M101/M103 switch the extruder) is read in 4 KB chunks: every chunk finds M101
+    again, the user reads it once, at the file's first M101 line."""
+    layer = "M101\nG1 X10 Y10 F900\nG1 X20 Y10\nM103\n"
+    text = "G28\nG1 Z0.3 F900\n" + "".join(f"G1 Z{0.3 + 0.2 * i:.2f}\n{layer}" for i in range(600))
+    p = tmp_path / "bfb.gcode"
+    p.write_text(text)
+    assert len(list(iter_chunks(p, chunk_bytes=4096))) > 5
+    r = profile_stream(p, chunk_bytes=4096)
+    m101 = [w for w in r.warnings if "M101" in w]
+    assert m101 == [w for w in parse(text, source=str(p)).warnings if "M101" in w]
+    assert len(m101) == 1 and f"{p}:4: M101" in m101[0]
+
+
 @pytest.mark.parametrize("name", ["real_prusa261_benchy.gcode.gz", "slic3r13_star_honey20.gcode.gz",
                                   "real_fullcontrol_ripple_vase.gcode.gz"])
 @pytest.mark.parametrize("chunk", [60_000, 1_000_000])
