@@ -61,3 +61,85 @@ def test_reordered_combing_file_keeps_retractions_near_the_slicers(name):
     s = res.summary
     assert s["travel_after_mm"] < s["travel_before_mm"]
     assert s["retractions_after"] <= 2.5 * s["retractions_before"]
+
+
+# ------------------------------------------------------------------------------------------------
+# firmware retraction (bare G10 / G11: PrusaSlicer/Slic3r "use firmware retraction", Klipper's
+# [firmware_retraction], Cura's machine_firmware_retract)
+
+def _firmware_retract_gcode(rrf_temperature_in_layer: bool = False) -> str:
+    """Two layers of eight 10 mm lines in a scrambled order; the slicer retracts with G10 / G11
+    around every travel. Optionally a RepRapFirmware ``G10 P0 S205`` (tool temperature) after the
+    fourth line of layer 1: a heater command, not a retraction."""
+    out = ["G21", "G90", "M83", "G28", "G10 P0 S200 ; set temperature"]
+    ys = [0, 40, 10, 50, 20, 60, 30, 70]
+    for layer in range(2):
+        out += [f";LAYER:{layer}", f"G1 Z{0.2 + 0.2 * layer:.1f} F600"]
+        for k, y in enumerate(ys):
+            x0, x1 = (20, 30) if k % 2 == 0 else (30, 20)
+            out += ["G10", f"G0 X{x0} Y{y + 20} F6000", "G11", f"G1 X{x1} Y{y + 20} E0.4 F1800"]
+            if rrf_temperature_in_layer and layer == 1 and k == 3:
+                out.append("G10 P0 S205")
+    out += ["G10", "G0 X0 Y150 F6000", "M84"]
+    return "\n".join(out) + "\n"
+
+
+def _travels_and_retraction(text: str):
+    """(XY length, retracted by G10?) of every travel between extrusions, and whether every
+    extrusion starts unretracted (each G10 undone by a G11 before the next extrusion)."""
+    x = y = 0.0
+    retracted = False
+    runs, run, run_retracted = [], None, False
+    extrudes_unretracted = True
+    for line in text.splitlines():
+        words = line.split(";")[0].split()
+        if words == ["G10"]:
+            assert not retracted, "G10 while already retracted"
+            retracted = True
+        elif words == ["G11"]:
+            assert retracted, "G11 without a G10"
+            retracted = False
+        elif words and words[0] in ("G0", "G1"):
+            w = {t[0]: float(t[1:]) for t in words[1:]}
+            nx, ny = w.get("X", x), w.get("Y", y)
+            length = float(np.hypot(nx - x, ny - y))
+            if "E" in w and length > 0:
+                extrudes_unretracted &= not retracted
+                if run is not None:
+                    runs.append((run, run_retracted))
+                run = None
+            elif length > 0:
+                if run is None:
+                    run, run_retracted = 0.0, False
+                run += length
+                run_retracted |= retracted
+            x, y = nx, ny
+    return runs, extrudes_unretracted
+
+
+def test_firmware_retraction_is_rebuilt_with_the_travel():
+    """A file that retracts with G10 / G11 is re-ordered (they were barriers before), and every
+    rebuilt travel the slicer would have retracted for is retracted by one G10 and one G11 (never
+    two G10 in a row, every extrusion unretracted). The report counts G10 as a retraction; a
+    RepRapFirmware ``G10 P0 S205`` is a heater command and stays a barrier."""
+    from gatesopt.ordering.pipeline import travel_stats
+    prog = gatesopt.parse(_firmware_retract_gcode())
+    assert travel_stats(prog)["retractions"] == 17        # 16 travels and the final one
+    res = order_program(prog, OrderingOptions(mode="free"))
+    assert res.ok and res.summary["groups_reordered"] == 1      # layer 0 keeps its order
+    assert res.summary["travel_after_mm"] < 0.75 * res.summary["travel_before_mm"]
+    runs_in, ok_in = _travels_and_retraction(prog.to_gcode())
+    runs_out, ok_out = _travels_and_retraction(res.text)
+    assert ok_in and ok_out
+    shortest_retracted = min(d for d, r in runs_in if r)          # 30 mm here
+    assert all(r for d, r in runs_out if d >= shortest_retracted)
+    assert any(not r for d, r in runs_out)                         # the new 10 mm hops go dry
+    # + the layer change's (no XY travel) and the last one's (no extrusion after it)
+    assert res.summary["retractions_after"] == sum(r for _, r in runs_out) + 2 == 10
+    # the heater line: layer 1 splits there into two groups of four lines each
+    rrf = gatesopt.parse(_firmware_retract_gcode(rrf_temperature_in_layer=True))
+    prob = build(rrf, OrderingOptions(mode="free"))
+    assert sorted(np.diff(prob.group_curve_start).tolist()) == [4, 4, 8]
+    assert travel_stats(rrf)["retractions"] == 17
+    res = order_program(rrf, OrderingOptions(mode="free"))
+    assert res.ok

@@ -5,6 +5,8 @@ neutral lines (comments, blank lines, F-only ``G1 F..``). Between two curves lie
 slicer's travel (retract, wipe, z-hop, travel, unretract) plus any other lines. A line in a gap is
 
 - *motion*: a non-extruding move; it is rebuilt when the curves around it change;
+- *firmware retraction*: a bare ``G10`` / ``G11`` (the slicer's "use firmware retraction"): the
+  firmware pulls the filament back and pushes it forward; rebuilt with the travel, like an E move;
 - *neutral*: comments, F-only moves; they travel with the next curve;
 - *state*: a command that sets state an extrusion sees (acceleration M204/M201,
   jerk M205, speed/flow M220/M221, linear advance M900, Klipper SET_VELOCITY_LIMIT and
@@ -31,6 +33,7 @@ from ..program import Kind, Program
 from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
 
 LINE_MOTION, LINE_NEUTRAL, LINE_STATE, LINE_BARRIER, LINE_FATAL, LINE_CURVE = range(6)
+LINE_FW_RETRACT, LINE_FW_UNRETRACT = 6, 7
 
 STATE_M = (201, 203, 204, 205, 220, 221, 900)   # fan M106/M107 is a barrier (verify keeps its order)
 FATAL_M = (0, 1, 25, 125, 600, 601, 602, 701, 702)
@@ -84,6 +87,20 @@ def state_key_of(program: Program, i: int):
     return (head.decode(),)
 
 
+def firmware_retraction(program: Program) -> tuple[np.ndarray, np.ndarray]:
+    """Lines of firmware retractions and unretractions: a bare ``G10`` / ``G11`` (Marlin, Klipper,
+    RepRapFirmware; the slicer's "use firmware retraction"). With words ``G10`` is something else:
+    tool offsets and temperatures on RepRapFirmware (``G10 P0 S200``), Marlin's swap retraction
+    (``G10 S1``); those stay barriers."""
+    cand = np.flatnonzero((program.line_letter == ord("G"))
+                          & ((program.line_number == 10) | (program.line_number == 11)))
+    bare = [i for i in cand.tolist()
+            if len(_line_text_bytes(program, i).split(b";")[0].split()) == 1]
+    bare = np.asarray(bare, np.int64)
+    is_g10 = program.line_number[bare] == 10
+    return bare[is_g10], bare[~is_g10]
+
+
 def layout(program: Program) -> Layout:
     """Classify every line and find the curves (see module docstring)."""
     n_lines = program.n_lines
@@ -100,6 +117,9 @@ def layout(program: Program) -> Layout:
     cls[m & np.isin(number, FATAL_M)] = LINE_FATAL
     cls[letter == ord("T")] = LINE_FATAL
     cls[g & np.isin(number, (28, 29))] = LINE_FATAL
+    fw_retract, fw_unretract = firmware_retraction(program)
+    cls[fw_retract] = LINE_FW_RETRACT
+    cls[fw_unretract] = LINE_FW_UNRETRACT
     ext = np.flatnonzero(letter == ord("@"))
     for i in ext:
         head = _line_text_bytes(program, int(i)).strip().split(b" ")[0].upper()

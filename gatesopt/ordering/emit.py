@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..program import Kind, Program
-from .build import (LINE_CURVE, LINE_MOTION, LINE_NEUTRAL, LINE_STATE,
-                    Layout, layout)
+from .build import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, LINE_NEUTRAL,
+                    LINE_STATE, Layout, layout)
 from .problem import OrderingProblem, OrderingSolution
 
 _E_WORD = re.compile(r"(?<![A-Za-z_])([Ee])([-+]?\d*\.?\d*)")
@@ -65,6 +65,8 @@ class TravelStyle:
     #: longest same-layer travel the slicer made without retracting (combing: Cura, ideaMaker,
     #: Creality Print, PrusaSlicer's "only retract when crossing perimeters"); 0: it does not comb
     comb_max_mm: float = 0.0
+    #: the slicer retracts with bare G10 / G11 (the firmware's retraction, not E moves)
+    firmware_retract: bool = False
 
 
 #: travels shorter than this say nothing about combing (every slicer skips retracting for them)
@@ -142,16 +144,22 @@ def travel_style(program: Program, lay: Layout) -> TravelStyle:
     retract_rows = (d[:, 3] < 0)
     cum_r = np.concatenate(([0.0], np.cumsum(np.where(retract_rows, -d[:, 3], 0.0))))
     retr = cum_r[g1] - cum_r[g0]
+    # gaps with a firmware retraction (bare G10 between the two curves' lines)
+    cum_fw = np.concatenate(([0], np.cumsum(lay.line_class == LINE_FW_RETRACT)))
+    fw = (cum_fw[lay.curve_l0[1:]] - cum_fw[lay.curve_l1[:-1] + 1]) > 0
     z_end = program.end_mm[:, 2]
     # z-hop: highest Z inside the gap above the next curve's Z (gaps within one layer only)
     same_layer = program.layer[g0 - 1] == program.layer[g1]
-    for i in np.flatnonzero((retr > 0) & same_layer)[:2000]:
+    has_e = retr > 1e-6
+    has_r = has_e | fw
+    for i in np.flatnonzero(has_r & same_layer)[:2000]:
         if g1[i] > g0[i]:
             hop[i] = z_end[g0[i]:g1[i]].max() - program.start_mm[g1[i], 2]
-    has_r = retr > 1e-6
     style = {}
     if has_r.any():
-        style["retract_mm"] = float(np.median(retr[has_r]))
+        if has_e.any():
+            style["retract_mm"] = float(np.median(retr[has_e]))
+        style["firmware_retract"] = bool(fw.sum() > has_e.sum())
         internal = has_r & same_layer
         style["min_travel_mm"] = float(xy_len[internal].min()) if internal.any() else 1.0
         hops = hop[has_r & same_layer]
@@ -530,6 +538,9 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
     """
     pre, mid, post, late = [], [], [], []
     boundary_retracted = early_push = False
+    # firmware retraction (bare G10 / G11): rebuilt as one G10 before our travel and one G11
+    # after it, unless the consumed gaps do not end as retracted as they began (then copied)
+    fw_lines, fw_net, fw_boundary, fw_internal = set(), 0, False, False
     r_boundary = r_internal = 0.0
     net = 0.0
     cls_of, de_of, travel_of = w.line_cls, w.line_de, w.line_travel
@@ -539,10 +550,12 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
         gap += lines
         cls = [cls_of[i] for i in lines]
         travel_pos = [j for j, i in enumerate(lines) if travel_of[i]]
-        retract_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION and de_of[i] < 0]
+        retract_pos = [j for j, i in enumerate(lines)
+                       if (cls[j] == LINE_MOTION and de_of[i] < 0) or cls[j] == LINE_FW_RETRACT]
         split_t = travel_pos[-1] if travel_pos else len(lines)
         split_r = min(retract_pos[0], split_t) if retract_pos else split_t
-        push_pos = [j for j, i in enumerate(lines) if cls[j] == LINE_MOTION and de_of[i] > 0]
+        push_pos = [j for j, i in enumerate(lines)
+                    if (cls[j] == LINE_MOTION and de_of[i] > 0) or cls[j] == LINE_FW_UNRETRACT]
         split_u = push_pos[-1] if push_pos else len(lines)
         if boundary and push_pos and push_pos[-1] < split_t:
             early_push = True           # the slicer unretracted before its last travel
@@ -559,9 +572,21 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
                 continue
             if cls[j] == LINE_CURVE:
                 continue
+            if cls[j] == LINE_FW_RETRACT or cls[j] == LINE_FW_UNRETRACT:
+                fw_lines.add(i)
+                if cls[j] == LINE_FW_RETRACT:
+                    fw_net -= 1
+                    fw_boundary = fw_boundary or boundary
+                    fw_internal = fw_internal or not boundary
+                else:
+                    fw_net += 1
             if not boundary and cls[j] == LINE_NEUTRAL and _TYPE_OR_WIPE.match(p.line_text(i)):
                 continue
             (pre if j < split_r else mid if j < split_t else post if j < split_u else late).append(i)
+    use_fw = fw_net == 0 and (fw_boundary or fw_internal or (
+        style.firmware_retract and r_boundary <= 0 and r_internal <= 0))
+    if use_fw and fw_lines:
+        pre, mid, post, late = ([i for i in b if i not in fw_lines] for b in (pre, mid, post, late))
     s = int(lay.curve_s0[c])
     off = p.offset_mm[s]
     relative_e = bool(p.relative_e[s])
@@ -592,11 +617,17 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
     dist = float(np.hypot(*(target[:2] - w.xyz[:2])))
     moving = dist > 1e-9 or abs(target[2] - w.xyz[2]) > 1e-9
     r = r_boundary if r_boundary > 0 else (r_internal if r_internal > 0 else style.retract_mm)
-    retract = moving and r > 0 and (boundary_retracted or (style.retract_mm > 0 and dist >= style.min_travel_mm))
+    if use_fw:
+        retract = moving and (fw_boundary or (style.firmware_retract and dist >= style.min_travel_mm))
+    else:
+        retract = moving and r > 0 and (boundary_retracted
+                                        or (style.retract_mm > 0 and dist >= style.min_travel_mm))
     if (retract and walls is not None and dist <= style.comb_max_mm
             and abs(target[2] - w.xyz[2]) <= 1e-9 and not walls.crosses(layer, w.xyz, target)):
         retract = False     # the slicer combs: a travel over infill that crosses no wall goes dry
-    if retract:
+    if retract and use_fw:
+        w.write("G10")
+    elif retract:
         move_e(-r, style.retract_feed_mm_s)
     for i in mid:
         copy(i)
@@ -617,6 +648,8 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
         move_e(net - emitted)
     for i in post:                      # e.g. the next layer's marker: before the unretract, as the slicer
         copy(i)
+    if retract and use_fw:
+        w.write("G11")
     if abs(net - emitted) > 1e-9:
         move_e(net - emitted)
     for i in late:

@@ -2,7 +2,8 @@
 
 Travel numbers in the report are measured on the two parsed files (not the solver's model):
 travel = every non-extruding XY move (straight or arc) from the first layer on; travel time under
-the paper's T = L/F; retractions = steps that pull filament back (E decreasing).
+the paper's T = L/F; retractions = steps that pull filament back (E decreasing), and firmware
+retractions (a bare ``G10``).
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import numpy as np
 
 from ..parse import parse
 from ..program import Kind, Program
-from .build import build
+from .build import build, firmware_retraction
 from .emit import emit
 from .layers import model_travel_mm, solve
 from .problem import OrderingOptions, OrderingProblem, OrderingSolution
@@ -53,12 +54,22 @@ def travel_stats(program: Program) -> dict:
     retract = printing & (d[:, 3] < 0)
     # a retraction spread over several wipe moves counts once
     starts = retract & ~np.concatenate(([False], retract[:-1]))
+    n_retract = int(starts.sum()) + len(firmware_retraction_lines(program))
     return {"travel_mm": float(program.length_mm[travel].sum()),
             "travel_s": float(program.duration_s[travel].sum()),
             # everything from the first layer on (paper time model): extrusion is the same in
             # both files, so a change is travel, retractions and z-hops together
             "print_s": float(program.duration_s[printing].sum()),
-            "travels": int(travel.sum()), "retractions": int(starts.sum())}
+            "travels": int(travel.sum()), "retractions": n_retract}
+
+
+def firmware_retraction_lines(program: Program) -> np.ndarray:
+    """Lines of firmware retractions (a bare ``G10``, ``build.firmware_retraction``) from the
+    first layer on: the firmware pulls the filament back, so no step shows it."""
+    if not len(program.layer_line):
+        return np.zeros(0, np.int64)
+    lines = firmware_retraction(program)[0]
+    return lines[lines >= program.layer_line[0]]
 
 
 #: emit-and-compare passes of the time guard (``emit_guarded``): each pass after the first is a
