@@ -143,3 +143,24 @@ def test_firmware_retraction_is_rebuilt_with_the_travel():
     assert travel_stats(rrf)["retractions"] == 17
     res = order_program(rrf, OrderingOptions(mode="free"))
     assert res.ok
+
+
+def test_progress_and_messages_do_not_split_a_layer_and_are_kept():
+    """M73 (progress: Bambu, Orca, PrusaSlicer, Creality Print) and M117 (Kiri:Moto writes one every
+    1 % of the print, mid-curve) are not barriers: the layer stays one group, and every such line
+    is in the output, also those inside a curve that is printed reversed."""
+    out = ["G21", "G90", "M83", ";LAYER:0", "G1 Z0.2 F600", "G1 X10 Y0 E1 F1800", ";LAYER:1",
+           "G1 Z0.4 F600"]
+    ys = [0, 40, 10, 50, 20, 60, 30, 70]
+    for k, y in enumerate(ys):
+        out += [f"G0 X20 Y{y + 20} F6000", f"M73 P{10 + k} R{30 - k}",
+                f"G1 X25 Y{y + 20} E0.2 F1800", f"M117 {k}% layer 1 / 2", f"G1 X30 Y{y + 20} E0.2"]
+    out += ["G0 X0 Y150 F6000", "M84"]
+    prog = gatesopt.parse("\n".join(out) + "\n")
+    prob = build(prog, OrderingOptions(mode="free"))
+    assert np.diff(prob.group_curve_start).max() == 8              # layer 1: one group of eight
+    res = order_program(prog, OrderingOptions(mode="free"))
+    assert res.ok and res.summary["travel_after_mm"] < 0.8 * res.summary["travel_before_mm"]
+    assert any(t.startswith("G1 X20") and " E" in t for t in res.text.splitlines())   # reversed
+    kept = [t for t in res.text.splitlines() if t.startswith(("M73", "M117"))]
+    assert sorted(kept) == sorted(t for t in out if t.startswith(("M73", "M117")))

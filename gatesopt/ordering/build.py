@@ -1,13 +1,13 @@
 """Program -> OrderingProblem: curves, gaps, barriers and groups (formulations/ordering.md, "Build").
 
 A *curve* is a maximal run of extruding steps (layer >= 0) whose lines are separated only by
-neutral lines (comments, blank lines, F-only ``G1 F..``). Between two curves lies a *gap*: the
+neutral lines (comments, blank lines, F-only ``G1 F..``, progress ``M73``, messages ``M117``). Between two curves lies a *gap*: the
 slicer's travel (retract, wipe, z-hop, travel, unretract) plus any other lines. A line in a gap is
 
 - *motion*: a non-extruding move; it is rebuilt when the curves around it change;
 - *firmware retraction*: a bare ``G10`` / ``G11`` (the slicer's "use firmware retraction"): the
   firmware pulls the filament back and pushes it forward; rebuilt with the travel, like an E move;
-- *neutral*: comments, F-only moves; they travel with the next curve;
+- *neutral*: comments, F-only moves, M73 / M117; they travel with the next curve;
 - *state*: a command that sets state an extrusion sees (acceleration M204/M201,
   jerk M205, speed/flow M220/M221, linear advance M900, Klipper SET_VELOCITY_LIMIT and
   SET_PRESSURE_ADVANCE); it travels with the next curve, and ``emit`` re-issues it wherever a
@@ -36,6 +36,10 @@ LINE_MOTION, LINE_NEUTRAL, LINE_STATE, LINE_BARRIER, LINE_FATAL, LINE_CURVE = ra
 LINE_FW_RETRACT, LINE_FW_UNRETRACT = 6, 7
 
 STATE_M = (201, 203, 204, 205, 220, 221, 900)   # fan M106/M107 is a barrier (verify keeps its order)
+#: commands that change nothing an extrusion sees: progress (M73) and display messages (M117),
+#: which slicers write mid-layer by print time (Bambu, Orca, PrusaSlicer, Creality Print,
+#: Kiri:Moto); neutral, they travel with the next curve instead of splitting the layer's groups
+NEUTRAL_M = (73, 117)
 FATAL_M = (0, 1, 25, 125, 600, 601, 602, 701, 702)
 STATE_EXT = (b"SET_VELOCITY_LIMIT", b"SET_PRESSURE_ADVANCE", b"M204")
 #: what marks a line as an object label (anywhere in it, in any case): ``; printing object``,
@@ -114,6 +118,7 @@ def layout(program: Program) -> Layout:
     cls[g & np.isin(number, (0, 1, 2, 3)) & ~is_step] = LINE_NEUTRAL       # F-only moves
     m = letter == ord("M")
     cls[m & np.isin(number, STATE_M)] = LINE_STATE
+    cls[m & np.isin(number, NEUTRAL_M)] = LINE_NEUTRAL
     cls[m & np.isin(number, FATAL_M)] = LINE_FATAL
     cls[letter == ord("T")] = LINE_FATAL
     cls[g & np.isin(number, (28, 29))] = LINE_FATAL

@@ -510,6 +510,12 @@ def _curve(w: _Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int
         for i in range(int(lay.curve_l0[c]), int(lay.curve_l1[c]) + 1):
             w.copy_line(i)
         return
+    # neutral commands inside the curve (progress M73, messages M117) are not moves: written
+    # move by move the curve would lose them, so they go first, in their order
+    letter = p.line_letter
+    for i in range(int(lay.curve_l0[c]) + 1, int(lay.curve_l1[c])):
+        if letter[i] == 77 and w.line_cls[i] == LINE_NEUTRAL:      # "M"
+            w.copy_line(i)
     steps = range(b - 1, a - 1, -1) if reverse else list(range(a + seam, b)) + list(range(a, a + seam))
     for s in steps:
         w.step(s, reverse)
