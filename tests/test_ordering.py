@@ -494,3 +494,36 @@ def test_time_guard_puts_back_the_neighbour_a_kept_layer_still_pays_for(monkeypa
     else:
         assert a not in kept and not slicer_order(final, a)
         assert after[a] + after[b] == pytest.approx(before[a] + before[b] - gain_s + 0.6)
+
+
+@pytest.mark.parametrize("reset", ["G92 E0", "G92 X0 Y0"])
+def test_an_e_reset_is_not_a_barrier_but_a_coordinate_reset_is(reset):
+    """Absolute E (M82) with ``G92 E0`` after every retraction, as PrusaSlicer and Slic3r write
+    it: the E reset travels with the next curve (emit numbers E from its own total and the offset
+    of each copied G92), so the layer is one group and re-ordered, and the output verifies (E per
+    layer). ``G92 X0 Y0`` sets the coordinate system from where the head is: a barrier, and the
+    layer keeps the slicer's order (re-ordered, its curves before the G92 ended 10 mm away and
+    every move after it came out shifted by 10 mm; the verifier caught it)."""
+    from gatesopt.ordering import pipeline
+    out = ["G21", "G90", "M82", "G92 E0", ";LAYER:0", "G1 Z0.2 F600", "G1 X10 Y0 E1 F1800",
+           ";LAYER:1", "G1 Z0.4 F600"]
+    e, ys = 1.0, [0, 40, 10, 50, 20, 60, 30, 70]
+    for k, y in enumerate(ys):
+        out += [f"G0 X20 Y{y + 20} F6000", f"G1 E{e + 0.8:.3f} F2100", f"G1 X30 Y{y + 20} E{e + 1.2:.3f} F1800",
+                f"G1 E{e + 0.4:.3f} F2100"]
+        e += 0.4
+        if k == 3:
+            out += [reset] + (["G1 X0 Y0"] if "X" in reset else [])
+            e = 0.0 if "E" in reset else e
+    out += ["G0 X0 Y150 F6000", "M84"]
+    prog = gatesopt.parse("\n".join(out) + "\n")
+    prob = build(prog, OrderingOptions(mode="free"))
+    sizes = np.diff(prob.group_curve_start).tolist()
+    res = pipeline.order_program(prog, OrderingOptions(mode="free"))
+    assert res.ok
+    if "E" in reset:
+        assert sizes[-1] == 8 and res.summary["travel_after_mm"] < 0.8 * res.summary["travel_before_mm"]
+        assert res.text.count("G92 E0") == 2
+    else:
+        assert sizes[-2:] == [4, 4] and prob.group_fixed[-2:].all()
+        assert res.text == prog.to_gcode()

@@ -12,7 +12,8 @@ slicer's travel (retract, wipe, z-hop, travel, unretract) plus any other lines. 
   jerk M205, speed/flow M220/M221, linear advance M900, Klipper SET_VELOCITY_LIMIT and
   SET_PRESSURE_ADVANCE); it travels with the next curve, and ``emit`` re-issues it wherever a
   curve would otherwise see another value than in the original;
-- *barrier*: anything else (heaters, fan, G92, modal switches, object labels M486 / EXCLUDE_OBJECT /
+- *E reset*: an E-only ``G92 E..``; it ends a curve and travels with the next one;
+- *barrier*: anything else (heaters, fan, G92 with X/Y/Z, modal switches, object labels M486 / EXCLUDE_OBJECT /
   ``; printing object`` / ``;MESH:``, dwells, unknown commands): no curve crosses it;
 - *fatal*: tool changes (T), filament change (M600...), homing: the layer keeps its order.
 
@@ -34,6 +35,7 @@ from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
 
 LINE_MOTION, LINE_NEUTRAL, LINE_STATE, LINE_BARRIER, LINE_FATAL, LINE_CURVE = range(6)
 LINE_FW_RETRACT, LINE_FW_UNRETRACT = 6, 7
+LINE_E_RESET = 8
 
 STATE_M = (201, 203, 204, 205, 220, 221, 900)   # fan M106/M107 is a barrier (verify keeps its order)
 #: commands that change nothing an extrusion sees: progress (M73) and display messages (M117),
@@ -122,6 +124,14 @@ def layout(program: Program) -> Layout:
     cls[m & np.isin(number, FATAL_M)] = LINE_FATAL
     cls[letter == ord("T")] = LINE_FATAL
     cls[g & np.isin(number, (28, 29))] = LINE_FATAL
+    # an E-only G92 (``G92 E0``: PrusaSlicer and Slic3r after a retraction, Cura at a layer
+    # change): emit numbers E from its own running total and the offset each copied G92 sets, so
+    # it may travel with the next curve; it still ends a curve (one written move by move would
+    # drop it). G92 with X, Y or Z moves the coordinate system: a barrier
+    for i in np.flatnonzero(g & (number == 92)).tolist():
+        words = _line_text_bytes(program, i).split(b";")[0].upper().split()
+        if len(words) == 2 and words[1][:1] == b"E":
+            cls[i] = LINE_E_RESET
     fw_retract, fw_unretract = firmware_retraction(program)
     cls[fw_retract] = LINE_FW_RETRACT
     cls[fw_unretract] = LINE_FW_UNRETRACT
@@ -192,6 +202,18 @@ def layout(program: Program) -> Layout:
                 layer_fatal[lay] = True
                 layer_keep[lay] = True
                 why[lay] = "tool change, filament change or homing in the layer"
+        # G92 with X, Y or Z sets the coordinate system from where the head is when it is read:
+        # the curves before it must end where the slicer's did (its layer, and the layer before
+        # it when it lies in the gap between the two), or every move after it shifts
+        for i in np.flatnonzero(g & (number == 92)).tolist():
+            words = _line_text_bytes(program, i).split(b";")[0].upper().split()
+            if not any(w[:1] in (b"X", b"Y", b"Z") for w in words[1:]):
+                continue
+            after = int(np.searchsorted(l0, i))
+            for c in (after - 1, after):
+                if 0 <= c < n:
+                    layer_keep[curve_layer[c]] = True
+                    why[curve_layer[c]] = why[curve_layer[c]] or "G92 sets X, Y or Z in the layer"
         # Z that changes while extruding (spiral vase): reversing would run Z backwards
         dz = np.abs(program.end_mm[es, 2] - program.start_mm[es, 2]) > 1e-6
         for lay in np.unique(program.layer[es[dz]]):

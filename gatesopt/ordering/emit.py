@@ -20,7 +20,8 @@ Rules (formulations/ordering.md, "Emit"; gatesopt.ordering.build explains the li
 - State every extrusion sees (fan, acceleration, jerk, flow, pressure advance, feature label,
   feedrate) is tracked through the output; before each curve, every value that differs from what
   that curve saw in the original is re-issued with the original line.
-- G92 resets stay where they were (they are barriers), and E after them continues from them.
+- An E-only G92 travels with the next curve (E after it continues from it: E is numbered from the
+  output's own running total and the offset each copied G92 sets); a G92 with X/Y/Z is a barrier.
 """
 from __future__ import annotations
 
