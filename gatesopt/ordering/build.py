@@ -80,10 +80,14 @@ def _line_text_bytes(program: Program, i: int) -> bytes:
     return program.data[program.line_start[i]:program.line_start[i + 1]]
 
 
+def _code_words(program: Program, i: int) -> list[bytes]:
+    """The words of line ``i`` before its comment, upper-cased."""
+    return _line_text_bytes(program, i).split(b";")[0].upper().split()
+
+
 def state_key_of(program: Program, i: int):
     """The state a state line sets (fan P index, M204 words, Klipper command name)."""
-    raw = _line_text_bytes(program, i).split(b";")[0].strip().upper()
-    words = raw.split()
+    words = _code_words(program, i)
     head = words[0] if words else b""
     if head in (b"M106", b"M107"):
         p = [w for w in words[1:] if w.startswith(b"P")]
@@ -100,8 +104,7 @@ def firmware_retraction(program: Program) -> tuple[np.ndarray, np.ndarray]:
     (``G10 S1``); those stay barriers."""
     cand = np.flatnonzero((program.line_letter == ord("G"))
                           & ((program.line_number == 10) | (program.line_number == 11)))
-    bare = [i for i in cand.tolist()
-            if len(_line_text_bytes(program, i).split(b";")[0].split()) == 1]
+    bare = [i for i in cand.tolist() if len(_code_words(program, i)) == 1]
     bare = np.asarray(bare, np.int64)
     is_g10 = program.line_number[bare] == 10
     return bare[is_g10], bare[~is_g10]
@@ -127,11 +130,14 @@ def layout(program: Program) -> Layout:
     # an E-only G92 (``G92 E0``: PrusaSlicer and Slic3r after a retraction, Cura at a layer
     # change): emit numbers E from its own running total and the offset each copied G92 sets, so
     # it may travel with the next curve; it still ends a curve (one written move by move would
-    # drop it). G92 with X, Y or Z moves the coordinate system: a barrier
+    # drop it). G92 with X, Y or Z moves the coordinate system: a barrier (and see below)
+    g92_xyz = []
     for i in np.flatnonzero(g & (number == 92)).tolist():
-        words = _line_text_bytes(program, i).split(b";")[0].upper().split()
+        words = _code_words(program, i)
         if len(words) == 2 and words[1][:1] == b"E":
             cls[i] = LINE_E_RESET
+        elif any(w[:1] in (b"X", b"Y", b"Z") for w in words[1:]):
+            g92_xyz.append(i)
     fw_retract, fw_unretract = firmware_retraction(program)
     cls[fw_retract] = LINE_FW_RETRACT
     cls[fw_unretract] = LINE_FW_UNRETRACT
@@ -205,10 +211,7 @@ def layout(program: Program) -> Layout:
         # G92 with X, Y or Z sets the coordinate system from where the head is when it is read:
         # the curves before it must end where the slicer's did (its layer, and the layer before
         # it when it lies in the gap between the two), or every move after it shifts
-        for i in np.flatnonzero(g & (number == 92)).tolist():
-            words = _line_text_bytes(program, i).split(b";")[0].upper().split()
-            if not any(w[:1] in (b"X", b"Y", b"Z") for w in words[1:]):
-                continue
+        for i in g92_xyz:
             after = int(np.searchsorted(l0, i))
             for c in (after - 1, after):
                 if 0 <= c < n:

@@ -25,6 +25,7 @@ Rules (formulations/ordering.md, "Emit"; gatesopt.ordering.build explains the li
 """
 from __future__ import annotations
 
+import bisect
 import re
 from dataclasses import dataclass
 
@@ -203,7 +204,8 @@ class _Writer:
         self.state: dict = {}
         self.feature = None
         (self.line_cls, self.line_step, self.line_de, self.line_travel, self.step_relative_e,
-         self.step_feed, self.layer_lines, self.arc_steps) = lists or self.per_line(program, lay)
+         self.step_feed, self.layer_lines, self.arc_steps,
+         self.command_lines) = lists or self.per_line(program, lay)
 
     @staticmethod
     def per_line(program: Program, lay: Layout) -> tuple:
@@ -218,7 +220,9 @@ class _Writer:
                 (motion & np.isin(program.kind[s], _TRAVEL_KINDS)).tolist(),
                 program.relative_e.tolist(), program.feed_mm_s.tolist(),
                 frozenset(program.layer_line.tolist()),
-                frozenset(np.flatnonzero(program.kind == Kind.ARC).tolist()))
+                frozenset(np.flatnonzero(program.kind == Kind.ARC).tolist()),
+                # neutral commands (M73, M117), in order: a curve written move by move keeps its own
+                np.flatnonzero((program.line_letter == ord("M")) & (cls == LINE_NEUTRAL)).tolist())
 
     # -- copying original lines -------------------------------------------------------------
     def copy_line(self, i: int) -> None:
@@ -513,10 +517,10 @@ def _curve(w: _Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int
         return
     # neutral commands inside the curve (progress M73, messages M117) are not moves: written
     # move by move the curve would lose them, so they go first, in their order
-    letter = p.line_letter
-    for i in range(int(lay.curve_l0[c]) + 1, int(lay.curve_l1[c])):
-        if letter[i] == 77 and w.line_cls[i] == LINE_NEUTRAL:      # "M"
-            w.copy_line(i)
+    cmd = w.command_lines
+    for k in range(bisect.bisect_right(cmd, int(lay.curve_l0[c])),
+                   bisect.bisect_left(cmd, int(lay.curve_l1[c]))):
+        w.copy_line(cmd[k])
     steps = range(b - 1, a - 1, -1) if reverse else list(range(a + seam, b)) + list(range(a, a + seam))
     for s in steps:
         w.step(s, reverse)
@@ -547,7 +551,7 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
     boundary_retracted = early_push = False
     # firmware retraction (bare G10 / G11): rebuilt as one G10 before our travel and one G11
     # after it, unless the consumed gaps do not end as retracted as they began (then copied)
-    fw_lines, fw_net, fw_boundary, fw_internal = set(), 0, False, False
+    fw_lines, fw_net, fw_boundary, fw_retracted = set(), 0, False, False
     r_boundary = r_internal = 0.0
     net = 0.0
     cls_of, de_of, travel_of = w.line_cls, w.line_de, w.line_travel
@@ -583,14 +587,14 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
                 fw_lines.add(i)
                 if cls[j] == LINE_FW_RETRACT:
                     fw_net -= 1
+                    fw_retracted = True
                     fw_boundary = fw_boundary or boundary
-                    fw_internal = fw_internal or not boundary
                 else:
                     fw_net += 1
             if not boundary and cls[j] == LINE_NEUTRAL and _TYPE_OR_WIPE.match(p.line_text(i)):
                 continue
             (pre if j < split_r else mid if j < split_t else post if j < split_u else late).append(i)
-    use_fw = fw_net == 0 and (fw_boundary or fw_internal or (
+    use_fw = fw_net == 0 and (fw_retracted or (
         style.firmware_retract and r_boundary <= 0 and r_internal <= 0))
     if use_fw and fw_lines:
         pre, mid, post, late = ([i for i in b if i not in fw_lines] for b in (pre, mid, post, late))
