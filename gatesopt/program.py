@@ -19,11 +19,13 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 AXES = ("X", "Y", "Z", "E")
+_P_WORD = re.compile(rb"P\s*([-+]?(?:\d+\.?\d*|\.\d+))?")
 X, Y, Z, E = 0, 1, 2, 3
 
 
@@ -140,6 +142,20 @@ class Program:
     def is_command(self, letter: str, number: float) -> np.ndarray:
         """(n_lines,) bool: lines whose command is ``letter`` ``number`` (e.g. ``("M", 104)``)."""
         return (self.line_letter == ord(letter)) & (self.line_number == number)
+
+    def part_fan_lines(self) -> np.ndarray:
+        """Lines of ``M106`` / ``M107`` that set the part-cooling fan ``fan`` follows: no ``P``
+        word, or ``P0`` (the parser's rule, ``_scan.py``; other fans, e.g. Bambu's auxiliary
+        ``M106 P2``, are not modelled)."""
+        cand = np.flatnonzero((self.line_letter == ord("M"))
+                              & ((self.line_number == 106) | (self.line_number == 107)))
+        keep = []
+        for i in cand.tolist():
+            code = self.data[self.line_start[i]:self.line_start[i + 1]].split(b";")[0].upper()
+            p = _P_WORD.search(code)
+            if p is None or p.group(1) is None or float(p.group(1)) == 0.0:
+                keep.append(i)
+        return np.asarray(keep, np.int64)
 
     def line_text(self, i: int) -> str:
         """Line ``i`` (0-based) with its line ending, as in the file."""

@@ -14,7 +14,9 @@ read the two Programs (``gatesopt.parse`` of the original and of the output) and
 2. ``extrusion``: net E per layer equal (relative ``e_rel_tol``).
 3. ``commands``: for gating output every original line that is not a motion is still there,
    unchanged and in order (only motor instructions and the rotation header may be added); for
-   re-ordered output the heater, fan and tool commands keep their order.
+   re-ordered output the heater and tool commands (and fans other than the part-cooling fan)
+   keep their order, and each layer extrudes as much filament at each part-fan duty as before
+   (the re-ordering re-issues M106 / M107 where a curve needs it).
 4. ``timing``: no motor steps while a motor instruction holds it off (on firmware that needs an
    explicit enable), each explicit enable comes at least ``start_ahead_s`` before the motor's next
    step, and no disable comes within ``end_late_s`` of the motor's last step (3DGates Sec. 4.4,
@@ -571,6 +573,32 @@ def _non_motion_lines(program: Program) -> np.ndarray:
     return np.flatnonzero(mask)
 
 
+def _check_fan_duty(original: Program, output: Program, max_findings: int) -> list[Finding]:
+    """Per layer, the filament extruded under each part-cooling fan duty is the same in both
+    files (the parser's modal ``fan``; order-free, so it holds for re-ordered and gated output,
+    whose moves may be split; ``gatesopt.ordering.verify.check_fan`` checks move by move)."""
+    def table(p):
+        rows = np.flatnonzero(p.extruding)
+        duty = np.round(p.fan[rows].astype(np.float64) * 255.0).astype(np.int64)   # M106 S units
+        de = p.end_mm[rows, 3] - p.start_mm[rows, 3]
+        return p.layer[rows].astype(np.int64), duty, de, rows
+    la, da, ea, _ = table(original)
+    lb, db, eb, rb = table(output)
+    key = np.concatenate([la * 1024 + da, lb * 1024 + db])
+    key, inv = np.unique(key, return_inverse=True)
+    sum_a = np.bincount(inv[:len(la)], ea, len(key))
+    sum_b = np.bincount(inv[len(la):], eb, len(key))
+    bad = np.flatnonzero(np.abs(sum_a - sum_b) > 1e-4 * np.maximum(np.abs(sum_a), np.abs(sum_b)) + 1e-4)
+    out = []
+    for k in bad[:max_findings].tolist():
+        L, duty = divmod(int(key[k]), 1024)
+        at = rb[(lb == L) & (db == duty)]
+        line = int(output.line[at[0]]) + 1 if len(at) else None
+        out.append(Finding("commands", line, f"layer {L}: {sum_b[k]:.5f} mm of filament extruded with the "
+                                             f"part fan at S{duty}, {sum_a[k]:.5f} mm in the original"))
+    return out
+
+
 def check_commands(original: Program, output: Program, *, reordered: bool = False,
                    max_findings: int = 5) -> list[Finding]:
     out: list[Finding] = []
@@ -580,8 +608,13 @@ def check_commands(original: Program, output: Program, *, reordered: bool = Fals
             for letter, num in CONTROL_COMMANDS:
                 m |= p.is_command(letter, num)
             m |= p.line_letter == ord("T")
+            # the part-cooling fan is state a re-ordering re-issues where a curve would see
+            # another value: its lines may be more, and are checked by what each layer extrudes
+            # under each fan duty (``_check_fan_duty``), not by their order
+            m[p.part_fan_lines()] = False
             idx = np.flatnonzero(m)
             return idx, [p.line_text(i).strip() for i in idx]
+        out += _check_fan_duty(original, output, max_findings)
         ia, ta = seq(original)
         ib, tb = seq(output)
         for k in range(max(len(ta), len(tb))):
@@ -803,7 +836,8 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     ``claimed``: what the solver reported (a GatingSolution, a dict with ``energy_after_j`` /
     ``time_after_s``, or an (energy J, time s) pair); None skips that comparison.
     ``reordered``: output whose curves were re-ordered (None: detect it: a ``; gatesopt: order``
-    header, or original lines that are not all kept in order); then only heater/fan/tool commands must keep their order, and
+    header, or original lines that are not all kept in order); then only heater/tool commands (and other fans) must keep their order, the part-fan duty
+    per layer its filament, and
     ``gatesopt.ordering.verify.check`` runs too if it exists.
     """
     fw = fwmod.get(firmware)

@@ -269,8 +269,9 @@ def test_verify_catches_a_moved_extrusion():
 
 
 def test_verify_catches_an_extrusion_moved_across_a_barrier():
-    # layer 1's fan command comes after its 4th infill line; put it before that line: the same
-    # moves, the same commands in the same order, but one line now extrudes after the barrier
+    # layer 1's fan command (the file's first, so a barrier: before it the fan is the firmware's)
+    # comes after its 4th infill line; put it before that line: the same moves, the same
+    # commands in the same order, but one line now extrudes after the barrier, with the fan on
     lines = gatesopt.parse(_handmade_gcode()).to_gcode().splitlines()
     prog = gatesopt.parse("\n".join(lines) + "\n")
     fan = lines.index("M106 S128")
@@ -279,8 +280,14 @@ def test_verify_catches_an_extrusion_moved_across_a_barrier():
     moved = lines[:line] + ["M106 S128"] + lines[line:fan] + lines[fan + 1:]
     found = check(prog, gatesopt.parse("\n".join(moved) + "\n"))
     # the bin before the barrier lost that line's E, the bin after it gained it
-    assert [f.check for f in found] == ["barriers", "barriers"]
-    assert all(f.message.startswith("layer 1, after barrier line") for f in found)
+    barriers = [f for f in found if f.check == "barriers"]
+    assert len(barriers) == 2
+    assert all(f.message.startswith("layer 1, after barrier line") for f in barriers)
+    # and that line now sees the fan at S128 where it saw none: the move-by-move fan check and
+    # the per-layer filament-by-fan-duty check both say so
+    fan_found = [f for f in found if f.check == "fan"]
+    assert len(fan_found) == 1 and "S128" in fan_found[0].message and "at S0 in the original" in fan_found[0].message
+    assert any(f.check == "commands" and "part fan at S128" in f.message for f in found)
 
 
 def test_fan_barrier_is_respected():

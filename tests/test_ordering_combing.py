@@ -164,3 +164,89 @@ def test_progress_and_messages_do_not_split_a_layer_and_are_kept():
     assert any(t.startswith("G1 X20") and " E" in t for t in res.text.splitlines())   # reversed
     kept = [t for t in res.text.splitlines() if t.startswith(("M73", "M117"))]
     assert sorted(kept) == sorted(t for t in out if t.startswith(("M73", "M117")))
+
+
+def _bridge_fan_gcode() -> str:
+    """Layer 1: eight infill lines; the fan is at S100 for most and at S255 for two of them (a
+    bridge, as PrusaSlicer and KISSlicer write it: M106 before the curve, M106 back after it).
+    Layer 0 sets the fan first (the first M106 of the file, a barrier)."""
+    out = ["G21", "G90", "M83", ";LAYER:0", "G1 Z0.2 F600", "M106 S100", "G1 X10 Y0 E1 F1800",
+           ";LAYER:1", "G1 Z0.4 F600"]
+    ys = [0, 40, 10, 50, 20, 60, 30, 70]
+    for k, y in enumerate(ys):
+        out.append(f"G0 X20 Y{y + 20} F6000")
+        if k in (1, 5):
+            out.append("M106 S255")
+        out.append(f"G1 X30 Y{y + 20} E0.4 F1800")
+        if k in (1, 5):
+            out.append("M106 S100")
+    out += ["G0 X0 Y150 F6000", "M107", "M84"]
+    return "\n".join(out) + "\n"
+
+
+def test_part_fan_is_state_reissued_where_a_curve_needs_it():
+    """The part-cooling fan (M106 / M107, no P) is state, not a barrier: layer 1 stays one group,
+    and the output re-issues M106 so that every extrusion sees the duty it saw in the slicer's
+    order (the bridge lines at S255, the rest at S100)."""
+    prog = gatesopt.parse(_bridge_fan_gcode())
+    prob = build(prog, OrderingOptions(mode="free"))
+    assert np.diff(prob.group_curve_start).max() == 8              # layer 1: one group of eight
+    res = order_program(prog, OrderingOptions(mode="free"))
+    assert res.ok and res.summary["travel_after_mm"] < 0.8 * res.summary["travel_before_mm"]
+    out = gatesopt.parse(res.text)
+    assert out.to_gcode() != prog.to_gcode()
+    # every extruding move, found by its end points, has the fan duty it had
+
+    def duty(p):
+        rows = np.flatnonzero(p.extruding & (p.layer == 1))
+        ends = [tuple(sorted((tuple(p.start_mm[r, :2]), tuple(p.end_mm[r, :2])))) for r in rows]
+        return dict(zip(ends, np.round(p.fan[rows] * 255).astype(int).tolist()))
+    assert duty(out) == duty(prog)
+    assert sorted(set(duty(prog).values())) == [100, 255]
+    # the order changed around the bridge lines: the fan lines are not where the slicer had them
+    fan_lines = [t for t in res.text.splitlines() if t.startswith("M106")]
+    assert fan_lines != [t for t in prog.to_gcode().splitlines() if t.startswith("M106")]
+
+
+def test_verify_catches_a_missing_fan_reissue():
+    """Drop one re-issued M106 from a re-ordered output: a curve now prints at the wrong fan duty,
+    and the verifier says which line."""
+    prog = gatesopt.parse(_bridge_fan_gcode())
+    res = order_program(prog, OrderingOptions(mode="free"))
+    lines = res.text.splitlines()
+    fan_at = [i for i, t in enumerate(lines) if t == "M106 S255"]
+    assert fan_at
+    broken = "\n".join(lines[:fan_at[0]] + lines[fan_at[0] + 1:]) + "\n"
+    from gatesopt.ordering.verify import check
+    found = check(prog, gatesopt.parse(broken))
+    assert any(f.check == "fan" and "part fan at S100" in f.message and "S255 in the original" in f.message
+               for f in found)
+    assert any(f.check == "commands" and "part fan at S100" in f.message for f in found)
+
+
+def test_other_fans_stay_barriers():
+    """``M106 P2`` (Bambu's auxiliary fan) is not the fan the parser models: it stays a barrier,
+    its lines keep their order, and the layer splits there."""
+    text = _bridge_fan_gcode().replace("M106 S255", "M106 P2 S255").replace("M106 S100\nG0", "M106 P2 S0\nG0")
+    prog = gatesopt.parse(text)
+    prob = build(prog, OrderingOptions(mode="free"))
+    assert np.diff(prob.group_curve_start).max() < 8
+    res = order_program(prog, OrderingOptions(mode="free"))
+    assert res.ok
+    aux = [t for t in res.text.splitlines() if t.startswith("M106 P2")]
+    assert aux == [t for t in text.splitlines() if t.startswith("M106 P2")]
+
+
+def test_first_value_of_a_state_is_a_barrier():
+    """Before a file's first ``M204`` the acceleration is the firmware's, which the output cannot
+    re-issue: a curve printed before that line must not move after it. The second M204 is state."""
+    text = _bridge_fan_gcode().replace("M106 S255", "M204 S1000").replace("M106 S100\nG0", "M204 S500\nG0")
+    prog = gatesopt.parse(text)
+    lay = layout(prog)
+    first, second = [i for i in range(prog.n_lines) if prog.line_text(i).startswith("M204")][:2]
+    assert first in lay.state_key and second in lay.state_key
+    prob = build(prog, OrderingOptions(mode="free"))
+    starts = prob.group_curve_start.tolist()
+    layer1 = [c for c in range(prob.n_curves) if prob.curve_layer[c] == 1]
+    # layer 1 splits once, at the first M204 (before its 2nd curve): groups of 1 and 7 curves
+    assert [b - a for a, b in zip(starts, starts[1:]) if a in layer1] == [1, 7]

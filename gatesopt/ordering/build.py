@@ -10,10 +10,12 @@ slicer's travel (retract, wipe, z-hop, travel, unretract) plus any other lines. 
 - *neutral*: comments, F-only moves, M73 / M117; they travel with the next curve;
 - *state*: a command that sets state an extrusion sees (acceleration M204/M201,
   jerk M205, speed/flow M220/M221, linear advance M900, Klipper SET_VELOCITY_LIMIT and
-  SET_PRESSURE_ADVANCE); it travels with the next curve, and ``emit`` re-issues it wherever a
-  curve would otherwise see another value than in the original;
+  SET_PRESSURE_ADVANCE, the part-cooling fan M106/M107 without P or with P0); it travels with the
+  next curve, and ``emit`` re-issues it wherever a curve would otherwise see another value than in
+  the original; the first line of each state is also a barrier (before it the value is the
+  firmware's, which emit cannot re-issue);
 - *E reset*: an E-only ``G92 E..``; it ends a curve and travels with the next one;
-- *barrier*: anything else (heaters, fan, G92 with X/Y/Z, modal switches, object labels M486 / EXCLUDE_OBJECT /
+- *barrier*: anything else (heaters, other fans, G92 with X/Y/Z, modal switches, object labels M486 / EXCLUDE_OBJECT /
   ``; printing object`` / ``;MESH:``, dwells, unknown commands): no curve crosses it;
 - *fatal*: tool changes (T), filament change (M600...), homing: the layer keeps its order.
 
@@ -37,7 +39,10 @@ LINE_MOTION, LINE_NEUTRAL, LINE_STATE, LINE_BARRIER, LINE_FATAL, LINE_CURVE = ra
 LINE_FW_RETRACT, LINE_FW_UNRETRACT = 6, 7
 LINE_E_RESET = 8
 
-STATE_M = (201, 203, 204, 205, 220, 221, 900)   # fan M106/M107 is a barrier (verify keeps its order)
+#: state commands by M number; the part-cooling fan (M106 / M107 without P or with P0, the fan
+#: ``Program.fan`` follows) is state too: verify checks the fan duty every extrusion sees. Other
+#: fans (``M106 P2``) stay barriers, their order kept
+STATE_M = (201, 203, 204, 205, 220, 221, 900)
 #: commands that change nothing an extrusion sees: progress (M73) and display messages (M117),
 #: which slicers write mid-layer by print time (Bambu, Orca, PrusaSlicer, Creality Print,
 #: Kiri:Moto); neutral, they travel with the next curve instead of splitting the layer's groups
@@ -123,6 +128,7 @@ def layout(program: Program) -> Layout:
     cls[g & np.isin(number, (0, 1, 2, 3)) & ~is_step] = LINE_NEUTRAL       # F-only moves
     m = letter == ord("M")
     cls[m & np.isin(number, STATE_M)] = LINE_STATE
+    cls[program.part_fan_lines()] = LINE_STATE
     cls[m & np.isin(number, NEUTRAL_M)] = LINE_NEUTRAL
     cls[m & np.isin(number, FATAL_M)] = LINE_FATAL
     cls[letter == ord("T")] = LINE_FATAL
@@ -165,6 +171,15 @@ def layout(program: Program) -> Layout:
     cls[steps[motion]] = LINE_MOTION
     cls[steps[~motion]] = LINE_BARRIER           # dwell, heat wait, homing handled as FATAL above
     cls[steps[sk == Kind.HOME]] = LINE_FATAL
+
+    skey = {int(i): state_key_of(program, int(i)) for i in np.flatnonzero(cls == LINE_STATE)}
+    # the first line of each state key is a barrier as well: before it the file sets no value
+    # (the firmware's default, unknown here), which emit could not re-issue to a curve moved
+    # from before it to after it. It stays in ``state_key``: emit still tracks what it sets
+    first_of_key: dict = {}
+    for i, k in skey.items():
+        first_of_key.setdefault(k, i)
+    cls[list(first_of_key.values())] = LINE_BARRIER
 
     # ---- curves: runs of extruding steps in layers >= 0 separated only by neutral lines
     extr = program.extruding & (program.layer >= 0)
@@ -232,7 +247,6 @@ def layout(program: Program) -> Layout:
         notes.append("relative XYZ (G91) or inch units (G20) while printing: order kept")
     fm = FEATURE_LINE.search(b"\n" + program.data)
     prefix = fm.group(1).decode() if fm else ";TYPE:"
-    skey = {int(i): state_key_of(program, int(i)) for i in np.flatnonzero(cls == LINE_STATE)}
     return Layout(cls, step_of_line, s0.astype(np.int64), s1.astype(np.int64), l0.astype(np.int64),
                   l1.astype(np.int64), gap_boundary, layer_fatal, layer_keep, tuple(why), prefix,
                   skey, tuple(notes))

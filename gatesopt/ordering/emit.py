@@ -33,7 +33,7 @@ import numpy as np
 
 from ..program import Kind, Program
 from .build import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, LINE_NEUTRAL,
-                    LINE_STATE, Layout, layout)
+                    Layout, layout)
 from .problem import OrderingProblem, OrderingSolution
 
 _E_WORD = re.compile(r"(?<![A-Za-z_])([Ee])([-+]?\d*\.?\d*)")
@@ -256,8 +256,10 @@ class _Writer:
                 m = _F_WORD.search(code)
                 if m:
                     self.feed = float(m.group(1)) / 60.0
-            if cls == LINE_STATE:
-                self.state[self.lay.state_key[i]] = text.rstrip("\r\n")
+            # a state line (the first of its key is a barrier, and still sets state)
+            key = self.lay.state_key.get(i)
+            if key is not None:
+                self.state[key] = text.rstrip("\r\n")
             elif cls == LINE_NEUTRAL and not code:
                 name = _feature_of_comment(text, self.lay.feature_prefix)
                 if name is not None:

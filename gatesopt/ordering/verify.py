@@ -4,9 +4,10 @@
 move, without merging collinear pieces (re-ordering never splits a move, and merging is
 order-dependent: a reversed piece next to a forward one would not merge as in the original).
 A move is its two end points (ordered), arc centre and turning sense, and its E. Then the shared checks
-of ``gatesopt.verify`` (``Finding``): E per layer equal, heater/fan/tool commands in the same
-order; and
-``barriers``: between two consecutive barrier lines (heaters, fan, G92, object labels, tool
+of ``gatesopt.verify`` (``Finding``): E per layer equal, heater/tool commands (and fans other than
+the part-cooling fan) in the same order; ``fan``: every extruded move sees the part-cooling fan
+duty it saw in the original (emit re-issues M106 / M107); and
+``barriers``: between two consecutive barrier lines (heaters, G92, object labels, tool
 changes, see ``gatesopt.ordering.build``) each layer extrudes the same filament over the same
 path length in both files — so no extrusion moved across a barrier.
 """
@@ -145,7 +146,40 @@ def check_geometry(original: Program, output: Program, *, tol_mm: float = 1e-3) 
     return out
 
 
+def check_fan(original: Program, output: Program, *, max_findings: int = 3) -> list[Finding]:
+    """Every extruded move sees the part-cooling fan duty it saw in the original (the parser's
+    modal ``fan``; emit re-issues M106 / M107 where a re-ordered curve would see another value).
+    Layers whose moves differ are the geometry check's; the others are compared move by move."""
+    ra, qa, _ = _move_keys(original, 1e-4)
+    rb, qb, _ = _move_keys(output, 1e-4)
+    duty_a = np.round(original.fan[ra].astype(np.float64) * 255.0).astype(np.int64)
+    duty_b = np.round(output.fan[rb].astype(np.float64) * 255.0).astype(np.int64)
+    la, lb = original.layer[ra], output.layer[rb]
+    moved = set(_layers_differing(la, qa, lb, qb).tolist())
+    out = []
+    for L in _layers_differing(la, np.column_stack([qa, duty_a]), lb, np.column_stack([qb, duty_b])).tolist():
+        if L in moved:
+            continue
+        want: dict = {}
+        for i in np.flatnonzero(la == L).tolist():
+            want.setdefault(qa[i].tobytes(), []).append(int(duty_a[i]))
+        for j in np.flatnonzero(lb == L).tolist():
+            seen = want[qb[j].tobytes()]
+            d = int(duty_b[j])
+            if d in seen:
+                seen.remove(d)
+                continue
+            out.append(Finding("fan", int(output.line[rb[j]]) + 1,
+                               f"layer {L}: extruded move with the part fan at S{d}, "
+                               f"at S{seen[0] if seen else '?'} in the original"))
+            break
+        if len(out) >= max_findings:
+            break
+    return out
+
+
 def check(original: Program, output: Program) -> list[Finding]:
     """All findings for a re-ordered output (empty list: it prints what the original printed)."""
     return (check_geometry(original, output) + _v.check_extrusion(original, output)
-            + _v.check_commands(original, output, reordered=True) + check_barriers(original, output))
+            + _v.check_commands(original, output, reordered=True) + check_fan(original, output)
+            + check_barriers(original, output))
