@@ -20,6 +20,11 @@ from ..parse import parse
 FIRMWARES = ("3dgates", "marlin", "klipper")
 FORMULATION_NAMES = ("greedy", "dp", "milp", "cpsat")
 
+#: the curve ordering's formulations (``order --formulation``, ``solve --order-formulation``)
+ORDER_FORMULATIONS = ("greedy", "tsp", "cpsat", "milp", "auto")
+#: the curve ordering's formulation for each gating formulation (``solve --order-formulation``)
+ORDER_FORMULATION_OF = {"milp": "milp", "cpsat": "cpsat", "greedy": "greedy", "dp": "auto"}
+
 
 def _add_common(p) -> None:
     p.add_argument("--firmware", choices=FIRMWARES, default="3dgates",
@@ -62,6 +67,14 @@ def register(sub) -> None:
     _add_common(p)
     p.add_argument("--json", metavar="REPORT.json", help="also write the report as JSON")
     p.add_argument("--no-order", action="store_true", help="do not re-order curves")
+    p.add_argument("--order-mode", choices=("safe", "free"), default="safe",
+                   help="as `order --order-mode`: safe keeps the slicer's feature groups, walls and "
+                        "objects (default); free re-orders every curve of a layer")
+    p.add_argument("--move-seams", action="store_true",
+                   help="closed loops may start at another vertex (default: keep the seam)")
+    p.add_argument("--order-formulation", choices=ORDER_FORMULATIONS, default=None,
+                   help="the curve ordering's formulation (default: the exact one named by "
+                        "--formulation: milp or cpsat; greedy for greedy; auto for dp)")
     p.add_argument("--order-budget", type=float, default=10.0, metavar="S",
                    help="finish the curve ordering (build, solve, emit) in about S seconds "
                         "(default 10; the solve gets what an estimate of the emit leaves, as "
@@ -199,10 +212,28 @@ def format_solve_report(s: dict) -> str:
          f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um" if s["rotation_deg"]
          else "rotation      none"),
         "off time      " + ("  ".join(f"{m} {t:.2f} s" for m, t in s["off_time_s"].items()) or "-"),
-        f"solve         {s['solve_s']:.3f} s   (whole run {s['wall_s']:.2f} s)"
-        + ("   curves re-ordered" if s["ordered"] else ""),
-        f"verified      {'yes' if s['verified'] else 'NO'}",
+        f"solve         {s['solve_s']:.3f} s   (whole run {s['wall_s']:.2f} s)",
     ]
+    o = s.get("ordering")
+    if o is not None:
+        lines += [
+            f"ordering      {o['formulation']}   mode {o['order_mode']}"
+            + ("   seams may move" if o["move_seams"] else "   seams kept")
+            + f"   solve {o['solve_s']:.2f} s",
+            f"travel        {o['travel_before_mm']:,.1f} mm -> {o['travel_after_mm']:,.1f} mm"
+            f"   ({pct(o['travel_after_mm'], o['travel_before_mm']):+.1f} %)"
+            f"   travel time {o['travel_time_before_s']:,.1f} s -> {o['travel_time_after_s']:,.1f} s",
+            f"travels       {o['travels_before']:,} -> {o['travels_after']:,}"
+            f"   retractions {o['retractions_before']:,} -> {o['retractions_after']:,}",
+            f"groups        optimal {o['groups_optimal']:,}   feasible at limit {o['groups_feasible']:,}"
+            f"   fallback {o['groups_fallback']:,}   worst gap {100 * o['worst_gap']:.2f} %"
+            f"   (largest {o['largest_group']} curves)",
+            f"layers        optimal {o['layers_optimal']:,}   feasible at limit {o['layers_feasible']:,}"
+            f"   fallback {o['layers_fallback']:,}   order kept {o['layers_kept']:,}",
+        ]
+    elif s.get("ordered") is False:
+        lines.append("ordering      none: the slicer's order")
+    lines.append(f"verified      {'yes' if s['verified'] else 'NO'}")
     for n in s.get("notes", []):
         lines.append(f"note          {n}")
     return "\n".join(lines)
@@ -244,6 +275,11 @@ def run_solve(args) -> int:
         check_new_file(args.json, [inp] if inp != "-" else [], args.force)
     report_to = sys.stderr if out == "-" else sys.stdout     # stdout carries the G-code
     options = options_from_args(args)
+    from ..ordering import OrderingOptions
+    order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+    # "--formulation milp means exact for both" (issue 4): the gating formulation names the
+    # ordering's unless --order-formulation does; dp is gating's alone (ordering: auto)
+    order_formulation = args.order_formulation or ORDER_FORMULATION_OF.get(args.formulation, "auto")
     if inp == "-":
         program = parse(sys.stdin.buffer.read(), source="<stdin>")
     else:
@@ -255,7 +291,8 @@ def run_solve(args) -> int:
         result = run(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
                      order=not args.no_order, gating=not args.no_gating,
                      order_workers=default_workers(), order_budget_s=args.order_budget,
-                     order_progress=progress)
+                     order_progress=progress, order_options=order_options,
+                     order_formulation=order_formulation)
     s = result.summary()
     if not result.report.ok:
         if out != "-":      # stderr keeps the one line a slicer shows

@@ -15,9 +15,9 @@ import time
 
 from ..errors import GatesoptError
 from ..parse import parse
-from .gating import _check_paths, check_distinct, check_new_file, write_atomic
+from .gating import ORDER_FORMULATIONS, _check_paths, check_distinct, check_new_file, write_atomic
 
-FORMULATIONS = ("greedy", "tsp", "cpsat", "milp", "auto")
+FORMULATIONS = ORDER_FORMULATIONS
 
 
 def register(sub) -> None:

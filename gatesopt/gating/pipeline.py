@@ -32,6 +32,7 @@ class RunResult:
     notes: tuple
     wall_s: float
     order_problem: object = None        # the OrderingProblem, when curves were ordered
+    order_summary: dict | None = None   # the ordering's report (``ordering.pipeline.order_summary``)
 
     def summary(self) -> dict:
         """The report keys of ``gatesopt solve --json`` (issue 3)."""
@@ -60,24 +61,47 @@ class RunResult:
             "message": s.message if s else "",
             "notes": list(self.notes), "wall_s": self.wall_s,
         }
+        if self.order_summary is not None:
+            o = self.order_summary
+            d.update({k: o[k] for k in ORDER_KEYS})
+            d["ordering"] = {k: v for k, v in o.items() if k not in ("per_layer", "source", "notes")}
         return d
 
 
 def _order(program: Program, time_limit_s: float, workers: int = 1, budget_s: float | None = None,
-           progress=None):
-    """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note, problem)."""
+           progress=None, options=None, formulation: str = "auto"):
+    """Re-order curves with gatesopt.ordering if it is there: (program, ordered?, note, problem,
+    ``summarize(findings)``: the ordering's report, given the findings of its checks)."""
     try:
         t0 = time.perf_counter()      # the budget covers the ordering: imports, build, solve, emit
         pipeline = importlib.import_module("gatesopt.ordering.pipeline")
-        problem, _, _, _, out, slower = pipeline.reorder(
-            program, formulation="auto", time_limit_s=time_limit_s, budget_s=budget_s,
+        options = options or pipeline.OrderingOptions()
+        problem, solve_budget, solution, _, out, slower = pipeline.reorder(
+            program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
             workers=workers, progress=progress, started_s=t0)
     except (ImportError, AttributeError, NotImplementedError) as exc:
-        return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})", None
+        return program, False, f"curve ordering skipped: gatesopt.ordering not available ({exc})", None, None
     except KeyboardInterrupt:   # Ctrl-C: the slicer's own order is a valid answer
-        return program, False, "curve ordering interrupted (Ctrl-C): the slicer's order kept", None
+        return program, False, "curve ordering interrupted (Ctrl-C): the slicer's order kept", None, None
+    wall_s = time.perf_counter() - t0
     note = f"curve ordering: {pipeline.kept_slower_note(len(slower))}" if len(slower) else ""
-    return dataclasses.replace(out, source=program.source), True, note, problem
+    out = dataclasses.replace(out, source=program.source)
+
+    def summarize(findings) -> dict:
+        return pipeline.order_summary(program, out, problem, solution, options, slower, findings,
+                                      formulation=formulation, time_limit_s=time_limit_s,
+                                      budget_s=budget_s, solve_budget_s=solve_budget,
+                                      workers=workers, wall_s=wall_s)
+    return out, True, note, problem, summarize
+
+
+#: the keys of the ordering's report that ``gatesopt solve --json`` carries (issue 4: "--json as
+#: for gating, keys travel_before_mm, travel_after_mm added"); the rest of that report is under
+#: ``"ordering"``
+ORDER_KEYS = ("travel_before_mm", "travel_after_mm", "travel_change_pct", "travel_time_before_s",
+              "travel_time_after_s", "travels_before", "travels_after", "retractions_before",
+              "retractions_after", "groups_optimal", "groups_feasible", "groups_fallback",
+              "layers_optimal", "layers_feasible", "layers_fallback", "layers_kept", "worst_gap")
 
 
 def _solve_interruptible(problem, formulation: str, time_limit_s, notes: list):
@@ -98,17 +122,21 @@ def _solve_interruptible(problem, formulation: str, time_limit_s, notes: list):
 def run(program: Program, options: GatingOptions | None = None, *, formulation: str = "dp",
         time_limit_s: float | None = None, order: bool = True, gating: bool = True,
         order_time_limit_s: float = 2.0, order_workers: int = 1,
-        order_budget_s: float | None = None, order_progress=None) -> RunResult:
+        order_budget_s: float | None = None, order_progress=None, order_options=None,
+        order_formulation: str = "auto") -> RunResult:
     """Rewrite ``program``: optional curve ordering, then power gating; verify the result.
-    ``order_progress``: called after each ordering group (``ordering.layers.solve``)."""
+    ``order_options``: an ``ordering.OrderingOptions`` (mode, seams; default safe, seams kept);
+    ``order_formulation``: the ordering's formulation (``auto``, ``milp``, ``cpsat``, ``greedy``,
+    ``tsp``); ``order_progress``: called after each ordering group (``ordering.layers.solve``)."""
     program.check_rewritable()
     t0 = time.perf_counter()
     o = options or GatingOptions()
     notes = []
-    base, ordered, order_problem = program, False, None
+    base, ordered, order_problem, summarize = program, False, None, None
     if order:
-        base, ordered, note, order_problem = _order(program, order_time_limit_s, order_workers,
-                                                    order_budget_s, order_progress)
+        base, ordered, note, order_problem, summarize = _order(
+            program, order_time_limit_s, order_workers, order_budget_s, order_progress,
+            order_options, order_formulation)
         if note:
             notes.append(note)
     ordered_base = base
@@ -145,6 +173,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     claimed = (sol.energy_j, sol.time_after_s) if sol is not None else None
     rep = verify(program, out, firmware=o.firmware, start_ahead_s=o.start_ahead_s,
                  end_late_s=o.end_late_s, claimed=claimed, profile=o.profile, reordered=ordered)
+    extra = []
     if ordered and sol is not None:
         # the ordering's own checks, on the re-ordered print before gating split any move
         try:
@@ -155,8 +184,13 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         if extra:
             rep = dataclasses.replace(rep, ok=False, findings=rep.findings + tuple(extra))
         rep = dataclasses.replace(rep, checks=rep.checks + ("ordering",))
+    order_summary = None
+    if summarize is not None:
+        # without gating ``verify`` above ran the ordering checks itself: its findings are theirs
+        order_summary = summarize(tuple(extra) if sol is not None else rep.findings)
     return RunResult(program, base, sol, em, text, out, rep, ordered, tuple(notes),
-                     time.perf_counter() - t0, order_problem=order_problem)
+                     time.perf_counter() - t0, order_problem=order_problem,
+                     order_summary=order_summary)
 
 
 def energy_time(program: Program, firmware: str = "3dgates", profile: str = "paper"):

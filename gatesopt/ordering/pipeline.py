@@ -207,6 +207,20 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
         program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
         workers=workers, time_guard=time_guard, progress=progress, started_s=t0)
     findings = tuple(check(program, out))
+    summary = order_summary(program, out, problem, solution, options, slower_layers, findings,
+                            formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
+                            solve_budget_s=solve_budget, workers=workers,
+                            wall_s=time.perf_counter() - t0)
+    return OrderResult(program, problem, solution, text, out, findings, summary)
+
+
+def order_summary(program: Program, out: Program, problem: OrderingProblem,
+                  solution: OrderingSolution, options: OrderingOptions, slower_layers,
+                  findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
+                  solve_budget_s: float | None, workers: int, wall_s: float) -> dict:
+    """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` adds its travel
+    and group keys): travel, travel and print time, travels and retractions measured on the
+    parsed input and output, how each group and layer was solved."""
     before, after = travel_stats(program), travel_stats(out)
     layers = solution.layer_summary(problem)
     put_back = set(slower_layers.tolist())
@@ -242,7 +256,7 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     summary = {
         "source": program.source, "formulation": formulation, "order_mode": options.mode,
         "move_seams": options.move_seams, "time_limit_s": time_limit_s, "budget_s": budget_s,
-        "solve_budget_s": solve_budget, "workers": workers,
+        "solve_budget_s": solve_budget_s, "workers": workers,
         "travel_before_mm": before["travel_mm"], "travel_after_mm": after["travel_mm"],
         "travel_change_pct": pct(after["travel_mm"], before["travel_mm"]),
         "travel_time_before_s": before["travel_s"], "travel_time_after_s": after["travel_s"],
@@ -260,10 +274,10 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
         "layers_fallback": lay_counts["fallback"], "layers_kept": lay_counts["kept"],
         "layers_kept_slower": int(len(slower_layers)),
         "worst_gap": float(max((gs.gap for _, gs in decided), default=0.0)),
-        "solve_s": solution.solve_s, "wall_s": time.perf_counter() - t0,
+        "solve_s": solution.solve_s, "wall_s": wall_s,
         "verified": not findings, "findings": [str(f) for f in findings],
         "notes": slower + list(problem.notes[:20]) + ([f"... {len(problem.notes) - 20} more notes"]
                                                       if len(problem.notes) > 20 else []),
         "per_layer": layers,
     }
-    return OrderResult(program, problem, solution, text, out, findings, summary)
+    return summary
