@@ -250,3 +250,20 @@ def test_first_value_of_a_state_is_a_barrier():
     layer1 = [c for c in range(prob.n_curves) if prob.curve_layer[c] == 1]
     # layer 1 splits once, at the first M204 (before its 2nd curve): groups of 1 and 7 curves
     assert [b - a for a, b in zip(starts, starts[1:]) if a in layer1] == [1, 7]
+
+
+def test_solve_output_keeps_the_fan_each_extrusion_saw():
+    """Re-ordered and gated (``gatesopt solve``): the moves are split by gating, so the verifier's
+    fan check there is per layer, filament by fan duty; it holds for the output and catches a
+    missing re-issue."""
+    from gatesopt.gating.pipeline import run
+    from gatesopt.verify import verify
+    prog = gatesopt.parse(_bridge_fan_gcode())
+    res = run(prog, order_options=OrderingOptions(mode="free"), formulation="milp")
+    assert res.ordered and res.report.ok, res.report.findings
+    assert res.summary()["travel_after_mm"] < res.summary()["travel_before_mm"]
+    lines = res.text.splitlines()
+    k = lines.index("M106 S255")
+    broken = gatesopt.parse("\n".join(lines[:k] + lines[k + 1:]) + "\n")
+    found = verify(prog, broken).findings
+    assert any(f.check == "commands" and "part fan at S100" in f.message for f in found)
