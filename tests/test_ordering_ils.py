@@ -134,38 +134,3 @@ def test_nearest_lists_equal_a_full_row_sort(m):
     far[np.arange(m), np.arange(m)] = np.inf
     for k in range(0, min(10, m - 1) + 1):
         np.testing.assert_array_equal(_nearest(far, k), np.argsort(far, axis=1, kind="stable")[:, :k])
-
-
-def test_auto_spends_what_an_early_give_up_leaves_on_ils(monkeypatch):
-    """When the exact step stops early without a proof (the symmetric branch-and-cut refuses a gap
-    that would bring in too many columns), auto gives what is left of the limit (up to
-    ``POLISH_MAX_S``) to ILS from that path: never worse, and here better than the give-up."""
-    from gatesopt.ordering.problem import GroupSolution
-    prob = random_problem(911, 60, closed_share=0.0)
-    grp = prob.group(0, prob.origin_xy)
-    # the give-up: the nearest-neighbour path as it is, no better bound, status feasible
-    nn = greedy.nearest_neighbour(grp)
-    nn_cost = grp.path_cost_mm(nn)
-
-    def give_up(group, time_limit_s, hint=None, give_up_gap=None):
-        return GroupSolution.make(nn, nn_cost, 0.0, "feasible", 0.001, "milp")
-    monkeypatch.setattr(milp, "solve", give_up)
-    monkeypatch.setattr(greedy, "solve", lambda group, hint=None: GroupSolution.make(
-        nn, nn_cost, 0.0, "feasible", 0.0, "nn"))
-    monkeypatch.setattr(ils, "improve_ils", _ils_only_after_the_exact_step(ils.improve_ils))
-    sol = auto.solve(grp, time_limit_s=1.0)
-    grp.check_order(sol.order)
-    assert sol.method == "auto:milp+ils" and sol.status == "feasible"
-    assert sol.objective_mm < nn_cost - 1e-6
-
-
-def _ils_only_after_the_exact_step(real):
-    """ILS that does nothing before the exact step (the warm start) and searches after it."""
-    calls = []
-
-    def wrapped(group, order, **kw):
-        calls.append(kw)
-        if len(calls) == 1:
-            return np.asarray(order)
-        return real(group, order, **kw)
-    return wrapped

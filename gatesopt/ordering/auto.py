@@ -45,11 +45,6 @@ MIN_EXACT_S = 0.05
 #: (real groups of 20-60 curves are often proven in 10-30 ms, of ~100 curves in 0.1-0.5 s)
 MIN_SYMMETRIC_S = 0.01
 MIN_SYMMETRIC_S_PER_CURVE = 0.002
-#: at most this much of a group's limit left by an exact step that gave up early goes to ILS from
-#: its path (measured: a 107-curve Bambu top-surface group whose branch-and-cut stopped at 0.29 s
-#: of 2 s with a 14 % gap: 77.78 mm; ILS from there reaches 76.61 mm within 0.5 s and no better in
-#: 5 s; LKH-3, 5 runs: 76.84 mm)
-POLISH_MAX_S = 0.5
 #: stop after the MILP's LP cutting-plane rounds if they leave more than this gap
 GIVE_UP_GAP = None   # measured: with 0.15, free-mode Cura groups lost most proofs the branch loop finds
 
@@ -133,18 +128,5 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         d = dp.solve(group)
         return GroupSolution.make(d.order, d.objective_mm, d.bound_mm, "optimal",
                                   time.perf_counter() - t0, "auto:dp")
-    left = t0 + time_limit_s - time.perf_counter()
-    if ex.status != "optimal" and left >= MIN_EXACT_S:
-        # the exact step gave up early (its branch-and-cut refuses a gap that would bring in too
-        # many columns): the rest of the limit, up to POLISH_MAX_S, goes to ILS from its path
-        bound = max(ex.bound_mm, heur.bound_mm)
-        now = time.perf_counter()
-        order = ils.improve_ils(group, ex.order, deadline=now + min(left, POLISH_MAX_S),
-                                target_mm=bound + OPTIMAL_ABS_TOL_MM)
-        obj = group.path_cost_mm(order)
-        if obj < ex.objective_mm - 1e-9:
-            status = "optimal" if obj - bound <= OPTIMAL_ABS_TOL_MM else ex.status
-            return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0,
-                                      "auto:milp+ils")
     return GroupSolution.make(ex.order, ex.objective_mm, max(ex.bound_mm, heur.bound_mm), ex.status,
                               time.perf_counter() - t0, "auto:milp")
