@@ -280,7 +280,9 @@ def run(args) -> None:
                        "contiguous": lk.get("contiguous"), "scale": lk.get("scale"), "error": lk_err},
                "ortools": {"travel_mm": ot_obj, "solve_s": ot.get("solve_s"), "error": ot_err},
                "params": {"time_limit_s": args.time_limit, "formulation": args.formulation,
-                          "elkai_runs": args.elkai_runs, "ortools_s": args.ortools_s}}
+                          "elkai_runs": args.elkai_runs, "ortools_s": args.ortools_s,
+                          "min_curves": args.min_curves, "max_curves": args.max_curves,
+                          "per_file": args.per_file, "max_groups": args.max_groups}}
         with open(out, "a") as f:
             f.write(json.dumps(row, default=float) + "\n")
         f3 = lambda v: "-" if v is None else f"{v:.3f}"
@@ -310,14 +312,21 @@ def report(args) -> str:
     modes = sorted({r["mode"] for r in rows})
     n = len(rows)
     st = {s: sum(r["exact"]["status"] == s for r in rows) for s in ("optimal", "feasible", "fallback")}
-    lines = ["## Curve ordering: peers (LKH-3 via elkai, OR-Tools routing)", "",
+    # a run on groups above the default size range gets its own section (both are kept)
+    large = p.get("min_curves", 8) > 80
+    sizes = "".join(f" --{k.replace('_', '-')} {p[k]}" for k, d in (
+        ("min_curves", 8), ("max_curves", 80), ("per_file", 25), ("max_groups", 150))
+        if p.get(k, d) != d)
+    out_arg = "" if Path(args.out) == DEFAULT_OUT else f" --out bench/{Path(args.out).name}"
+    lines = ["## Curve ordering: peers" + (" on large groups" if large else "")
+             + " (LKH-3 via elkai, OR-Tools routing)", "",
              "Command (from the repository root; `pip install elkai` into the venv first — elkai is "
              "non-commercial, a benchmark peer only, not a dependency; 2 cores shared with other jobs):",
              "", "```",
              f"python bench/ordering_peers.py run --files {','.join(files)} --modes {','.join(modes)} "
              f"--formulation {p['formulation']} --time-limit {p['time_limit_s']:g} "
-             f"--elkai-runs {p['elkai_runs']} --ortools-s {p['ortools_s']:g}",
-             "python bench/ordering_peers.py report --write docs/RESULTS.md", "```", "",
+             f"--elkai-runs {p['elkai_runs']} --ortools-s {p['ortools_s']:g}{sizes}{out_arg}",
+             f"python bench/ordering_peers.py report{out_arg} --write docs/RESULTS.md", "```", "",
              f"{n} distinct re-orderable groups of {min(r['curves'] for r in rows)}-"
              f"{max(r['curves'] for r in rows)} curves ({', '.join(modes)} mode) from {len(files)} files, "
              "each group starting where the slicer's order left the previous one (ending at the next "
