@@ -573,15 +573,20 @@ def _non_motion_lines(program: Program) -> np.ndarray:
     return np.flatnonzero(mask)
 
 
+def fan_duty_s(program: Program, rows: np.ndarray) -> np.ndarray:
+    """The part-cooling fan duty at steps ``rows`` in M106 S units (0-255, rounded): the
+    parser's modal ``fan``, as the fan checks compare it."""
+    return np.round(program.fan[rows].astype(np.float64) * 255.0).astype(np.int64)
+
+
 def _check_fan_duty(original: Program, output: Program, max_findings: int) -> list[Finding]:
     """Per layer, the filament extruded under each part-cooling fan duty is the same in both
     files (the parser's modal ``fan``; order-free, so it holds for re-ordered and gated output,
     whose moves may be split; ``gatesopt.ordering.verify.check_fan`` checks move by move)."""
     def table(p):
         rows = np.flatnonzero(p.extruding)
-        duty = np.round(p.fan[rows].astype(np.float64) * 255.0).astype(np.int64)   # M106 S units
         de = p.end_mm[rows, 3] - p.start_mm[rows, 3]
-        return p.layer[rows].astype(np.int64), duty, de, rows
+        return p.layer[rows].astype(np.int64), fan_duty_s(p, rows), de, rows
     la, da, ea, _ = table(original)
     lb, db, eb, rb = table(output)
     key = np.concatenate([la * 1024 + da, lb * 1024 + db])

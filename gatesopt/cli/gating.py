@@ -194,6 +194,30 @@ def write_atomic(path: str, text: str, like: str | None = None) -> None:
         raise
 
 
+def ordering_result_lines(s: dict) -> list[str]:
+    """The lines of a re-ordering's report (``ordering.pipeline.order_summary``) that say what it
+    did: travel, times, travels, curves, groups and layers (``order`` and ``solve`` print them)."""
+    def pct(a, b):
+        return f"{100.0 * (a / b - 1.0):+.1f} %" if b else "n/a"
+    return [
+        f"travel        {s['travel_before_mm']:,.1f} mm -> {s['travel_after_mm']:,.1f} mm"
+        f"   ({pct(s['travel_after_mm'], s['travel_before_mm'])})",
+        f"travel time   {s['travel_time_before_s']:,.1f} s -> {s['travel_time_after_s']:,.1f} s"
+        f"   ({pct(s['travel_time_after_s'], s['travel_time_before_s'])})",
+        f"print time    {s['print_time_before_s']:,.1f} s -> {s['print_time_after_s']:,.1f} s"
+        f"   ({pct(s['print_time_after_s'], s['print_time_before_s'])}; travels, retractions, z-hops)",
+        f"travels       {s['travels_before']:,} -> {s['travels_after']:,}"
+        f"   retractions {s['retractions_before']:,} -> {s['retractions_after']:,}",
+        f"curves        {s['curves']:,} in {s['groups']:,} groups; {s['groups_reordered']:,} re-orderable "
+        f"(largest {s['largest_group']} curves)",
+        f"groups        optimal {s['groups_optimal']:,}   feasible at limit {s['groups_feasible']:,}"
+        f"   fallback {s['groups_fallback']:,}   worst gap {100 * s['worst_gap']:.2f} %",
+        f"layers        optimal {s['layers_optimal']:,}   feasible at limit {s['layers_feasible']:,}"
+        f"   fallback {s['layers_fallback']:,}   order kept {s['layers_kept']:,}"
+        + (f" ({s['layers_kept_slower']:,} of them: slower re-ordered)" if s.get("layers_kept_slower") else ""),
+    ]
+
+
 def format_solve_report(s: dict) -> str:
     def pct(a, b):
         return 100.0 * (a / b - 1.0) if b else 0.0
@@ -216,22 +240,11 @@ def format_solve_report(s: dict) -> str:
     ]
     o = s.get("ordering")
     if o is not None:
-        lines += [
-            f"ordering      {o['formulation']}   mode {o['order_mode']}"
-            + ("   seams may move" if o["move_seams"] else "   seams kept")
-            + f"   solve {o['solve_s']:.2f} s",
-            f"travel        {o['travel_before_mm']:,.1f} mm -> {o['travel_after_mm']:,.1f} mm"
-            f"   ({pct(o['travel_after_mm'], o['travel_before_mm']):+.1f} %)"
-            f"   travel time {o['travel_time_before_s']:,.1f} s -> {o['travel_time_after_s']:,.1f} s",
-            f"travels       {o['travels_before']:,} -> {o['travels_after']:,}"
-            f"   retractions {o['retractions_before']:,} -> {o['retractions_after']:,}",
-            f"groups        optimal {o['groups_optimal']:,}   feasible at limit {o['groups_feasible']:,}"
-            f"   fallback {o['groups_fallback']:,}   worst gap {100 * o['worst_gap']:.2f} %"
-            f"   (largest {o['largest_group']} curves)",
-            f"layers        optimal {o['layers_optimal']:,}   feasible at limit {o['layers_feasible']:,}"
-            f"   fallback {o['layers_fallback']:,}   order kept {o['layers_kept']:,}",
-        ]
-    elif s.get("ordered") is False:
+        lines.append(f"ordering      {o['formulation']}   mode {o['order_mode']}"
+                     + ("   seams may move" if o["move_seams"] else "   seams kept")
+                     + f"   solve {o['solve_s']:.2f} s")
+        lines += ordering_result_lines(o)
+    else:
         lines.append("ordering      none: the slicer's order")
     lines.append(f"verified      {'yes' if s['verified'] else 'NO'}")
     for n in s.get("notes", []):

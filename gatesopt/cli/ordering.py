@@ -15,7 +15,8 @@ import time
 
 from ..errors import GatesoptError
 from ..parse import parse
-from .gating import ORDER_FORMULATIONS, _check_paths, check_distinct, check_new_file, write_atomic
+from .gating import (ORDER_FORMULATIONS, _check_paths, ordering_result_lines, check_distinct,
+                     check_new_file, write_atomic)
 
 FORMULATIONS = ORDER_FORMULATIONS
 
@@ -141,8 +142,6 @@ def group_progress(enabled: bool, stream=None, mininterval: float = 0.25,
 
 
 def format_report(s: dict) -> str:
-    def pct(a, b):
-        return f"{100.0 * (a / b - 1.0):+.1f} %" if b else "n/a"
     lines = [
         f"file          {s['source']}",
         f"formulation   {s['formulation']}   mode {s['order_mode']}"
@@ -150,21 +149,7 @@ def format_report(s: dict) -> str:
         + f"   time limit {s['time_limit_s']:g} s per group"
         + (f", budget {s['budget_s']:g} s for the whole run" if s.get("budget_s") else "")
         + (f", {s['workers']} processes" if s.get("workers", 1) > 1 else ""),
-        f"travel        {s['travel_before_mm']:,.1f} mm -> {s['travel_after_mm']:,.1f} mm"
-        f"   ({pct(s['travel_after_mm'], s['travel_before_mm'])})",
-        f"travel time   {s['travel_time_before_s']:,.1f} s -> {s['travel_time_after_s']:,.1f} s"
-        f"   ({pct(s['travel_time_after_s'], s['travel_time_before_s'])})",
-        f"print time    {s['print_time_before_s']:,.1f} s -> {s['print_time_after_s']:,.1f} s"
-        f"   ({pct(s['print_time_after_s'], s['print_time_before_s'])}; travels, retractions, z-hops)",
-        f"travels       {s['travels_before']:,} -> {s['travels_after']:,}"
-        f"   retractions {s['retractions_before']:,} -> {s['retractions_after']:,}",
-        f"curves        {s['curves']:,} in {s['groups']:,} groups; {s['groups_reordered']:,} re-orderable "
-        f"(largest {s['largest_group']} curves)",
-        f"groups        optimal {s['groups_optimal']:,}   feasible at limit {s['groups_feasible']:,}"
-        f"   fallback {s['groups_fallback']:,}   worst gap {100 * s['worst_gap']:.2f} %",
-        f"layers        optimal {s['layers_optimal']:,}   feasible at limit {s['layers_feasible']:,}"
-        f"   fallback {s['layers_fallback']:,}   order kept {s['layers_kept']:,}"
-        + (f" ({s['layers_kept_slower']:,} of them: slower re-ordered)" if s.get("layers_kept_slower") else ""),
+        *ordering_result_lines(s),
         f"solve         {s['solve_s']:.2f} s"
         + (f" of the {s['solve_budget_s']:.2f} s the budget left it" if s.get("solve_budget_s") else "")
         + f"   (whole run {s['wall_s']:.2f} s)",

@@ -91,12 +91,13 @@ def _code_words(program: Program, i: int) -> list[bytes]:
 
 
 def state_key_of(program: Program, i: int):
-    """The state a state line sets (fan P index, M204 words, Klipper command name)."""
+    """The state a state line sets (the part fan, M204 words, Klipper command name)."""
     words = _code_words(program, i)
     head = words[0] if words else b""
     if head in (b"M106", b"M107"):
-        p = [w for w in words[1:] if w.startswith(b"P")]
-        return ("fan", p[0].decode() if p else "P0")
+        # only the part-cooling fan is state (``Program.part_fan_lines``: no P, or P0 written
+        # any way, ``P0.0`` too): one key, whatever the line's P word
+        return ("fan",)
     if head in (b"M204", b"M201", b"M203", b"M205"):
         return (head.decode(),) + tuple(sorted({w[:1].decode() for w in words[1:]}))
     return (head.decode(),)

@@ -86,15 +86,18 @@ def _move_keys(program: Program, q: float):
     return rows, np.round(k / q).astype(np.int64), k
 
 
+def _sorted_rows(k: np.ndarray) -> np.ndarray:
+    """The rows of ``k`` in lexicographic order (two multisets of rows are equal iff these are)."""
+    return k[np.lexsort(k.T[::-1])]
+
+
 def _layers_differing(layer_a, qa, layer_b, qb) -> np.ndarray:
     """The layers whose multisets of move keys differ (exactly), found by sorting both files'
     (layer, key) rows: a layer with the same rows in the same sorted order holds the same moves,
     so only the others need the move-by-move matching below (a per-move Python loop over every
     layer took ~1 s on a 67 k-curve file)."""
-    def sorted_rows(layer, q):
-        k = np.column_stack([layer, q])
-        return k[np.lexsort(k.T[::-1])]
-    a, b = sorted_rows(layer_a, qa), sorted_rows(layer_b, qb)
+    a = _sorted_rows(np.column_stack([layer_a, qa]))
+    b = _sorted_rows(np.column_stack([layer_b, qb]))
     layers = np.union1d(layer_a, layer_b)
     a_at = np.searchsorted(a[:, 0], layers, side="left"), np.searchsorted(a[:, 0], layers, side="right")
     b_at = np.searchsorted(b[:, 0], layers, side="left"), np.searchsorted(b[:, 0], layers, side="right")
@@ -105,10 +108,11 @@ def _layers_differing(layer_a, qa, layer_b, qb) -> np.ndarray:
     return np.asarray(differ, layers.dtype)
 
 
-def check_geometry(original: Program, output: Program, *, tol_mm: float = 1e-3) -> list[Finding]:
+def check_geometry(original: Program, output: Program, *, tol_mm: float = 1e-3,
+                   keys=None) -> list[Finding]:
+    """``keys``: both files' ``_move_keys`` (``check`` computes them once for every check)."""
     out = []
-    ra, qa, ka = _move_keys(original, 1e-4)
-    rb, qb, kb = _move_keys(output, 1e-4)
+    (ra, qa, ka), (rb, qb, kb) = keys or (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
     for L in _layers_differing(original.layer[ra], qa, output.layer[rb], qb):
         ia = np.flatnonzero(original.layer[ra] == L)
         ib = np.flatnonzero(output.layer[rb] == L)
@@ -146,24 +150,24 @@ def check_geometry(original: Program, output: Program, *, tol_mm: float = 1e-3) 
     return out
 
 
-def check_fan(original: Program, output: Program, *, max_findings: int = 3) -> list[Finding]:
+def check_fan(original: Program, output: Program, *, max_findings: int = 3,
+               keys=None) -> list[Finding]:
     """Every extruded move sees the part-cooling fan duty it saw in the original (the parser's
     modal ``fan``; emit re-issues M106 / M107 where a re-ordered curve would see another value).
-    Layers whose moves differ are the geometry check's; the others are compared move by move."""
-    ra, qa, _ = _move_keys(original, 1e-4)
-    rb, qb, _ = _move_keys(output, 1e-4)
-    duty_a = np.round(original.fan[ra].astype(np.float64) * 255.0).astype(np.int64)
-    duty_b = np.round(output.fan[rb].astype(np.float64) * 255.0).astype(np.int64)
+    Layers whose moves differ are the geometry check's; the others are compared move by move.
+    ``keys``: as for ``check_geometry``."""
+    (ra, qa, _), (rb, qb, _) = keys or (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
+    duty_a, duty_b = _v.fan_duty_s(original, ra), _v.fan_duty_s(output, rb)
     la, lb = original.layer[ra], output.layer[rb]
-    moved = set(_layers_differing(la, qa, lb, qb).tolist())
     out = []
     for L in _layers_differing(la, np.column_stack([qa, duty_a]), lb, np.column_stack([qb, duty_b])).tolist():
-        if L in moved:
-            continue
+        ia, ib = np.flatnonzero(la == L), np.flatnonzero(lb == L)
+        if not np.array_equal(_sorted_rows(qa[ia]), _sorted_rows(qb[ib])):     # shape too
+            continue                    # its moves differ: the geometry check's finding
         want: dict = {}
-        for i in np.flatnonzero(la == L).tolist():
+        for i in ia.tolist():
             want.setdefault(qa[i].tobytes(), []).append(int(duty_a[i]))
-        for j in np.flatnonzero(lb == L).tolist():
+        for j in ib.tolist():
             seen = want[qb[j].tobytes()]
             d = int(duty_b[j])
             if d in seen:
@@ -180,6 +184,7 @@ def check_fan(original: Program, output: Program, *, max_findings: int = 3) -> l
 
 def check(original: Program, output: Program) -> list[Finding]:
     """All findings for a re-ordered output (empty list: it prints what the original printed)."""
-    return (check_geometry(original, output) + _v.check_extrusion(original, output)
-            + _v.check_commands(original, output, reordered=True) + check_fan(original, output)
-            + check_barriers(original, output))
+    keys = (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
+    return (check_geometry(original, output, keys=keys) + _v.check_extrusion(original, output)
+            + _v.check_commands(original, output, reordered=True)
+            + check_fan(original, output, keys=keys) + check_barriers(original, output))
