@@ -267,3 +267,16 @@ def test_solve_output_keeps_the_fan_each_extrusion_saw():
     broken = gatesopt.parse("\n".join(lines[:k] + lines[k + 1:]) + "\n")
     found = verify(prog, broken).findings
     assert any(f.check == "commands" and "part fan at S100" in f.message for f in found)
+
+
+def test_the_part_fan_is_one_state_however_its_p_word_is_written():
+    """``M106 S..``, ``M106 P0 S..``, ``M106 P0.0 S..`` and ``M107`` set the same fan: one state
+    key, so emit re-issues one value (two keys would write both, the wrong one last)."""
+    text = (_bridge_fan_gcode().replace("M106 S255", "M106 P0.0 S255", 1)
+            .replace("M106 S100\nG0", "M106 P0 S100\nG0", 1))
+    prog = gatesopt.parse(text)
+    lay = layout(prog)
+    fan = [i for i in range(prog.n_lines) if prog.line_text(i).startswith(("M106", "M107"))]
+    assert len(fan) == 6 and {lay.state_key[i] for i in fan} == {("fan",)}
+    res = order_program(prog, OrderingOptions(mode="free"))
+    assert res.ok
