@@ -61,7 +61,10 @@ _JOIN_ANGLE_RAD = 2e-3
 ROTATE_PREFIX = "; gatesopt: rotate_deg="
 ORDER_PREFIX = "; gatesopt: order"
 CONTROL_COMMANDS = (("M", 104), ("M", 109), ("M", 140), ("M", 190), ("M", 141), ("M", 191),
-                    ("M", 106), ("M", 107))
+                    ("M", 106), ("M", 107),
+                    # progress and display messages: a re-ordering moves them with curves, but
+                    # their sequence must stay the slicer's (a printer showing 40 % after 42 %)
+                    ("M", 73), ("M", 117))
 
 
 @dataclass(frozen=True)

@@ -280,3 +280,46 @@ def test_the_part_fan_is_one_state_however_its_p_word_is_written():
     assert len(fan) == 6 and {lay.state_key[i] for i in fan} == {("fan",)}
     res = order_program(prog, OrderingOptions(mode="free"))
     assert res.ok
+
+
+def _progress_gcode() -> str:
+    """Layer 1: eight infill lines in a scrambled order, an ``M73 P.. R..`` progress line before
+    each (as Bambu, Orca, PrusaSlicer and Creality Print write them mid-layer, by print time)."""
+    out = ["G21", "G90", "M83", ";LAYER:0", "G1 Z0.2 F600", "G1 X10 Y0 E1 F1800",
+           ";LAYER:1", "G1 Z0.4 F600"]
+    for k, y in enumerate([0, 40, 10, 50, 20, 60, 30, 70]):
+        out += [f"M73 P{10 + 10 * k} R{80 - 10 * k}", f"G0 X20 Y{y + 20} F6000",
+                f"G1 X30 Y{y + 20} E0.4 F1800"]
+    out += ["M117 done", "G0 X0 Y150 F6000", "M84"]
+    return "\n".join(out) + "\n"
+
+
+def test_progress_lines_keep_their_order_when_curves_move():
+    """M73 lines travel with the curve after them, but a re-ordered layer still writes them in
+    the slicer's sequence: the printer's progress never steps back (it did before the fix: the
+    output had P40 after P60 here)."""
+    prog = gatesopt.parse(_progress_gcode())
+    res = order_program(prog, OrderingOptions(mode="free"))
+    assert res.ok and res.summary["travel_after_mm"] < 0.8 * res.summary["travel_before_mm"]
+
+    def progress(text):
+        return [t for t in text.splitlines() if t.startswith(("M73", "M117"))]
+    assert progress(res.text) == progress(prog.to_gcode())
+    # the curves did move (the lines are printed bottom to top now), so the M73 lines went with them
+
+    def lines_y(text):
+        return [t.split()[2] for t in text.splitlines() if t.startswith(("G1 X30", "G1 X20"))]
+    assert lines_y(res.text) != lines_y(prog.to_gcode())
+
+
+def test_verify_catches_progress_stepping_back():
+    """Swap two M73 lines of a re-ordered output: the verifier reports the first out of order."""
+    prog = gatesopt.parse(_progress_gcode())
+    res = order_program(prog, OrderingOptions(mode="free"))
+    lines = res.text.splitlines()
+    at = [i for i, t in enumerate(lines) if t.startswith("M73")]
+    lines[at[2]], lines[at[3]] = lines[at[3]], lines[at[2]]
+    from gatesopt.ordering.verify import check
+    found = check(prog, gatesopt.parse("\n".join(lines) + "\n"))
+    assert [f.line for f in found if f.check == "commands"][:1] == [at[2] + 1]
+    assert any("M73 P40" in f.message and "M73 P30" in f.message for f in found)

@@ -205,13 +205,17 @@ class _Writer:
         self.feature = None
         (self.line_cls, self.line_step, self.line_de, self.line_travel, self.step_relative_e,
          self.step_feed, self.layer_lines, self.arc_steps,
-         self.command_lines) = lists or self.per_line(program, lay)
+         self.command_lines, self.command_set) = lists or self.per_line(program, lay)
+        # neutral commands written so far: the k-th one written is the original's k-th (below)
+        self.n_commands = 0
 
     @staticmethod
     def per_line(program: Program, lay: Layout) -> tuple:
         """Per line, what the gap rebuild asks of it, as Python lists (numpy scalar indexing line
         by line was ~40 % of the emit); the same for every emit of one program and problem."""
         cls, step = lay.line_class, lay.step_of_line
+        # neutral commands (M73, M117), in order: a curve written move by move keeps its own
+        commands = np.flatnonzero((program.line_letter == ord("M")) & (cls == LINE_NEUTRAL)).tolist()
         has = step >= 0
         motion = (cls == LINE_MOTION) & has
         s = np.where(has, step, 0)
@@ -221,12 +225,18 @@ class _Writer:
                 program.relative_e.tolist(), program.feed_mm_s.tolist(),
                 frozenset(program.layer_line.tolist()),
                 frozenset(np.flatnonzero(program.kind == Kind.ARC).tolist()),
-                # neutral commands (M73, M117), in order: a curve written move by move keeps its own
-                np.flatnonzero((program.line_letter == ord("M")) & (cls == LINE_NEUTRAL)).tolist())
+                commands, frozenset(commands))
 
     # -- copying original lines -------------------------------------------------------------
     def copy_line(self, i: int) -> None:
         p = self.p
+        if i in self.command_set:
+            # progress (M73) and messages (M117) travel with the next curve, so a re-ordered
+            # layer would write them in another order: printers would show progress stepping
+            # back. Written in the original's order instead (verify checks it): the k-th neutral
+            # command written is the original's k-th, whichever curve carries it
+            i = self.command_lines[self.n_commands]
+            self.n_commands += 1
         text = p.line_text(i)
         s = self.line_step[i]
         cls = self.line_cls[i]
@@ -275,18 +285,19 @@ class _Writer:
     def entry_key(self) -> tuple:
         """What a layer's text depends on besides its own curves (E apart: ``_same_entry``)."""
         return (tuple(self.xyz.tolist()), self.feed, tuple(sorted(self.state.items())),
-                self.feature, self.e - self.e_off, self.e, self.e_off)
+                self.feature, self.n_commands, self.e - self.e_off, self.e, self.e_off)
 
     def snapshot(self) -> tuple:
         """The state a memoized layer leaves behind (``extend_from`` takes it)."""
-        return (self.e, self.e_off, self.xyz.copy(), self.feed, dict(self.state), self.feature)
+        return (self.e, self.e_off, self.xyz.copy(), self.feed, dict(self.state), self.feature,
+                self.n_commands)
 
     def extend_from(self, entry: tuple, chunk: list, exit_: tuple) -> None:
         """Append a memoized layer's text and take its exit state; E moves with the difference
         between this entry and the memoized one (logical E agrees within MEMO_E_TOL_MM)."""
         self.out.extend(chunk)
-        d_e, d_off = self.e - entry[5], self.e_off - entry[6]
-        e, e_off, xyz, feed, state, feature = exit_
+        d_e, d_off = self.e - entry[6], self.e_off - entry[7]
+        e, e_off, xyz, feed, state, feature, self.n_commands = exit_
         self.e, self.e_off = e + d_e, e_off + d_off
         self.xyz, self.feed, self.state, self.feature = xyz.copy(), feed, dict(state), feature
 
@@ -445,7 +456,7 @@ MEMO_E_TOL_MM = 1e-7
 
 
 def _same_entry(memo_entry: tuple, entry: tuple) -> bool:
-    return memo_entry[:4] == entry[:4] and abs(memo_entry[4] - entry[4]) <= MEMO_E_TOL_MM
+    return memo_entry[:5] == entry[:5] and abs(memo_entry[5] - entry[5]) <= MEMO_E_TOL_MM
 
 
 class _Plan:
