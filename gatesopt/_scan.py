@@ -305,6 +305,9 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
     return cmd_letter, cmd_number, first_pos, False
 
 
+#: ``l_flags`` bit of a line that set the part-cooling fan (``Program.part_fan_lines``)
+FLAG_PART_FAN = 4
+
 STATE_SIZE = 21   # pos[4], G92 offset[4], enable[4], G91, M83, G20, feed, fan, hotend, bed, reached x2
 
 
@@ -368,7 +371,8 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
     l_letter = np.zeros(n_lines, np.uint8)
     l_number = np.full(n_lines, np.nan, np.float32)
     l_flags = np.zeros(n_lines, np.uint8)      # bit 0: an unexpanded {placeholder} was dropped;
-    # bit 1: a G0-G3 line carries an axis the model has not got (A B C U V W)
+    # bit 1: a G0-G3 line carries an axis the model has not got (A B C U V W); bit 2: an M106 /
+    # M107 set the part-cooling fan ``fan`` follows (FLAG_PART_FAN)
     # comment markers (grown by doubling): line, code bits, Z, feature-name byte span
     mk_cap = 1024
     mk_line = np.empty(mk_cap, np.int64)
@@ -652,11 +656,13 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                     continue
                 s = value[LS] if present[LS] and not np.isnan(value[LS]) else 255.0
                 fan = min(max(s / 255.0, 0.0), 1.0)
+                l_flags[ln] |= FLAG_PART_FAN
                 continue
             elif m == 107.0:
                 if present[LP] and not np.isnan(value[LP]) and value[LP] != 0.0:
                     continue
                 fan = 0.0
+                l_flags[ln] |= FLAG_PART_FAN
                 continue
             elif m == 17.0 or m == 18.0 or m == 84.0:
                 named = False

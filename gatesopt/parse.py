@@ -281,6 +281,7 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
         enabled=s_en[s], feature_names=feature_names, layer_z_mm=layer_z, layer_line=layer_line,
         layer_method=method, line_ending=line_ending, header=header, warnings=tuple(warnings),
         line_letter=l_letter, line_number=l_number, foreign_axis_lines=foreign,
+        part_fan_lines=np.flatnonzero(l_flags & _scan.FLAG_PART_FAN),
     )
     for a in (prog.line, prog.kind, prog.start_mm, prog.end_mm, prog.duration_s, prog.enabled):
         a.flags.writeable = False

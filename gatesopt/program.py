@@ -19,13 +19,11 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 AXES = ("X", "Y", "Z", "E")
-_P_WORD = re.compile(rb"P\s*([-+]?(?:\d+\.?\d*|\.\d+))?")
 X, Y, Z, E = 0, 1, 2, 3
 
 
@@ -99,6 +97,10 @@ class Program:
     # 0-based lines of moves that carry an axis the model has not got (A B C U V W: Mach3 and
     # machinekit write the extruder as A): profiled without it, never rewritten (check_rewritable)
     foreign_axis_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    # 0-based lines of M106 / M107 that set the part-cooling fan ``fan`` follows (no P word, or
+    # P0; the parser's rule, recorded where it applies it): other fans (Bambu's auxiliary
+    # ``M106 P2``) are not modelled. Re-ordering treats these lines as state, the rest as barriers
+    part_fan_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     # ------------------------------------------------------------------------------------------
     @property
@@ -142,20 +144,6 @@ class Program:
     def is_command(self, letter: str, number: float) -> np.ndarray:
         """(n_lines,) bool: lines whose command is ``letter`` ``number`` (e.g. ``("M", 104)``)."""
         return (self.line_letter == ord(letter)) & (self.line_number == number)
-
-    def part_fan_lines(self) -> np.ndarray:
-        """Lines of ``M106`` / ``M107`` that set the part-cooling fan ``fan`` follows: no ``P``
-        word, or ``P0`` (the parser's rule, ``_scan.py``; other fans, e.g. Bambu's auxiliary
-        ``M106 P2``, are not modelled)."""
-        cand = np.flatnonzero((self.line_letter == ord("M"))
-                              & ((self.line_number == 106) | (self.line_number == 107)))
-        keep = []
-        for i in cand.tolist():
-            code = self.data[self.line_start[i]:self.line_start[i + 1]].split(b";")[0].upper()
-            p = _P_WORD.search(code)
-            if p is None or p.group(1) is None or float(p.group(1)) == 0.0:
-                keep.append(i)
-        return np.asarray(keep, np.int64)
 
     def line_text(self, i: int) -> str:
         """Line ``i`` (0-based) with its line ending, as in the file."""

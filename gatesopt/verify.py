@@ -619,7 +619,7 @@ def check_commands(original: Program, output: Program, *, reordered: bool = Fals
             # the part-cooling fan is state a re-ordering re-issues where a curve would see
             # another value: its lines may be more, and are checked by what each layer extrudes
             # under each fan duty (``_check_fan_duty``), not by their order
-            m[p.part_fan_lines()] = False
+            m[p.part_fan_lines] = False
             idx = np.flatnonzero(m)
             return idx, [p.line_text(i).strip() for i in idx]
         out += _check_fan_duty(original, output, max_findings)

@@ -170,6 +170,16 @@ def test_fan_and_temperatures_are_modal():
     assert p.fan.tolist() == pytest.approx([0, 0.5, 0])
 
 
+def test_parser_records_the_lines_that_set_the_part_fan():
+    """The lines the parser applied to ``fan`` (no P, P0 in any spelling, M107) are recorded once,
+    for re-ordering (state) and verify; a fan with another index, or a bare P, is not one."""
+    text = ("G1 X1 F600\nM106 S100\nM106 P0 S50\nM106 P0.0 S60\nM107\nM106 P2 S30\n"
+            "M107 P1\nM106 P1.5 S9\n; M106 S1\nG1 X2\n")
+    p = parse(text)
+    assert p.part_fan_lines.tolist() == [1, 2, 3, 4]
+    assert p.fan.tolist() == pytest.approx([0, 0])       # M107 last: the P2 and P1 lines change nothing
+
+
 def test_heat_wait_duration_is_the_named_assumption():
     p = parse("M109 S205\nG1 X1 F600\n")
     assert Kind(p.kind[0]) == Kind.WAIT

@@ -129,7 +129,7 @@ def layout(program: Program) -> Layout:
     cls[g & np.isin(number, (0, 1, 2, 3)) & ~is_step] = LINE_NEUTRAL       # F-only moves
     m = letter == ord("M")
     cls[m & np.isin(number, STATE_M)] = LINE_STATE
-    cls[program.part_fan_lines()] = LINE_STATE
+    cls[program.part_fan_lines] = LINE_STATE
     cls[m & np.isin(number, NEUTRAL_M)] = LINE_NEUTRAL
     cls[m & np.isin(number, FATAL_M)] = LINE_FATAL
     cls[letter == ord("T")] = LINE_FATAL
