@@ -201,3 +201,27 @@ def test_solve_reports_the_ordering_and_takes_its_mode(tmp_path, capsys):
     assert main(["solve", str(src), "-o", str(out), "--rotate", "none", "--no-order", "--json", str(rj)]) == 0
     assert "travel_before_mm" not in json.loads(rj.read_text())
     assert "ordering      none" in capsys.readouterr().out
+
+
+def test_compare_ordering_formulations(tmp_path, capsys):
+    """``compare --ordering``: one verified row per curve-ordering formulation, greedy (the Fleming
+    et al. baseline) first; on a small bundled instance the exact ones prove every group, agree on
+    the solver's travel and are not worse than greedy; an unknown name is a row that says so."""
+    src = Path(__file__).resolve().parents[1] / "instances" / "square_grid_m82.gcode"
+    js, png = tmp_path / "cmp.json", tmp_path / "cmp.png"
+    rc = main(["compare", str(src), "--ordering", "--formulations", "auto,milp,cpsat,nosuch",
+               "--order-mode", "free", "--order-budget", "20", "--json", str(js), "--plot", str(png)])
+    assert rc == 0
+    table = capsys.readouterr().out
+    assert "travel mm" in table and "unknown formulation 'nosuch'" in table
+    rows = json.loads(js.read_text())
+    assert [r["formulation"] for r in rows] == ["greedy", "auto", "milp", "cpsat", "nosuch"]
+    solved = {r["formulation"]: r for r in rows if "travel_after_mm" in r}
+    assert all(r["verified"] for r in solved.values())
+    assert all(r["travel_after_mm"] < r["travel_before_mm"] for r in solved.values())
+    exact = [solved[f] for f in ("auto", "milp", "cpsat")]
+    for r in exact:
+        assert r["groups_optimal"] == r["groups_reordered"] > 0 and r["worst_gap"] == pytest.approx(0, abs=1e-9)
+        assert r["model_travel_after_mm"] == pytest.approx(exact[0]["model_travel_after_mm"], rel=1e-9)
+    assert exact[0]["model_travel_after_mm"] <= solved["greedy"]["model_travel_after_mm"] + 1e-9
+    assert png.exists() and png.stat().st_size > 1000

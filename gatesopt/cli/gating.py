@@ -83,12 +83,23 @@ def register(sub) -> None:
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=run_solve)
 
-    c = sub.add_parser("compare", help="all gating formulations side by side",
+    c = sub.add_parser("compare", help="all gating (or --ordering: curve ordering) formulations side by side",
                        description="Solve each file with every gating formulation (greedy always "
-                                   "included) and print one table; outputs are verified, not written.")
+                                   "included) and print one table; outputs are verified, not written. "
+                                   "With --ordering: every curve-ordering formulation instead, by travel.")
     c.add_argument("files", nargs="+", help="G-code files")
-    c.add_argument("--formulations", default=",".join(FORMULATION_NAMES), metavar="LIST",
-                   help="comma separated (default: all); greedy is always a row")
+    c.add_argument("--formulations", default=None, metavar="LIST",
+                   help="comma separated (default: all of the compared kind); greedy is always a row")
+    c.add_argument("--ordering", action="store_true",
+                   help="compare the curve ordering's formulations (greedy, tsp, cpsat, milp, auto) "
+                        "by travel instead of gating's by energy")
+    c.add_argument("--order-mode", choices=("safe", "free"), default="safe",
+                   help="with --ordering: as `order --order-mode` (default safe)")
+    c.add_argument("--move-seams", action="store_true",
+                   help="with --ordering: closed loops may start at another vertex")
+    c.add_argument("--order-budget", type=float, default=10.0, metavar="S",
+                   help="with --ordering: each formulation's run of a file, parse to verified output, "
+                        "in about S seconds (default 10, as `order --budget`)")
     _add_common(c)
     c.add_argument("--plot", metavar="OUT.png", help="bar chart of the saving per formulation")
     c.add_argument("--json", metavar="OUT.json", help="write the rows as JSON")
@@ -389,10 +400,13 @@ def format_compare(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
-def plot_compare(rows: list[dict], path: str) -> None:
+def plot_compare(rows: list[dict], path: str, ordering: bool = False) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    key, ylabel, title = (("travel_change_pct", "travel change % (vs the slicer's order)",
+                           "curve ordering: travel by formulation") if ordering else
+                          ("saving_pct", "energy saving %", "motor power gating: saving by formulation"))
     files = list(dict.fromkeys(r["file"] for r in rows))
     forms = list(dict.fromkeys(r["formulation"] for r in rows))
     fig, ax = plt.subplots(figsize=(max(6, 1.2 * len(files) * len(forms) / 2), 4))
@@ -401,33 +415,94 @@ def plot_compare(rows: list[dict], path: str) -> None:
         ys = []
         for fn in files:
             r = next((r for r in rows if r["file"] == fn and r["formulation"] == f), None)
-            ys.append(r.get("saving_pct", math.nan) if r else math.nan)
+            ys.append(r.get(key, math.nan) if r else math.nan)
         ax.bar([i + k * w for i in range(len(files))], ys, width=w, label=f)
     ax.set_xticks([i + w * (len(forms) - 1) / 2 for i in range(len(files))])
     ax.set_xticklabels(files, rotation=30, ha="right", fontsize=8)
-    ax.set_ylabel("energy saving %")
-    ax.set_title("motor power gating: saving by formulation")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
+def compare_order_rows(program, options, formulations, budget_s: float, workers: int) -> list[dict]:
+    """``compare --ordering``: one row per curve-ordering formulation (greedy, the Fleming et al.
+    baseline, first), each a verified run with ``budget_s`` for the whole of it (nothing written)."""
+    from ..ordering.pipeline import order_program
+    names = ["greedy"] + [f for f in formulations if f != "greedy"]
+    rows = []
+    for name in names:
+        row = {"file": os.path.basename(program.source), "formulation": name}
+        if name not in ORDER_FORMULATIONS:
+            row.update(status="unknown", error=f"unknown formulation {name!r}")
+            rows.append(row)
+            continue
+        try:
+            r = order_program(program, options, formulation=name, budget_s=budget_s, workers=workers)
+        except GatesoptError as exc:
+            row.update(status="error", error=str(exc))
+            rows.append(row)
+            continue
+        s = r.summary
+        row.update({k: s[k] for k in ("travel_before_mm", "travel_after_mm", "travel_change_pct",
+                                      "model_travel_after_mm", "print_time_before_s", "print_time_after_s", "groups_reordered",
+                                      "groups_optimal", "groups_feasible", "groups_fallback",
+                                      "worst_gap", "solve_s", "wall_s")})
+        row["verified"] = bool(r.ok)
+        if not r.ok:
+            row["findings"] = [str(f) for f in r.findings[:3]]
+        rows.append(row)
+    return rows
+
+
+def format_compare_order(rows: list[dict]) -> str:
+    head = (f"{'file':28s} {'formulation':11s} {'travel mm':>11s} {'travel %':>9s} {'print s':>10s} "
+            f"{'optimal':>8s} {'feasible':>8s} {'fallback':>8s} {'worst gap':>9s} {'run s':>7s} {'verified':>8s}")
+    out = [head, "-" * len(head)]
+    for r in rows:
+        if "travel_after_mm" not in r:
+            out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {r['status']:>11s}   {r.get('error', '')[:60]}")
+            continue
+        gap = "n/a" if r["worst_gap"] is None else f"{100 * r['worst_gap']:.2f}%"
+        out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {r['travel_after_mm']:11,.1f} "
+                   f"{r['travel_change_pct']:9.2f} {r['print_time_after_s']:10,.1f} {r['groups_optimal']:8d} "
+                   f"{r['groups_feasible']:8d} {r['groups_fallback']:8d} {gap:>9s} {r['wall_s']:7.2f} "
+                   f"{'yes' if r['verified'] else 'NO':>8s}")
+    if rows and "travel_before_mm" in rows[0]:
+        out.append("travel % is against the slicer's order; groups: proven optimal / feasible at the "
+                   "limit / fallback (heuristic); worst gap to the group's lower bound")
+    return "\n".join(out)
+
+
 def run_compare(args) -> int:
-    options = options_from_args(args)
-    forms = [f.strip() for f in args.formulations.split(",") if f.strip()]
+    forms = [f.strip() for f in (args.formulations or ",".join(
+        ORDER_FORMULATIONS if args.ordering else FORMULATION_NAMES)).split(",") if f.strip()]
     check_distinct({"--plot": args.plot, "--json": args.json})
+    if args.ordering and not (math.isfinite(args.order_budget) and args.order_budget > 0):
+        raise GatesoptError(f"--order-budget must be > 0 s, not {args.order_budget}")
     if args.plot:
         check_new_file(args.plot, args.files, args.force, png=True)
     if args.json:
         check_new_file(args.json, args.files, args.force)
     rows = []
-    for path in args.files:
-        program = parse(path)
-        rows += compare_rows(program, options, forms, args.time_limit)
-    print(format_compare(rows))
+    if args.ordering:
+        from ..ordering import OrderingOptions
+        from .ordering import default_workers
+        order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+        for path in args.files:
+            rows += compare_order_rows(parse(path), order_options, forms, args.order_budget,
+                                       default_workers())
+        print(format_compare_order(rows))
+    else:
+        options = options_from_args(args)
+        for path in args.files:
+            program = parse(path)
+            rows += compare_rows(program, options, forms, args.time_limit)
+        print(format_compare(rows))
     if args.plot:
-        plot_compare(rows, args.plot)
+        plot_compare(rows, args.plot, ordering=args.ordering)
     if args.json:
         write_atomic(args.json, json.dumps(rows, indent=2, default=_jsonable) + "\n")
     bad = [r for r in rows if "verified" in r and not r["verified"]]
