@@ -126,7 +126,9 @@ def report(args) -> str:
              "re-ordered print takes longer than the slicer's (rebuilt travels retract and hop where "
              "the slicer combed) keeps the slicer's order, so travel is never bought with print time; "
              "the bold lines give the print time (paper time model) and how many layers it kept. "
-             "Peers (LKH via elkai, OR-Tools routing) are in the next section.", ""]
+             "Peers (LKH via elkai, OR-Tools routing) are in the sections \"peers\" and \"peers on large "
+             "groups\"; why unproven groups keep wide gaps (the cheap bound of fallback groups; strips of "
+             "parallel lines whose parity the LP does not see) in \"where the gaps come from\".", ""]
     for form, tl, bud, w in configs:
         for mode in ("safe", "free"):
             rs = sorted((r for r in rows if r["formulation"] == form and r["order_mode"] == mode

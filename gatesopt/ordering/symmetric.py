@@ -395,10 +395,11 @@ class SymmetricModel:
 
     # -- the solve ----------------------------------------------------------------------------
 
-    def root(self, deadline: float, max_rounds: int = 500) -> float:
+    def root(self, deadline: float, max_rounds: int = 500, cuts: bool = True) -> float:
         """Cutting planes and pricing on the LP until neither finds anything (or time is up).
         Returns a valid lower bound (0 if no LP was solved); ``self.complete`` tells whether the
-        LP of the whole graph was solved to optimality."""
+        LP of the whole graph was solved to optimality. ``cuts=False``: pricing only, the bound
+        of the degree equations alone (a fractional matching; bench/ordering_gaps.py compares)."""
         self.complete = False
         bound = 0.0
         t_round = 0.0                           # the longest round so far
@@ -415,7 +416,7 @@ class SymmetricModel:
             last_chance = time.perf_counter() + 2 * t_round > deadline
             if last_chance:
                 bound = max(bound, self.lp_bound(obj, self.reduced_costs()))
-            found = self.separate(x, deadline)
+            found = self.separate(x, deadline) if cuts else 0
             t_round = max(t_round, time.perf_counter() - t)
             if found:
                 continue
