@@ -503,6 +503,58 @@ def test_time_guard_puts_back_the_neighbour_a_kept_layer_still_pays_for(monkeypa
         assert after[a] + after[b] == pytest.approx(before[a] + before[b] - gain_s + 0.6)
 
 
+@pytest.mark.parametrize("gain_s", [0.2, 0.0])
+def test_time_guard_that_does_not_settle_never_returns_a_slower_print(monkeypatch, gain_s):
+    # Putting a layer back can make the next one slower, pass after pass (slic3r13_torus free: one
+    # layer per pass; the state after the last pass, never measured, printed 0.008 s slower than
+    # the slicer's). Stand-in emit: every re-ordered layer gains gain_s; the first re-ordered layer
+    # is 0.5 s slower re-ordered; a re-ordered layer right after one put back is 5 s slower. With
+    # two passes the guard cannot settle: it returns the tried state with the shortest print (the
+    # first), or, when every tried state is slower than the slicer's, the slicer's order.
+    from types import SimpleNamespace
+    from gatesopt.ordering import pipeline
+    prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
+    prob = build(prog, OrderingOptions(mode="free"))
+    sol = solve(prob, "greedy")
+
+    def slicer_order(s, L):
+        at = prob.curve_layer[s.curve_order] == L
+        return (np.array_equal(s.curve_order[at], np.flatnonzero(prob.curve_layer == L))
+                and not s.curve_reversed[s.curve_order[at]].any())
+
+    moved = [L for L in range(prog.n_layers) if not slicer_order(sol, L)]
+    assert len(moved) >= 5
+    first = moved[0]
+    before = pipeline.layer_times_s(prog)
+
+    def fake_emit(program, problem, solution, memo=None):
+        t = before.copy()
+        for L in moved:
+            if slicer_order(solution, L):
+                continue
+            t[L] -= gain_s
+            if L == first:
+                t[L] += 0.5 + gain_s
+            elif L - 1 in moved and slicer_order(solution, L - 1):
+                t[L] += 5.0
+        return t.tobytes()
+
+    def fake_parse(text, source=None):
+        t = np.frombuffer(text, float)
+        return SimpleNamespace(n_layers=len(t), layer=np.arange(len(t)), duration_s=t)
+
+    monkeypatch.setattr(pipeline, "emit", fake_emit)
+    monkeypatch.setattr(pipeline, "parse", fake_parse)
+    monkeypatch.setattr(pipeline, "GUARD_PASSES", 2)
+    final, _, out, kept = pipeline.emit_guarded(prog, prob, sol)
+    after = pipeline.layer_times_s(out)
+    assert after.sum() <= before.sum() + 1e-9
+    if gain_s > 0:          # the first state: everything re-ordered, 0.2 s gained per layer but one
+        assert len(kept) == 0 and after.sum() == pytest.approx(before.sum() + 0.5 - gain_s * (len(moved) - 1))
+    else:                   # every tried state is slower: the slicer's order throughout
+        assert len(kept) == prog.n_layers and all(slicer_order(final, L) for L in moved)
+
+
 @pytest.mark.parametrize("reset", ["G92 E0", "G92 X0 Y0"])
 def test_an_e_reset_is_not_a_barrier_but_a_coordinate_reset_is(reset):
     """Absolute E (M82) with ``G92 E0`` after every retraction, as PrusaSlicer and Slic3r write
