@@ -67,6 +67,14 @@ def _warning_kind(message: str) -> str:
     return re.sub(r"\d+", "#", message)
 
 
+def _keep_new_warnings(prog, warnings: list, warned: set) -> None:
+    """Append ``prog``'s parse warnings of a kind not given yet (``_warning_kind``)."""
+    for w in prog.warnings:
+        if _warning_kind(w) not in warned:
+            warned.add(_warning_kind(w))
+            warnings.append(w)
+
+
 def _parse_piece(piece: bytes, name: str, state, line0: int, flavor: str | None):
     return parse(piece, source=name, state=state, line_offset=line0, flavor=flavor, require_moves=False)
 
@@ -97,10 +105,7 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
         prog = _parse_piece(piece, name, state, line0, flavor)
         if flavor is None:      # the header (first chunk) says which G90/G91 semantics apply
             flavor = prog.header.get("flavor", "") or "marlin"
-        for w in prog.warnings:
-            if _warning_kind(w) not in warned:
-                warned.add(_warning_kind(w))
-                warnings.append(w)
+        _keep_new_warnings(prog, warnings, warned)
         n_lines += prog.n_lines
         if prog.n_steps == 0:
             continue
@@ -169,6 +174,7 @@ class StreamGatingResult:
     lines_after: int
     verified: bool
     findings: tuple
+    warnings: tuple = ()        # the input's parse warnings, each kind once (as profile_stream's)
 
     @property
     def saving_pct(self) -> float:
@@ -198,6 +204,7 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
     e_before = e_after = 0.0
     lines_before = lines_after = 0
     findings = []
+    warnings, warned = [], set()
     chunks = 0
     flavor = None
     try:
@@ -206,6 +213,7 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
                 chunks += 1
                 prog = _parse_piece(piece, name, state_in, line0, flavor)
                 prog.check_rewritable(line0)
+                _keep_new_warnings(prog, warnings, warned)
                 if flavor is None:
                     flavor = prog.header.get("flavor", "") or "marlin"
                 lines_before += prog.n_lines
@@ -246,4 +254,5 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
     finally:
         if tmp.exists():
             tmp.unlink()
-    return StreamGatingResult(chunks, e_before, e_after, lines_before, lines_after, not findings, tuple(findings))
+    return StreamGatingResult(chunks, e_before, e_after, lines_before, lines_after, not findings,
+                              tuple(findings), tuple(warnings[:20]))

@@ -79,6 +79,22 @@ def test_streamed_profile_equals_the_whole_file(name, chunk):
         assert s.sectors_j[k] == pytest.approx(r.sectors_j[k], rel=1e-9, abs=1e-9)
 
 
+def test_streamed_gating_gives_the_input_warnings_once(tmp_path):
+    """A slicer placeholder left in every layer (``M204 S{accel}``): gate_stream reports it, once,
+    at its first line, as parse and profile_stream do (it used to report no warning at all)."""
+    lines = (PROJECT_INSTANCES / "cyl_grid.gcode").read_text().splitlines(keepends=True)
+    text = "".join(ln + ("M204 S{accel}\n" if ln.startswith(";Z:") else "") for ln in lines)
+    src = tmp_path / "ph.gcode"
+    src.write_text(text)
+    res = gate_stream(src, tmp_path / "out.gcode", chunk_bytes=8_000)
+    assert res.chunks > 2 and res.verified
+    first = next(i for i, ln in enumerate(text.splitlines()) if ln.startswith("M204")) + 1
+    placeholder = [w for w in res.warnings if "placeholder" in w]
+    assert placeholder == [f"{src}:{first}: M204 S{{accel}}: unexpanded slicer placeholder ignored "
+                           "(as the firmware ignores a word without a value)"]
+    assert placeholder[0] in parse(text, source=str(src)).warnings
+
+
 def test_streamed_gating_is_verified_and_close_to_whole_file(tmp_path):
     from gatesopt.gating.problem import GatingOptions, build
     from gatesopt.gating.solve import solve
