@@ -93,14 +93,15 @@ def test_ils_reaches_the_dp_optimum_on_small_groups():
     assert hits > greedy_hits                           # it does something the greedy does not
 
 
-def _slicer_chain_group(name: str, mode: str, index: int):
-    """Group ``index`` of a corpus file, starting where the slicer's own order left the previous
-    group (as bench/ordering_peers.py builds its instances)."""
+def _slicer_chain_group(name: str, mode: str, layer: int, n_curves: int):
+    """The group of ``n_curves`` curves in ``layer`` of a corpus file (found by what it is, not by
+    its index, which shifts whenever the build splits a layer differently), starting where the
+    slicer's own order left the previous group (as bench/ordering_peers.py builds its instances)."""
     prob = build(gatesopt.parse(SHARED_INSTANCES / name), OrderingOptions(mode=mode))
     pos = np.asarray(prob.origin_xy, float)
     for g in range(prob.n_groups):
         curves = prob.group_curves(g)
-        if g == index:
+        if prob.group_layer[g] == layer and len(curves) == n_curves:
             end = None
             if g + 1 < prob.n_groups and prob.group_fixed[g + 1]:
                 end = prob.curve_start_xy[prob.group_curve_start[g + 1]]
@@ -112,10 +113,10 @@ def _slicer_chain_group(name: str, mode: str, index: int):
 
 @needs_shared
 def test_ils_escapes_the_greedy_trap_on_a_real_layer():
-    """ideaMaker 5.1.4, safe mode, group 82 (60 curves): 2-opt/Or-opt stop at 59.69 mm; LKH-3
-    found 42.79 mm (docs/RESULTS.md, peers). auto must get there and never claim a bound above."""
-    grp = _slicer_chain_group("real_ideamaker514.gcode.gz", "safe", 82)
-    assert grp.n_curves == 60
+    """ideaMaker 5.1.4, safe mode, the 60-curve group of layer 7 (group 82 in docs/RESULTS.md,
+    peers): 2-opt/Or-opt stop at 59.69 mm; LKH-3 found 42.79 mm. auto must get there and never
+    claim a bound above."""
+    grp = _slicer_chain_group("real_ideamaker514.gcode.gz", "safe", 7, 60)
     g = greedy.solve(grp)
     assert g.objective_mm > 59.0
     a = auto.solve(grp, time_limit_s=1.0)

@@ -97,13 +97,13 @@ def _rows(model):
 
 
 @needs_shared
-# the bunny's group: 119 curves in layer 277 (index 994 until an E-only G92 stopped ending groups)
-@pytest.mark.parametrize("name,mode,index", [("cura413_bunny_cubic10_mk3.gcode.gz", "safe", 981),
-                                             ("real_ideamaker514.gcode.gz", "safe", 82)])
-def test_real_groups_are_proven_and_agree_with_cpsat(name, mode, index):
+# groups by layer and size: the bunny's 119 curves in layer 277, ideaMaker's 60 in layer 7
+@pytest.mark.parametrize("name,mode,layer,n_curves", [("cura413_bunny_cubic10_mk3.gcode.gz", "safe", 277, 119),
+                                                      ("real_ideamaker514.gcode.gz", "safe", 7, 60)])
+def test_real_groups_are_proven_and_agree_with_cpsat(name, mode, layer, n_curves):
     """Real groups: the symmetric model proves them within seconds; where CP-SAT also proves its
     answer the two optima agree, and the proven optimum is never worse than the ILS path."""
-    grp = _slicer_chain_group(name, mode, index)
+    grp = _slicer_chain_group(name, mode, layer, n_curves)
     assert symmetric.applies(grp)
     a = auto.solve(grp, time_limit_s=20.0)
     grp.check_order(a.order)
