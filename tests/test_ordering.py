@@ -451,6 +451,20 @@ def test_cli_progress_bar_shows_groups_and_proofs():
         assert update is None
 
 
+def _in_slicer_order(prob, solution, layer) -> bool:
+    """Layer ``layer``'s curves are in the slicer's order and direction in ``solution``."""
+    at = prob.curve_layer[solution.curve_order] == layer
+    return (np.array_equal(solution.curve_order[at], np.flatnonzero(prob.curve_layer == layer))
+            and not solution.curve_reversed[solution.curve_order[at]].any())
+
+
+def _layer_times_parse(text, source=None):
+    """Stand-in parse for the time-guard tests: their stand-in emit writes the layer times."""
+    from types import SimpleNamespace
+    t = np.frombuffer(text, float)
+    return SimpleNamespace(n_layers=len(t), layer=np.arange(len(t)), duration_s=t)
+
+
 @pytest.mark.parametrize("neighbour", [-1, +1])
 @pytest.mark.parametrize("gain_s", [0.1, 1.0])
 def test_time_guard_puts_back_the_neighbour_a_kept_layer_still_pays_for(monkeypatch, neighbour, gain_s):
@@ -460,16 +474,13 @@ def test_time_guard_puts_back_the_neighbour_a_kept_layer_still_pays_for(monkeypa
     # Stand-in emit and parse: layer B is 0.6 s slower whenever it or its neighbour A is
     # re-ordered; A re-ordered saves gain_s. With 0.1 s the pair is slower: both go back; with
     # 1.0 s the print is faster with A re-ordered: only B goes back.
-    from types import SimpleNamespace
     from gatesopt.ordering import pipeline
     prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
 
     def slicer_order(s, L):
-        at = prob.curve_layer[s.curve_order] == L
-        return (np.array_equal(s.curve_order[at], np.flatnonzero(prob.curve_layer == L))
-                and not s.curve_reversed[s.curve_order[at]].any())
+        return _in_slicer_order(prob, s, L)
 
     moved = [L for L in range(1, prog.n_layers - 1) if not slicer_order(sol, L)
              and not slicer_order(sol, L + neighbour)]
@@ -486,12 +497,9 @@ def test_time_guard_puts_back_the_neighbour_a_kept_layer_still_pays_for(monkeypa
             t[b] += 0.6
         return t.tobytes()
 
-    def fake_parse(text, source=None):
-        t = np.frombuffer(text, float)
-        return SimpleNamespace(n_layers=len(t), layer=np.arange(len(t)), duration_s=t)
 
     monkeypatch.setattr(pipeline, "emit", fake_emit)
-    monkeypatch.setattr(pipeline, "parse", fake_parse)
+    monkeypatch.setattr(pipeline, "parse", _layer_times_parse)
     final, _, out, kept = pipeline.emit_guarded(prog, prob, sol)
     assert b in kept and slicer_order(final, b)
     after = pipeline.layer_times_s(out)
@@ -511,16 +519,13 @@ def test_time_guard_that_does_not_settle_never_returns_a_slower_print(monkeypatc
     # is 0.5 s slower re-ordered; a re-ordered layer right after one put back is 5 s slower. With
     # two passes the guard cannot settle: it returns the tried state with the shortest print (the
     # first), or, when every tried state is slower than the slicer's, the slicer's order.
-    from types import SimpleNamespace
     from gatesopt.ordering import pipeline
     prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
 
     def slicer_order(s, L):
-        at = prob.curve_layer[s.curve_order] == L
-        return (np.array_equal(s.curve_order[at], np.flatnonzero(prob.curve_layer == L))
-                and not s.curve_reversed[s.curve_order[at]].any())
+        return _in_slicer_order(prob, s, L)
 
     moved = [L for L in range(prog.n_layers) if not slicer_order(sol, L)]
     assert len(moved) >= 5
@@ -539,12 +544,9 @@ def test_time_guard_that_does_not_settle_never_returns_a_slower_print(monkeypatc
                 t[L] += 5.0
         return t.tobytes()
 
-    def fake_parse(text, source=None):
-        t = np.frombuffer(text, float)
-        return SimpleNamespace(n_layers=len(t), layer=np.arange(len(t)), duration_s=t)
 
     monkeypatch.setattr(pipeline, "emit", fake_emit)
-    monkeypatch.setattr(pipeline, "parse", fake_parse)
+    monkeypatch.setattr(pipeline, "parse", _layer_times_parse)
     monkeypatch.setattr(pipeline, "GUARD_PASSES", 2)
     final, _, out, kept = pipeline.emit_guarded(prog, prob, sol)
     after = pipeline.layer_times_s(out)

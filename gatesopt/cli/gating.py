@@ -347,40 +347,42 @@ def _jsonable(v):
 
 
 # ------------------------------------------------------------------------------------------------
-def compare_rows(program, options, formulations, time_limit_s) -> list[dict]:
-    """One row per formulation (greedy first), each a verified run (nothing written)."""
-    from ..gating.pipeline import run
-    from ..gating.solve import FORMULATIONS, is_installed
-    names = ["greedy"] + [f for f in formulations if f != "greedy"]
+def formulation_rows(program, formulations, known, solve_row, installed=lambda name: True) -> list[dict]:
+    """``compare``'s rows: one per formulation, greedy first; ``solve_row(name)`` gives a solved
+    row's values. An unknown name, a backend not installed or a run that fails is a row saying so."""
     rows = []
-    for name in names:
+    for name in ["greedy"] + [f for f in formulations if f != "greedy"]:
         row = {"file": os.path.basename(program.source), "formulation": name}
-        if name not in FORMULATIONS:
+        if name not in known:
             row.update(status="unknown", error=f"unknown formulation {name!r}")
-            rows.append(row)
-            continue
-        if not is_installed(name):
+        elif not installed(name):
             row.update(status="unavailable", error="backend not installed")
-            rows.append(row)
-            continue
-        try:
-            r = run(program, options, formulation=name, time_limit_s=time_limit_s, order=False)
-        except ModuleNotFoundError as exc:
-            row.update(status="unavailable", error=str(exc))
-            rows.append(row)
-            continue
-        except GatesoptError as exc:
-            row.update(status="error", error=str(exc))
-            rows.append(row)
-            continue
-        s = r.summary()
-        row.update({k: s[k] for k in ("saving_pct", "energy_before_j", "energy_after_j", "lines_added",
-                                      "instruction_lines", "size_change_pct", "added_time_pct",
-                                      "status", "gap", "bound", "solve_s", "rotation_deg", "verified")})
-        if not r.report.ok:
-            row["findings"] = [str(f) for f in r.report.findings[:3]]
+        else:
+            try:
+                row.update(solve_row(name))
+            except ModuleNotFoundError as exc:
+                row.update(status="unavailable", error=str(exc))
+            except GatesoptError as exc:
+                row.update(status="error", error=str(exc))
         rows.append(row)
     return rows
+
+
+def compare_rows(program, options, formulations, time_limit_s) -> list[dict]:
+    """One row per gating formulation (greedy first), each a verified run (nothing written)."""
+    from ..gating.pipeline import run
+    from ..gating.solve import FORMULATIONS, is_installed
+
+    def solve_row(name):
+        r = run(program, options, formulation=name, time_limit_s=time_limit_s, order=False)
+        s = r.summary()
+        row = {k: s[k] for k in ("saving_pct", "energy_before_j", "energy_after_j", "lines_added",
+                                 "instruction_lines", "size_change_pct", "added_time_pct",
+                                 "status", "gap", "bound", "solve_s", "rotation_deg", "verified")}
+        if not r.report.ok:
+            row["findings"] = [str(f) for f in r.report.findings[:3]]
+        return row
+    return formulation_rows(program, formulations, FORMULATIONS, solve_row, is_installed)
 
 
 def format_compare(rows: list[dict]) -> str:
@@ -431,30 +433,19 @@ def compare_order_rows(program, options, formulations, budget_s: float, workers:
     """``compare --ordering``: one row per curve-ordering formulation (greedy, the Fleming et al.
     baseline, first), each a verified run with ``budget_s`` for the whole of it (nothing written)."""
     from ..ordering.pipeline import order_program
-    names = ["greedy"] + [f for f in formulations if f != "greedy"]
-    rows = []
-    for name in names:
-        row = {"file": os.path.basename(program.source), "formulation": name}
-        if name not in ORDER_FORMULATIONS:
-            row.update(status="unknown", error=f"unknown formulation {name!r}")
-            rows.append(row)
-            continue
-        try:
-            r = order_program(program, options, formulation=name, budget_s=budget_s, workers=workers)
-        except GatesoptError as exc:
-            row.update(status="error", error=str(exc))
-            rows.append(row)
-            continue
+
+    def solve_row(name):
+        r = order_program(program, options, formulation=name, budget_s=budget_s, workers=workers)
         s = r.summary
-        row.update({k: s[k] for k in ("travel_before_mm", "travel_after_mm", "travel_change_pct",
-                                      "model_travel_after_mm", "print_time_before_s", "print_time_after_s", "groups_reordered",
-                                      "groups_optimal", "groups_feasible", "groups_fallback",
-                                      "worst_gap", "solve_s", "wall_s")})
+        row = {k: s[k] for k in ("travel_before_mm", "travel_after_mm", "travel_change_pct",
+                                 "model_travel_after_mm", "print_time_before_s", "print_time_after_s",
+                                 "groups_reordered", "groups_optimal", "groups_feasible",
+                                 "groups_fallback", "worst_gap", "solve_s", "wall_s")}
         row["verified"] = bool(r.ok)
         if not r.ok:
             row["findings"] = [str(f) for f in r.findings[:3]]
-        rows.append(row)
-    return rows
+        return row
+    return formulation_rows(program, formulations, ORDER_FORMULATIONS, solve_row)
 
 
 def format_compare_order(rows: list[dict]) -> str:
