@@ -102,8 +102,11 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     """Emit and re-parse; with ``time_guard``, layers whose re-ordered print takes longer than
     the slicer's keep its order (emitted again). Returns (solution, text, output, those layers)."""
     memo: dict = {}                     # layers that did not change are not emitted again
-    text = emit(program, problem, solution, memo)
-    out = parse(text, source=f"{program.source} (re-ordered)")
+
+    def emitted(solution):
+        text = emit(program, problem, solution, memo)
+        return text, parse(text, source=f"{program.source} (re-ordered)")
+    text, out = emitted(solution)
     kept = np.zeros(0, np.int64)
     if not time_guard or out.n_layers != program.n_layers:
         return solution, text, out, kept
@@ -142,12 +145,10 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
                 return best[1]
             kept = np.arange(program.n_layers)
             solution = keep_layers(problem, solution, kept)
-            text = emit(program, problem, solution, memo)
-            return solution, text, parse(text, source=f"{program.source} (re-ordered)"), kept
+            return (solution, *emitted(solution), kept)
         kept = np.union1d(kept, slower)
         solution = keep_layers(problem, solution, kept)
-        text = emit(program, problem, solution, memo)
-        out = parse(text, source=f"{program.source} (re-ordered)")
+        text, out = emitted(solution)
     return solution, text, out, kept
 
 
