@@ -88,6 +88,67 @@ def test_blossom_cut_separates_an_odd_cycle_of_half_edges():
         assert act >= lo[r] - 1e-9
 
 
+def _chord_group(seed: int, n_max: int = 15):
+    """Lines in three directions clipped to an ellipse, shuffled (like cubic or triangles infill:
+    every end point on the boundary, travel between neighbouring ends)."""
+    from gatesopt.ordering import OrderingOptions, from_polylines
+    rng = np.random.default_rng(seed)
+    a, b = rng.uniform(8, 14), rng.uniform(6, 12)
+    lines = []
+    for ang in (0.0, np.pi / 3, 2 * np.pi / 3):
+        ang += rng.uniform(-0.05, 0.05)
+        d = np.array([np.cos(ang), np.sin(ang)])
+        nrm = np.array([-d[1], d[0]])
+        off = rng.uniform(0, 1)
+        for k in range(-8, 9):
+            c = (k + off) * rng.uniform(4.5, 5.5) * nrm
+            # c + t d on the ellipse x²/a² + y²/b² = 1
+            qa = d[0] ** 2 / a ** 2 + d[1] ** 2 / b ** 2
+            qb = 2 * (c[0] * d[0] / a ** 2 + c[1] * d[1] / b ** 2)
+            qc = c[0] ** 2 / a ** 2 + c[1] ** 2 / b ** 2 - 1
+            disc = qb * qb - 4 * qa * qc
+            if disc <= 0 or np.sqrt(disc) / qa < 1.0:
+                continue
+            t1, t2 = (-qb - np.sqrt(disc)) / (2 * qa), (-qb + np.sqrt(disc)) / (2 * qa)
+            lines.append(np.array([c + t1 * d, c + t2 * d]))
+    rng.shuffle(lines)
+    prob = from_polylines([lines[:n_max]], origin_xy=(a + 2, 0.0),
+                          options=OrderingOptions(mode="free"))
+    return prob.group(0, prob.origin_xy)
+
+
+def test_exact_blossoms_cut_off_what_the_heuristic_left_and_keep_every_path():
+    """After a root with the fast separators only, the Gomory–Hu blossom separation (Letchford,
+    Reinelt and Theis) must find violated blossoms on some chord groups; every cut it adds is
+    violated by the LP point it was separated from and satisfied by the DP's optimal path, and
+    the root with it is never above the optimum, and above the fast separators' root on some."""
+    found = raised = 0
+    for seed in range(40):
+        grp = _chord_group(seed)
+        assert symmetric.applies(grp) and dp.fits(grp)
+        opt = dp.solve(grp)
+        model = symmetric.SymmetricModel(grp, greedy.nearest_neighbour(grp))
+        base = model.root(time.perf_counter() + 30, exact_blossoms_s=0.0)
+        x = np.asarray(model.h.getSolution().col_value)
+        n_rows = model.h.getNumRow()
+        n = model._blossoms_exact(x, time.perf_counter() + 30)
+        assert n == model.h.getNumRow() - n_rows
+        if n == 0:
+            continue
+        found += 1
+        tour = model.columns_of(opt.order)
+        lo, starts, idx, val = _rows(model)
+        for r in range(n_rows, n_rows + n):
+            k = range(starts[r], starts[r + 1])
+            assert sum(val[j] * x[idx[j]] for j in k) < lo[r] - 0.05       # violated by x
+            assert sum(val[j] * tour[idx[j]] for j in k) >= lo[r] - 1e-9   # kept by the path
+        again = symmetric.SymmetricModel(grp, greedy.nearest_neighbour(grp))
+        bound = again.root(time.perf_counter() + 30, exact_blossoms_s=30.0)
+        assert bound <= opt.objective_mm + 1e-6
+        raised += bound > base + 1e-3
+    assert found >= 5 and raised >= 5, (found, raised)
+
+
 def _rows(model):
     h = model.h
     n_rows = h.getNumRow()

@@ -66,6 +66,7 @@ def warm_up() -> None:
     prob = from_polylines([lines, lines[:DP_FIRST_CURVES]])
     solve(prob.group(0, prob.origin_xy), time_limit_s=1.0)                # greedy, ILS, model
     solve(prob.group(1, prob.origin_xy), time_limit_s=1.0)                # DP
+    symmetric.load_kernels()        # what these groups may not have reached
 
 
 def exact_time_s(n_curves):

@@ -43,6 +43,11 @@ MAX_BRANCH_COLUMNS_PER_NODE = 40
 POLISH_KICKS_PER_CURVE = 1
 #: at most this many priced-in columns per pricing round, per node of the graph
 PRICE_PER_NODE = 1
+#: share of a group's time (from the root's start) in which the root may separate blossoms
+#: exactly (``_blossoms_exact``) once the fast separators find nothing
+EXACT_BLOSSOM_SHARE = 0.25
+EXACT_BLOSSOM_MAX_CUTS = 10
+EXACT_BLOSSOM_MIN_VIOLATION = 0.1
 #: separation rounds per branch-and-cut node (then it is branched on its last LP point)
 MAX_NODE_CUT_ROUNDS = 50
 
@@ -132,6 +137,7 @@ class SymmetricModel:
         self.ev = np.zeros(0, np.int64)
         self.present = np.zeros((N, N), bool)
         self.cut_inside: list[np.ndarray] = []
+        self.exact_blossoms_until = -np.inf     # ``root`` sets it: when exact blossoms stop
         h = self.h = highspy.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("random_seed", 0)
@@ -236,7 +242,10 @@ class SymmetricModel:
         if integer:
             return 0
         n = self._min_cuts(x, deadline)
-        return n + self._blossoms(x)
+        n += self._blossoms(x)
+        if n == 0 and time.perf_counter() < self.exact_blossoms_until:
+            n = self._blossoms_exact(x, min(deadline, self.exact_blossoms_until))
+        return n
 
     def _min_cuts(self, x: np.ndarray, deadline: float, max_cuts: int = 40) -> int:
         """A minimum S-v cut (capacities x, fixed edges 1) below 2 is a violated subtour cut
@@ -257,17 +266,7 @@ class SymmetricModel:
         key, inv = np.unique(np.minimum(u, v)[keep] * n_sh + np.maximum(u, v)[keep], return_inverse=True)
         w = np.bincount(inv, weights=x[on][keep], minlength=len(key))
         u, v = key // n_sh, key % n_sh
-        # directed residual arcs u->v and v->u, each with capacity w, paired by ``rev``
-        tail = np.concatenate([u, v])
-        head = np.concatenate([v, u])
-        m = len(u)
-        rev = np.concatenate([np.arange(m, 2 * m), np.arange(m)])
-        srt = np.argsort(tail, kind="stable")
-        inv = np.empty_like(srt)
-        inv[srt] = np.arange(len(srt))
-        indptr = np.searchsorted(tail[srt], np.arange(n_sh + 1)).astype(np.int64)
-        cuts = _subtour_cuts(n_sh, indptr, head[srt].astype(np.int64), np.concatenate([w, w])[srt],
-                             inv[rev[srt]].astype(np.int64), max_cuts,
+        cuts = _subtour_cuts(n_sh, *_residual_arcs(n_sh, u, v, w), max_cuts,
                              float(deadline - time.perf_counter()))
         for reach in cuts:
             self.add_cut(reach[lab])
@@ -314,6 +313,77 @@ class SymmetricModel:
             self.add_cut(inside, (tooth_col, tooth_fixed))
             n_cuts += 1
         return n_cuts
+
+    def _blossoms_exact(self, x: np.ndarray, deadline: float, max_cuts: int | None = None,
+                        min_violation: float | None = None) -> int:
+        """Blossoms the odd-component heuristic misses (Letchford, Reinelt and Theis, "Odd
+        minimum cut sets and b-matchings revisited", 2008). For a handle H the best odd T of
+        δ(H) takes the edges with x > 1/2, and if their number is even the edge with the least
+        |1 - 2x| changes side, so ``x(δ(H) \\ T) + Σ_T (1 - x) = Σ_δ(H) min(x, 1 - x)`` plus that
+        parity term; the blossom is violated when this is below 1. The candidate handles are the
+        minimum cuts of a Gomory–Hu tree (Gusfield's n - 1 maximum flows) under the weights
+        min(x, 1 - x), within each component of the fractional edges (edges at 1 weigh 0). LRT
+        show that a most violated blossom is among such cuts; here teeth need not be disjoint (the
+        inequality is valid for any odd T, by the parity of x(δ(H)) on a tour)."""
+        max_cuts = EXACT_BLOSSOM_MAX_CUTS if max_cuts is None else max_cuts
+        min_violation = EXACT_BLOSSOM_MIN_VIOLATION if min_violation is None else min_violation
+        frac = (x > _EPS) & (x < 1 - _EPS)
+        if not frac.any():
+            return 0
+        N = self.N
+        ones = np.nonzero(x >= 1 - _EPS)[0]
+        one_u = np.concatenate([self.eu[ones], self.fixed_u])
+        one_v = np.concatenate([self.ev[ones], self.fixed_v])
+        one_col = np.concatenate([ones, np.full(len(self.fixed_u), -1)])
+        fcol = np.nonzero(frac)[0]
+        fu, fv, fx = self.eu[fcol], self.ev[fcol], x[fcol]
+        _, lab = components(N, fu, fv)
+        touched = np.zeros(N, bool)
+        touched[fu] = touched[fv] = True
+        found, seen = [], set()
+        for comp in np.unique(lab[touched]).tolist():
+            nodes = np.flatnonzero(lab == comp)
+            n = len(nodes)
+            if n < 3:
+                continue
+            local = np.full(N, -1)
+            local[nodes] = np.arange(n)
+            mine = lab[fu] == comp
+            w = np.minimum(fx[mine], 1.0 - fx[mine])
+            indptr, head, cap, rev = _residual_arcs(n, local[fu[mine]], local[fv[mine]], w)
+            sides = _gomory_hu_sides(n, indptr, head, cap, rev,
+                                     float(deadline - time.perf_counter()))
+            for side in sides:
+                inside = np.zeros(N, bool)
+                inside[nodes[side]] = True
+                key = inside.tobytes()
+                if key in seen:
+                    continue
+                seen.add(key)
+                cross_f = inside[fu] != inside[fv]
+                xs = fx[cross_f]
+                cross_1 = inside[one_u] != inside[one_v]
+                tooth = xs > 0.5
+                value = float(np.minimum(xs, 1.0 - xs).sum())
+                if (int(tooth.sum()) + int(cross_1.sum())) % 2 == 0:
+                    # parity: the fractional edge with the least |1 - 2x| changes side (an edge at
+                    # 1 leaving T would cost 1: no violation)
+                    if len(xs) == 0:
+                        continue
+                    j = int(np.argmin(np.abs(1.0 - 2.0 * xs)))
+                    value += abs(1.0 - 2.0 * xs[j])
+                    tooth[j] = not tooth[j]
+                if value < 1.0 - min_violation:
+                    cols = one_col[cross_1]
+                    found.append((value, inside,
+                                  np.concatenate([fcol[cross_f][tooth], cols[cols >= 0]])))
+            if time.perf_counter() > deadline:
+                break
+        found.sort(key=lambda f: f[0])
+        for _, inside, tooth_col in found[:max_cuts]:
+            self.add_cut(inside, (tooth_col.astype(np.int64),
+                                  inside[self.fixed_u] != inside[self.fixed_v]))
+        return min(len(found), max_cuts)
 
     # -- duals ------------------------------------------------------------------------------
 
@@ -395,11 +465,21 @@ class SymmetricModel:
 
     # -- the solve ----------------------------------------------------------------------------
 
-    def root(self, deadline: float, max_rounds: int = 500, cuts: bool = True) -> float:
+    def root(self, deadline: float, max_rounds: int = 500, cuts: bool = True,
+             exact_blossoms_s: float = 0.0) -> float:
         """Cutting planes and pricing on the LP until neither finds anything (or time is up).
         Returns a valid lower bound (0 if no LP was solved); ``self.complete`` tells whether the
         LP of the whole graph was solved to optimality. ``cuts=False``: pricing only, the bound
-        of the degree equations alone (a fractional matching; bench/ordering_gaps.py compares)."""
+        of the degree equations alone (a fractional matching; bench/ordering_gaps.py compares).
+        For the first ``exact_blossoms_s`` seconds, rounds where the other separators find
+        nothing also try ``_blossoms_exact``."""
+        self.exact_blossoms_until = time.perf_counter() + exact_blossoms_s
+        try:
+            return self._root(deadline, max_rounds, cuts)
+        finally:
+            self.exact_blossoms_until = -np.inf     # branch-and-cut nodes: the fast separators
+
+    def _root(self, deadline: float, max_rounds: int, cuts: bool) -> float:
         self.complete = False
         bound = 0.0
         t_round = 0.0                           # the longest round so far
@@ -557,7 +637,8 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     best = np.asarray(incumbent, np.int64)
     best_obj = group.path_cost_mm(best)
     model = SymmetricModel(group, best)
-    bound = model.root(deadline)
+    bound = model.root(deadline,
+                       exact_blossoms_s=EXACT_BLOSSOM_SHARE * (deadline - time.perf_counter()))
     if best_obj - bound > OPTIMAL_ABS_TOL_MM and model.complete:
         x = np.asarray(model.h.getSolution().col_value)
         best, best_obj = model._polish(model.tour_from(x), best, best_obj, bound, deadline)
@@ -566,6 +647,91 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     if not model.complete:
         return best, best_obj, bound, False
     return model.branch(best, best_obj, bound, deadline)
+
+
+def load_kernels() -> None:
+    """Compile (or load from numba's cache) the kernels of the exact blossom separation on a
+    made-up triangle, so that the first group that needs them does not pay for it."""
+    arcs = _residual_arcs(3, np.array([0, 1, 2]), np.array([1, 2, 0]), np.full(3, 0.5))
+    _gomory_hu_sides(3, *arcs, 1.0)
+
+
+def _residual_arcs(n: int, u, v, w):
+    """An undirected graph (edges u-v of capacity w) as residual arcs for the max flows below:
+    u->v and v->u, each with capacity w, grouped by tail (``indptr``) and paired by ``rev``."""
+    tail = np.concatenate([u, v])
+    head = np.concatenate([v, u])
+    m = len(u)
+    rev = np.concatenate([np.arange(m, 2 * m), np.arange(m)])
+    srt = np.argsort(tail, kind="stable")
+    inv = np.empty_like(srt)
+    inv[srt] = np.arange(len(srt))
+    indptr = np.searchsorted(tail[srt], np.arange(n + 1)).astype(np.int64)
+    return (indptr, head[srt].astype(np.int64), np.concatenate([w, w])[srt].astype(np.float64),
+            inv[rev[srt]].astype(np.int64))
+
+
+@numba.njit(cache=True)
+def _source_side(indptr, head, cap, rev, s, t, queue, parent):
+    """Edmonds–Karp maximum flow from s to t; returns the source side of a minimum cut (the
+    nodes reachable from s in the residual graph)."""
+    r = cap.copy()
+    while True:
+        parent[:] = -2
+        parent[s] = -1
+        qh, qt = 0, 1
+        queue[0] = s
+        while qh < qt and parent[t] == -2:
+            a = queue[qh]
+            qh += 1
+            for e in range(indptr[a], indptr[a + 1]):
+                b = head[e]
+                if parent[b] == -2 and r[e] > 1e-9:
+                    parent[b] = e
+                    queue[qt] = b
+                    qt += 1
+        if parent[t] == -2:             # that search ran to the end: parent marks the side
+            return parent != -2
+        f = np.inf
+        b = t
+        while b != s:
+            e = parent[b]
+            f = min(f, r[e])
+            b = head[rev[e]]
+        b = t
+        while b != s:
+            e = parent[b]
+            r[e] -= f
+            r[rev[e]] += f
+            b = head[rev[e]]
+
+
+@numba.njit(cache=True)
+def _gomory_hu_sides(n, indptr, head, cap, rev, seconds):
+    """Gusfield's Gomory–Hu cut tree: for s = 1 .. n-1 a minimum cut between s and its current
+    tree neighbour t, whose s side re-hangs the later nodes of t that it holds. Returns the s side
+    of each of these n - 1 cuts (fewer if ``seconds`` run out)."""
+    tree = np.zeros(n, np.int64)
+    sides = np.zeros((n - 1, n), np.bool_)
+    queue = np.empty(n, np.int64)
+    parent = np.empty(n, np.int64)
+    with numba.objmode(t0="f8"):
+        t0 = time.perf_counter()
+    k = 0
+    for s in range(1, n):
+        if s % 16 == 0:
+            with numba.objmode(now="f8"):
+                now = time.perf_counter()
+            if now - t0 > seconds:
+                break
+        t = tree[s]
+        side = _source_side(indptr, head, cap, rev, s, t, queue, parent)
+        sides[k] = side
+        k += 1
+        for i in range(s + 1, n):
+            if side[i] and tree[i] == t:
+                tree[i] = s
+    return sides[:k]
 
 
 @numba.njit(cache=True)
