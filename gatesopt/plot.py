@@ -139,10 +139,10 @@ def plot_profile(report: EnergyReport, path, *, bins: int = 2000, title: str | N
     return save_png(fig, p)
 
 
-def save_png(fig, p: Path) -> Path:
+def save_png(fig, p: Path, dpi: int = DPI) -> Path:
     """Write ``fig`` to ``p`` (checked by ``check_png_path``) as PNG; ``PlotError`` if it cannot."""
     try:
-        fig.savefig(p, format="png", dpi=DPI)
+        fig.savefig(p, format="png", dpi=dpi)
     except OSError as exc:
         raise PlotError(f"{p}: cannot write: {exc.strerror or exc}") from None
     return p

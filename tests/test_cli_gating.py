@@ -168,6 +168,25 @@ def test_compare_refuses_a_plot_that_is_no_png_before_solving(square, tmp_path, 
     assert not (tmp_path / "cmp.txt").exists()
 
 
+def test_compare_plot_that_cannot_be_written_is_a_one_line_error(square, tmp_path, capsys,
+                                                                   monkeypatch):
+    """A plot path that passes the early checks but cannot be written when the figure is saved
+    (the disk fills, the folder's permissions change during the solve) is reported as the plot's
+    error, exit code 2, not a traceback; the JSON report asked for is not written after it."""
+    import matplotlib.figure
+
+    def refuse(self, *args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", refuse)
+    png, js = tmp_path / "cmp.png", tmp_path / "cmp.json"
+    rc = main(["compare", str(square), "--formulations", "dp", "--rotate", "none",
+               "--plot", str(png), "--json", str(js)])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "cmp.png: cannot write: Permission denied" in err and "Traceback" not in err
+    assert not png.exists() and not js.exists()
+
+
 def test_solve_reports_the_ordering_and_takes_its_mode(tmp_path, capsys):
     """``solve`` re-orders, then gates; its report and JSON carry the ordering's travel and group
     counts (issue 4), ``--order-mode free`` re-orders across features, and ``--formulation milp``

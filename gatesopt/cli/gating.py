@@ -403,6 +403,7 @@ def format_compare(rows: list[dict]) -> str:
 
 
 def plot_compare(rows: list[dict], path: str, ordering: bool = False) -> None:
+    from ..plot import check_png_path, save_png
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -425,8 +426,10 @@ def plot_compare(rows: list[dict], path: str, ordering: bool = False) -> None:
     ax.set_title(title)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        save_png(fig, check_png_path(path), dpi=120)
+    finally:
+        plt.close(fig)
 
 
 def compare_order_rows(program, options, formulations, budget_s: float, workers: int) -> list[dict]:
