@@ -128,7 +128,8 @@ def report(args) -> str:
              "the bold lines give the print time (paper time model) and how many layers it kept. "
              "Peers (LKH via elkai, OR-Tools routing) are in the sections \"peers\" and \"peers on large "
              "groups\"; why unproven groups keep wide gaps (the cheap bound of fallback groups; strips of "
-             "parallel lines whose parity the LP does not see) in \"where the gaps come from\".", ""]
+             "parallel lines whose parity the LP does not see) in \"where the gaps come from\"; what exact blossom separation "
+             "adds to the root in \"exact blossom separation at the root\".", ""]
     for form, tl, bud, w in configs:
         for mode in ("safe", "free"):
             rs = sorted((r for r in rows if r["formulation"] == form and r["order_mode"] == mode
