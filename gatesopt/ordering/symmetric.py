@@ -672,11 +672,13 @@ def _residual_arcs(n: int, u, v, w):
 
 
 @numba.njit(cache=True)
-def _source_side(indptr, head, cap, rev, s, t, queue, parent):
-    """Edmonds–Karp maximum flow from s to t; returns the source side of a minimum cut (the
-    nodes reachable from s in the residual graph)."""
+def _max_flow(indptr, head, cap, rev, s, t, limit, queue, parent):
+    """Edmonds–Karp maximum flow from s to t (residual arcs of ``_residual_arcs``), stopped once
+    it reaches ``limit``. Returns (flow, side); below the limit, ``side`` is the source side of a
+    minimum cut: the nodes the last search reached in the residual graph (it ran to the end)."""
     r = cap.copy()
-    while True:
+    flow = 0.0
+    while flow < limit - 1e-6:
         parent[:] = -2
         parent[s] = -1
         qh, qt = 0, 1
@@ -690,9 +692,10 @@ def _source_side(indptr, head, cap, rev, s, t, queue, parent):
                     parent[b] = e
                     queue[qt] = b
                     qt += 1
-        if parent[t] == -2:             # that search ran to the end: parent marks the side
-            return parent != -2
-        f = np.inf
+        if parent[t] == -2:
+            break
+        # bottleneck along the path, then push
+        f = limit - flow
         b = t
         while b != s:
             e = parent[b]
@@ -704,6 +707,8 @@ def _source_side(indptr, head, cap, rev, s, t, queue, parent):
             r[e] -= f
             r[rev[e]] += f
             b = head[rev[e]]
+        flow += f
+    return flow, parent != -2
 
 
 @numba.njit(cache=True)
@@ -725,7 +730,7 @@ def _gomory_hu_sides(n, indptr, head, cap, rev, seconds):
             if now - t0 > seconds:
                 break
         t = tree[s]
-        side = _source_side(indptr, head, cap, rev, s, t, queue, parent)
+        _, side = _max_flow(indptr, head, cap, rev, s, t, np.inf, queue, parent)
         sides[k] = side
         k += 1
         for i in range(s + 1, n):
@@ -754,55 +759,9 @@ def _subtour_cuts(n, indptr, head, cap, rev, max_cuts, seconds):
                 now = time.perf_counter()
             if now - t0 > seconds:
                 break
-        r = cap.copy()
-        flow = 0.0
-        while flow < 2.0 - 1e-6:
-            parent[:] = -2
-            parent[0] = -1
-            qh, qt = 0, 1
-            queue[0] = 0
-            while qh < qt and parent[t] == -2:
-                a = queue[qh]
-                qh += 1
-                for e in range(indptr[a], indptr[a + 1]):
-                    b = head[e]
-                    if parent[b] == -2 and r[e] > 1e-9:
-                        parent[b] = e
-                        queue[qt] = b
-                        qt += 1
-            if parent[t] == -2:
-                break
-            # bottleneck along the path, then push
-            f = 2.0 - flow
-            b = t
-            while b != 0:
-                e = parent[b]
-                if r[e] < f:
-                    f = r[e]
-                b = head[rev[e]]
-            b = t
-            while b != 0:
-                e = parent[b]
-                r[e] -= f
-                r[rev[e]] += f
-                b = head[rev[e]]
-            flow += f
+        flow, reach = _max_flow(indptr, head, cap, rev, 0, t, 2.0, queue, parent)
         if flow >= 2.0 - 1e-6:
             continue
-        # source side: reachable from 0 in the residual graph (the last BFS, run to the end)
-        reach = np.zeros(n, np.bool_)
-        reach[0] = True
-        qh, qt = 0, 1
-        queue[0] = 0
-        while qh < qt:
-            a = queue[qh]
-            qh += 1
-            for e in range(indptr[a], indptr[a + 1]):
-                b = head[e]
-                if not reach[b] and r[e] > 1e-9:
-                    reach[b] = True
-                    queue[qt] = b
-                    qt += 1
         for b in range(n):
             if not reach[b]:
                 done[b] = True
