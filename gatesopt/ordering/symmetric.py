@@ -137,7 +137,6 @@ class SymmetricModel:
         self.ev = np.zeros(0, np.int64)
         self.present = np.zeros((N, N), bool)
         self.cut_inside: list[np.ndarray] = []
-        self.exact_blossoms_until = -np.inf     # ``root`` sets it: when exact blossoms stop
         h = self.h = highspy.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("random_seed", 0)
@@ -230,10 +229,12 @@ class SymmetricModel:
         return components(self.N, np.concatenate([self.eu[on], self.fixed_u]),
                           np.concatenate([self.ev[on], self.fixed_v]))
 
-    def separate(self, x: np.ndarray, deadline: float, integer: bool = False) -> int:
+    def separate(self, x: np.ndarray, deadline: float, integer: bool = False,
+                 exact_blossoms_until: float = -np.inf) -> int:
         """Add violated cuts for the point ``x``; returns how many. Components of the support
         first; a connected support gets exact subtour separation by minimum cuts and the
-        odd-component blossom heuristic."""
+        odd-component blossom heuristic; if these find nothing before ``exact_blossoms_until``
+        (a ``time.perf_counter()`` value), exact blossom separation."""
         ncomp, lab = self._support_components(x > _EPS)
         if ncomp > 1:
             for comp in range(ncomp):
@@ -243,8 +244,8 @@ class SymmetricModel:
             return 0
         n = self._min_cuts(x, deadline)
         n += self._blossoms(x)
-        if n == 0 and time.perf_counter() < self.exact_blossoms_until:
-            n = self._blossoms_exact(x, min(deadline, self.exact_blossoms_until))
+        if n == 0 and time.perf_counter() < exact_blossoms_until:
+            n = self._blossoms_exact(x, min(deadline, exact_blossoms_until))
         return n
 
     def _min_cuts(self, x: np.ndarray, deadline: float, max_cuts: int = 40) -> int:
@@ -314,8 +315,7 @@ class SymmetricModel:
             n_cuts += 1
         return n_cuts
 
-    def _blossoms_exact(self, x: np.ndarray, deadline: float, max_cuts: int | None = None,
-                        min_violation: float | None = None) -> int:
+    def _blossoms_exact(self, x: np.ndarray, deadline: float) -> int:
         """Blossoms the odd-component heuristic misses (Letchford, Reinelt and Theis, "Odd
         minimum cut sets and b-matchings revisited", 2008). For a handle H the best odd T of
         δ(H) takes the edges with x > 1/2, and if their number is even the edge with the least
@@ -324,9 +324,9 @@ class SymmetricModel:
         minimum cuts of a Gomory–Hu tree (Gusfield's n - 1 maximum flows) under the weights
         min(x, 1 - x), within each component of the fractional edges (edges at 1 weigh 0). LRT
         show that a most violated blossom is among such cuts; here teeth need not be disjoint (the
-        inequality is valid for any odd T, by the parity of x(δ(H)) on a tour)."""
-        max_cuts = EXACT_BLOSSOM_MAX_CUTS if max_cuts is None else max_cuts
-        min_violation = EXACT_BLOSSOM_MIN_VIOLATION if min_violation is None else min_violation
+        inequality is valid for any odd T, by the parity of x(δ(H)) on a tour). The
+        ``EXACT_BLOSSOM_MAX_CUTS`` most violated, by at least ``EXACT_BLOSSOM_MIN_VIOLATION``,
+        enter."""
         frac = (x > _EPS) & (x < 1 - _EPS)
         if not frac.any():
             return 0
@@ -373,17 +373,17 @@ class SymmetricModel:
                     j = int(np.argmin(np.abs(1.0 - 2.0 * xs)))
                     value += abs(1.0 - 2.0 * xs[j])
                     tooth[j] = not tooth[j]
-                if value < 1.0 - min_violation:
+                if value < 1.0 - EXACT_BLOSSOM_MIN_VIOLATION:
                     cols = one_col[cross_1]
                     found.append((value, inside,
                                   np.concatenate([fcol[cross_f][tooth], cols[cols >= 0]])))
             if time.perf_counter() > deadline:
                 break
         found.sort(key=lambda f: f[0])
-        for _, inside, tooth_col in found[:max_cuts]:
+        for _, inside, tooth_col in found[:EXACT_BLOSSOM_MAX_CUTS]:
             self.add_cut(inside, (tooth_col.astype(np.int64),
                                   inside[self.fixed_u] != inside[self.fixed_v]))
-        return min(len(found), max_cuts)
+        return min(len(found), EXACT_BLOSSOM_MAX_CUTS)
 
     # -- duals ------------------------------------------------------------------------------
 
@@ -472,14 +472,8 @@ class SymmetricModel:
         LP of the whole graph was solved to optimality. ``cuts=False``: pricing only, the bound
         of the degree equations alone (a fractional matching; bench/ordering_gaps.py compares).
         For the first ``exact_blossoms_s`` seconds, rounds where the other separators find
-        nothing also try ``_blossoms_exact``."""
-        self.exact_blossoms_until = time.perf_counter() + exact_blossoms_s
-        try:
-            return self._root(deadline, max_rounds, cuts)
-        finally:
-            self.exact_blossoms_until = -np.inf     # branch-and-cut nodes: the fast separators
-
-    def _root(self, deadline: float, max_rounds: int, cuts: bool) -> float:
+        nothing also try ``_blossoms_exact`` (branch-and-cut nodes use the fast separators only)."""
+        exact_until = time.perf_counter() + exact_blossoms_s
         self.complete = False
         bound = 0.0
         t_round = 0.0                           # the longest round so far
@@ -496,7 +490,7 @@ class SymmetricModel:
             last_chance = time.perf_counter() + 2 * t_round > deadline
             if last_chance:
                 bound = max(bound, self.lp_bound(obj, self.reduced_costs()))
-            found = self.separate(x, deadline) if cuts else 0
+            found = self.separate(x, deadline, exact_blossoms_until=exact_until) if cuts else 0
             t_round = max(t_round, time.perf_counter() - t)
             if found:
                 continue
