@@ -70,8 +70,9 @@ def _warning_kind(message: str) -> str:
 def _keep_new_warnings(prog, warnings: list, warned: set) -> None:
     """Append ``prog``'s parse warnings of a kind not given yet (``_warning_kind``)."""
     for w in prog.warnings:
-        if _warning_kind(w) not in warned:
-            warned.add(_warning_kind(w))
+        kind = _warning_kind(w)
+        if kind not in warned:
+            warned.add(kind)
             warnings.append(w)
 
 
