@@ -25,18 +25,45 @@ def test_plan_gives_the_smallest_groups_their_exact_time_first():
     plan = layers._BudgetPlan(prob)
     exact = {n: float(auto.exact_time_s(n)) for n in sizes}
     heur = {n: layers.HEURISTIC_S_PER_CURVE * n for n in sizes}
-    # enough for the exact time of 20 and 30, heuristic for the rest, and 1 ms to spare
-    left = exact[20] + exact[30] + heur[80] + heur[150] + heur[60] + 0.001
+    # an exact group is charged its exact time times the ratio proofs used of it so far
+    r = plan.used_ratio
+    assert r == pytest.approx(layers.EXACT_PRIOR_RATIO)
+    # enough for the charge of 20 and 30, heuristic for the rest, and 1 ms to spare
+    left = r * (exact[20] + exact[30]) + heur[80] + heur[150] + heur[60] + 0.001
     scale = left / (left - 0.001)
-    assert plan.limit(1, left) == pytest.approx(exact[20] * scale)
+    assert plan.limit(1, left) == pytest.approx(exact[20] * scale)    # given its whole exact time
     assert plan.limit(3, left) == pytest.approx(exact[30] * scale)
     assert plan.limit(0, left) == pytest.approx(heur[80] * scale)
     assert plan.limit(0, left) < auto.exact_time_s(80)     # auto will not start the model on it
     assert plan.limit(4, left) == left                      # no claim: capped by what is left
     # once 20 and 30 are done, the time they left unused pays the exact time of 60 too
     plan.done(1), plan.done(3)
-    left = exact[60] + heur[80] + heur[150] + 0.001
+    left = r * exact[60] + heur[80] + heur[150] + 0.001
     assert plan.limit(5, left) >= exact[60]
+    assert plan.limit(2, left) < exact[150]
+
+
+def test_plan_learns_what_proofs_use_of_their_exact_time():
+    sizes = [80, 20, 150, 30, 60]
+    prob = from_polylines(_layers_of(sizes, seed=4), options=OrderingOptions(mode="free"))
+    plan = layers._BudgetPlan(prob)
+    exact = {n: float(auto.exact_time_s(n)) for n in sizes}
+    heur = {n: layers.HEURISTIC_S_PER_CURVE * n for n in sizes}
+    # a group given less than its exact time did not try the exact step: not counted
+    plan.measured(0, 0.5 * exact[80], 0.5 * exact[80])
+    assert plan.used_ratio == pytest.approx(layers.EXACT_PRIOR_RATIO)
+    # two proofs that took 1 % of their exact time: the ratio falls towards it
+    for g, n in ((1, 20), (3, 30)):
+        plan.measured(g, exact[n], 0.01 * exact[n])
+        plan.done(g)
+    learnt = ((layers.EXACT_PRIOR_RATIO * layers.EXACT_PRIOR_S + 0.01 * (exact[20] + exact[30]))
+              / (layers.EXACT_PRIOR_S + exact[20] + exact[30]))
+    assert plan.used_ratio == pytest.approx(learnt)
+    assert learnt < 0.8 * layers.EXACT_PRIOR_RATIO
+    # what is left pays for the exact time of 60 and 80 at the learnt ratio, not at the prior
+    left = learnt * (exact[60] + exact[80]) + heur[150] + 0.001
+    assert left < layers.EXACT_PRIOR_RATIO * (exact[60] + exact[80]) + heur[150]
+    assert plan.limit(0, left) >= exact[80]          # planned exact
     assert plan.limit(2, left) < exact[150]
 
 
