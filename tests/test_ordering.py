@@ -1,6 +1,7 @@
 """Curve ordering: formulations against brute force and each other; build/emit/verify on G-code."""
 from __future__ import annotations
 
+import importlib
 import itertools
 from pathlib import Path
 
@@ -419,6 +420,34 @@ def test_emit_memo_reuses_unchanged_layers_and_writes_what_a_fresh_emit_writes(n
     # the layer put back, and at most the next one (entered from another point)
     assert 1 <= len(memo) - n_first <= 2
     assert emit(prog, prob, sol, memo) == emit(prog, prob, sol)
+
+
+@pytest.mark.parametrize("name", ["star_lines_m82.gcode", "cyl_lines_zhop.gcode"])
+def test_emit_copies_unchanged_curves_in_one_piece_as_line_by_line(name, monkeypatch):
+    # an unchanged curve whose lines are all extruding steps is copied as one slice of the file
+    # (_Writer.copy_steps) unless an E word must be re-numbered: the text must be the one the
+    # line-by-line copy writes, for a re-ordered solution and for the slicer's own order
+    emit_module = importlib.import_module("gatesopt.ordering.emit")   # the name is the function
+    from gatesopt.ordering.pipeline import keep_layers
+    prog = gatesopt.parse(str(PROJECT_INSTANCES / name))
+    prob = build(prog, OrderingOptions(mode="free"))
+    sol = solve(prob, "greedy")
+    kept = keep_layers(prob, sol, list(range(prog.n_layers)))
+    used = []
+    copy_steps = emit_module._Writer.copy_steps
+
+    def counted(self, *a):
+        ok = copy_steps(self, *a)
+        used.append(ok)
+        return ok
+    monkeypatch.setattr(emit_module._Writer, "copy_steps", counted)
+    fast = [emit(prog, prob, s) for s in (sol, kept)]
+    assert sum(used) >= 10                          # the one-piece copy did happen
+    if name.endswith("_m82.gcode"):
+        assert not all(used)                        # and an absolute-E layer re-ordered declined it
+    monkeypatch.setattr(emit_module._Writer, "copy_steps", lambda self, *a: False)
+    assert fast == [emit(prog, prob, s) for s in (sol, kept)]
+    assert fast[1] == prog.to_gcode()               # the slicer's order: the file itself
 
 
 def test_progress_is_called_after_every_group_with_the_proofs_so_far():

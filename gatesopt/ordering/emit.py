@@ -26,6 +26,7 @@ Rules (formulations/ordering.md, "Emit"; gatesopt.ordering.build explains the li
 from __future__ import annotations
 
 import bisect
+import math
 import re
 from dataclasses import dataclass
 
@@ -204,7 +205,7 @@ class _Writer:
         self.state: dict = {}
         self.feature = None
         (self.line_cls, self.line_step, self.line_de, self.line_travel, self.step_relative_e,
-         self.step_feed, self.layer_lines, self.arc_steps,
+         self.step_feed, self.step_logical_e, self.step_end_xyz, self.layer_lines, self.arc_steps,
          self.command_lines, self.command_set) = lists or self.per_line(program, lay)
         # neutral commands written so far: the k-th one written is the original's k-th (below)
         self.n_commands = 0
@@ -223,6 +224,8 @@ class _Writer:
                 np.where(has, program.end_mm[s, 3] - program.start_mm[s, 3], 0.0).tolist(),
                 (motion & np.isin(program.kind[s], _TRAVEL_KINDS)).tolist(),
                 program.relative_e.tolist(), program.feed_mm_s.tolist(),
+                (program.end_mm[:, 3] - program.offset_mm[:, 3]).tolist(),
+                np.ascontiguousarray(program.end_mm[:, :3]),    # rows are views: never written
                 frozenset(program.layer_line.tolist()),
                 frozenset(np.flatnonzero(program.kind == Kind.ARC).tolist()),
                 commands, frozenset(commands))
@@ -243,16 +246,15 @@ class _Writer:
         if s >= 0:
             new_e = self.e + self.line_de[i]
             if not self.step_relative_e[s]:
-                code, sep, comment = text.partition(";")
-                m = _E_WORD.search(code)
-                if m:
-                    want = new_e - self.e_off
-                    orig = p.end_mm[s, 3] - p.offset_mm[s, 3]
-                    if abs(want - orig) > 1e-7:
+                want = new_e - self.e_off
+                if abs(want - self.step_logical_e[s]) > 1e-7:
+                    code, sep, comment = text.partition(";")
+                    m = _E_WORD.search(code)
+                    if m:
                         code = code[:m.start(2)] + _num(want, 6) + code[m.end(2):]
                         text = code + sep + comment
             self.e = new_e
-            self.xyz = p.end_mm[s, :3].copy()
+            self.xyz = self.step_end_xyz[s]     # replaced, never written in place
             self.feed = self.step_feed[s]
         else:
             code = text.split(";")[0].strip().upper()
@@ -277,6 +279,26 @@ class _Writer:
         if not text.endswith("\n"):
             text += self.nl
         self.out.append(text)
+
+    def copy_steps(self, l0: int, l1: int, b0: int, b1: int) -> bool:
+        """Lines l0..l1, each an extruding step (bytes b0:b1 of the file), verbatim in one piece,
+        with what ``copy_line`` line by line would leave behind; False (nothing written) where
+        an E word would be re-numbered. In an absolute-E file every line of the block is off
+        by what its first line is off (the block's own E deltas are the original's, rounding
+        ~1e-12 mm apart), so a first line within 1e-8 mm of the original is a block whose
+        every line ``copy_line`` keeps (it re-numbers beyond 1e-7)."""
+        s0 = self.line_step[l0]
+        if (not self.step_relative_e[s0]
+                and abs(self.e + self.line_de[l0] - self.e_off - self.step_logical_e[s0]) > 1e-8):
+            return False
+        e = self.e
+        for d in self.line_de[l0:l1 + 1]:      # summed in copy_line's order: the same float
+            e += d
+        self.e = e
+        s1 = self.line_step[l1]
+        self.xyz, self.feed = self.step_end_xyz[s1], self.step_feed[s1]
+        self.out.append(self.p.data[b0:b1].decode("utf-8", "surrogateescape"))
+        return True
 
     def write(self, text: str) -> None:
         self.out.append(text + self.nl)
@@ -314,13 +336,16 @@ class _Writer:
         self.write(f"G1 E{_num(val, 6)}{self._f(feed_mm_s)}")
 
     def move_xyz(self, xyz, feed_mm_s: float, cmd: str, offset) -> None:
+        # plain floats: numpy scalar arithmetic, three axes per travel, was a tenth of the emit
+        new = [float(v) for v in xyz]
+        cur, off = self.xyz.tolist(), offset.tolist()
         words = ""
         for ax, k in (("X", 0), ("Y", 1), ("Z", 2)):
-            if abs(xyz[k] - self.xyz[k]) > 1e-9:
-                words += f" {ax}{_num(xyz[k] - offset[k], 5)}"
+            if abs(new[k] - cur[k]) > 1e-9:
+                words += f" {ax}{_num(new[k] - off[k], 5)}"
         if words:
             self.write(f"{cmd}{words}{self._f(feed_mm_s)}")
-            self.xyz = np.asarray(xyz, float).copy()
+            self.xyz = np.array(new)
 
     def step(self, s: int, reverse: bool) -> None:
         """One extruding step of the original, forwards or backwards, as a new line."""
@@ -468,16 +493,33 @@ class _Plan:
         self.p, self.lay, self.style, self.walls = p, lay, style, walls
         self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
         self.changed = (rev | (seam != 0)).tolist()
-        self.group_first, self.layer, self.l0, self.l1, self.feature, self.req = per_curve
+        (self.group_first, self.layer, self.l0, self.l1, self.feature, self.req,
+         self.curve_state, self.block) = per_curve
 
     @staticmethod
     def per_curve(p: Program, problem: OrderingProblem, lay: Layout) -> tuple:
         """What does not depend on the order: each curve's group's original first curve, layer,
-        first and last line, feature, and the state lines in force at any line."""
+        first and last line, feature, the state lines in force at any line and, per state key,
+        the text in force at each curve's first line (None before the first: ``_state_at`` for
+        every curve at once)."""
         gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
+        req = _required_state(p, lay)
+        curve_state = []
+        for key, (arr, texts) in req.items():
+            j = np.searchsorted(arr, lay.curve_l0, side="left") - 1
+            opts = [None] + texts
+            curve_state.append((key, [opts[k] for k in (j + 1).tolist()]))
+        # a curve whose lines are all extruding steps, not the file's last line, is copied in
+        # one piece when unchanged (``_Writer.copy_steps``): (first byte, end byte), else None
+        steps_before = np.concatenate(([0], np.cumsum(lay.step_of_line >= 0)))
+        l0, l1 = lay.curve_l0, lay.curve_l1
+        whole = ((steps_before[l1 + 1] - steps_before[l0] == l1 - l0 + 1)
+                 & (l1 + 1 < p.n_lines)).tolist()
+        block = [(b0, b1) if ok else None for ok, b0, b1 in
+                 zip(whole, p.line_start[l0].tolist(), p.line_start[l1 + 1].tolist())]
         return (problem.group_curve_start[gidx].tolist(), problem.curve_layer.tolist(),
-                lay.curve_l0.tolist(), lay.curve_l1.tolist(), p.feature[lay.curve_s0].tolist(),
-                _required_state(p, lay))
+                l0.tolist(), l1.tolist(), p.feature[lay.curve_s0].tolist(), req, curve_state,
+                block)
 
     def gap_lines(self, c: int) -> range:
         """The original lines between curve c - 1 and curve c."""
@@ -504,20 +546,21 @@ def _emit_curve(plan: _Plan, w: _Writer, k: int, prev: int) -> int:
             _rebuilt_gap(w, p, lay, plan.style, lines, c,
                          _entry_mm(p, lay, c, plan.rev[c], plan.seam[c]), plan.walls, plan.layer[c])
     # state the curve saw in the original
-    st = _state_at(plan.req, plan.l0[c])
-    for key, text in st.items():
-        if w.state.get(key) != text:
+    for key, texts in plan.curve_state:
+        text = texts[c]
+        if text is not None and w.state.get(key) != text:
             w.write(text)
             w.state[key] = text
     fi = plan.feature[c]
     if fi >= 0 and w.feature != p.feature_names[fi]:
         w.write(f"{lay.feature_prefix}{p.feature_names[fi]}")
         w.feature = p.feature_names[fi]
-    _curve(w, p, lay, c, plan.rev[c], plan.seam[c])
+    _curve(w, p, lay, c, plan.rev[c], plan.seam[c], plan.block[c])
     return c
 
 
-def _curve(w: _Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> None:
+def _curve(w: _Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int,
+           block=None) -> None:
     a, b = int(lay.curve_s0[c]), int(lay.curve_s1[c])
     if not reverse and seam == 0:
         if w.feed is None or abs(w.feed - p.feed_mm_s[a]) > 1e-9:
@@ -525,7 +568,10 @@ def _curve(w: _Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int
             if not _F_WORD.search(p.line_text(int(p.line[a])).split(";")[0]):
                 w.write(f"G1 F{_num(p.feed_mm_s[a] * 60.0, 3)}")
                 w.feed = float(p.feed_mm_s[a])
-        for i in range(int(lay.curve_l0[c]), int(lay.curve_l1[c]) + 1):
+        l0, l1 = int(lay.curve_l0[c]), int(lay.curve_l1[c])
+        if block is not None and w.copy_steps(l0, l1, *block):
+            return
+        for i in range(l0, l1 + 1):
             w.copy_line(i)
         return
     # neutral commands inside the curve (progress M73, messages M117) are not moves: written
@@ -638,8 +684,9 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
 
     for i in pre:
         copy(i)
-    dist = float(np.hypot(*(target[:2] - w.xyz[:2])))
-    moving = dist > 1e-9 or abs(target[2] - w.xyz[2]) > 1e-9
+    (tx, ty, tz), (x0, y0, z0) = target.tolist(), w.xyz.tolist()
+    dist = math.hypot(tx - x0, ty - y0)
+    moving = dist > 1e-9 or abs(tz - z0) > 1e-9
     r = r_boundary if r_boundary > 0 else (r_internal if r_internal > 0 else style.retract_mm)
     if use_fw:
         retract = moving and (fw_boundary or (style.firmware_retract and dist >= style.min_travel_mm))
@@ -656,16 +703,18 @@ def _rebuilt_gap(w: _Writer, p: Program, lay: Layout, style: TravelStyle, line_s
     for i in mid:
         copy(i)
     if moving:
-        z_now, z_to = w.xyz[2], target[2]
+        x_now, y_now, z_now = w.xyz.tolist()
+        z_to = tz
         if retract and style.hop_mm > 0:
             z_up = max(z_now, z_to) + style.hop_mm
         else:
             z_up = max(z_now, z_to)
         if z_up > z_now + 1e-9:
-            w.move_xyz([w.xyz[0], w.xyz[1], z_up], style.z_feed_mm_s, "G1", off)
-        w.move_xyz([target[0], target[1], w.xyz[2]], style.travel_feed_mm_s, style.travel_cmd, off)
-        if abs(w.xyz[2] - z_to) > 1e-9:
-            w.move_xyz([w.xyz[0], w.xyz[1], z_to], style.z_feed_mm_s, "G1", off)
+            w.move_xyz([x_now, y_now, z_up], style.z_feed_mm_s, "G1", off)
+        z_now = float(w.xyz[2])
+        w.move_xyz([tx, ty, z_now], style.travel_feed_mm_s, style.travel_cmd, off)
+        if abs(z_now - z_to) > 1e-9:
+            w.move_xyz([tx, ty, z_to], style.z_feed_mm_s, "G1", off)
     # unretract, plus any prime the slicer's gaps added: whatever brings the gap to its net E
     if (early_push or not boundary_retracted) and abs(net - emitted) > 1e-9:
         # a retraction the slicer did not make here: undo it at once, on this side of any marker
