@@ -175,6 +175,7 @@ def report(args) -> str:
                           f"Groups proven optimal: {n_opt} of {n_g} ({100 * n_opt / max(n_g, 1):.1f} %); "
                           f"the rest: gap median {100 * np.median(gaps) if len(gaps) else 0:.1f} %, "
                           f"<= 2 % for {int((gaps <= 0.02).sum())} of {len(gaps)}. "
+                          f"{_most_unproven(rs)}"
                           f"Solve time per file: median {np.median([r['solve_s'] for r in rs]):.1f} s, "
                           f"max {max(r['solve_s'] for r in rs):.1f} s; "
                           f"files solved in <= 10 s: {sum(r['solve_s'] <= 10 for r in rs)} of {len(rs)}; "
@@ -210,6 +211,19 @@ def report(args) -> str:
                                      f"{sum(x[2] == 'optimal' for x in sel)} |")
             lines.append("")
     return "\n".join(lines)
+
+
+def _most_unproven(rs) -> str:
+    """Where the unproven groups are: the file with the most of them, and the share proven
+    without it (one large file can hold most of them)."""
+    unproven = [r["groups_reordered"] - r["groups_optimal"] for r in rs]
+    if len(rs) < 2 or max(unproven) == 0:
+        return ""
+    i = int(np.argmax(unproven))
+    rest = [r for j, r in enumerate(rs) if j != i]
+    n, opt = sum(r["groups_reordered"] for r in rest), sum(r["groups_optimal"] for r in rest)
+    return (f"{unproven[i]} of the {sum(unproven)} unproven groups are in {rs[i]['file']}; "
+            f"the other {len(rest)} files: {opt} of {n} proven ({100 * opt / max(n, 1):.1f} %). ")
 
 
 def main() -> None:
