@@ -303,6 +303,15 @@ class _Writer:
     def write(self, text: str) -> None:
         self.out.append(text + self.nl)
 
+    def reissue(self, states: list, k: int) -> None:
+        """Write each state line ``states`` (``_states_at``) holds at its k-th place that is not
+        what the output has in force."""
+        for key, texts in states:
+            text = texts[k]
+            if text is not None and self.state.get(key) != text:
+                self.write(text)
+                self.state[key] = text
+
     # -- the per-layer memo of ``emit`` -----------------------------------------------------------
     def entry_key(self) -> tuple:
         """What a layer's text depends on besides its own curves (E apart: ``_same_entry``)."""
@@ -393,13 +402,14 @@ def _required_state(program: Program, lay: Layout):
     return out
 
 
-def _state_at(req, line: int) -> dict:
-    st = {}
-    for k, (arr, texts) in req.items():
-        j = int(np.searchsorted(arr, line, side="left")) - 1
-        if j >= 0:
-            st[k] = texts[j]
-    return st
+def _states_at(req, lines) -> list:
+    """Per state key (in ``req``'s order), the text in force at each of ``lines``: the key's last
+    line before it, None before its first."""
+    out = []
+    for key, (arr, texts) in req.items():
+        opts = [None] + texts
+        out.append((key, [opts[j] for j in np.searchsorted(arr, lines, side="left").tolist()]))
+    return out
 
 
 def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
@@ -462,11 +472,7 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
             memo[key[:-1]] = (key[-1], w.out[start:], w.snapshot())
     # state the remainder of the file expects, then the remainder verbatim
     last = plan.l1[n - 1]
-    st = _state_at(plan.req, last + 1)
-    for key, text in st.items():
-        if w.state.get(key) != text:
-            w.write(text)
-            w.state[key] = text
+    w.reissue(_states_at(plan.req, [last + 1]), 0)
     for i in range(last + 1, p.n_lines):
         w.copy_line(i)
     return "".join(w.out)
@@ -500,15 +506,10 @@ class _Plan:
     def per_curve(p: Program, problem: OrderingProblem, lay: Layout) -> tuple:
         """What does not depend on the order: each curve's group's original first curve, layer,
         first and last line, feature, the state lines in force at any line and, per state key,
-        the text in force at each curve's first line (None before the first: ``_state_at`` for
-        every curve at once)."""
+        the text in force at each curve's first line (``_states_at``)."""
         gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
         req = _required_state(p, lay)
-        curve_state = []
-        for key, (arr, texts) in req.items():
-            j = np.searchsorted(arr, lay.curve_l0, side="left") - 1
-            opts = [None] + texts
-            curve_state.append((key, [opts[k] for k in (j + 1).tolist()]))
+        curve_state = _states_at(req, lay.curve_l0)
         # a curve whose lines are all extruding steps, not the file's last line, is copied in
         # one piece when unchanged (``_Writer.copy_steps``): (first byte, end byte), else None
         steps_before = np.concatenate(([0], np.cumsum(lay.step_of_line >= 0)))
@@ -545,12 +546,7 @@ def _emit_curve(plan: _Plan, w: _Writer, k: int, prev: int) -> int:
                 lines.append((plan.gap_lines(c), False))
             _rebuilt_gap(w, p, lay, plan.style, lines, c,
                          _entry_mm(p, lay, c, plan.rev[c], plan.seam[c]), plan.walls, plan.layer[c])
-    # state the curve saw in the original
-    for key, texts in plan.curve_state:
-        text = texts[c]
-        if text is not None and w.state.get(key) != text:
-            w.write(text)
-            w.state[key] = text
+    w.reissue(plan.curve_state, c)      # state the curve saw in the original
     fi = plan.feature[c]
     if fi >= 0 and w.feature != p.feature_names[fi]:
         w.write(f"{lay.feature_prefix}{p.feature_names[fi]}")
