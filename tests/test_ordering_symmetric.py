@@ -149,6 +149,29 @@ def test_exact_blossoms_cut_off_what_the_heuristic_left_and_keep_every_path():
     assert found >= 5 and raised >= 5, (found, raised)
 
 
+def test_reduced_costs_of_the_whole_graph_are_highs_column_duals():
+    """``reduced_costs`` (the degree and cut duals over all N x N edges, from each cut's smaller
+    side) must equal HiGHS's own column duals on every present column no cut has as a tooth (a
+    missing edge never is one), after roots with subtour and blossom cuts with nonzero duals."""
+    checked = 0
+    for seed in range(12):
+        grp = _chord_group(seed)
+        model = symmetric.SymmetricModel(grp, greedy.nearest_neighbour(grp))
+        model.root(time.perf_counter() + 30, exact_blossoms_s=30.0)
+        lo, starts, idx, val = _rows(model)
+        tooth = np.zeros(len(model.eu), bool)
+        tooth[idx[val < 0]] = True
+        y = np.asarray(model.h.getSolution().row_dual)
+        if not np.any(np.abs(y[model.N:]) > 1e-9):
+            continue
+        rc = model.reduced_costs()
+        col_dual = np.asarray(model.h.getSolution().col_dual)
+        np.testing.assert_allclose(rc[model.eu, model.ev][~tooth], col_dual[~tooth], atol=1e-7)
+        np.testing.assert_allclose(rc, rc.T, atol=1e-12)
+        checked += 1
+    assert checked >= 5, checked
+
+
 def _rows(model):
     h = model.h
     n_rows = h.getNumRow()

@@ -397,11 +397,7 @@ class SymmetricModel:
         if len(yc):
             act = np.abs(yc) > 1e-12
             if act.any():
-                M = np.asarray(self.cut_inside)[act].astype(float)      # (cuts, N)
-                w = yc[act]
-                a = w @ M                                               # sum_r y_r [u in r]
-                Q = M.T @ (w[:, None] * M)                              # sum_r y_r [u in r][v in r]
-                rc -= a[:, None] + a[None, :] - 2.0 * Q
+                _subtract_cut_duals(rc, np.asarray(self.cut_inside)[act], yc[act])
         return rc
 
     def lp_bound(self, obj: float, rc: np.ndarray) -> float:
@@ -643,11 +639,42 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     return model.branch(best, best_obj, bound, deadline)
 
 
+@numba.njit(cache=True)
+def _subtract_cut_duals(rc, inside, w):
+    """``rc[u, v] -= sum_r w_r [cut r crosses uv]``, crossing = ``[u in r] + [v in r] - 2 [u in r]
+    [v in r]``, summed over each cut's smaller side (a side and its complement cross the same
+    edges). A loop rather than numpy's matrix product: OpenBLAS's threads spin after each
+    product, on the core the other process of a two-process solve needs (measured on 60 Cura
+    bunny groups in one process: 8.8 s of CPU for 6.6 s, 6.3 s for 6.3 s with this loop)."""
+    n_cuts, n = inside.shape
+    a = np.zeros(n)
+    q = np.zeros((n, n))
+    side = np.empty(n, np.int64)
+    for r in range(n_cuts):
+        flip = 2 * inside[r].sum() > n
+        k = 0
+        for u in range(n):
+            if inside[r, u] != flip:
+                side[k] = u
+                k += 1
+        wr = w[r]
+        for i in range(k):
+            u = side[i]
+            a[u] += wr
+            for j in range(k):
+                q[u, side[j]] += wr
+    for u in range(n):
+        for v in range(n):
+            rc[u, v] -= a[u] + a[v] - 2.0 * q[u, v]
+
+
 def load_kernels() -> None:
-    """Compile (or load from numba's cache) the kernels of the exact blossom separation on a
-    made-up triangle, so that the first group that needs them does not pay for it."""
+    """Compile (or load from numba's cache) the kernels of the exact blossom separation and of
+    the reduced costs on a made-up triangle, so that the first group that needs them does not
+    pay for it."""
     arcs = _residual_arcs(3, np.array([0, 1, 2]), np.array([1, 2, 0]), np.full(3, 0.5))
     _gomory_hu_sides(3, *arcs, 1.0)
+    _subtract_cut_duals(np.zeros((3, 3)), np.array([[True, False, False]]), np.ones(1))
 
 
 def _residual_arcs(n: int, u, v, w):
