@@ -22,3 +22,11 @@ def replace_section(path: Path, section: str) -> None:
     end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
     rest = "".join(lines[end:])
     path.write_text("".join(lines[:start]) + body + ("\n" + rest if rest else ""))
+
+
+def publish(section: str, write: str | None) -> None:
+    """A report's ``report`` command: print the section and, with ``--write FILE``, put it in
+    FILE in place of the section of the same heading."""
+    if write:
+        replace_section(Path(write), section)
+    print(section)

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _markdown import replace_section  # bench/_markdown.py
+from _markdown import publish  # bench/_markdown.py
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -246,10 +246,7 @@ def main() -> None:
     if a.cmd == "run":
         run(a)
     else:
-        sec = report(a)
-        if a.write:
-            replace_section(Path(a.write), sec)
-        print(sec)
+        publish(report(a), a.write)
 
 
 if __name__ == "__main__":
