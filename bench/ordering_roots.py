@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 from _markdown import publish  # bench/_markdown.py
+from ordering_gaps import _pct  # gap in % of the best path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -37,10 +38,6 @@ DEFAULT_GROUPS = [
     "real_cura591.gcode.gz:free:30:400:8",
     "cura413_cyl_grid20.gcode.gz:free:30:300:8",
 ]
-
-
-def _pct(best, bound):
-    return 100.0 * (best - bound) / best if best > 0 else 0.0
 
 
 def measure(args) -> None:

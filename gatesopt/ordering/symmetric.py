@@ -273,6 +273,14 @@ class SymmetricModel:
             self.add_cut(reach[lab])
         return len(cuts)
 
+    def _edges_at_one(self, x: np.ndarray):
+        """The edges at 1 in ``x``, the blossoms' possible teeth: travel columns and every fixed
+        edge, as (u, v, column or -1)."""
+        ones = np.nonzero(x >= 1 - _EPS)[0]
+        return (np.concatenate([self.eu[ones], self.fixed_u]),
+                np.concatenate([self.ev[ones], self.fixed_v]),
+                np.concatenate([ones, np.full(len(self.fixed_u), -1)]))
+
     def _blossoms(self, x: np.ndarray) -> int:
         """Odd-component heuristic (Padberg–Hong): a handle H = a connected component of the
         fractional edges; its teeth are the edges at 1 (fixed edges included) leaving H. With an
@@ -281,11 +289,7 @@ class SymmetricModel:
         frac = (x > _EPS) & (x < 1 - _EPS)
         if not frac.any():
             return 0
-        ones = np.nonzero(x >= 1 - _EPS)[0]
-        # edges at one: travel columns and fixed edges, as (u, v, column or -1)
-        one_u = np.concatenate([self.eu[ones], self.fixed_u])
-        one_v = np.concatenate([self.ev[ones], self.fixed_v])
-        one_col = np.concatenate([ones, np.full(len(self.fixed_u), -1)])
+        one_u, one_v, one_col = self._edges_at_one(x)
         ncomp, lab = components(self.N, self.eu[frac], self.ev[frac])
         touched = np.zeros(self.N, bool)
         touched[self.eu[frac]] = touched[self.ev[frac]] = True
@@ -331,10 +335,7 @@ class SymmetricModel:
         if not frac.any():
             return 0
         N = self.N
-        ones = np.nonzero(x >= 1 - _EPS)[0]
-        one_u = np.concatenate([self.eu[ones], self.fixed_u])
-        one_v = np.concatenate([self.ev[ones], self.fixed_v])
-        one_col = np.concatenate([ones, np.full(len(self.fixed_u), -1)])
+        one_u, one_v, one_col = self._edges_at_one(x)
         fcol = np.nonzero(frac)[0]
         fu, fv, fx = self.eu[fcol], self.ev[fcol], x[fcol]
         _, lab = components(N, fu, fv)
