@@ -126,7 +126,8 @@ def test_auto_tries_the_model_before_the_dp_above_12_curves_and_stays_exact(seed
     assert dp.fits(grp) and symmetric.applies(grp)
     opt = dp.solve(grp).objective_mm
     a = auto.solve(grp, time_limit_s=5.0)
-    assert a.status == "optimal" and a.method in ("auto:milp", "auto:bound", "auto:ils+bound")
+    assert a.status == "optimal" and a.method in ("auto:milp", "auto:bound", "auto:matching",
+                                                    "auto:ils+bound")
     assert a.objective_mm == pytest.approx(opt, abs=1e-6)
     # a limit below the DP's own time (it cannot be stopped): no DP, the heuristic path, never
     # called optimal unless it is

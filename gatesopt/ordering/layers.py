@@ -24,13 +24,12 @@ from .problem import (OPTIMAL_ABS_TOL_MM, GroupSolution, OrderingProblem, Orderi
 #: groups up to this many curves are settled by the subset DP (``dp.fits``) in milliseconds
 DP_CURVES = 12
 #: what a group costs in the budget plan without an exact step: the greedy path (nearest
-#: neighbour, 2-opt, Or-opt, cheap bound; measured 35 us per curve on the Cura bunny's groups of
-#: 90+ curves), not ILS after it. At 60 us per curve ILS got ~3 ms per group, and on the bunny
-#: under a 10 s budget the ~470 groups planned heuristic by one process took 3.7 s of its 5.5 s,
-#: the ~110 it proved 0.9 s. Measured on 8 files x 2 modes (bench/ordering.py, --budget 10):
-#: 3029 -> 3127 of 3863 groups proven in safe mode, 1894 -> 1912 of 2520 in free mode (the bunny
-#: 324 -> 419 and 35 -> 46), travel within 1 % either way, every run within 8.9 s
-HEURISTIC_S_PER_CURVE = 3e-5
+#: neighbour, 2-opt, Or-opt, cheap bound; ~35 us per curve) and the matching's bound and path
+#: (``auto._matching_path``; ~100 us per curve): measured 130 us per curve in all on 52 sampled
+#: Cura bunny groups of 13-163 curves given no time for an exact step. Before the matching, at
+#: 30 us per curve, those groups kept the cheap bound's gap (median 27 %, <= 2 % for 6 of 52);
+#: with it the median gap is 1.8 %, <= 2 % for 27 of 52
+HEURISTIC_S_PER_CURVE = 1.3e-4
 #: what the main process spends outside the solvers, kept out of a budget: per curve still to
 #: come, building its group and taking the helper's answers (measured 3-6 us per curve on the
 #: Cura bunny and two other Cura files); per curve of the file, ``_chain`` and the travel totals

@@ -25,6 +25,7 @@ import numba
 import numpy as np
 
 from .._native import run_highs
+from . import matching
 from .problem import OPTIMAL_ABS_TOL_MM, Group
 
 _OPT = highspy.HighsModelStatus.kOptimal
@@ -38,6 +39,8 @@ K_NEIGHBOURS = 8
 #: branch-and-cut: 166 k columns for a 312-curve group with an 11 % root gap, nothing closed in
 #: 20 s)
 MAX_BRANCH_COLUMNS_PER_NODE = 40
+#: edges per vertex the matching's blossom algorithm starts from (``odd_sets``)
+MATCHING_NEIGHBOURS = 10
 #: ILS kicks per curve spent on the path built from the root LP point (it starts close to the
 #: optimum; the warm start's search already spent its share)
 POLISH_KICKS_PER_CURVE = 1
@@ -93,43 +96,137 @@ def applies(group: Group) -> bool:
     return bool(np.all(f != two) and np.allclose(group.cand_entry_xy[two], group.cand_exit_xy[f]))
 
 
+def travel_graph(group: Group):
+    """The symmetric model's graph: node 0 = S, 1 = E, then the end points of each open curve
+    (joined by the curve: a fixed edge) and each loop's seam. Returns (positions, curve per node
+    (-1 S, -2 E), degree per node (travel edges: 1, a seam 2), cost matrix (inf where no travel
+    edge exists: same curve, S-E, the diagonal; 0 into E when the path may end anywhere), nodes
+    per curve, each curve's first candidate)."""
+    n = group.n_curves
+    cc = group.cand_curve
+    counts = np.bincount(cc, minlength=n)
+    first_cand = np.full(n, -1)
+    for k in range(group.n_cands - 1, -1, -1):
+        first_cand[cc[k]] = k
+    pos = [group.start_xy, group.end_xy if group.end_xy is not None else np.zeros(2)]
+    node_curve = [-1, -2]
+    curve_nodes = []
+    for c in range(n):
+        k = first_cand[c]
+        if counts[c] == 1:                                  # loop: one node, degree 2
+            curve_nodes.append((len(pos),))
+            pos.append(group.cand_entry_xy[k]); node_curve.append(c)
+        else:                                               # open: entry of k, exit of k
+            curve_nodes.append((len(pos), len(pos) + 1))
+            pos += [group.cand_entry_xy[k], group.cand_exit_xy[k]]; node_curve += [c, c]
+    pos = np.asarray(pos, float)
+    node_curve = np.asarray(node_curve)
+    deg = np.array([2.0 if len(nd) == 1 else 1.0 for nd in curve_nodes])
+    deg = np.concatenate([[1.0, 1.0], np.repeat(deg, [len(nd) for nd in curve_nodes])])
+    C = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
+    if group.end_xy is None:
+        C[1, :] = C[:, 1] = 0.0                            # the path just ends
+    C[node_curve[:, None] == node_curve[None, :]] = np.inf
+    C[0, 1] = C[1, 0] = np.inf
+    return pos, node_curve, deg, C, curve_nodes, first_cand
+
+
+def odd_sets(C: np.ndarray, deg: np.ndarray, free_end: bool):
+    """The cheapest perfect matching of the travel graph (``matching.py``; a seam counted as two
+    vertices): every path's travel edges are one, so its cost is a lower bound (mm, rounded
+    down), and the odd sets H of its dual hold ``x(δ(H)) >= 1`` for every path. Returns (bound,
+    node masks of the odd sets, the matching's edges as node pairs (u, v); None, [], None if the
+    matching failed)."""
+    N = len(C)
+    rep = np.where(deg == 2, 2, 1)
+    idx = np.repeat(np.arange(N), rep)
+    C2 = C[np.ix_(idx, idx)]
+    ok = np.isfinite(C2) & (idx[:, None] != idx[None, :])
+    units = np.floor(np.where(ok, C2, 0.0) * matching.UNITS_PER_MM).astype(np.int64)
+    # the blossom algorithm runs on each vertex's nearest edges (and E's), adding the others
+    # whose reduced cost turns negative (``matching.min_cost_perfect_matching``)
+    V = len(idx)
+    k = min(MATCHING_NEIGHBOURS, V - 1)
+    near = np.argpartition(np.where(ok, C2, np.inf), k - 1, axis=1)[:, :k]
+    search = np.zeros((V, V), bool)
+    search[np.repeat(np.arange(V), k), near.ravel()] = True
+    search[idx == 1, :] = True
+    hub = int(np.flatnonzero(idx == 1)[0]) if free_end else None
+    bound, mate, sets = matching.min_cost_perfect_matching(units, ok, search & ok, hub=hub)
+    if bound is None:               # no perfect matching among the nearest edges: all of them
+        bound, mate, sets = matching.min_cost_perfect_matching(units, ok, hub=hub)
+    if bound is None:
+        return None, [], None
+    masks = []
+    for H in sets:
+        cnt = np.bincount(idx[H], minlength=N)
+        if ((cnt > 0) & (cnt < rep)).any():     # a seam split between H and the rest
+            continue
+        inside = cnt > 0
+        if int(deg[inside].sum()) % 2 == 1:
+            masks.append(inside)
+    a = np.flatnonzero(mate > np.arange(len(mate)))
+    return bound / matching.UNITS_PER_MM, masks, (idx[a], idx[mate[a]])
+
+
+#: (group, bound, odd sets) of the last ``matching_path``: its exact step reuses them
+_last_odd_sets = None
+
+
+def matching_path(group: Group):
+    """A path from the cheapest perfect matching (``odd_sets``) and its bound: with the fixed
+    edges the matching is a set of cycles, one through S and E; ``_patch`` joins them into one
+    (Karp's patching). Polished by local search, it is the fallback path where it beats the
+    greedy one (formulations/ordering.md, "Bounds").
+    Returns (candidate order, bound mm), or (None, 0.0) if the matching failed."""
+    global _last_odd_sets
+    pos, node_curve, deg, C, curve_nodes, first_cand = travel_graph(group)
+    bound, masks, edges = odd_sets(C, deg, group.end_xy is None)
+    _last_odd_sets = (group, bound, masks)
+    if bound is None:
+        return None, 0.0
+    two = [nd for nd in curve_nodes if len(nd) == 2]
+    fixed_u = np.array([nd[0] for nd in two] + [0], np.int64)
+    fixed_v = np.array([nd[1] for nd in two] + [1], np.int64)
+    eu, ev = _patch(len(pos), fixed_u, fixed_v, edges[0].astype(np.int64),
+                    edges[1].astype(np.int64), C)
+    return decode_edges(group, node_curve, curve_nodes, first_cand, eu, ev), bound
+
+
+def decode_edges(group: Group, node_curve, curve_nodes, first_cand, eu, ev) -> np.ndarray:
+    """Candidate order of the tour (of ``travel_graph``'s nodes) whose travel edges are (eu, ev)."""
+    adj: dict[int, list[int]] = {}
+    for u, v in zip(np.asarray(eu).tolist(), np.asarray(ev).tolist()):
+        adj.setdefault(u, []).append(v)
+        adj.setdefault(v, []).append(u)
+    order, came, cur = [], 0, adj[0][0]
+    while cur != 1 and len(order) <= group.n_curves:
+        c = int(node_curve[cur])
+        nodes = curve_nodes[c]
+        k0 = int(first_cand[c])
+        if len(nodes) == 1:                     # loop: leave by its other travel edge
+            k, out = k0, cur
+            nxt = [v for v in adj[cur] if v != came][0]
+        else:                                   # open: traverse to the other end point
+            k = k0 if cur == nodes[0] else int(group.cand_flip[k0])
+            out = nodes[1] if cur == nodes[0] else nodes[0]
+            nxt = adj[out][0]
+        order.append(k)
+        came, cur = out, nxt
+    return np.asarray(order, np.int64)
+
+
 class SymmetricModel:
     """Nodes 0 = S, 1 = E, then the end points of the curves; HiGHS rows 0..N-1 are the degree
     equations ``x(δ(v)) = deg_v`` (1 beside a fixed edge, 2 for a loop's seam), the rest cuts."""
 
     def __init__(self, group: Group, incumbent: np.ndarray):
         self.group = group
-        n = group.n_curves
-        cc = group.cand_curve
-        counts = np.bincount(cc, minlength=n)
-        first_cand = np.full(n, -1)
-        for k in range(group.n_cands - 1, -1, -1):
-            first_cand[cc[k]] = k
-        pos = [group.start_xy, group.end_xy if group.end_xy is not None else np.zeros(2)]
-        node_curve = [-1, -2]
-        curve_nodes = []
-        for c in range(n):
-            k = first_cand[c]
-            if counts[c] == 1:                                  # loop: one node, degree 2
-                curve_nodes.append((len(pos),))
-                pos.append(group.cand_entry_xy[k]); node_curve.append(c)
-            else:                                               # open: entry of k, exit of k
-                curve_nodes.append((len(pos), len(pos) + 1))
-                pos += [group.cand_entry_xy[k], group.cand_exit_xy[k]]; node_curve += [c, c]
-        self.curve_nodes, self.first_cand = curve_nodes, first_cand
-        self.pos = np.asarray(pos, float)
-        self.node_curve = np.asarray(node_curve)
-        N = self.N = len(pos)
-        self.deg = np.array([2.0 if len(nd) == 1 else 1.0 for nd in curve_nodes])
-        self.deg = np.concatenate([[1.0, 1.0], np.repeat(self.deg, [len(nd) for nd in curve_nodes])])
-        # full cost matrix; inf where no travel edge exists (same curve, S-E, the diagonal)
-        C = np.hypot(*(self.pos[:, None, :] - self.pos[None, :, :]).transpose(2, 0, 1))
-        if group.end_xy is None:
-            C[1, :] = C[:, 1] = 0.0                            # the path just ends
-        C[self.node_curve[:, None] == self.node_curve[None, :]] = np.inf
-        C[0, 1] = C[1, 0] = np.inf
-        self.C = C
-        two = [nd for nd in curve_nodes if len(nd) == 2]
+        (self.pos, self.node_curve, self.deg, self.C, self.curve_nodes,
+         self.first_cand) = travel_graph(group)
+        N = self.N = len(self.pos)
+        C = self.C
+        two = [nd for nd in self.curve_nodes if len(nd) == 2]
         self.fixed_u = np.array([nd[0] for nd in two] + [0], np.int64)
         self.fixed_v = np.array([nd[1] for nd in two] + [1], np.int64)
         # columns (u < v) and cuts (node mask "inside", row index N + i)
@@ -197,6 +294,19 @@ class SymmetricModel:
         cols = np.nonzero(cross)[0].astype(np.int32)
         self.h.addRow(float(rhs), highspy.kHighsInf, len(cols), cols, coef[cols])
         self.cut_inside.append(inside.copy())
+
+    def seed_odd_sets(self) -> float:
+        """Start the LP with the odd-set cuts ``x(δ(H)) >= 1`` of the cheapest perfect matching's
+        dual (``odd_sets``): the blossoms the separators would otherwise find a few per round.
+        Returns the matching's bound (0 if it failed)."""
+        if _last_odd_sets is not None and _last_odd_sets[0] is self.group:
+            _, bound, masks = _last_odd_sets        # auto took its path from the same matching
+        else:
+            bound, masks, _ = odd_sets(self.C, self.deg, self.group.end_xy is None)
+        none = np.zeros(0, np.int64)
+        for inside in masks:
+            self.add_cut(inside, (none, inside[self.fixed_u] != inside[self.fixed_v]))
+        return 0.0 if bound is None else bound
 
     def tour_edges(self, order: np.ndarray) -> np.ndarray:
         """The travel edges of a candidate order, as (u, v) node pairs."""
@@ -428,26 +538,7 @@ class SymmetricModel:
 
     def decode_edges(self, eu, ev) -> np.ndarray:
         """Candidate order of the tour whose travel edges are (eu, ev)."""
-        adj: dict[int, list[int]] = {}
-        for u, v in zip(np.asarray(eu).tolist(), np.asarray(ev).tolist()):
-            adj.setdefault(u, []).append(v)
-            adj.setdefault(v, []).append(u)
-        g = self.group
-        order, came, cur = [], 0, adj[0][0]
-        while cur != 1 and len(order) <= g.n_curves:
-            c = int(self.node_curve[cur])
-            nodes = self.curve_nodes[c]
-            k0 = int(self.first_cand[c])
-            if len(nodes) == 1:                     # loop: leave by its other travel edge
-                k, out = k0, cur
-                nxt = [v for v in adj[cur] if v != came][0]
-            else:                                   # open: traverse to the other end point
-                k = k0 if cur == nodes[0] else int(g.cand_flip[k0])
-                out = nodes[1] if cur == nodes[0] else nodes[0]
-                nxt = adj[out][0]
-            order.append(k)
-            came, cur = out, nxt
-        return np.asarray(order, np.int64)
+        return decode_edges(self.group, self.node_curve, self.curve_nodes, self.first_cand, eu, ev)
 
     def tour_from(self, x: np.ndarray) -> np.ndarray:
         """A path built from an LP or subtour point: greedy edge matching (Kruskal-like: an edge
@@ -628,8 +719,11 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     best = np.asarray(incumbent, np.int64)
     best_obj = group.path_cost_mm(best)
     model = SymmetricModel(group, best)
-    bound = model.root(deadline,
-                       exact_blossoms_s=EXACT_BLOSSOM_SHARE * (deadline - time.perf_counter()))
+    bound = model.seed_odd_sets()
+    if best_obj - bound <= OPTIMAL_ABS_TOL_MM:
+        return best, best_obj, bound, True
+    bound = max(bound, model.root(
+        deadline, exact_blossoms_s=EXACT_BLOSSOM_SHARE * (deadline - time.perf_counter())))
     if best_obj - bound > OPTIMAL_ABS_TOL_MM and model.complete:
         x = np.asarray(model.h.getSolution().col_value)
         best, best_obj = model._polish(model.tour_from(x), best, best_obj, bound, deadline)
@@ -670,9 +764,12 @@ def _subtract_cut_duals(rc, inside, w):
 
 
 def load_kernels() -> None:
-    """Compile (or load from numba's cache) the kernels of the exact blossom separation and of
-    the reduced costs on a made-up triangle, so that the first group that needs them does not
-    pay for it."""
+    """Compile (or load from numba's cache) the kernels of the exact blossom separation, of
+    the reduced costs and of the matching on made-up graphs, so that the first group that needs
+    them does not pay for it."""
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [5.0, 0.0]])
+    odd_sets(np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1)) + np.diag(np.full(4, np.inf)),
+             np.ones(4), True)
     arcs = _residual_arcs(3, np.array([0, 1, 2]), np.array([1, 2, 0]), np.full(3, 0.5))
     _gomory_hu_sides(3, *arcs, 1.0)
     _subtract_cut_duals(np.zeros((3, 3)), np.array([[True, False, False]]), np.ones(1))
@@ -800,6 +897,46 @@ def _find(parent, a):
         parent[a] = parent[parent[a]]
         a = parent[a]
     return a
+
+
+@numba.njit(cache=True)
+def _patch(n, fixed_u, fixed_v, eu, ev, C):
+    """Karp's patching: the travel edges (eu, ev) and the fixed edges form cycles; while there
+    is more than one, the cheapest exchange of a travel edge (a, b) of the cycle through S for a
+    travel edge (c, d) of another cycle, (a, b) + (c, d) -> (a, c) + (b, d) or (a, d) + (b, c),
+    joins the two. Returns the travel edges of the one cycle."""
+    m = len(eu)
+    eu = eu.copy()
+    ev = ev.copy()
+    while True:
+        parent = np.arange(n)
+        for i in range(len(fixed_u)):
+            parent[_find(parent, fixed_u[i])] = _find(parent, fixed_v[i])
+        for i in range(m):
+            parent[_find(parent, eu[i])] = _find(parent, ev[i])
+        root = _find(parent, 0)
+        best, bi, bj, cross = np.inf, -1, -1, False
+        for j in range(m):
+            if _find(parent, eu[j]) == root:
+                continue
+            c, d = eu[j], ev[j]
+            for i in range(m):
+                a, b = eu[i], ev[i]
+                if _find(parent, a) != root:
+                    continue
+                base = C[a, b] + C[c, d]
+                v1 = C[a, c] + C[b, d] - base
+                if v1 < best:
+                    best, bi, bj, cross = v1, i, j, False
+                v2 = C[a, d] + C[b, c] - base
+                if v2 < best:
+                    best, bi, bj, cross = v2, i, j, True
+        if bi < 0:
+            return eu, ev
+        a, b, c, d = eu[bi], ev[bi], eu[bj], ev[bj]
+        if cross:
+            c, d = d, c
+        eu[bi], ev[bi], eu[bj], ev[bj] = a, c, b, d
 
 
 @numba.njit(cache=True)

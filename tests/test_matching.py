@@ -1,0 +1,127 @@
+"""The minimum-cost perfect matching (gatesopt/ordering/matching.py) and what the ordering takes
+from it: a lower bound, odd-set cuts valid for every path, and a patched path."""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from gatesopt.ordering import auto, dp, symmetric
+from gatesopt.ordering.matching import min_cost_perfect_matching
+
+from tests.test_ordering import random_problem
+
+
+def _brute_force(c, ok):
+    """Cheapest perfect matching by recursion over the lowest unmatched vertex (V <= 12)."""
+    V = len(c)
+
+    @functools.lru_cache(maxsize=None)
+    def best(mask):
+        if mask == (1 << V) - 1:
+            return 0
+        i = next(k for k in range(V) if not mask >> k & 1)
+        out = np.inf
+        for j in range(i + 1, V):
+            if not mask >> j & 1 and ok[i, j]:
+                out = min(out, c[i, j] + best(mask | 1 << i | 1 << j))
+        return out
+    return best(0)
+
+
+def _instance(rng, V, ties=False):
+    if ties:        # few distinct costs: many ties, many blossoms
+        c = rng.integers(0, 4, (V, V))
+    else:
+        pts = rng.random((V, 2)) * 100
+        c = np.floor(np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1)) * 1e3)
+    c = np.minimum(c, c.T).astype(np.int64)
+    ok = ~np.eye(V, dtype=bool)
+    for i in range(0, V, 2):                    # like the two ends of one curve
+        ok[i, i + 1] = ok[i + 1, i] = False
+    return c, ok
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_matching_is_the_cheapest_perfect_matching(seed):
+    rng = np.random.default_rng(seed)
+    V = 2 * int(rng.integers(2, 7))
+    c, ok = _instance(rng, V, ties=seed % 2 == 0)
+    bound, mate, sets = min_cost_perfect_matching(c, ok)
+    opt = _brute_force(c, ok)
+    assert bound == pytest.approx(opt)
+    # the matching itself: perfect, on allowed edges, of the optimal cost
+    assert np.array_equal(mate[mate], np.arange(V)) and np.all(mate != np.arange(V))
+    assert ok[np.arange(V), mate].all()
+    assert c[np.arange(V), mate].sum() / 2 == pytest.approx(opt)
+    # odd sets: the optimum crosses each at least once
+    for H in sets:
+        assert len(H) % 2 == 1
+        inside = np.zeros(V, bool)
+        inside[H] = True
+        assert np.count_nonzero(inside != inside[mate]) >= 1
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_a_sparse_search_graph_still_gives_a_valid_bound(seed):
+    """Run on each vertex's nearest edges only (and one known perfect matching), the bound comes
+    from a dual repaired on the edges left out: never above the optimum of the whole graph, and
+    equal to it with pricing rounds enough."""
+    rng = np.random.default_rng(100 + seed)
+    V = 2 * int(rng.integers(4, 7))
+    c, ok = _instance(rng, V)
+    opt = _brute_force(c, ok)
+    k = 1 + seed % 3
+    near = np.argsort(np.where(ok, c, 1 << 40), axis=1)[:, :k]
+    search = np.zeros((V, V), bool)
+    search[np.repeat(np.arange(V), k), near.ravel()] = True
+    perm = rng.permutation(V // 2)              # pairs (2i, 2j+1) for a permutation: perfect
+    for i, j in enumerate(perm):
+        a, b = 2 * i, 2 * j + 1
+        if ok[a, b]:
+            search[a, b] = search[b, a] = True
+        else:                                   # i == j: use the next pair's end instead
+            b2 = 2 * ((j + 1) % (V // 2)) + 1
+            search[a, b2] = search[b2, a] = True
+    bound, _, _ = min_cost_perfect_matching(c, ok, search)
+    if bound is not None:
+        assert bound <= opt + 1e-9
+    full, _, _ = min_cost_perfect_matching(c, ok)
+    assert full == pytest.approx(opt)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_matching_bound_and_path_on_ordering_groups(seed):
+    """On layer groups of open lines and loops: the matching's bound is at most the proven
+    optimum (the subset DP), every odd set is crossed by the optimal path's travel edges, and the
+    patched path is a valid order."""
+    prob = random_problem(900 + seed, 12, closed_share=0.3 if seed % 2 else 0.0,
+                          clustered=seed % 3 == 0)
+    grp = prob.group(0, prob.origin_xy, None if seed % 4 else np.array([5.0, 5.0]))
+    assert symmetric.applies(grp) and dp.fits(grp)
+    opt = dp.solve(grp)
+    order, bound = symmetric.matching_path(grp)
+    grp.check_order(order)
+    assert bound <= opt.objective_mm + 1e-6
+    assert grp.path_cost_mm(order) >= opt.objective_mm - 1e-6
+    model = symmetric.SymmetricModel(grp, opt.order)
+    _, masks, _ = symmetric.odd_sets(model.C, model.deg, grp.end_xy is None)
+    travel = model.tour_edges(opt.order)
+    for inside in masks:
+        assert np.count_nonzero(inside[travel[:, 0]] != inside[travel[:, 1]]) >= 1
+
+
+def test_auto_takes_the_matching_bound_and_stays_exact():
+    """A group given no time for an exact step: the fallback reports the matching's bound (well
+    above the cheap bound), never above the optimum; with time, the seeded exact step proves
+    the same optimum as the DP."""
+    prob = random_problem(77, 14, closed_share=0.0, clustered=True)
+    grp = prob.group(0, prob.origin_xy)
+    opt = dp.solve(grp).objective_mm
+    quick = auto.solve(grp, time_limit_s=1e-4)
+    assert quick.bound_mm <= opt + 1e-6 and quick.objective_mm >= opt - 1e-6
+    _, mbound = symmetric.matching_path(grp)
+    assert quick.bound_mm >= mbound - 1e-9
+    full = auto.solve(grp, time_limit_s=5.0)
+    assert full.status == "optimal" and full.objective_mm == pytest.approx(opt, abs=1e-6)
