@@ -9,11 +9,11 @@ Unlike the degree LP (a fractional matching, measured ~10 % below the optimum on
 groups) it pays for the odd sets a matching must leave: the blossom inequalities that the LP root
 otherwise finds a few per round.
 
-Edmonds' weighted blossom algorithm, primal-dual, O(V^3) on the dense graph, with integer
-weights (0.1 um units rounded down, so the bound stays valid in mm). The bound is taken from
-the dual, not from the matching: ``_dual_bound`` checks every edge's reduced cost and the sign
-of every dual, so the bound is certified whatever the primal did; a check that fails gives no
-bound. The live blossoms of the final dual are odd sets H whose constraint ``x(δ(H)) >= 1`` holds
+Edmonds' weighted blossom algorithm, primal-dual, O(V^3), with integer weights (0.1 um units
+rounded down, so the bound stays valid in mm), run on a sparse search graph that grows by
+pricing. The bound is taken from the dual, not from the matching: ``_certify`` checks every
+allowed edge's reduced cost (raising a vertex dual where one is negative) and the sign of every
+blossom dual, so the bound is certified whatever the primal did. The live blossoms of the final dual are odd sets H whose constraint ``x(δ(H)) >= 1`` holds
 for every path: ``symmetric.SymmetricModel`` starts its LP with them.
 """
 from __future__ import annotations
@@ -26,8 +26,8 @@ UNITS_PER_MM = 1e4
 #: rounds of adding the left-out edges with negative reduced cost to a sparse search graph;
 #: what is still negative after them is repaired in the dual (``_certify``)
 MAX_PRICING_ROUNDS = 3
-#: above this many vertices the O(V^3) algorithm costs more than the bound is worth
-#: (measured: see formulations/ordering.md, "Bounds")
+#: above this many vertices auto skips the matching (O(V^3); not tuned: a 163-curve group, 328
+#: vertices, took ~20 ms)
 MAX_VERTICES = 500
 
 
@@ -351,8 +351,8 @@ def _perfect_matching(c, adj_ptr, adj, hub):
         for j in range(adj_ptr[u], adj_ptr[u + 1]):
             K = max(K, c[u, adj[j]] + 1)
     # the edge stored between two (blossoms or) vertices: its end points and weight. int32 end
-    # points and blossom lists: these arrays are (2V)^2 and 2V x V, and their allocation was a
-    # good part of the time on groups of ~100 curves
+    # points and blossom lists halve the memory of these (2V)^2 and 2V x V arrays (no measurable
+    # time gain on Cura bunny groups)
     gu = np.zeros((m, m), np.int32)
     gv = np.zeros((m, m), np.int32)
     gw = np.zeros((m, m), np.int64)
@@ -468,6 +468,27 @@ def _members(n, b, flower, flen, inside):
 
 
 @numba.njit(cache=True)
+def _shortfall(c, K, lab, parent, depth, u, v):
+    """How far edge (u, v) is from dual feasibility, ``2 w_uv - lab_u - lab_v - sum_{B ∋ u, v}
+    lab_B`` (> 0: its reduced cost is negative). The blossoms holding both are those from the
+    lowest common ancestor of u and v in the blossom tree up."""
+    need = 2 * (K - c[u, v]) - lab[u] - lab[v]
+    if need <= 0:
+        return need                 # blossom duals are >= 0: they only add to the left side
+    a, b = parent[u], parent[v]
+    while a and b and a != b:
+        if depth[a] >= depth[b]:
+            a = parent[a]
+        else:
+            b = parent[b]
+    if a and a == b:
+        while a:
+            need -= lab[a]
+            a = parent[a]
+    return need
+
+
+@numba.njit(cache=True)
 def _violated(c, allowed, search, K, lab, parent, depth):
     """The allowed edges outside ``search`` whose reduced cost is negative in the dual of the
     search graph's optimum, as (u, v) arrays."""
@@ -478,20 +499,7 @@ def _violated(c, allowed, search, K, lab, parent, depth):
         for v in range(u + 1, n + 1):
             if not allowed[u, v] or search[u, v]:
                 continue
-            need = 2 * (K - c[u, v]) - lab[u] - lab[v]
-            if need <= 0:
-                continue
-            a, b = parent[u], parent[v]
-            while a and b and a != b:
-                if depth[a] >= depth[b]:
-                    a = parent[a]
-                else:
-                    b = parent[b]
-            if a and a == b:
-                while a:
-                    need -= lab[a]
-                    a = parent[a]
-            if need > 0:
+            if _shortfall(c, K, lab, parent, depth, u, v) > 0:
                 out_u.append(u)
                 out_v.append(v)
     return np.array(out_u, np.int64), np.array(out_v, np.int64)
@@ -518,19 +526,7 @@ def _certify(c, allowed, K, lab, parent, depth, size, live):
         for v in range(u + 1, n + 1):
             if not allowed[u, v]:
                 continue
-            need = 2 * (K - c[u, v]) - lab[u] - lab[v]
-            if need <= 0:
-                continue
-            a, b = parent[u], parent[v]             # blossoms holding both: from their LCA up
-            while a and b and a != b:
-                if depth[a] >= depth[b]:
-                    a = parent[a]
-                else:
-                    b = parent[b]
-            if a and a == b:
-                while a:
-                    need -= lab[a]
-                    a = parent[a]
+            need = _shortfall(c, K, lab, parent, depth, u, v)
             if need > 0:
                 lab[u] += need
     for u in range(1, n + 1):

@@ -131,6 +131,13 @@ def travel_graph(group: Group):
     return pos, node_curve, deg, C, curve_nodes, first_cand
 
 
+def fixed_edges(curve_nodes):
+    """The fixed edges of ``travel_graph``: each open curve between its end points, and E-S."""
+    two = [nd for nd in curve_nodes if len(nd) == 2]
+    return (np.array([nd[0] for nd in two] + [0], np.int64),
+            np.array([nd[1] for nd in two] + [1], np.int64))
+
+
 def odd_sets(C: np.ndarray, deg: np.ndarray, free_end: bool):
     """The cheapest perfect matching of the travel graph (``matching.py``; a seam counted as two
     vertices): every path's travel edges are one, so its cost is a lower bound (mm, rounded
@@ -185,9 +192,7 @@ def matching_path(group: Group):
     _last_odd_sets = (group, bound, masks)
     if bound is None:
         return None, 0.0
-    two = [nd for nd in curve_nodes if len(nd) == 2]
-    fixed_u = np.array([nd[0] for nd in two] + [0], np.int64)
-    fixed_v = np.array([nd[1] for nd in two] + [1], np.int64)
+    fixed_u, fixed_v = fixed_edges(curve_nodes)
     eu, ev = _patch(len(pos), fixed_u, fixed_v, edges[0].astype(np.int64),
                     edges[1].astype(np.int64), C)
     return decode_edges(group, node_curve, curve_nodes, first_cand, eu, ev), bound
@@ -226,9 +231,7 @@ class SymmetricModel:
          self.first_cand) = travel_graph(group)
         N = self.N = len(self.pos)
         C = self.C
-        two = [nd for nd in self.curve_nodes if len(nd) == 2]
-        self.fixed_u = np.array([nd[0] for nd in two] + [0], np.int64)
-        self.fixed_v = np.array([nd[1] for nd in two] + [1], np.int64)
+        self.fixed_u, self.fixed_v = fixed_edges(self.curve_nodes)
         # columns (u < v) and cuts (node mask "inside", row index N + i)
         self.eu = np.zeros(0, np.int64)
         self.ev = np.zeros(0, np.int64)
