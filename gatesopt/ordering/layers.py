@@ -25,12 +25,12 @@ from .problem import (OPTIMAL_ABS_TOL_MM, GroupSolution, OrderingProblem, Orderi
 DP_CURVES = 12
 #: what a group costs in the budget plan without an exact step: the greedy path (nearest
 #: neighbour, 2-opt, Or-opt, cheap bound; ~35 us per curve) and the matching's bound and path
-#: (``auto._matching_path``): measured 134 us per curve in all on 52 sampled Cura bunny groups of
-#: 13-163 curves given no time for an exact step with the matching on the whole graph, 102 us
-#: with its search graph of nearest edges (the constant is from the first measurement). Before the matching, at
-#: 30 us per curve, those groups kept the cheap bound's gap (median 27 %, <= 2 % for 6 of 52);
-#: with it the median gap is 1.8 %, <= 2 % for 27 of 52
-HEURISTIC_S_PER_CURVE = 1.3e-4
+#: (``auto._matching_path``): measured 80 us per curve in all on 52 sampled Cura bunny groups of
+#: 13-163 curves given no time for an exact step (134 us before the blossom algorithm kept its
+#: arrays and ``travel_graph`` was vectorised). Before the matching, at 30 us per curve, those
+#: groups kept the cheap bound's gap (median 27 %, <= 2 % for 6 of 52); with it the median gap
+#: is 1.8 %, <= 2 % for 27 of 52
+HEURISTIC_S_PER_CURVE = 8e-5
 #: what the main process spends outside the solvers, kept out of a budget: per curve still to
 #: come, building its group and taking the helper's answers (measured 3-6 us per curve on the
 #: Cura bunny and two other Cura files); per curve of the file, ``_chain`` and the travel totals

@@ -26,8 +26,8 @@ UNITS_PER_MM = 1e4
 #: rounds of adding the left-out edges with negative reduced cost to a sparse search graph;
 #: what is still negative after them is repaired in the dual (``_certify``)
 MAX_PRICING_ROUNDS = 3
-#: above this many vertices auto skips the matching (O(V^3); not tuned: a 163-curve group, 328
-#: vertices, took ~20 ms)
+#: above this many vertices auto skips the matching (O(V^3); not tuned: on a 163-curve group, 328
+#: vertices, the blossom algorithm takes ~3 ms, ~6 ms when it allocated its arrays per call)
 MAX_VERTICES = 500
 
 
@@ -337,31 +337,29 @@ def _expand_blossom(n, gu, gv, gw, lab, slack, st, pa, S, flower, flen, flower_f
 
 
 @numba.njit(cache=True)
-def _perfect_matching(c, adj_ptr, adj, hub):
+def _perfect_matching(c, adj_ptr, adj, hub, gu, gv, gw, flower, flower_from):
     """Minimum-cost perfect matching of vertices 1..V on the edges ``adj`` (CSR by vertex,
     ``adj_ptr`` of length V + 2; integer costs ``c``, (V+1) x (V+1)), as a maximum-weight perfect
     matching of weights K - c. Starts from a greedy dual (each vertex raised as far as its edges
     allow, in turn) and the greedy matching of its tight edges, so the blossom stages only finish
-    what is left. Returns (mate per vertex, 0 = unmatched; duals ``lab`` = K - 2 y; blossom
-    children ``flower``/``flen``; ``st``; ``n_x``; K; error flag)."""
+    what is left. ``gu``, ``gv``, ``gw``, ``flower``, ``flower_from``: the workspace of
+    ``_workspace``, all zero in ``gw`` and ``flower_from`` on entry and left so on return.
+    Returns (mate per vertex, 0 = unmatched; duals ``lab`` = K - 2 y; blossom children
+    ``flower``/``flen``; ``st``; ``n_x``; K; error flag)."""
     n = c.shape[0] - 1
     m = 2 * n + 2
     K = np.int64(1)
     for u in range(1, n + 1):
         for j in range(adj_ptr[u], adj_ptr[u + 1]):
             K = max(K, c[u, adj[j]] + 1)
-    # the edge stored between two (blossoms or) vertices: its end points and weight. int32 end
-    # points and blossom lists halve the memory of these (2V)^2 and 2V x V arrays (no measurable
-    # time gain on Cura bunny groups)
-    gu = np.zeros((m, m), np.int32)
-    gv = np.zeros((m, m), np.int32)
-    gw = np.zeros((m, m), np.int64)
+    # the edge stored between two (blossoms or) vertices: its end points and weight, read only
+    # where the weight is > 0 (an edge); between vertices only the edges are written
     for u in range(1, n + 1):
-        for v in range(1, n + 1):
+        for j in range(adj_ptr[u], adj_ptr[u + 1]):
+            v = adj[j]
             gu[u, v] = u
             gv[u, v] = v
-        for j in range(adj_ptr[u], adj_ptr[u + 1]):
-            gw[u, adj[j]] = K - c[u, adj[j]]
+            gw[u, v] = K - c[u, v]
     # greedy dual (min-cost form, integer y: every root keeps the same parity, so the dual
     # steps stay integral as with Galil's uniform start): y_u = half u's cheapest edge, then
     # y_u = min_v c_uv - y_v in turn. A hub (the free end E: an edge of cost 0 to every vertex)
@@ -405,9 +403,7 @@ def _perfect_matching(c, adj_ptr, adj, hub):
     pa = np.zeros(m, np.int64)
     S = np.zeros(m, np.int64)
     vis = np.zeros(m, np.int64)
-    flower = np.zeros((m, n + 2), np.int32)
     flen = np.zeros(m, np.int64)
-    flower_from = np.zeros((m, n + 1), np.int32)
     queue = np.zeros(8 * m, np.int64)
     for u in range(n + 1):
         st[u] = u
@@ -417,7 +413,37 @@ def _perfect_matching(c, adj_ptr, adj, hub):
     while _matching(n, adj_ptr, adj, gu, gv, gw, lab, match, slack, st, pa, S, vis, flower, flen,
                     flower_from, queue, nx_stamp):
         pass
-    return match[:n + 1].copy(), lab, flower, flen, st, nx_stamp[0], K, nx_stamp[2]
+    # leave the workspace as it came: what this call wrote into gw and flower_from back to 0
+    n_x = nx_stamp[0]
+    for u in range(1, n + 1):
+        for j in range(adj_ptr[u], adj_ptr[u + 1]):
+            gw[u, adj[j]] = 0
+        flower_from[u, u] = 0
+    for b in range(n + 1, n_x + 1):
+        for x in range(n_x + 1):
+            gw[b, x] = 0
+            gw[x, b] = 0
+        for x in range(n + 1):
+            flower_from[b, x] = 0
+    return match[:n + 1].copy(), lab, flower, flen, st, n_x, K, nx_stamp[2]
+
+
+#: the blossom algorithm's (2V + 2)^2 and (2V + 2) x V arrays, kept from call to call: allocated
+#: afresh each call they cost more than the algorithm on groups of ~250 end points (fresh pages,
+#: 2.6 ms of a ~4 ms call; measured). One process, one call at a time.
+_WORK: tuple | None = None
+
+
+def _workspace(V: int) -> tuple:
+    """(gu, gv, gw, flower, flower_from) for V vertices: the kept arrays if large enough (all zero
+    in gw and flower_from, as ``_perfect_matching`` leaves them), else new ones."""
+    global _WORK
+    m = 2 * V + 2
+    if _WORK is None or _WORK[2].shape[0] < m:
+        _WORK = (np.zeros((m, m), np.int32), np.zeros((m, m), np.int32),
+                 np.zeros((m, m), np.int64), np.zeros((m, V + 2), np.int32),
+                 np.zeros((m, V + 1), np.int32))
+    return _WORK
 
 
 @numba.njit(cache=True)
@@ -560,8 +586,8 @@ def min_cost_perfect_matching(cost_units: np.ndarray, allowed: np.ndarray,
     for _ in range(MAX_PRICING_ROUNDS + 1):
         u, v = np.nonzero(sub)
         adj_ptr = np.searchsorted(u, np.arange(V + 2)).astype(np.int64)
-        match, lab, flower, flen, st, n_x, K, err = _perfect_matching(c, adj_ptr,
-                                                                      v.astype(np.int64), hub1)
+        match, lab, flower, flen, st, n_x, K, err = _perfect_matching(
+            c, adj_ptr, v.astype(np.int64), hub1, *_workspace(V))
         if err:
             return None, None, []
         parent, depth, size, live = _blossom_tree(V, n_x, st, flower, flen)

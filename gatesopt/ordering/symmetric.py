@@ -23,6 +23,7 @@ import time
 import highspy
 import numba
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from .._native import run_highs
 from . import matching
@@ -51,6 +52,8 @@ PRICE_PER_NODE = 1
 EXACT_BLOSSOM_SHARE = 0.25
 EXACT_BLOSSOM_MAX_CUTS = 10
 EXACT_BLOSSOM_MIN_VIOLATION = 0.1
+#: at most this many subtour cuts per separation round (``_min_cuts``)
+MAX_SUBTOUR_CUTS = 40
 #: separation rounds per branch-and-cut node (then it is branched on its last LP point)
 MAX_NODE_CUT_ROUNDS = 50
 
@@ -105,28 +108,28 @@ def travel_graph(group: Group):
     n = group.n_curves
     cc = group.cand_curve
     counts = np.bincount(cc, minlength=n)
-    first_cand = np.full(n, -1)
-    for k in range(group.n_cands - 1, -1, -1):
-        first_cand[cc[k]] = k
-    pos = [group.start_xy, group.end_xy if group.end_xy is not None else np.zeros(2)]
-    node_curve = [-1, -2]
-    curve_nodes = []
-    for c in range(n):
-        k = first_cand[c]
-        if counts[c] == 1:                                  # loop: one node, degree 2
-            curve_nodes.append((len(pos),))
-            pos.append(group.cand_entry_xy[k]); node_curve.append(c)
-        else:                                               # open: entry of k, exit of k
-            curve_nodes.append((len(pos), len(pos) + 1))
-            pos += [group.cand_entry_xy[k], group.cand_exit_xy[k]]; node_curve += [c, c]
-    pos = np.asarray(pos, float)
-    node_curve = np.asarray(node_curve)
-    deg = np.array([2.0 if len(nd) == 1 else 1.0 for nd in curve_nodes])
-    deg = np.concatenate([[1.0, 1.0], np.repeat(deg, [len(nd) for nd in curve_nodes])])
-    C = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
+    by_curve = np.argsort(cc, kind="stable")
+    first_cand = by_curve[np.searchsorted(cc[by_curve], np.arange(n))]
+    loop = counts == 1                          # a loop: one node (its seam), degree 2
+    per_curve = np.where(loop, 1, 2)            # open: entry of its first candidate, then exit
+    first_node = 2 + np.cumsum(per_curve) - per_curve
+    N = 2 + int(per_curve.sum())
+    pos = np.zeros((N, 2))
+    pos[0] = group.start_xy
+    if group.end_xy is not None:
+        pos[1] = group.end_xy
+    pos[first_node] = group.cand_entry_xy[first_cand]
+    opened = first_node[~loop]
+    pos[opened + 1] = group.cand_exit_xy[first_cand[~loop]]
+    node_curve = np.concatenate([[-1, -2], np.repeat(np.arange(n), per_curve)])
+    deg = np.ones(N)
+    deg[first_node[loop]] = 2.0
+    curve_nodes = [(f,) if lp else (f, f + 1) for f, lp in zip(first_node.tolist(), loop.tolist())]
+    C = cdist(pos, pos)
     if group.end_xy is None:
         C[1, :] = C[:, 1] = 0.0                            # the path just ends
-    C[node_curve[:, None] == node_curve[None, :]] = np.inf
+    np.fill_diagonal(C, np.inf)                 # no travel edge within a curve, nor S-E
+    C[opened, opened + 1] = C[opened + 1, opened] = np.inf
     C[0, 1] = C[1, 0] = np.inf
     return pos, node_curve, deg, C, curve_nodes, first_cand
 
@@ -361,30 +364,42 @@ class SymmetricModel:
             n = self._blossoms_exact(x, min(deadline, exact_blossoms_until))
         return n
 
-    def _min_cuts(self, x: np.ndarray, deadline: float, max_cuts: int = 40) -> int:
-        """A minimum S-v cut (capacities x, fixed edges 1) below 2 is a violated subtour cut
+    def _min_cuts(self, x: np.ndarray, deadline: float, max_cuts: int = MAX_SUBTOUR_CUTS) -> int:
+        """A cut below 2 (capacities x, fixed edges 1) is a violated subtour cut
         ``x(δ(U)) >= 2 - fixed(δ(U))``. Edges at 1 (fixed ones included) are shrunk first
         (Padberg–Rinaldi: with x_uv = 1 moving v to u's side never increases a cut, as
-        x(δ(v)) = 2), then one max flow per sink not already behind a found cut."""
+        x(δ(v)) = 2), then the Gomory–Hu tree of what is left gives a minimum cut for every pair
+        of nodes: its cuts below 2, the most violated first, are added all at once. Nested
+        violated cuts are common (a far cluster of curves behind a chain of near ones); a search
+        from S that stops at the first cut per sink found one of them per LP round (measured on 60
+        Cura bunny groups: 1204 LP solves and 4.1 s in all, with the tree 923 and 3.1-3.4 s; one
+        47-curve group took 17 LP rounds and 83 ms, with the tree 6 and 19 ms)."""
         on = x > 1e-9
         n_sh, lab = self._support_components(x >= 1 - 1e-9)
         if n_sh <= 2:
             return 0
-        # relabel so that S's super node is 0
-        perm = np.arange(n_sh)
-        perm[[0, lab[0]]] = perm[[lab[0], 0]]
-        lab = perm[lab]
         u, v = lab[self.eu[on]], lab[self.ev[on]]
         keep = u != v
         # parallel edges between two shrunk nodes: one arc with the summed capacity
         key, inv = np.unique(np.minimum(u, v)[keep] * n_sh + np.maximum(u, v)[keep], return_inverse=True)
         w = np.bincount(inv, weights=x[on][keep], minlength=len(key))
         u, v = key // n_sh, key % n_sh
-        cuts = _subtour_cuts(n_sh, *_residual_arcs(n_sh, u, v, w), max_cuts,
-                             float(deadline - time.perf_counter()))
-        for reach in cuts:
-            self.add_cut(reach[lab])
-        return len(cuts)
+        sides = _gomory_hu_sides(n_sh, *_residual_arcs(n_sh, u, v, w),
+                                 float(deadline - time.perf_counter()))
+        if len(sides) == 0:
+            return 0
+        value = (sides[:, u] != sides[:, v]) @ w
+        violated = np.flatnonzero(value < 2.0 - 1e-6)
+        seen = set()
+        for i in violated[np.argsort(value[violated], kind="stable")]:
+            side = sides[i] ^ sides[i, lab[0]]          # the side without S: one key per cut
+            k = side.tobytes()
+            if k not in seen:
+                seen.add(k)
+                self.add_cut(side[lab])
+                if len(seen) >= max_cuts:
+                    break
+        return len(seen)
 
     def _edges_at_one(self, x: np.ndarray):
         """The edges at 1 in ``x``, the blossoms' possible teeth: travel columns and every fixed
@@ -859,39 +874,6 @@ def _gomory_hu_sides(n, indptr, head, cap, rev, seconds):
             if side[i] and tree[i] == t:
                 tree[i] = s
     return sides[:k]
-
-
-@numba.njit(cache=True)
-def _subtour_cuts(n, indptr, head, cap, rev, max_cuts, seconds):
-    """For every sink t (not yet on the far side of a found cut): Edmonds–Karp from node 0, stopped
-    as soon as the flow reaches 2; a smaller maximum flow gives the source side of a minimum cut
-    (the nodes still reachable in the residual graph). Returns those sides as boolean rows."""
-    out = np.zeros((max_cuts, n), np.bool_)
-    n_out = 0
-    done = np.zeros(n, np.bool_)
-    parent = np.empty(n, np.int64)
-    queue = np.empty(n, np.int64)
-    with numba.objmode(t0="f8"):
-        t0 = time.perf_counter()
-    for t in range(1, n):
-        if done[t]:
-            continue
-        if t % 16 == 0:
-            with numba.objmode(now="f8"):
-                now = time.perf_counter()
-            if now - t0 > seconds:
-                break
-        flow, reach = _max_flow(indptr, head, cap, rev, 0, t, 2.0, queue, parent)
-        if flow >= 2.0 - 1e-6:
-            continue
-        for b in range(n):
-            if not reach[b]:
-                done[b] = True
-        out[n_out] = reach
-        n_out += 1
-        if n_out >= max_cuts:
-            break
-    return out[:n_out]
 
 
 @numba.njit(cache=True)
