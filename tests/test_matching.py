@@ -125,3 +125,23 @@ def test_auto_takes_the_matching_bound_and_stays_exact():
     assert quick.bound_mm >= mbound - 1e-9
     full = auto.solve(grp, time_limit_s=5.0)
     assert full.status == "optimal" and full.objective_mm == pytest.approx(opt, abs=1e-6)
+
+
+def test_the_kept_workspace_gives_what_a_fresh_one_gives():
+    """The blossom algorithm keeps its large arrays from call to call (``matching._workspace``)
+    and must leave them clean: a run of instances of changing size (with ties: many blossoms)
+    gives the same bound and matching as each run alone on new arrays, and the arrays it reads
+    as 'no edge' are zero after every call."""
+    from gatesopt.ordering import matching
+    rng = np.random.default_rng(7)
+    instances = [_instance(rng, V, ties=k % 2 == 0) for k, V in enumerate([40, 12, 60, 8, 30, 60])]
+    kept = []
+    for c, ok in instances:
+        kept.append(min_cost_perfect_matching(c, ok))
+        gu, gv, gw, flower, flower_from = matching._WORK
+        assert not gw.any() and not flower_from.any()
+    for (c, ok), (bound, mate, _) in zip(instances, kept):
+        matching._WORK = None
+        fresh_bound, fresh_mate, _ = min_cost_perfect_matching(c, ok)
+        assert bound == fresh_bound and np.array_equal(mate, fresh_mate)
+        assert bound == pytest.approx(c[np.arange(len(c)), mate].sum() / 2)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from gatesopt.ordering import auto, cpsat, dp, greedy, milp, symmetric
+from gatesopt.ordering.polylines import from_polylines
 from gatesopt.ordering.problem import OPTIMAL_ABS_TOL_MM
 
 from conftest import needs_shared
@@ -270,3 +271,61 @@ def test_a_node_lp_stopped_by_highs_is_never_taken_for_pruned(monkeypatch):
         if checked >= 3:
             break
     assert checked >= 1
+
+
+def test_travel_graph_lays_out_open_curves_and_loops():
+    """Node 0 = S, 1 = E, two nodes per open curve (entry, exit of its first candidate), one per
+    loop (its seam, degree 2); no travel edge inside a curve, on the diagonal or S-E; into E free
+    when the path may end anywhere, the distance to the end point when one is given."""
+    square = np.array([[10.0, 0.0], [12.0, 0.0], [12.0, 2.0], [10.0, 0.0]])      # a loop
+    lines = [np.array([[0.0, 1.0], [5.0, 1.0]]), square, np.array([[0.0, 3.0], [5.0, 3.0]])]
+    prob = from_polylines([lines])
+    for end in (None, np.array([20.0, 0.0])):
+        grp = prob.group(0, np.array([-1.0, 0.0]), end)
+        pos, node_curve, deg, C, curve_nodes, first_cand = symmetric.travel_graph(grp)
+        assert node_curve.tolist() == [-1, -2, 0, 0, 1, 2, 2]
+        assert deg.tolist() == [1, 1, 1, 1, 2, 1, 1]
+        assert [len(nd) for nd in curve_nodes] == [2, 1, 2]
+        assert np.allclose(pos[[0, 2, 4]], [[-1, 0], [0, 1], [10, 0]])
+        assert {tuple(pos[n]) for n in curve_nodes[0]} == {(0.0, 1.0), (5.0, 1.0)}
+        assert np.isinf(np.diag(C)).all() and np.isinf(C[0, 1]) and np.isinf(C[1, 0])
+        assert np.isinf(C[2, 3]) and np.isinf(C[5, 6]) and np.isinf(C[6, 5])
+        assert C[3, 4] == pytest.approx(np.hypot(*(pos[3] - pos[4])))
+        assert np.array_equal(C, C.T)
+        into_e = C[1, 2:]
+        if end is None:
+            assert not into_e.any()
+        else:
+            assert np.allclose(into_e, np.hypot(*(pos[2:] - end).T))
+
+
+def test_tree_cuts_below_gives_nested_cuts_together_smallest_first():
+    """A chain 0 - 1 - 2 - 3 - 4 of capacities 1, 0.5, 3, 1.5: the cuts below 2 are nested (each
+    holds the next); all three come back in one call, the smallest first, as sides without 0."""
+    u, v, w = [0, 1, 2, 3], [1, 2, 3, 4], [1.0, 0.5, 3.0, 1.5]
+    cuts = symmetric.tree_cuts_below(5, u, v, w, 2.0, 40, 10.0)
+    assert [np.flatnonzero(c).tolist() for c in cuts] == [[2, 3, 4], [1, 2, 3, 4], [4]]
+    assert len(symmetric.tree_cuts_below(5, u, v, w, 2.0, 1, 10.0)) == 1
+    ring = symmetric.tree_cuts_below(5, [0, 1, 2, 3, 4], [1, 2, 3, 4, 0], np.ones(5), 2.0, 40, 10.0)
+    assert ring == []                   # every cut of a ring of 1s crosses it twice
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_tree_cuts_below_agree_with_every_cut_by_brute_force(seed):
+    """Random weighted graphs of up to 8 nodes: each cut returned is below the limit, and one is
+    returned exactly when some node set has a cut below it, the first at the minimum cut."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 9))
+    iu, iv = np.triu_indices(n, 1)
+    keep = rng.random(len(iu)) < 0.5
+    u, v = iu[keep], iv[keep]
+    w = np.round(rng.random(len(u)) * 2, 2)
+    limit = 1.5
+    cuts = symmetric.tree_cuts_below(n, u, v, w, limit, 40, 10.0)
+    value = lambda side: float(w[side[u] != side[v]].sum())   # noqa: E731
+    best = min(value(np.array([m >> k & 1 for k in range(n)], bool)) for m in range(1, 2 ** n - 1))
+    assert all(value(c) < limit and not c[0] and c.any() for c in cuts)
+    assert len({c.tobytes() for c in cuts}) == len(cuts)
+    assert bool(cuts) == (best < limit)
+    if cuts:
+        assert value(cuts[0]) == pytest.approx(best)

@@ -134,6 +134,31 @@ def travel_graph(group: Group):
     return pos, node_curve, deg, C, curve_nodes, first_cand
 
 
+def tree_cuts_below(n: int, u, v, w, limit: float, max_cuts: int, seconds: float,
+                    keep_out: int = 0) -> list[np.ndarray]:
+    """The distinct cuts of the Gomory–Hu tree of the graph on nodes 0..n-1 (edges u-v of
+    capacity w) whose capacity is below ``limit``, the smallest first, at most ``max_cuts``, each
+    as the boolean side without node ``keep_out``. Every pair of nodes has a minimum cut among the
+    tree's n - 1, so this finds nested cuts together (``SymmetricModel._min_cuts``)."""
+    u, v = np.asarray(u, np.int64), np.asarray(v, np.int64)
+    w = np.asarray(w, float)
+    sides = _gomory_hu_sides(n, *_residual_arcs(n, u, v, w), float(seconds))
+    if len(sides) == 0:
+        return []
+    value = (sides[:, u] != sides[:, v]) @ w
+    below = np.flatnonzero(value < limit)
+    out, seen = [], set()
+    for i in below[np.argsort(value[below], kind="stable")]:
+        side = sides[i] ^ sides[i, keep_out]            # one orientation: one key per cut
+        k = side.tobytes()
+        if k not in seen:
+            seen.add(k)
+            out.append(side)
+            if len(out) >= max_cuts:
+                break
+    return out
+
+
 def fixed_edges(curve_nodes):
     """The fixed edges of ``travel_graph``: each open curve between its end points, and E-S."""
     two = [nd for nd in curve_nodes if len(nd) == 2]
@@ -383,23 +408,11 @@ class SymmetricModel:
         # parallel edges between two shrunk nodes: one arc with the summed capacity
         key, inv = np.unique(np.minimum(u, v)[keep] * n_sh + np.maximum(u, v)[keep], return_inverse=True)
         w = np.bincount(inv, weights=x[on][keep], minlength=len(key))
-        u, v = key // n_sh, key % n_sh
-        sides = _gomory_hu_sides(n_sh, *_residual_arcs(n_sh, u, v, w),
-                                 float(deadline - time.perf_counter()))
-        if len(sides) == 0:
-            return 0
-        value = (sides[:, u] != sides[:, v]) @ w
-        violated = np.flatnonzero(value < 2.0 - 1e-6)
-        seen = set()
-        for i in violated[np.argsort(value[violated], kind="stable")]:
-            side = sides[i] ^ sides[i, lab[0]]          # the side without S: one key per cut
-            k = side.tobytes()
-            if k not in seen:
-                seen.add(k)
-                self.add_cut(side[lab])
-                if len(seen) >= max_cuts:
-                    break
-        return len(seen)
+        cuts = tree_cuts_below(n_sh, key // n_sh, key % n_sh, w, 2.0 - 1e-6, max_cuts,
+                               float(deadline - time.perf_counter()), keep_out=int(lab[0]))
+        for side in cuts:
+            self.add_cut(side[lab])
+        return len(cuts)
 
     def _edges_at_one(self, x: np.ndarray):
         """The edges at 1 in ``x``, the blossoms' possible teeth: travel columns and every fixed
