@@ -314,6 +314,10 @@ def improve_ils(group: Group, order, *, kicks: int | None = None, seed: int = 0,
         return order
     if kicks is None:
         kicks = min(MAX_KICKS, KICKS_PER_CURVE * n)
+    if kicks <= 0:
+        # nothing to kick (auto before the symmetric model): the link matrix below would cost
+        # ~1 ms on a 100-curve group for nothing
+        return order
     he = group.end_xy is not None
     ex, ey = (float(group.end_xy[0]), float(group.end_xy[1])) if he else (0.0, 0.0)
     cand_start, cand_list = clusters(group)
