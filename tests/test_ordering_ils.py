@@ -128,10 +128,19 @@ def test_ils_escapes_the_greedy_trap_on_a_real_layer():
 
 
 @pytest.mark.parametrize("m", [1, 2, 5, 11, 60])
-def test_nearest_lists_equal_a_full_row_sort(m):
-    from gatesopt.ordering.ils import _nearest
+def test_link_lists_equal_a_full_row_sort(m):
+    """``_link_lists``: the link matrix, and per candidate the k nearest of other curves as a
+    stable sort of its row gives (ties in index order: integer points make many), with its own
+    curve's candidates (at infinity) last when too few others exist."""
+    from gatesopt.ordering.ils import _link_lists
     rng = np.random.default_rng(m)
-    far = rng.uniform(0, 1, (m, m))
-    far[np.arange(m), np.arange(m)] = np.inf
+    ent = rng.integers(0, 4, (m, 2)).astype(float)
+    ext = rng.integers(0, 4, (m, 2)).astype(float)
+    cc = np.sort(rng.integers(0, max(m // 2, 1), m))     # curves of one or more candidates
+    D_ref = np.hypot(ext[:, None, 0] - ent[None, :, 0], ext[:, None, 1] - ent[None, :, 1])
+    far = np.where(cc[:, None] == cc[None, :], np.inf, D_ref)
     for k in range(0, min(10, m - 1) + 1):
-        np.testing.assert_array_equal(_nearest(far, k), np.argsort(far, axis=1, kind="stable")[:, :k])
+        D, near_out, near_in = _link_lists(ent, ext, cc, k)
+        np.testing.assert_allclose(D, D_ref, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(near_out, np.argsort(far, axis=1, kind="stable")[:, :k])
+        np.testing.assert_array_equal(near_in, np.argsort(far.T, axis=1, kind="stable")[:, :k])

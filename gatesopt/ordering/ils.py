@@ -284,19 +284,58 @@ def link_matrix(group: Group, k: int = NEIGHBOURS):
     """(D, ds, de, near_out, near_in): exit->entry lengths between candidates, start->entry,
     exit->end (0 without an end: the path just stops), and per candidate the k candidates of
     other curves nearest its exit (``near_out``) and nearest its entry (``near_in``)."""
-    ent, ext = group.cand_entry_xy, group.cand_exit_xy
-    D = np.hypot(ext[:, None, 0] - ent[None, :, 0], ext[:, None, 1] - ent[None, :, 1])
-    ds = group.start_cost_mm()
-    de = group.end_cost_mm()
-    far = D.copy()
-    far[group.cand_curve[:, None] == group.cand_curve[None, :]] = np.inf
     k = min(k, group.n_cands - 1)
-    near_out = _nearest(far, k)
-    near_in = _nearest(far.T, k)
-    # (in a group with < k other candidates a list may name the curve's own: every move is
-    # re-scored exactly, so such an entry only costs a wasted try)
-    return (D, np.ascontiguousarray(ds, float), np.ascontiguousarray(de, float),
-            np.ascontiguousarray(near_out, np.int64), np.ascontiguousarray(near_in, np.int64))
+    D, near_out, near_in = _link_lists(np.ascontiguousarray(group.cand_entry_xy, float),
+                                       np.ascontiguousarray(group.cand_exit_xy, float),
+                                       np.ascontiguousarray(group.cand_curve, np.int64), max(k, 0))
+    return (D, np.ascontiguousarray(group.start_cost_mm(), float),
+            np.ascontiguousarray(group.end_cost_mm(), float), near_out, near_in)
+
+
+@numba.njit(cache=True)
+def _link_lists(ent, ext, cc, k):
+    """The link matrix and both neighbour lists in one compiled pass: each row's k nearest
+    candidates of other curves, nearest first, ties in index order, then (a group with fewer than
+    k of them) the row's own curve's candidates in index order, as a stable sort of the row with
+    those at infinity gives. Numpy (hypot, a masked copy, a partial sort per row) took ~1 ms on
+    a 200-candidate group, this ~0.25 ms (measured: 52 Cura bunny groups, 45 -> 13 ms)."""
+    m = len(ent)
+    D = np.empty((m, m))
+    for a in range(m):
+        for b in range(m):
+            D[a, b] = np.sqrt((ext[a, 0] - ent[b, 0]) ** 2 + (ext[a, 1] - ent[b, 1]) ** 2)
+    near_out = np.empty((m, k), np.int64)
+    near_in = np.empty((m, k), np.int64)
+    val = np.empty(k + 1)
+    idx = np.empty(k + 1, np.int64)
+    for side in range(2):
+        out = near_out if side == 0 else near_in
+        for a in range(m):
+            cnt = 0
+            for b in range(m):
+                if cc[a] == cc[b]:
+                    continue
+                d = D[a, b] if side == 0 else D[b, a]
+                if cnt == k and (k == 0 or d >= val[k - 1]):
+                    continue
+                j = cnt if cnt < k else k - 1           # insertion: after equal values
+                while j > 0 and val[j - 1] > d:
+                    val[j] = val[j - 1]
+                    idx[j] = idx[j - 1]
+                    j -= 1
+                val[j] = d
+                idx[j] = b
+                if cnt < k:
+                    cnt += 1
+            for t in range(cnt):
+                out[a, t] = idx[t]
+            b = 0
+            while cnt < k:                              # own curve's candidates last
+                if cc[b] == cc[a]:
+                    out[a, cnt] = b
+                    cnt += 1
+                b += 1
+    return D, near_out, near_in
 
 
 def improve_ils(group: Group, order, *, kicks: int | None = None, seed: int = 0,
@@ -335,15 +374,3 @@ def warm_start(group: Group, hint, t0: float, time_limit_s: float):
     if hint is not None:
         return hint
     return improve_ils(group, nearest_neighbour(group), deadline=t0 + WARM_START_SHARE * time_limit_s)
-
-
-def _nearest(far: np.ndarray, k: int) -> np.ndarray:
-    """Per row, the columns of the k smallest values, nearest first. A partial selection, then a
-    sort of those k only: the full row sort took 1.3 of the 10 s of a budgeted Cura bunny run."""
-    if k <= 0:
-        return np.zeros((far.shape[0], 0), np.int64)
-    if k >= far.shape[1]:
-        return np.argsort(far, axis=1, kind="stable")
-    part = np.argpartition(far, k - 1, axis=1)[:, :k]
-    return np.take_along_axis(part, np.argsort(np.take_along_axis(far, part, axis=1), axis=1,
-                                               kind="stable"), axis=1)
