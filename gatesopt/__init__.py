@@ -2,6 +2,7 @@
 
 parse -> Program -> problem -> formulation -> solution -> emit -> verify. See README.md.
 """
+from . import _jit  # noqa: F401  (counts compile time from the first kernel on)
 from .errors import GatesoptError, GcodeError
 from .parse import parse
 from .program import AXES, Kind, Program

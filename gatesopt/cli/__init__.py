@@ -10,6 +10,7 @@ import argparse
 import importlib
 import sys
 
+from .. import _jit
 from ..errors import GatesoptError
 
 # command modules, in the order ``gatesopt --help`` lists them
@@ -38,6 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return 2
+    compiled_before_s = _jit.compile_s()
     try:
         return int(args.func(args) or 0)
     except GatesoptError as exc:
@@ -48,6 +50,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gatesopt: interrupted", file=sys.stderr)
         return 130
+    finally:
+        # a first run's time, explained (stderr: stdout may carry G-code or JSON)
+        note = _jit.compile_note(compiled_before_s)
+        if note:
+            print(f"gatesopt: note: {note}", file=sys.stderr)
 
 
 if __name__ == "__main__":  # pragma: no cover
