@@ -148,7 +148,7 @@ def _matching(n, adj_ptr, adj, gu, gv, gw, lab, match, slack, st, pa, S, vis, fl
         S[x] = -1
         slack[x] = 0
     qh = 0
-    qt = 0
+    qt = np.int64(0)
     for x in range(1, n_x + 1):
         if st[x] == x and match[x] == 0:
             pa[x] = 0
@@ -202,7 +202,7 @@ def _matching(n, adj_ptr, adj, gu, gv, gw, lab, match, slack, st, pa, S, vis, fl
                 elif S[b] == 1:
                     lab[b] -= 2 * d
         qh = 0
-        qt = 0
+        qt = np.int64(0)
         for x in range(1, n_x + 1):
             if (st[x] == x and slack[x] != 0 and st[slack[x]] != x
                     and _slack2(gu, gv, gw, lab, slack[x], x) == 0):
@@ -292,7 +292,7 @@ def _add_blossom(n, gu, gv, gw, lab, match, slack, st, pa, S, flower, flen, flow
     for x in range(1, n + 1):
         flower_from[b, x] = 0
     for i in range(k):
-        xs = flower[b, i]
+        xs = np.int64(flower[b, i])       # int64 throughout: one compiled signature per kernel
         for x in range(1, n_x + 1):
             if gw[xs, x] > 0 and (gw[b, x] == 0 or _slack2(gu, gv, gw, lab, xs, x)
                                   < _slack2(gu, gv, gw, lab, b, x)):
@@ -316,8 +316,8 @@ def _expand_blossom(n, gu, gv, gw, lab, slack, st, pa, S, flower, flen, flower_f
     xr = flower_from[b, gu[b, pa[b]]]
     pr = _get_pr(flower, flen, b, xr)
     for i in range(0, pr, 2):
-        xs = flower[b, i]
-        xns = flower[b, i + 1]
+        xs = np.int64(flower[b, i])
+        xns = np.int64(flower[b, i + 1])
         pa[xs] = gu[xns, xs]
         S[xs] = 1
         S[xns] = 0
@@ -329,7 +329,7 @@ def _expand_blossom(n, gu, gv, gw, lab, slack, st, pa, S, flower, flen, flower_f
     S[xr] = 1
     pa[xr] = pa[b]
     for i in range(pr + 1, flen[b]):
-        xs = flower[b, i]
+        xs = np.int64(flower[b, i])
         S[xs] = -1
         _set_slack(n, gu, gv, gw, lab, slack, st, S, xs)
     st[b] = 0
