@@ -138,10 +138,42 @@ def test_the_kept_workspace_gives_what_a_fresh_one_gives():
     kept = []
     for c, ok in instances:
         kept.append(min_cost_perfect_matching(c, ok))
-        gu, gv, gw, flower, flower_from = matching._WORK
+        gu, gv, gw, flower, flower_from = matching._WORK.arrays
         assert not gw.any() and not flower_from.any()
     for (c, ok), (bound, mate, _) in zip(instances, kept):
-        matching._WORK = None
+        matching._WORK.arrays = None
         fresh_bound, fresh_mate, _ = min_cost_perfect_matching(c, ok)
         assert bound == fresh_bound and np.array_equal(mate, fresh_mate)
         assert bound == pytest.approx(c[np.arange(len(c)), mate].sum() / 2)
+
+
+def test_threads_get_their_own_workspace(monkeypatch):
+    """Two threads matching at once (a planner calling the library from threads) get the bounds
+    and odd sets each gets alone: the kept arrays are per thread. A pause between the blossom
+    algorithm and the reading of its blossoms hands the other thread the interpreter right there."""
+    import threading
+    import time
+    from gatesopt.ordering import matching
+    tree = matching._blossom_tree
+
+    def paused_tree(*a):
+        time.sleep(0.002)
+        return tree(*a)
+    rng = np.random.default_rng(3)
+    instances = [_instance(rng, 2 * int(rng.integers(10, 40)), ties=k % 2 == 0) for k in range(16)]
+    alone = [min_cost_perfect_matching(c, ok) for c, ok in instances]
+    monkeypatch.setattr(matching, "_blossom_tree", paused_tree)
+    got = [None] * len(instances)
+
+    def work(k0):
+        for k in range(k0, len(instances), 2):
+            for _ in range(3):
+                got[k] = min_cost_perfect_matching(*instances[k])
+    threads = [threading.Thread(target=work, args=(k0,)) for k0 in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for (b0, m0, s0), (b1, m1, s1) in zip(alone, got):
+        assert b0 == b1 and np.array_equal(m0, m1)
+        assert [h.tolist() for h in s0] == [h.tolist() for h in s1]

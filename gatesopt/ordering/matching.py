@@ -18,6 +18,8 @@ for every path: ``symmetric.SymmetricModel`` starts its LP with them.
 """
 from __future__ import annotations
 
+import threading
+
 import numba
 import numpy as np
 
@@ -430,20 +432,21 @@ def _perfect_matching(c, adj_ptr, adj, hub, gu, gv, gw, flower, flower_from):
 
 #: the blossom algorithm's (2V + 2)^2 and (2V + 2) x V arrays, kept from call to call: allocated
 #: afresh each call they cost more than the algorithm on groups of ~250 end points (fresh pages,
-#: 2.6 ms of a ~4 ms call; measured). One process, one call at a time.
-_WORK: tuple | None = None
+#: 2.6 ms of a ~4 ms call; measured). One set per thread: ``flower`` is read after the call
+#: (``_blossom_tree``, ``_members``), so two threads must not share it.
+_WORK = threading.local()
 
 
 def _workspace(V: int) -> tuple:
-    """(gu, gv, gw, flower, flower_from) for V vertices: the kept arrays if large enough (all zero
-    in gw and flower_from, as ``_perfect_matching`` leaves them), else new ones."""
-    global _WORK
+    """(gu, gv, gw, flower, flower_from) for V vertices: this thread's kept arrays if large enough
+    (all zero in gw and flower_from, as ``_perfect_matching`` leaves them), else new ones."""
     m = 2 * V + 2
-    if _WORK is None or _WORK[2].shape[0] < m:
-        _WORK = (np.zeros((m, m), np.int32), np.zeros((m, m), np.int32),
-                 np.zeros((m, m), np.int64), np.zeros((m, V + 2), np.int32),
-                 np.zeros((m, V + 1), np.int32))
-    return _WORK
+    arrays = getattr(_WORK, "arrays", None)
+    if arrays is None or arrays[2].shape[0] < m:
+        arrays = _WORK.arrays = (np.zeros((m, m), np.int32), np.zeros((m, m), np.int32),
+                                 np.zeros((m, m), np.int64), np.zeros((m, V + 2), np.int32),
+                                 np.zeros((m, V + 1), np.int32))
+    return arrays
 
 
 @numba.njit(cache=True)
