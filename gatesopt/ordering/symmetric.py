@@ -330,8 +330,9 @@ class SymmetricModel:
         """Start the LP with the odd-set cuts ``x(δ(H)) >= 1`` of the cheapest perfect matching's
         dual (``odd_sets``): the blossoms the separators would otherwise find a few per round.
         Returns the matching's bound (0 if it failed)."""
-        if _last_odd_sets is not None and _last_odd_sets[0] is self.group:
-            _, bound, masks = _last_odd_sets        # auto took its path from the same matching
+        last = _last_odd_sets           # one read: another thread may replace it meanwhile
+        if last is not None and last[0] is self.group:
+            _, bound, masks = last                  # auto took its path from the same matching
         else:
             bound, masks, _ = odd_sets(self.C, self.deg, self.group.end_xy is None)
         none = np.zeros(0, np.int64)
