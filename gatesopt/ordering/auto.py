@@ -147,7 +147,8 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "fallback",
                                   time.perf_counter() - t0, "auto:ils")
     left = max(time_limit_s - (time.perf_counter() - t0), 0.05)
-    ex = milp.solve(group, time_limit_s=left, hint=heur, give_up_gap=GIVE_UP_GAP)
+    ex = milp.solve(group, time_limit_s=left, hint=heur, give_up_gap=GIVE_UP_GAP,
+                    known_bound_mm=heur.bound_mm)
     if ex.objective_mm > heur.objective_mm:        # never worse than the warm start
         ex = GroupSolution.make(heur.order, heur.objective_mm, max(ex.bound_mm, heur.bound_mm),
                                 "feasible", ex.solve_s, ex.method)

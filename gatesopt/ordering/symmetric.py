@@ -271,7 +271,9 @@ class SymmetricModel:
         h.addRows(N, self.deg, self.deg, 0, np.zeros(N, np.int32), np.zeros(0, np.int32), np.zeros(0))
         # first columns: each node's nearest neighbours, every edge at E, the incumbent's edges
         k = min(K_NEIGHBOURS, N - 1)
-        near = np.argsort(C, axis=1)[:, :k]
+        # a partial selection: the full row sort took ~1 ms of the model's ~1.6 ms build on a
+        # 100-curve group (which k of equal distances enter matters not: pricing adds the rest)
+        near = np.argpartition(C, k - 1, axis=1)[:, :k] if k > 0 else np.zeros((N, 0), np.int64)
         r = np.repeat(np.arange(N), k)
         c = near.ravel()
         inc = self.tour_edges(incumbent)
