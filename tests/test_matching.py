@@ -177,3 +177,31 @@ def test_threads_get_their_own_workspace(monkeypatch):
     for (b0, m0, s0), (b1, m1, s1) in zip(alone, got):
         assert b0 == b1 and np.array_equal(m0, m1)
         assert [h.tolist() for h in s0] == [h.tolist() for h in s1]
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_travel_matching_equals_the_dense_matching(seed):
+    """``travel_matching`` (one compiled pass from the node cost matrix) gives the bound of
+    ``min_cost_perfect_matching`` on the same graph written out: vertices per node (a seam
+    twice), no edge inside a node or where the cost is infinite, costs in whole units."""
+    from gatesopt.ordering import matching
+    rng = np.random.default_rng(seed)
+    N = int(rng.integers(4, 30))
+    pts = rng.random((N, 2)) * 50
+    C = np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1))
+    C[rng.random((N, N)) < 0.1] = np.inf
+    C = np.minimum(C, C.T)
+    np.fill_diagonal(C, np.inf)
+    rep = rng.integers(1, 3, N)
+    if rep.sum() % 2:
+        rep[0] = 3 - rep[0]
+    idx = np.repeat(np.arange(N), rep)
+    C2 = C[np.ix_(idx, idx)]
+    ok = np.isfinite(C2) & (idx[:, None] != idx[None, :])
+    units = np.floor(np.where(ok, C2, 0.0) * matching.UNITS_PER_MM).astype(np.int64)
+    dense, _, _ = min_cost_perfect_matching(units, ok)
+    got, mate, _ = matching.travel_matching(C, idx, 3, 0)
+    assert (dense is None) == (got is None)
+    if dense is not None:
+        assert got == dense
+        assert ok[np.arange(len(idx)), mate].all()

@@ -175,21 +175,11 @@ def odd_sets(C: np.ndarray, deg: np.ndarray, free_end: bool):
     N = len(C)
     rep = np.where(deg == 2, 2, 1)
     idx = np.repeat(np.arange(N), rep)
-    C2 = C[np.ix_(idx, idx)]
-    ok = np.isfinite(C2) & (idx[:, None] != idx[None, :])
-    units = np.floor(np.where(ok, C2, 0.0) * matching.UNITS_PER_MM).astype(np.int64)
     # the blossom algorithm runs on each vertex's nearest edges (and E's), adding the others
-    # whose reduced cost turns negative (``matching.min_cost_perfect_matching``)
-    V = len(idx)
-    k = min(MATCHING_NEIGHBOURS, V - 1)
-    near = np.argpartition(np.where(ok, C2, np.inf), k - 1, axis=1)[:, :k]
-    search = np.zeros((V, V), bool)
-    search[np.repeat(np.arange(V), k), near.ravel()] = True
-    search[idx == 1, :] = True
+    # whose reduced cost turns negative (``matching.travel_matching``)
+    k = min(MATCHING_NEIGHBOURS, len(idx) - 1)
     hub = int(np.flatnonzero(idx == 1)[0]) if free_end else None
-    bound, mate, sets = matching.min_cost_perfect_matching(units, ok, search & ok, hub=hub)
-    if bound is None:               # no perfect matching among the nearest edges: all of them
-        bound, mate, sets = matching.min_cost_perfect_matching(units, ok, hub=hub)
+    bound, mate, sets = matching.travel_matching(C, idx, k, 1, hub=hub)
     if bound is None:
         return None, [], None
     masks = []
