@@ -114,6 +114,23 @@ def _d(ax, ay, bx, by):
     return np.sqrt((ax - bx) ** 2 + (ay - by) ** 2)
 
 
+@numba.njit(cache=True, inline="always")
+def keep_smallest(val, idx, cnt, k, d, b):
+    """Offer value d of item b to the k smallest kept so far (``val``/``idx``, ``cnt`` of them,
+    ascending; equal values keep the earlier item first, as a stable sort does). Returns the new
+    count."""
+    if cnt == k and (k == 0 or d >= val[k - 1]):
+        return cnt
+    j = cnt if cnt < k else k - 1
+    while j > 0 and val[j - 1] > d:
+        val[j] = val[j - 1]
+        idx[j] = idx[j - 1]
+        j -= 1
+    val[j] = d
+    idx[j] = b
+    return cnt + 1 if cnt < k else cnt
+
+
 @numba.njit(cache=True)
 def _path_cost(seq, ent, ext, sx, sy, closed, has_end=False, ex=0.0, ey=0.0):
     n = len(seq)

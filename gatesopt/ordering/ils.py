@@ -23,7 +23,8 @@ import time
 import numba
 import numpy as np
 
-from .greedy import _EPS, _orient_dp, _path_cost, clusters, improve, nearest_neighbour
+from .greedy import (_EPS, _orient_dp, _path_cost, clusters, improve, keep_smallest,
+                     nearest_neighbour)
 from .problem import Group
 
 #: kicks per curve in the group, and the cap. Measured on the 12 hardest groups of
@@ -315,18 +316,7 @@ def _link_lists(ent, ext, cc, k):
             for b in range(m):
                 if cc[a] == cc[b]:
                     continue
-                d = D[a, b] if side == 0 else D[b, a]
-                if cnt == k and (k == 0 or d >= val[k - 1]):
-                    continue
-                j = cnt if cnt < k else k - 1           # insertion: after equal values
-                while j > 0 and val[j - 1] > d:
-                    val[j] = val[j - 1]
-                    idx[j] = idx[j - 1]
-                    j -= 1
-                val[j] = d
-                idx[j] = b
-                if cnt < k:
-                    cnt += 1
+                cnt = keep_smallest(val, idx, cnt, k, D[a, b] if side == 0 else D[b, a], b)
             for t in range(cnt):
                 out[a, t] = idx[t]
             b = 0

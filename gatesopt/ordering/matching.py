@@ -23,6 +23,8 @@ import threading
 import numba
 import numpy as np
 
+from .greedy import keep_smallest
+
 #: cost units per mm (0.1 um): costs are rounded down to whole units
 UNITS_PER_MM = 1e4
 #: rounds of adding the left-out edges with negative reduced cost to a sparse search graph;
@@ -638,18 +640,7 @@ def _prepare(C, idx, k, search_node, units_per_mm):
         for b in range(V):
             if not ok[a + 1, b + 1]:
                 continue
-            d = C[idx[a], idx[b]]
-            if cnt == k and (k == 0 or d >= val[k - 1]):
-                continue
-            j = cnt if cnt < k else k - 1               # insertion: after equal values
-            while j > 0 and val[j - 1] > d:
-                val[j] = val[j - 1]
-                best[j] = best[j - 1]
-                j -= 1
-            val[j] = d
-            best[j] = b
-            if cnt < k:
-                cnt += 1
+            cnt = keep_smallest(val, best, cnt, k, C[idx[a], idx[b]], b)
         for t in range(cnt):
             sub[a + 1, best[t] + 1] = True
             sub[best[t] + 1, a + 1] = True
