@@ -256,6 +256,21 @@ def _on_found_edge(n, gu, gv, gw, lab, match, slack, st, pa, S, vis, flower, fle
 
 
 @numba.njit(cache=True)
+def _append_tree_path(n, match, st, pa, flower, flen, queue, qt, b, k, x, lca):
+    """Append to blossom b's cycle (from position k) the tree path from x up to ``lca``: each
+    (blossom or) vertex and its mate; the mates, odd until now, join the queue. Returns the new
+    length and queue tail."""
+    while x != lca:
+        y = st[match[x]]
+        flower[b, k] = x
+        flower[b, k + 1] = y
+        k += 2
+        qt = _q_push(n, flower, flen, queue, qt, y)
+        x = st[pa[y]]
+    return k, qt
+
+
+@numba.njit(cache=True)
 def _add_blossom(n, gu, gv, gw, lab, match, slack, st, pa, S, flower, flen, flower_from, queue,
                  qt, nx_stamp, u, lca, v):
     n_x = nx_stamp[0]
@@ -268,26 +283,10 @@ def _add_blossom(n, gu, gv, gw, lab, match, slack, st, pa, S, flower, flen, flow
     lab[b] = 0
     S[b] = 0
     match[b] = match[lca]
-    k = 0
-    flower[b, k] = lca
-    k += 1
-    x = u
-    while x != lca:
-        y = st[match[x]]
-        flower[b, k] = x
-        flower[b, k + 1] = y
-        k += 2
-        qt = _q_push(n, flower, flen, queue, qt, y)
-        x = st[pa[y]]
+    flower[b, 0] = lca
+    k, qt = _append_tree_path(n, match, st, pa, flower, flen, queue, qt, b, 1, u, lca)
     flower[b, 1:k] = flower[b, 1:k][::-1].copy()
-    x = v
-    while x != lca:
-        y = st[match[x]]
-        flower[b, k] = x
-        flower[b, k + 1] = y
-        k += 2
-        qt = _q_push(n, flower, flen, queue, qt, y)
-        x = st[pa[y]]
+    k, qt = _append_tree_path(n, match, st, pa, flower, flen, queue, qt, b, k, v, lca)
     flen[b] = k
     _set_st(n, flower, flen, st, b, b)
     for x in range(1, n_x + 1):

@@ -909,20 +909,16 @@ def _patch(n, fixed_u, fixed_v, eu, ev, C):
     eu = eu.copy()
     ev = ev.copy()
     while True:
-        parent = np.arange(n)
-        for i in range(len(fixed_u)):
-            parent[_find(parent, fixed_u[i])] = _find(parent, fixed_v[i])
-        for i in range(m):
-            parent[_find(parent, eu[i])] = _find(parent, ev[i])
-        root = _find(parent, 0)
+        _, lab = _components(n, np.concatenate((fixed_u, eu)), np.concatenate((fixed_v, ev)))
+        root = lab[0]
         best, bi, bj, cross = np.inf, -1, -1, False
         for j in range(m):
-            if _find(parent, eu[j]) == root:
+            if lab[eu[j]] == root:
                 continue
             c, d = eu[j], ev[j]
             for i in range(m):
                 a, b = eu[i], ev[i]
-                if _find(parent, a) != root:
+                if lab[a] != root:
                     continue
                 base = C[a, b] + C[c, d]
                 v1 = C[a, c] + C[b, d] - base
