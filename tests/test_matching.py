@@ -91,6 +91,29 @@ def test_a_sparse_search_graph_still_gives_a_valid_bound(seed):
     assert full == pytest.approx(opt)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_the_dual_is_repaired_where_pricing_stopped(seed, monkeypatch):
+    """No pricing round: the matching runs once on each vertex's nearest edge and a path's
+    pairs, far from the optimum; the violated edges then found are only repaired in the dual
+    (``_certify``), and the bound is still never above the whole graph's optimum."""
+    from gatesopt.ordering import matching
+    monkeypatch.setattr(matching, "MAX_PRICING_ROUNDS", 0)
+    rng = np.random.default_rng(300 + seed)
+    V = 40
+    pts = rng.random((V, 2)) * 100
+    c = np.floor(np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1)) * 100).astype(np.int64)
+    ok = ~np.eye(V, dtype=bool)
+    search = np.zeros((V, V), bool)
+    search[np.arange(V), np.argsort(np.where(ok, c, 1 << 40), axis=1)[:, 0]] = True
+    search[np.arange(0, V, 2), np.arange(1, V, 2)] = True
+    full, _, _ = min_cost_perfect_matching(c, ok)
+    sparse_opt, _, _ = min_cost_perfect_matching(np.where(search | search.T, c, 0),
+                                                 search | search.T)
+    bound, _, _ = min_cost_perfect_matching(c, ok, search)
+    assert sparse_opt > full + 1       # the search graph alone is far from the optimum
+    assert bound <= full + 1e-9
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_matching_bound_and_path_on_ordering_groups(seed):
     """On layer groups of open lines and loops: the matching's bound is at most the proven

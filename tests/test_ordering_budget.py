@@ -19,17 +19,33 @@ def _layers_of(sizes, seed=0):
     return [[rng.uniform(0, 60, (2, 2)) for _ in range(n)] for n in sizes]
 
 
+def _shape(n):
+    """What the plan charges per unit of the learnt ratio for an exact group of n curves."""
+    return float(auto.exact_time_s(n)) * (n / layers.EXACT_SHAPE_CURVES) ** layers.EXACT_SHAPE_EXPONENT
+
+
+def _charge(n, ratio):
+    return min(ratio * _shape(n), float(auto.exact_time_s(n)))
+
+
+def test_plan_charges_an_exact_group_by_a_shape_that_grows_faster_than_its_exact_time():
+    # small groups use a smaller share of their exact time than large ones (measured on the
+    # corpus): one learnt ratio, applied to a shape growing with n, charges them less
+    assert _shape(20) / float(auto.exact_time_s(20)) < _shape(150) / float(auto.exact_time_s(150))
+    assert _charge(1000, 0.9) == float(auto.exact_time_s(1000))      # never above the exact time
+
+
 def test_plan_gives_the_smallest_groups_their_exact_time_first():
     sizes = [80, 20, 150, 30, 5, 60]          # 5 curves: the DP's, no claim on the budget
     prob = from_polylines(_layers_of(sizes), options=OrderingOptions(mode="free"))
     plan = layers._BudgetPlan(prob)
     exact = {n: float(auto.exact_time_s(n)) for n in sizes}
     heur = {n: layers.HEURISTIC_S_PER_CURVE * n for n in sizes}
-    # an exact group is charged its exact time times the ratio proofs used of it so far
+    # an exact group is charged its shape times the ratio proofs used of it so far
     r = plan.used_ratio
     assert r == pytest.approx(layers.EXACT_PRIOR_RATIO)
     # enough for the charge of 20 and 30, heuristic for the rest, and 1 ms to spare
-    left = r * (exact[20] + exact[30]) + heur[80] + heur[150] + heur[60] + 0.001
+    left = _charge(20, r) + _charge(30, r) + heur[80] + heur[150] + heur[60] + 0.001
     scale = left / (left - 0.001)
     assert plan.limit(1, left) == pytest.approx(exact[20] * scale)    # given its whole exact time
     assert plan.limit(3, left) == pytest.approx(exact[30] * scale)
@@ -38,7 +54,7 @@ def test_plan_gives_the_smallest_groups_their_exact_time_first():
     assert plan.limit(4, left) == left                      # no claim: capped by what is left
     # once 20 and 30 are done, the time they left unused pays the exact time of 60 too
     plan.done(1), plan.done(3)
-    left = r * exact[60] + heur[80] + heur[150] + 0.001
+    left = _charge(60, r) + heur[80] + heur[150] + 0.001
     assert plan.limit(5, left) >= exact[60]
     assert plan.limit(2, left) < exact[150]
 
@@ -57,12 +73,12 @@ def test_plan_learns_what_proofs_use_of_their_exact_time():
         plan.measured(g, exact[n], 0.01 * exact[n])
         plan.done(g)
     learnt = ((layers.EXACT_PRIOR_RATIO * layers.EXACT_PRIOR_S + 0.01 * (exact[20] + exact[30]))
-              / (layers.EXACT_PRIOR_S + exact[20] + exact[30]))
+              / (layers.EXACT_PRIOR_S + _shape(20) + _shape(30)))
     assert plan.used_ratio == pytest.approx(learnt)
-    assert learnt < 0.8 * layers.EXACT_PRIOR_RATIO
+    assert learnt < 0.85 * layers.EXACT_PRIOR_RATIO
     # what is left pays for the exact time of 60 and 80 at the learnt ratio, not at the prior
-    left = learnt * (exact[60] + exact[80]) + heur[150] + 0.001
-    assert left < layers.EXACT_PRIOR_RATIO * (exact[60] + exact[80]) + heur[150]
+    left = _charge(60, learnt) + _charge(80, learnt) + heur[150] + 0.001
+    assert left < _charge(60, layers.EXACT_PRIOR_RATIO) + _charge(80, layers.EXACT_PRIOR_RATIO) + heur[150]
     assert plan.limit(0, left) >= exact[80]          # planned exact
     assert plan.limit(2, left) < exact[150]
 
@@ -311,6 +327,7 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
     import time
 
     import gatesopt
+    from gatesopt import _jit
     from gatesopt.ordering import pipeline
 
     from conftest import PROJECT_INSTANCES
@@ -325,11 +342,15 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
     monkeypatch.setattr(pipeline, "solve", spy)
     est = pipeline.FINISH_FIXED_S + pipeline.FINISH_S_PER_LINE * prog.n_lines
     res = pipeline.order_program(prog, OrderingOptions(mode="free"), budget_s=10.0)
-    # a parse that took 4 s before order_program was called counts against the budget
-    pipeline.order_program(prog, OrderingOptions(mode="free"), budget_s=10.0,
-                           started_s=time.perf_counter() - 4.0)
+    # a parse that took 4 s before order_program was called counts against the budget; numba
+    # loading (or compiling) kernels in those 4 s (the first call above, when this test runs
+    # first in its process) does not
+    started = time.perf_counter() - 4.0
+    pipeline.order_program(prog, OrderingOptions(mode="free"), budget_s=10.0, started_s=started)
+    not_charged = _jit.compile_s_since(started)
     pipeline.order_program(prog, OrderingOptions(mode="free"))
-    assert seen[0] <= 10.0 - est and seen[1] <= 10.0 - est - 4.0 and seen[2] is None
+    assert seen[0] <= 10.0 - est and seen[2] is None
+    assert seen[1] <= 10.0 - est - 4.0 + not_charged
     assert res.ok and res.summary["budget_s"] == 10.0 and res.summary["solve_budget_s"] == seen[0]
 
 
