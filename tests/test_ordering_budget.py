@@ -378,3 +378,32 @@ def test_one_slow_group_early_does_not_starve_the_groups_after_it(monkeypatch):
     small = [lim for n, lim in given if n == 20]
     assert len(small) == 60
     assert all(lim >= auto.exact_time_s(20) for lim in small), small
+
+
+def test_a_fallback_group_runs_ils_only_when_its_limit_leaves_time_for_it(monkeypatch):
+    from gatesopt.ordering import ils
+    auto.warm_up()          # a first call loading the kernels would pass any deadline by itself
+    prob = from_polylines(_layers_of([60], seed=7), options=OrderingOptions(mode="free"))
+    grp = prob.group(0, prob.origin_xy)
+    calls = []
+    real = ils.improve_ils
+
+    def spy(*a, **kw):
+        calls.append(kw.get("deadline"))
+        return real(*a, **kw)
+
+    monkeypatch.setattr(ils, "improve_ils", spy)
+    # below exact_time_s, so no exact step, and less than MIN_FALLBACK_ILS_S_PER_CURVE per curve
+    # (minus what the greedy path and the matching take): those two only
+    limit = 0.95 * auto.MIN_FALLBACK_ILS_S_PER_CURVE * grp.n_curves
+    assert limit < auto.exact_time_s(grp.n_curves)
+    small = auto.solve(grp, time_limit_s=limit)
+    assert small.status in ("fallback", "optimal") and calls == []
+    assert small.method in ("auto:greedy", "auto:matching", "auto:bound")
+    # no exact step for this group (none may take it), and time enough: ILS runs
+    monkeypatch.setattr(auto, "SYMMETRIC_MAX_CANDS", 0)
+    monkeypatch.setattr(auto, "EXACT_MAX_CANDS", 0)
+    big = auto.solve(grp, time_limit_s=0.2)
+    if small.status != "optimal":
+        assert len(calls) == 1 and big.method == "auto:ils"
+        assert big.objective_mm <= small.objective_mm + 1e-9
