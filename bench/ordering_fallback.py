@@ -41,7 +41,7 @@ def _groups(file: str, mode: str, lo: int, hi: int, sample: int, seed: int):
 
 def _run(groups, limit_us: float, repeats: int):
     from gatesopt.ordering import auto
-    best_s, travel, gaps = np.inf, 0.0, []
+    best_s = np.inf
     for _ in range(repeats):
         t = time.perf_counter()
         sols = [auto.solve(g, time_limit_s=limit_us * 1e-6 * g.n_curves) for g in groups]

@@ -29,10 +29,20 @@ def _charge(n, ratio):
 
 
 def test_plan_charges_an_exact_group_by_a_shape_that_grows_faster_than_its_exact_time():
+    sizes = [150, 20]
+    prob = from_polylines(_layers_of(sizes, seed=2), options=OrderingOptions(mode="free"))
+    plan = layers._BudgetPlan(prob)
     # small groups use a smaller share of their exact time than large ones (measured on the
     # corpus): one learnt ratio, applied to a shape growing with n, charges them less
-    assert _shape(20) / float(auto.exact_time_s(20)) < _shape(150) / float(auto.exact_time_s(150))
-    assert _charge(1000, 0.9) == float(auto.exact_time_s(1000))      # never above the exact time
+    share = plan.shape_s / plan.exact_s                 # sorted by size: 20, then 150
+    assert list(plan.curves) == [20, 150] and share[0] < share[1]
+    assert share == pytest.approx([_shape(n) / float(auto.exact_time_s(n)) for n in (20, 150)])
+    # proofs that used 50 times their shape: the ratio is far above 1, but a group is never
+    # charged more than its exact time, so what pays that time still gets it
+    plan.measured(0, float(auto.exact_time_s(150)), 50 * _shape(150))
+    assert plan.used_ratio * _shape(20) > float(auto.exact_time_s(20))
+    left = float(auto.exact_time_s(20)) + layers.HEURISTIC_S_PER_CURVE * 150 + 0.001
+    assert plan.limit(1, left) >= float(auto.exact_time_s(20))
 
 
 def test_plan_gives_the_smallest_groups_their_exact_time_first():
