@@ -84,6 +84,7 @@ def _slicer_family(s: str) -> str:
 
 
 def report(args) -> str:
+    from gatesopt.ordering import pipeline
     rows = [json.loads(l) for l in open(args.out) if l.strip()]
     last = {}
     for r in rows:                      # the latest run of each (file, mode, formulation, limits)
@@ -117,8 +118,9 @@ def report(args) -> str:
              "`bounds.py` and the cheapest perfect matching of the end points, formulations/ordering.md "
              "\"Matching bound\"), not measured distances to the optimum. `--budget 10` is for the whole run of a file, parse "
              "to verified output, as `gatesopt order --budget 10`: the solve gets 10 s less what "
-             "parse and build took and an estimate of the rest (`pipeline.solve_budget_s`: 19 us per "
-             "line of the file + 0.15 s), and spends it on kernel warm-up, greedy paths, bounds and "
+             "parse and build took and an estimate of the rest (`pipeline.solve_budget_s`: "
+             f"{pipeline.FINISH_S_PER_LINE * 1e6:g} us per line of the file + "
+             f"{pipeline.FINISH_FIXED_S:g} s), and spends it on kernel warm-up, greedy paths, bounds and "
              "exact steps (what a group takes beyond its limit is reserved for the groups after it). "
              "`--workers 2`: a second process solves the chain of groups from the back "
              "(formulations/ordering.md, \"Two processes\"). Without `--budget` every group gets the full per-group "

@@ -161,14 +161,15 @@ def kept_slower_note(n_layers: int) -> str:
 
 
 #: seconds per input line that the work after the solve takes (emit with the time guard's passes,
-#: re-parse, verify, the report's travel totals). Measured on the 39 corpus files (greedy orders,
-#: one process, idle machine): 3-13 us per line. The Cura bunny (204 k lines, absolute E: every
-#: copied line is re-numbered) after budgeted two-process solves: 13.5-19.8 us (build included;
-#: safe mode, 78 layers put back by the time guard, 17.3-19.8 us over four runs; the emit alone
-#: varied 1.4-2.4 s between runs of the same input on this shared machine). At 16 and 17 us its
-#: whole run took up to 10.06 s of a 10 s budget. The rest of a small file is a few tenths of a
-#: second whatever its rate
-FINISH_S_PER_LINE = 19e-6
+#: re-parse, verify, the report's travel totals). Measured on the 39 corpus files after budgeted
+#: two-process solves (10 s, both modes; the guard's passes re-emit only the layers they change):
+#: 7.6-14.4 us per line, build included (most: real_ideamaker420 free 14.4, the Cura bunny safe,
+#: 204 k lines, absolute E, 13.5). At 15 us every file's whole run ended within 9.12 s of a 10 s
+#: budget (cura413_xend_zigzag100 free; the bunny 8.97-9.12 s over four runs). Before the guard
+#: was memoised the bunny took 17.3-19.8 us and a run at 16-17 us reached 10.06 s; the emit alone
+#: varies by ~+-25 % between runs on this shared machine, hence the margin. The rest of a small
+#: file is a few tenths of a second whatever its rate
+FINISH_S_PER_LINE = 15e-6
 #: and per file, whatever its size (imports on first use, the report)
 FINISH_FIXED_S = 0.15
 #: the solve keeps at least this share of a whole-run budget however large the file: a budget too
