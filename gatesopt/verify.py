@@ -608,7 +608,11 @@ def _check_fan_duty(original: Program, output: Program, max_findings: int) -> li
 
 
 def check_commands(original: Program, output: Program, *, reordered: bool = False,
-                   max_findings: int = 5) -> list[Finding]:
+                   fan_duty: bool = True, max_findings: int = 5) -> list[Finding]:
+    """Control commands (heaters, tools, fans, ...) in the same order. ``reordered``: the part
+    fan's lines may move and repeat; what counts is the filament each layer extrudes under each
+    fan duty (``_check_fan_duty``), unless ``fan_duty`` is False (a caller that checks the fan
+    move by move, ``gatesopt.ordering.verify.check``, would otherwise report one fault twice)."""
     out: list[Finding] = []
     if reordered:
         def seq(p):
@@ -622,7 +626,8 @@ def check_commands(original: Program, output: Program, *, reordered: bool = Fals
             m[p.part_fan_lines] = False
             idx = np.flatnonzero(m)
             return idx, [p.line_text(i).strip() for i in idx]
-        out += _check_fan_duty(original, output, max_findings)
+        if fan_duty:
+            out += _check_fan_duty(original, output, max_findings)
         ia, ta = seq(original)
         ib, tb = seq(output)
         for k in range(max(len(ta), len(tb))):
