@@ -25,16 +25,12 @@ from _markdown import publish  # bench/_markdown.py
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
-INSTANCES = ROOT.parent / "shared" / "instances"
 LIMITS_US = (0, 40, 80, 160, 400)
 
 
 def _groups(file: str, mode: str, lo: int, hi: int, sample: int, seed: int):
-    import gatesopt
-    from gatesopt.ordering import OrderingOptions, build, symmetric
-    from ordering_peers import group_instances
-    prob = build(gatesopt.parse(str(INSTANCES / file)), OrderingOptions(mode=mode))
-    groups = [grp for _, grp in group_instances(prob, lo, hi) if symmetric.applies(grp)]
+    from ordering_gaps import _groups as symmetric_groups     # the symmetric model's groups
+    groups = [grp for _, grp in symmetric_groups(file, mode, lo, hi)]
     pick = np.random.default_rng(seed).choice(len(groups), min(sample, len(groups)), replace=False)
     return [groups[i] for i in sorted(pick)]
 

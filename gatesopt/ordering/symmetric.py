@@ -301,14 +301,12 @@ class SymmetricModel:
         self.ev = np.concatenate([self.ev, v])
         return len(u)
 
-    def add_cut(self, inside: np.ndarray, teeth: np.ndarray | None = None) -> None:
-        """Subtour cut ``x(δ(U)) >= 2`` or, with ``teeth`` (edges of δ(H) at 1), the blossom
-        ``x(δ(H) \\ T) - x(T) >= 1 - |T|``; fixed edges are constants moved to the right."""
-        self.add_cuts([(inside, teeth)])
-
     def add_cuts(self, cuts) -> int:
-        """``add_cut`` for a list of (inside, teeth or None), as one HiGHS call (a separation
-        round finds up to ~40; one call each cost ~35 us apiece). Returns how many."""
+        """Cuts given as (inside, teeth or None): for ``teeth`` None the subtour cut
+        ``x(δ(U)) >= 2``, else (edges of δ(H) at 1: travel columns, fixed-edge mask) the blossom
+        ``x(δ(H) \\ T) - x(T) >= 1 - |T|``; fixed edges are constants moved to the right. All in
+        one HiGHS call (a separation round finds up to ~40; one call each cost ~35 us apiece).
+        Returns how many."""
         if not cuts:
             return 0
         K = len(cuts)
