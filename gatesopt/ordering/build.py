@@ -237,15 +237,28 @@ def layout(program: Program) -> Layout:
         dz = np.abs(program.end_mm[es, 2] - program.start_mm[es, 2]) > 1e-6
         for lay in np.unique(program.layer[es[dz]]):
             layer_keep[lay] = True
-            why[lay] = why[lay] or "Z changes while extruding (spiral vase)"
+            why[lay] = why[lay] or "Z changes while extruding (spiral vase, or a prime moving up)"
     if n:
         first = int(curve_layer[0])
         layer_keep[first] = True
         why[first] = why[first] or "first layer keeps the slicer's order"
     notes = []
-    if (program.relative_xyz[es].any() if len(es) else False) or (program.inch[es].any() if len(es) else False):
-        layer_keep[:] = True
-        notes.append("relative XYZ (G91) or inch units (G20) while printing: order kept")
+    # extrusion in relative XYZ (G91) or inch units (G20): a curve's moves mean something else
+    # elsewhere, and a travel rebuilt into one in G91 would be read as relative. Its layer keeps
+    # the slicer's order, and the layer before it too, so the travel into it stays the slicer's
+    # (as for G92 above). Only those layers: Ultimaker's stock end G-code primes in G91 after the
+    # last layer (``G91`` / ``G0 F10000 Z1.5 E4.5``), which once kept every layer of the print
+    rel = es[program.relative_xyz[es] | program.inch[es]] if len(es) else es
+    if len(rel):
+        rel_layers = np.unique(program.layer[rel])
+        for lay in np.unique(np.concatenate((rel_layers, rel_layers - 1))):
+            if 0 <= lay < n_layers:
+                layer_keep[lay] = True
+                why[lay] = why[lay] or ("relative XYZ (G91) or inch units (G20) while extruding"
+                                        + ("" if lay in rel_layers else " in the next layer"))
+        notes.append(f"relative XYZ (G91) or inch units (G20) while extruding in "
+                     f"{len(rel_layers)} layer(s) from layer {int(rel_layers[0])}: "
+                     "their order kept")
     fm = FEATURE_LINE.search(b"\n" + program.data)
     prefix = fm.group(1).decode() if fm else ";TYPE:"
     return Layout(cls, step_of_line, s0.astype(np.int64), s1.astype(np.int64), l0.astype(np.int64),

@@ -144,6 +144,9 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     finally:
         if helper:
             helper.stop()
+    if fn is not greedy.solve and fn is not tsp.solve:     # the baselines chain as the paper does
+        deadline = None if budget_s is None else t0 + budget_s - runner.rest_s(problem.n_groups - 1)
+        _look_ahead(problem, plans, fn, time_limit_s, deadline, kwargs)
     choice = _chain(problem, plans)
     for g, (grp, opts) in enumerate(plans):
         gs = opts[choice[g]]
@@ -157,6 +160,67 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     after = model_travel_mm(problem, np.asarray(order_out, np.int64), reversed_, seam)
     return OrderingSolution(np.asarray(order_out, np.int64), reversed_, seam, tuple(sols),
                             problem.original_travel_mm(), after, time.perf_counter() - t0, formulation)
+
+
+#: look-ahead at a boundary (``_look_ahead``): next groups of up to this many curves (the subset DP
+#: solves one from each of its possible entries in well under a millisecond)
+LOOKAHEAD_CURVES = 12
+#: at most this many entries of the next group tried per boundary, the most promising first
+LOOKAHEAD_TRIES = 2
+#: a re-solve may take this multiple of the group's first solve (at least its
+#: ``auto.exact_time_s``, at most the per-group limit). Only groups proven the first time are
+#: solved again: a proof is about as quick with the end fixed, a fallback would take its limit
+LOOKAHEAD_TIME_FACTOR = 2.0
+
+
+def _look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwargs) -> None:
+    """Chain options across boundaries whose next group is small and re-orderable (its entry is
+    the path's choice, so group g was solved with a free end; formulations/ordering.md, "Across
+    groups and layers"). For the entries ``e`` of group g+1 whose lower bound on the pair (g's
+    bound with a free end plus g+1's optimum from ``e``) is lowest and below the pair as solved:
+    group g again with its end at ``e``; if g's path to ``e`` and g+1's path from it cost less than
+    the pair, both join the groups' options (in place) and ``_chain`` takes them where the whole
+    chain gets shorter. Identical re-solves (layers that repeat) are solved once. Seen on KISSlicer
+    output: a 24-curve infill group proven optimal for itself ended 19 mm further from the next
+    layer's 2-curve group than the greedy path did."""
+    cache: dict = {}
+    for g in range(problem.n_groups - 1):
+        if deadline is not None and time.perf_counter() > deadline:
+            return
+        grp, opts = plans[g]
+        nxt, nxt_opts = plans[g + 1]
+        if (problem.group_fixed[g] or problem.group_fixed[g + 1] or grp.end_xy is not None
+                or grp.n_curves == 0 or not 0 < nxt.n_curves <= LOOKAHEAD_CURVES
+                or opts[0].status != "optimal"):
+            continue
+        pair = opts[0].objective_mm + nxt_opts[0].objective_mm
+        entries = np.unique(nxt.cand_entry_xy, axis=0)
+        ahead = []
+        for e in entries:
+            ng = problem.group(g + 1, e, nxt.end_xy)
+            ns = dp.solve(ng) if dp.fits(ng) else fn(ng, time_limit_s=time_limit_s, **kwargs)
+            low = opts[0].bound_mm + ns.objective_mm
+            if low < pair - OPTIMAL_ABS_TOL_MM:
+                ahead.append((low, tuple(e), ns))
+        ahead.sort(key=lambda a: a[0])
+        for low, e, ns in ahead[:LOOKAHEAD_TRIES]:
+            gg = problem.group(g, grp.start_xy, e)
+            key = _key(gg)
+            gs = cache.get(key)
+            if gs is None:
+                limit = min(time_limit_s, max(auto.exact_time_s(gg.n_curves),
+                                              LOOKAHEAD_TIME_FACTOR * opts[0].solve_s))
+                if deadline is not None:
+                    limit = min(limit, deadline - time.perf_counter())
+                    if limit <= 0:
+                        return
+                gs = cache[key] = fn(gg, time_limit_s=limit, **kwargs)
+                gg.check_order(gs.order)
+            if gs.objective_mm + ns.objective_mm < pair - OPTIMAL_ABS_TOL_MM:
+                opts.append(GroupSolution.make(gs.order, gs.objective_mm, gs.bound_mm, gs.status,
+                                               gs.solve_s, gs.method + "+ahead"))
+                nxt_opts.append(GroupSolution.make(ns.order, ns.objective_mm, ns.bound_mm,
+                                                   ns.status, ns.solve_s, ns.method + "+ahead"))
 
 
 def _end_of(problem: OrderingProblem, g: int):
