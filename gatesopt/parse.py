@@ -92,6 +92,58 @@ def _line_starts(arr: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------------------------------------------
 # layers and features
+#: layer markers written as a trailing comment on the layer change move (the scanner reads
+#: markers on comment lines only): Slic3r 1.x with verbose G-code, ``G1 Z0.350 F7800.000 ; move to
+#: next layer (0)``. Without them its start G-code's purge line became "layer 0" of the print
+_TRAILING_MARKERS = ((b"; move to next layer (", _scan.LAYER_KINDS.index("slic3r") + 1),)
+
+
+def _trailing_layer_markers(data: bytes, line_start: np.ndarray, markers):
+    """``markers`` with the layer markers of ``_TRAILING_MARKERS`` on G-code lines added (line
+    order kept)."""
+    mk_line, mk_code, mk_z, mk_span = markers
+    add_line, add_code = [], []
+    for pattern, code in _TRAILING_MARKERS:
+        at = data.find(pattern)
+        while at >= 0:
+            ln = int(np.searchsorted(line_start, at, side="right")) - 1
+            if data[line_start[ln]:at].strip():             # a comment line is the scanner's
+                add_line.append(ln)
+                add_code.append(code)
+            at = data.find(pattern, at + len(pattern))
+    if not add_line:
+        return markers
+    line = np.concatenate((mk_line, np.asarray(add_line, mk_line.dtype)))
+    order = np.argsort(line, kind="stable")
+    return (line[order], np.concatenate((mk_code, np.asarray(add_code, mk_code.dtype)))[order],
+            np.concatenate((mk_z, np.full(len(add_line), np.nan)))[order],
+            np.concatenate((mk_span, np.full((len(add_line), 2), -1, mk_span.dtype)))[order])
+
+
+#: a first layer (found by Z change) whose extrusion lies this far outside the rest of the print's
+#: footprint is the start G-code's purge (prime) line, not part of the print
+PURGE_CLEARANCE_MM = 1.0
+
+
+def _purge_layer(idx, layer_of_ext, start, end) -> int:
+    """How many of the first extruding steps ``idx`` are a purge line: all of the first layer
+    found by Z change (there are more) if its extrusion lies outside the bounding box of every
+    later layer's extrusion by ``PURGE_CLEARANCE_MM``: a skirt or brim is at the first layer's Z,
+    a purge line at its own Z before the first layer (Slic3r 1.x without verbose comments: ``G1 X5
+    Y5 Z0.3`` / ``G1 X100 E12`` at the bed's edge, then the print from Z 0.35). Else 0."""
+    first = layer_of_ext == 0
+    if first.all():
+        return 0
+    rest = idx[~first]
+    lo = np.minimum(start[rest, :2].min(axis=0), end[rest, :2].min(axis=0)) - PURGE_CLEARANCE_MM
+    hi = np.maximum(start[rest, :2].max(axis=0), end[rest, :2].max(axis=0)) + PURGE_CLEARANCE_MM
+    # a segment can cross the box with both ends outside it; the test is on each segment's box
+    a, b = start[idx[first], :2], end[idx[first], :2]
+    seg_lo, seg_hi = np.minimum(a, b), np.maximum(a, b)
+    overlaps = ((seg_hi >= lo) & (seg_lo <= hi)).all(axis=1)
+    return 0 if overlaps.any() else int(first.sum())
+
+
 def _find_layers(markers, step_line, kind, start, end):
     """Layer index per step, Z per layer, first line per layer, and the method used.
 
@@ -138,10 +190,17 @@ def _find_layers(markers, step_line, kind, start, end):
     new = np.ones(len(idx), bool)
     new[1:] = np.abs(zs[1:] - end[idx[:-1], 2]) > 1e-6
     layer_of_ext = np.cumsum(new) - 1
+    purge = _purge_layer(idx, layer_of_ext, start, end)
+    if purge:
+        # the start G-code's purge line at its own Z: before the print, as a marker would put it
+        idx, zs, layer_of_ext = idx[purge:], zs[purge:], layer_of_ext[purge:] - 1
+        new = new[purge:]
     # each step belongs to the layer of the next extruding step (the layer change travel is the
     # new layer's first step); steps after the last extrusion belong to the last layer
     nxt = np.minimum(np.searchsorted(idx, np.arange(n_steps), side="left"), len(idx) - 1)
     layer = layer_of_ext[nxt].astype(np.int32)
+    if purge:       # up to the purge's last extrusion; the travel after it is the first layer's
+        layer[:int(np.flatnonzero(extruding)[purge - 1]) + 1] = -1
     z = zs[new]
     # a layer starts at the first step after the previous layer's last extrusion
     starts = np.zeros(int(new.sum()), np.int64)
@@ -250,6 +309,7 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     motion = kind <= Kind.ARC
     if require_moves and not motion.any():
         raise GcodeError(name, None, "no moves: no G0/G1/G2/G3 line with a coordinate")
+    markers = _trailing_layer_markers(data, line_start, markers)
     layer, layer_z, layer_line, method = _find_layers(markers, step_line, kind, start, end)
     feature, feature_names = _find_features(data, markers, step_line)
     head = data[:65536]                 # the line ending is the file's convention: its head tells
