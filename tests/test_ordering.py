@@ -675,3 +675,17 @@ def test_relative_moves_in_the_end_gcode_keep_only_their_layers():
     sol = solve(prob, "auto", time_limit_s=1.0)
     assert sol.travel_after_mm < sol.travel_before_mm - 1.0
     assert check(prog, gatesopt.parse(emit(prog, prob, sol))) == []
+
+
+def test_summary_layer_counts_match_its_per_layer_rows():
+    """A layer with nothing to re-order is "kept" in the per-layer rows as in the counts (it was
+    "optimal" there: its fixed groups are trivially optimal), in both modes."""
+    from collections import Counter
+    from gatesopt.ordering.pipeline import order_program
+    prog = gatesopt.parse(_handmade_gcode(4))
+    for mode in ("safe", "free"):
+        s = order_program(prog, OrderingOptions(mode=mode), time_limit_s=1.0).summary
+        seen = Counter(r["status"] for r in s["per_layer"])
+        assert seen["kept"] == s["layers_kept"] >= 1           # the first layer at least
+        for status in ("optimal", "feasible", "fallback"):
+            assert seen[status] == s[f"layers_{status}"], (mode, status)

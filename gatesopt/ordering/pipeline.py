@@ -258,6 +258,9 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         if row["layer"] in decided_layers:
             lay_counts[row["status"] if row["status"] in lay_counts else "fallback"] += 1
         else:
+            # nothing in it to re-order (walls, monotonic fill, a kept first layer): the slicer's
+            # order, as the counts say (its fixed groups are trivially "optimal" for the solver)
+            row["status"] = "kept"
             lay_counts["kept"] += 1
 
     def pct(a, b):
