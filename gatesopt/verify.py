@@ -22,6 +22,12 @@ read the two Programs (``gatesopt.parse`` of the original and of the output) and
    step, and no disable comes within ``end_late_s`` of the motor's last step (3DGates Sec. 4.4,
    instruction inertia and delay). Times are the paper's T = L/F (Eq. 2) without stalls: a stall
    only adds time between an instruction and the moves around it, so this is the strict reading.
+4b. ``firmware`` (run before ``timing``): every motor enable/disable line the rewrite added (the
+   original's own lines, a slicer's closing ``M84``, are not checked) is one the firmware carries
+   out as gating means it: in its dialect (``Firmware.off_word`` / ``on_word``: no ``M18 X`` for
+   Klipper, which turns every stepper off, no ``S0`` for stock firmware, which does not know it),
+   on a motor it may gate (``allowed_motors``: RepRapFirmware's ``M18 X`` unhomes X) and keeping
+   the axis homed (``homing_kept``), all read from ``gatesopt.firmware``.
 5. ``energy``: energy and time of the output, recomputed from its text with the one energy model
    (``gatesopt.energy.step_energy_j``, stall times from ``gatesopt.firmware.stall_durations``),
    agree with what the solver claimed within ``claim_rel_tol``.
@@ -759,6 +765,132 @@ def check_timing(output: Program, *, firmware="3dgates", start_ahead_s: float = 
 
 
 # ------------------------------------------------------------------------------------------------
+# 4b. firmware
+# M84 is M18 under another number (Marlin's ``GcodeSuite::M18_M84``; the parser reads them alike,
+# ``firmware.parse_motor_line``): a line's instruction word is compared as M18.
+_SAME_WORD = {"M84": "M18"}
+_HOMED = AXES[:3]       # the axes a printer homes (X Y Z); the extruder has no home
+
+
+def _dialect(fw: fwmod.Firmware) -> tuple[str, ...]:
+    """The instruction words ``fw`` gates with (``Firmware.off_word`` / ``on_word``)."""
+    return tuple(w for w in (fw.off_word, fw.on_word) if w is not None)
+
+
+def _motor_word(text: str) -> str:
+    """The instruction word of a motor line (``S0``, ``M18``, ``SET_STEPPER_ENABLE``), upper case,
+    after a line number; ``M84`` read as ``M18``."""
+    words = text.split(";", 1)[0].upper().split()
+    if len(words) > 1 and words[0].startswith("N") and words[0][1:].isdigit():
+        words = words[1:]
+    word = words[0] if words else ""
+    return _SAME_WORD.get(word, word)
+
+
+def firmware_problem(text: str, firmware="3dgates") -> str | None:
+    """Why ``firmware`` would not carry out the motor enable/disable line ``text`` the way gating
+    means it (switch just the named motors, keep the axes homed), or None if it would (or ``text``
+    is no motor line). Everything is read from ``gatesopt.firmware``: the dialect
+    (``Firmware.off_word`` / ``on_word``), ``allowed_motors`` (with ``refused_note``) and
+    ``homing_kept``."""
+    fw = fwmod.get(firmware)
+    parsed = fwmod.parse_motor_line(text)
+    if parsed is None:
+        return None
+    on, motors = parsed
+    shown = text.split(";", 1)[0].strip()
+    word = _motor_word(text)
+    own = _dialect(fw)
+    if word not in own:
+        owners = [name for name, p in fwmod.PRESETS.items() if word in _dialect(p)]
+        whose = f"{'/'.join(owners)}'s" if owners else "no firmware's"
+        return f"{shown} is {whose} motor instruction, not {fw.name}'s ({fw.name} gates with {' / '.join(own)})"
+    if on:
+        return None
+    refused = [m for m in motors if m not in fw.allowed_motors]
+    if refused:
+        return (f"{shown} switches motor {','.join(refused)} off, which {fw.name} may not gate: "
+                f"{fw.refused_note or 'not allowed'}")
+    unhomed = [m for m in motors if m in _HOMED]
+    if not fw.homing_kept and unhomed:
+        return f"{shown} switches axis {','.join(unhomed)} off, and {fw.name} forgets it is homed after a disable"
+    return None
+
+
+def _added_motor_lines(original: Program | None, output: Program):
+    """The motor enable/disable lines (``firmware.parse_motor_line``) of ``output`` that the rewrite
+    added: (rows, per row the index of its stripped text in ``texts``, ``texts``). A line of the
+    original's own (a slicer's closing ``M84``, end G-code's ``M18``) is not one: the output's motor
+    lines are paired in order with the original's of the same stripped text, and any left over
+    still count as the file's own up to the number of times the original has that text -- so a
+    copy the rewrite added of an original line is added, a kept one is not."""
+    rows = np.flatnonzero(output.kind == Kind.MOTOR)
+    inverse, texts = _text.distinct_lines(output, output.line[rows])
+    texts = [t.strip() for t in texts]
+    motor = np.array([fwmod.parse_motor_line(t) is not None for t in texts], bool)
+    if not len(rows) or not motor.any():
+        return rows[:0], inverse[:0], texts
+    keep = motor[inverse]
+    rows, inverse = rows[keep], inverse[keep]
+    if original is None:
+        return rows, inverse, texts
+    orows = np.flatnonzero(original.kind == Kind.MOTOR)
+    oinv, otexts = _text.distinct_lines(original, original.line[orows])
+    seq = [t for t in (otexts[k].strip() for k in oinv) if fwmod.parse_motor_line(t) is not None]
+    if not seq:
+        return rows, inverse, texts
+    left: dict[str, int] = {}
+    for t in seq:
+        left[t] = left.get(t, 0) + 1
+    cand = np.flatnonzero(np.array([t in left for t in texts], bool)[inverse])
+    own = np.zeros(len(rows), bool)
+    k = 0
+    for c in cand.tolist():                         # in order
+        t = texts[inverse[c]]
+        if k < len(seq) and t == seq[k]:
+            own[c] = True
+            left[t] -= 1
+            k += 1
+    for c in cand.tolist():                         # the original's order changed: by count
+        t = texts[inverse[c]]
+        if not own[c] and left[t] > 0:
+            own[c] = True
+            left[t] -= 1
+    return rows[~own], inverse[~own], texts
+
+
+def check_firmware(output: Program, *, firmware="3dgates", original: Program | None = None,
+                   max_findings: int = 10) -> list[Finding]:
+    """Every motor enable/disable line the rewrite added (``_added_motor_lines``; the original's own
+    lines are not checked) is one ``firmware`` carries out as gating means it
+    (``firmware_problem``): its own dialect, a motor it may gate, the axis kept homed."""
+    fw = fwmod.get(firmware)
+    rows, inverse, texts = _added_motor_lines(original, output)
+    problem = [firmware_problem(t, fw) for t in texts]
+    bad = np.array([p is not None for p in problem], bool)
+    if not len(rows) or not bad.any():
+        return []
+    hit = np.flatnonzero(bad[inverse])[:max_findings]
+    return [Finding("firmware", int(output.line[rows[h]]) + 1, problem[inverse[h]]) for h in hit.tolist()]
+
+
+def detect_firmware(original: Program | None, output: Program) -> str:
+    """The firmware ``gatesopt verify --firmware auto`` checks ``output`` for: ``firmware.detect``
+    (the dialect of the output's motor lines) when that firmware takes every line the rewrite added
+    (``firmware_problem``), else the first preset that does -- so a start G-code's own ``M17`` does
+    not make S-series output Marlin's. When no preset takes them all, ``detect``'s answer stands
+    (and ``check_firmware`` reports the lines)."""
+    guess = fwmod.detect(output)
+    _, inverse, texts = _added_motor_lines(original, output)
+    texts = [texts[k] for k in np.unique(inverse).tolist()]
+    if not texts:
+        return guess
+    takes = [name for name in fwmod.PRESETS
+             if all(firmware_problem(t, name) is None for t in texts)]
+    return guess if guess in takes or not takes else takes[0]
+
+
+# ------------------------------------------------------------------------------------------------
 # 5. energy
 def _file_enable(program: Program, original_motor_text=frozenset()) -> np.ndarray:
     """(n, 4) motor state as the slicer's file has it: the parsed state with the effect of every
@@ -869,6 +1001,9 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     checks.append("extrusion")
     findings += check_commands(original, output, reordered=reordered)
     checks.append("commands")
+    # the firmware's own dialect first: timing read with the wrong firmware's rules means little
+    findings += check_firmware(output, firmware=fw, original=original)
+    checks.append("firmware")
     findings += check_timing(output, firmware=fw, start_ahead_s=start_ahead_s, end_late_s=end_late_s,
                              original=original, tol_s=time_tol_s)
     checks.append("timing")

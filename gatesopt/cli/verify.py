@@ -11,13 +11,15 @@ def register(sub) -> None:
     p = sub.add_parser("verify", help="check a rewritten file against its original",
                        description="Re-parse both files and check: extruded geometry per layer "
                                    "(after undoing a declared rotation), E per layer, control "
-                                   "commands in order, motor timing (start-ahead, end-late), and "
+                                   "commands in order, added motor lines in the firmware's dialect, "
+                                   "motor timing (start-ahead, end-late), and "
                                    "energy/time against a claimed report. Exit 0 only if all hold.")
     p.add_argument("original", help="the original G-code")
     p.add_argument("output", help="the rewritten G-code")
     p.add_argument("--firmware", choices=("auto", "3dgates", "marlin", "klipper", "reprap"), default="auto",
-                   help="firmware the output is meant for (stall times, automatic re-enable); auto: "
-                        "the claimed report's, else the dialect of the output's own motor lines")
+                   help="firmware the output is meant for (its motor-instruction dialect, the motors "
+                        "it may gate, stall times, automatic re-enable); auto: the claimed report's, else "
+                        "the dialect of the motor lines the rewrite added")
     p.add_argument("--start-ahead-ms", type=float, default=1.8)
     p.add_argument("--end-late-ms", type=float, default=1.0)
     p.add_argument("--profile", default="paper", metavar="NAME|TOML", help="energy profile")
@@ -39,8 +41,8 @@ def run(args) -> int:
             claimed = json.load(f)
     firmware = args.firmware
     if firmware == "auto":
-        from ..firmware import detect
-        firmware = (claimed or {}).get("firmware") or detect(output)
+        from ..verify import detect_firmware
+        firmware = (claimed or {}).get("firmware") or detect_firmware(original, output)
     rep = verify(original, output, firmware=firmware, start_ahead_s=args.start_ahead_ms / 1e3,
                  end_late_s=args.end_late_ms / 1e3, claimed=claimed, profile=args.profile,
                  reordered=True if args.reordered else None)
