@@ -6,6 +6,10 @@ candidate (cost = exit-to-entry travel), and returns to the depot at cost 0 (the
 it ends wherever its last curve ends). A candidate the path skips takes its self-loop literal
 ``skip[k]``; exactly one candidate per curve is visited (generalised TSP with clusters, the
 OR-Tools idiom for optional nodes). Costs are integers: travel in units of 1/SCALE mm.
+
+The model (~m^2 arcs) is written straight into the CpModelProto from index arrays, and its
+building counts against the group's limit: a group whose model would not be built and solved in
+the time left keeps the warm start (status "fallback"), as ``auto`` keeps its heuristic path.
 """
 from __future__ import annotations
 
@@ -20,6 +24,28 @@ from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
 #: integer cost scale: 1 unit = 0.1 µm of travel (rounding error <= n * 0.05 µm per path)
 SCALE = 10_000
+#: building the model (``_Model.build`` and its hint), per arc of the circuit (``n_arcs``):
+#: measured 1.6-2.4 us on 20 groups of 13-171 curves (650-95k arcs; 0.17 s at 308 candidates) of
+#: two robustness-sweep Cura files, one core. Through CpModel's Python API (NewBoolVar, AddHint
+#: and a ``sum`` objective per arc) it took ~12 us per arc: 0.8 s for a 260-candidate group, so a
+#: budget's small per-group limits were overrun many times over
+BUILD_S_PER_ARC = 2.5e-6
+#: what CP-SAT takes beyond ``max_time_in_seconds`` (copying and loading the model before its
+#: first time check, handing the solution back) and reading the solution, per arc: measured
+#: 1.6-4.6 us on the same groups (2 workers on one core, limit 1 ms; 0.3-0.4 s at 260-308
+#: candidates)
+SOLVER_S_PER_ARC = 4e-6
+#: CP-SAT is not started (the model not built) with less than MIN_SOLVE_S + MIN_SOLVE_S_PER_ARC *
+#: arcs left for it: the warm start is kept. Given a complete, feasible hint it still returns
+#: nothing (UNKNOWN) until its presolve (probing: 1 deterministic second) is done; measured time
+#: to its first solution, 2 workers on one core: 0.02 s at 650 arcs, 0.34-0.53 s at 5-7k, 1.6-1.9 s
+#: at 15-23k, 2.4-3.8 s at 40-95k arcs (40-111 us per arc; 12 groups of 13-171 curves, two Cura
+#: files and random lines). Under a budget, 40 groups of 32-39 curves given ~0.08 s each spent
+#: 3 s of a 4 s solve on models that returned nothing
+MIN_SOLVE_S = 0.01
+MIN_SOLVE_S_PER_ARC = 3e-5
+#: variables written per step of ``_Model.build`` (the deadline is checked between steps)
+BUILD_CHUNK = 8192
 
 STATUS = {
     cp_model.OPTIMAL: "optimal",
@@ -43,6 +69,10 @@ def _trivial(group: Group, t0: float, method: str) -> GroupSolution | None:
 
 def solve(group: Group, *, time_limit_s: float = 10.0, hint=None, num_workers: int = 2,
           seed: int = 0) -> GroupSolution:
+    """Within about ``time_limit_s`` from the call: the warm start, building the model and CP-SAT
+    all count against it (CP-SAT gets what is left). A group whose model would not be built in
+    time, or would leave CP-SAT too little (``MIN_SOLVE_S``, ``MIN_SOLVE_S_PER_ARC``), keeps the
+    warm start (status "fallback" unless the cheap bound proves it)."""
     t0 = time.perf_counter()
     triv = _trivial(group, t0, "cpsat")
     if triv is not None:
@@ -53,7 +83,8 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None, num_workers: i
 
 def closed_tour(group: Group, *, time_limit_s: float = 10.0, num_workers: int = 2, seed: int = 0):
     """Shortest *closed* tour through every curve (start point ignored): the Concorde step of
-    Fleming et al. Algorithm 1. Returns (candidate order, proven optimal?) or None (no tour found)."""
+    Fleming et al. Algorithm 1. Returns (candidate order, proven optimal?) or None (no tour found,
+    or the model would not be built and solved within the limit)."""
     t0 = time.perf_counter()
     if group.n_curves < 2:
         return None
@@ -61,101 +92,174 @@ def closed_tour(group: Group, *, time_limit_s: float = 10.0, num_workers: int = 
     return sol
 
 
+def n_arcs(group: Group, closed: bool = False) -> int:
+    """Arcs (one 0-1 variable each) of the circuit model of ``group``: x[u, v] between
+    candidates of different curves, first[k] and last[k] (open path) or the depot's self-loop
+    (closed tour), skip[k] for candidates of curves with several."""
+    m = group.n_cands
+    counts = np.bincount(group.cand_curve, minlength=group.n_curves)
+    x = m * m - int((counts.astype(np.int64) ** 2).sum())
+    return x + (1 if closed else 2 * m) + int(counts[counts > 1].sum())
+
+
+class _Model:
+    """The circuit model written straight into the CpModelProto from index arrays.
+
+    Variable layout: first[k] (m) | last[k] (m) | x[u, v] (A) | skip[k] (S), or for a closed tour
+    x (A) | skip (S) | depot_out (1; the depot sits out of the circuit, its self-loop fixed true).
+    """
+
+    def __init__(self, group: Group, closed: bool):
+        m, n = group.n_cands, group.n_curves
+        self.group, self.closed, self.m, self.n = group, closed, m, n
+        arc = group.arc_cost_mm()
+        self.us, self.vs = np.nonzero(np.isfinite(arc))     # x[u, v]: v follows u (other curves)
+        self.arc_c = np.rint(arc[self.us, self.vs] * SCALE).astype(np.int64)
+        counts = np.bincount(group.cand_curve, minlength=n)
+        self.sk = np.flatnonzero(counts[group.cand_curve] > 1)     # candidates that may be skipped
+        A, S = len(self.us), len(self.sk)
+        if closed:
+            self.o_first = self.o_last = -1
+            self.o_x, self.o_skip, self.o_depot = 0, A, A + S
+            self.n_vars = A + S + 1
+        else:
+            self.o_first, self.o_last, self.o_x, self.o_skip = 0, m, 2 * m, 2 * m + A
+            self.n_vars = 2 * m + A + S
+        self.model = cp_model.CpModel()
+
+    def build(self, deadline: float | None) -> bool:
+        """Writes the model; False (model unusable) if ``deadline`` passed while writing it."""
+        g, m, p = self.group, self.m, self.model.proto
+        A, S = len(self.us), len(self.sk)
+        n_bool = self.n_vars - (1 if self.closed else 0)
+        for a in range(0, n_bool, BUILD_CHUNK):                 # the bulk of the time
+            p.merge_text_format("variables { domain: [0, 1] }\n" * min(BUILD_CHUNK, n_bool - a))
+            if deadline is not None and time.perf_counter() > deadline:
+                return False
+        k1 = np.arange(1, m + 1)
+        x = self.o_x + np.arange(A)
+        skip = self.o_skip + np.arange(S)
+        tails, heads, lits = [self.us + 1, self.sk + 1], [self.vs + 1, self.sk + 1], [x, skip]
+        if self.closed:
+            p.merge_text_format("variables { domain: [1, 1] }\n")
+            tails.append([0])
+            heads.append([0])
+            lits.append([self.o_depot])
+        else:
+            # first[k]: the path starts with candidate k (0 -> k); last[k]: it ends with k
+            # (k -> 0, the return arc)
+            tails += [np.zeros(m, np.int64), k1]
+            heads += [k1, np.zeros(m, np.int64)]
+            lits += [self.o_first + np.arange(m), self.o_last + np.arange(m)]
+        circ = p.constraints.add().circuit
+        circ.tails.extend(np.concatenate(tails).tolist())
+        circ.heads.extend(np.concatenate(heads).tolist())
+        circ.literals.extend(np.concatenate(lits).tolist())
+        # exactly one candidate per curve is visited: sum of its skip[k] = |K_i| - 1
+        cc = g.cand_curve[self.sk]
+        srt = np.argsort(cc, kind="stable")
+        cuts = np.flatnonzero(np.diff(cc[srt])) + 1
+        for ks in np.split(skip[srt], cuts) if S else []:
+            lin = p.constraints.add().linear
+            lin.vars.extend(ks.tolist())
+            lin.coeffs.extend([1] * len(ks))
+            lin.domain.extend([len(ks) - 1, len(ks) - 1])
+        if self.closed:
+            ovars, ocost = [x], [self.arc_c]
+        else:
+            start_c = np.rint(g.start_cost_mm() * SCALE).astype(np.int64)
+            end_c = np.rint(g.end_cost_mm() * SCALE).astype(np.int64)
+            ovars = [self.o_first + np.arange(m), self.o_last + np.arange(m), x]
+            ocost = [start_c, end_c, self.arc_c]
+        ovars, ocost = np.concatenate(ovars), np.concatenate(ocost)
+        nz = ocost != 0
+        obj = p.objective
+        obj.vars.extend(ovars[nz].tolist())
+        obj.coeffs.extend(ocost[nz].tolist())
+        obj.scaling_factor = 1.0
+        return True
+
+    def hint(self, order: np.ndarray) -> None:
+        """Every literal of the path ``order``."""
+        m, p = self.m, self.model.proto
+        follows = np.zeros((m, m), bool)
+        follows[order[:-1], order[1:]] = True
+        visited = np.zeros(m, bool)
+        visited[order] = True
+        val = np.zeros(self.n_vars, np.int64)
+        val[self.o_first + order[0]] = 1
+        val[self.o_last + order[-1]] = 1
+        val[self.o_x:self.o_x + len(self.us)] = follows[self.us, self.vs]
+        val[self.o_skip:self.o_skip + len(self.sk)] = ~visited[self.sk]
+        p.solution_hint.vars.extend(range(self.n_vars))
+        p.solution_hint.values.extend(val.tolist())
+
+    def decode(self, solver) -> np.ndarray:
+        """The path (open) or the tour (closed) of CP-SAT's solution, as candidates."""
+        sol = np.asarray(solver.response_proto.solution, np.int64)
+        on = np.flatnonzero(sol[self.o_x:self.o_x + len(self.us)])
+        succ = dict(zip(self.us[on].tolist(), self.vs[on].tolist()))
+        if self.closed:
+            cur = next(iter(succ))
+            order = [cur]
+            while succ[cur] != order[0]:
+                cur = succ[cur]
+                order.append(cur)
+            return np.asarray(order, np.int64)
+        order = []
+        cur = int(np.argmax(sol[self.o_first:self.o_first + self.m]))
+        while cur is not None and len(order) <= self.n:
+            order.append(cur)
+            cur = succ.get(cur)
+        return np.asarray(order, np.int64)
+
+
+def _kept(group: Group, hint, t0: float) -> GroupSolution:
+    """The hint (the warm start) with the cheap bound: what a group keeps without CP-SAT's
+    solution ("optimal" if the bound proves it)."""
+    order = np.asarray(getattr(hint, "order", hint), np.int64)
+    group.check_order(order)
+    obj = group.path_cost_mm(order)
+    bound = lower_bound_mm(group)
+    status = "optimal" if obj - bound <= OPTIMAL_ABS_TOL_MM else "fallback"
+    return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "cpsat")
+
+
 def _solve_circuit(group: Group, t0, time_limit_s, hint, num_workers, seed, closed):
-    m, n = group.n_cands, group.n_curves
-    start_c = np.rint(group.start_cost_mm() * SCALE).astype(np.int64)
-    end_c = np.rint(group.end_cost_mm() * SCALE).astype(np.int64)
-    arc = group.arc_cost_mm()
-    finite = np.isfinite(arc)
-    arc_c = np.where(finite, np.rint(np.where(finite, arc, 0) * SCALE), 0).astype(np.int64)
-
-    model = cp_model.CpModel()
-    arcs, costs = [], []
-    # first[k]: the path starts with candidate k; last[k]: it ends with k (return arc, cost 0)
-    first = [model.NewBoolVar(f"first_{k}") for k in range(m)]
-    last = [model.NewBoolVar(f"last_{k}") for k in range(m)]
-    if closed:          # the depot sits out of the circuit (self-loop fixed true)
-        depot_out = model.NewBoolVar("depot_out")
-        model.Add(depot_out == 1)
-        arcs.append((0, 0, depot_out))
-    for k in range(m):
-        if closed:      # no depot: the circuit closes on the candidates themselves
-            model.Add(first[k] == 0)
-            model.Add(last[k] == 0)
-            continue
-        arcs.append((0, k + 1, first[k]))
-        costs.append((first[k], int(start_c[k])))
-        arcs.append((k + 1, 0, last[k]))
-        if end_c[k]:
-            costs.append((last[k], int(end_c[k])))
-    # x[u, v]: candidate v follows candidate u (different curves only)
-    us, vs = np.nonzero(finite)
-    x = {}
-    for u, v in zip(us.tolist(), vs.tolist()):
-        lit = model.NewBoolVar(f"x_{u}_{v}")
-        x[u, v] = lit
-        arcs.append((u + 1, v + 1, lit))
-        costs.append((lit, int(arc_c[u, v])))
-    # skip[k]: candidate k is not visited (self-loop); exactly one candidate per curve is visited
-    counts = np.bincount(group.cand_curve, minlength=n)
-    skip = {}
-    for k in range(m):
-        if counts[group.cand_curve[k]] > 1:
-            skip[k] = model.NewBoolVar(f"skip_{k}")
-            arcs.append((k + 1, k + 1, skip[k]))
-    for c in np.nonzero(counts > 1)[0]:
-        ks = np.nonzero(group.cand_curve == c)[0]
-        model.Add(sum(skip[int(k)] for k in ks) == len(ks) - 1)
-    model.AddCircuit(arcs)
-    model.Minimize(sum(c * lit for lit, c in costs))
-
+    n = group.n_curves
+    # the limit runs from the call (t0): the warm start, building and CP-SAT all count
+    deadline = t0 + float(time_limit_s)
+    arcs = n_arcs(group, closed)
+    build_s, after_s = BUILD_S_PER_ARC * arcs, SOLVER_S_PER_ARC * arcs
+    min_solve_s = MIN_SOLVE_S + MIN_SOLVE_S_PER_ARC * arcs
+    if deadline - time.perf_counter() < build_s + after_s + min_solve_s:
+        # too large to be built and solved in the time left (or no time left): not built
+        return None if closed else _kept(group, hint, t0)
+    mod = _Model(group, closed)
+    # building is abandoned where it leaves CP-SAT too little (a slower machine, a busy core)
+    if not mod.build(deadline - after_s - min_solve_s):
+        return None if closed else _kept(group, hint, t0)
     if hint is not None:
-        order = np.asarray(getattr(hint, "order", hint), np.int64)
-        used = set(zip(order[:-1].tolist(), order[1:].tolist()))
-        visited = set(order.tolist())
-        for (u, v), lit in x.items():
-            model.AddHint(lit, (u, v) in used)
-        for k in range(m):
-            model.AddHint(first[k], k == order[0])
-            model.AddHint(last[k], k == order[-1])
-        for k, lit in skip.items():
-            model.AddHint(lit, k not in visited)
-
+        mod.hint(np.asarray(getattr(hint, "order", hint), np.int64))
+    left = deadline - time.perf_counter() - after_s
+    if left < min_solve_s:
+        return None if closed else _kept(group, hint, t0)
     solver = cp_model.CpSolver()
-    solver.parameters.max_time_in_seconds = max(float(time_limit_s), 0.01)
+    solver.parameters.max_time_in_seconds = left
     solver.parameters.num_workers = int(num_workers)
     solver.parameters.random_seed = int(seed)
-    code = solver.Solve(model)
+    code = solver.Solve(mod.model)
     status = STATUS.get(code, "fallback")
     if closed:
         if status not in ("optimal", "feasible"):
             return None
-        succ = {u: v for (u, v), lit in x.items() if solver.BooleanValue(lit)}
-        cur = next(iter(succ))
-        order = [cur]
-        while succ[cur] != order[0]:
-            cur = succ[cur]
-            order.append(cur)
-        return np.asarray(order, np.int64), status == "optimal"
-    if status in ("optimal", "feasible"):
-        succ = {}
-        for k in range(m):
-            if solver.BooleanValue(first[k]):
-                succ[-1] = k
-        for (u, v), lit in x.items():
-            if solver.BooleanValue(lit):
-                succ[u] = v
-        order, cur = [], succ[-1]
-        while cur is not None and len(order) <= n:
-            order.append(cur)
-            cur = succ.get(cur)
-        order = np.asarray(order, np.int64)
-        # integer rounding: each of the n links is off by at most 0.5 unit
-        bound = max(solver.BestObjectiveBound() / SCALE - (n + 1) * 0.5 / SCALE, lower_bound_mm(group))
-    else:  # no solution within the limit: keep the hint (solve always passes one), cheap bound
-        order = np.asarray(getattr(hint, "order", hint), np.int64)
-        bound = lower_bound_mm(group)
-        status = "fallback"
+        return mod.decode(solver), status == "optimal"
+    if status not in ("optimal", "feasible"):
+        # no solution within the limit: keep the hint (solve always passes one), cheap bound
+        return _kept(group, hint, t0)
+    order = mod.decode(solver)
+    # integer rounding: each of the n links is off by at most 0.5 unit
+    bound = max(solver.BestObjectiveBound() / SCALE - (n + 1) * 0.5 / SCALE, lower_bound_mm(group))
     group.check_order(order)
     obj = group.path_cost_mm(order)
     # integer costs: the model's optimum may be a hair longer than the hint in float travel
