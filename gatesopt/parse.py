@@ -104,6 +104,9 @@ def _trailing_layer_markers(data: bytes, line_start: np.ndarray, markers):
     mk_line, mk_code, mk_z, mk_span = markers
     add_line, add_code = [], []
     for pattern, code in _TRAILING_MARKERS:
+        kinds = mk_code & 7
+        if ((kinds > 0) & (kinds < code)).any():
+            continue        # markers of a kind ahead of it are what ``_find_layers`` takes
         at = data.find(pattern)
         while at >= 0:
             ln = int(np.searchsorted(line_start, at, side="right")) - 1
@@ -193,14 +196,14 @@ def _find_layers(markers, step_line, kind, start, end):
     purge = _purge_layer(idx, layer_of_ext, start, end)
     if purge:
         # the start G-code's purge line at its own Z: before the print, as a marker would put it
-        idx, zs, layer_of_ext = idx[purge:], zs[purge:], layer_of_ext[purge:] - 1
-        new = new[purge:]
+        purge_end = int(idx[purge - 1])
+        idx, zs, layer_of_ext, new = idx[purge:], zs[purge:], layer_of_ext[purge:] - 1, new[purge:]
     # each step belongs to the layer of the next extruding step (the layer change travel is the
     # new layer's first step); steps after the last extrusion belong to the last layer
     nxt = np.minimum(np.searchsorted(idx, np.arange(n_steps), side="left"), len(idx) - 1)
     layer = layer_of_ext[nxt].astype(np.int32)
     if purge:       # up to the purge's last extrusion; the travel after it is the first layer's
-        layer[:int(np.flatnonzero(extruding)[purge - 1]) + 1] = -1
+        layer[:purge_end + 1] = -1
     z = zs[new]
     # a layer starts at the first step after the previous layer's last extrusion
     starts = np.zeros(int(new.sum()), np.int64)

@@ -306,12 +306,17 @@ REAL = ["real_slic3r131_stars.gcode", "real_prusa240_m486_arcwelder.gcode",
         "cura413_star_triangles20.gcode.gz", "prusa25_star_rect15_m82.gcode.gz"]
 
 
-@pytest.mark.parametrize("name", REAL)
-def test_real_files_round_trip(name):
+def _corpus_program(name: str):
+    """The parsed corpus file ``name``, or the test skips (the corpus is not in the repository)."""
     path = INSTANCES / name
     if not path.exists():
         pytest.skip(f"{path} absent (../shared/instances is not part of the repository)")
-    prog = gatesopt.parse(path)
+    return gatesopt.parse(path)
+
+
+@pytest.mark.parametrize("name", REAL)
+def test_real_files_round_trip(name):
+    prog = _corpus_program(name)
     for mode in ("safe", "free"):
         prob = build(prog, OrderingOptions(mode=mode))
         sol = solve(prob, "auto", time_limit_s=0.5, budget_s=3.0)
@@ -324,10 +329,7 @@ def test_real_files_round_trip(name):
 def test_exact_chain_is_not_longer_than_the_greedy_chain_on_kisslicer(name):
     """On KISSlicer files the exact groups' free ends made the whole chain longer than the greedy
     baseline's (1544 vs 1488 mm in safe mode before the look-ahead); verified output."""
-    path = INSTANCES / name
-    if not path.exists():
-        pytest.skip(f"{path} absent (../shared/instances is not part of the repository)")
-    prog = gatesopt.parse(path)
+    prog = _corpus_program(name)
     for mode in ("safe", "free"):
         prob = build(prog, OrderingOptions(mode=mode))
         exact = solve(prob, "auto", time_limit_s=1.0)
