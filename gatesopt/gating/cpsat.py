@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .milp import build_model, hint_vector, incumbent
+from .milp import _gap, build_model, hint_vector, incumbent
 from .problem import GatingProblem, GatingSolution, solution_from_gaps
 
 UNIT_J = 1e-6           # energy unit of the integer objective
@@ -29,7 +29,7 @@ def _status_map():
 
 def _add_share_cuts(m, model, x) -> None:
     """Redundant budget rows over x alone: a shared line, split or stall charged 1/|sharers| to each
-    sharer never exceeds what is paid (the argument of ``milp._budget_bounds``). They give CP-SAT's
+    sharer never exceeds what is paid (the argument of ``milp._angle_bounds``). They give CP-SAT's
     LP relaxation a plain knapsack row to work with. Scaled by 12 = lcm(1..4) (sharers <= 4 when
     X, Y, Z, E share one moment; larger groups round the shares down, which keeps the row valid)."""
     S = 12
@@ -143,13 +143,15 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     solver.parameters.random_seed = int(problem.options.seed)
     solver.parameters.relative_gap_limit = float(problem.options.mip_rel_gap)
     if time_limit_s is not None:
-        solver.parameters.max_time_in_seconds = float(time_limit_s)
+        # the limit is for the whole call: the dp start and building the model count against it
+        solver.parameters.max_time_in_seconds = max(float(time_limit_s) - (time.perf_counter() - t0), 0.01)
     st = solver.Solve(m)
     mapped = _status_map().get(st, "fallback")
     solve_s = time.perf_counter() - t0
     if st not in (cp.OPTIMAL, cp.FEASIBLE):
         return replace(start, formulation="cpsat", status="infeasible" if mapped == "infeasible" else "fallback",
-                       solve_s=solve_s, message=f"CP-SAT {solver.StatusName(st)}; returned the dp/hint start")
+                       solve_s=solve_s, bound=model.bound_j, gap=_gap(start.energy_j, model.bound_j),
+                       message=f"CP-SAT {solver.StatusName(st)}; returned the dp/hint start")
     xs = np.array([solver.BooleanValue(v) for v in x], bool)
     ys = np.array([solver.BooleanValue(v) for v in y], bool)
     lines_note = ""
@@ -187,7 +189,7 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     # energy_units >= floor(bound / W); each rounded coefficient is off by <= unit / 2
     bound_units = math.floor((solver.BestObjectiveBound() - e0) / W)
     slack = unit / 2.0 * (nx + nz + na + 1)            # +1: the rounded constant
-    bound = model.energy_before_j + bound_units * unit - slack
+    bound = max(model.energy_before_j + bound_units * unit - slack, model.bound_j)
     return solution_from_gaps(problem, "cpsat", mapped, k, model.gaps[xs], solve_s=solve_s, bound=bound,
                               message=f"CP-SAT {solver.StatusName(st)}; {nx} gap variables, {ny} angle(s), "
                                       f"{len(model.pruned)} pruned by bound; energy unit {unit:.3g} J"

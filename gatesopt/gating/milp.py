@@ -49,6 +49,7 @@ class CoupledModel:
     max_time_s: float           # budgets (inf: none)
     max_lines: float
     pruned: tuple               # angle indices left out by the bound (see ``build_model``)
+    bound_j: float = -math.inf  # lower bound on the optimum energy over all angles (``build_model``)
 
     @property
     def nx(self) -> int:
@@ -72,7 +73,11 @@ def build_model(problem: GatingProblem, incumbent_j: float = math.inf) -> Couple
     * angle k is left out when its relaxation bound ``energy_before_j - sum(max(saving, 0)) +
       (negative XY corrections)`` is above ``incumbent_j`` (the energy of a known feasible solution):
       stalls and budgets only add energy, so no solution at that angle beats the incumbent;
-      with budgets, also when the budget bound (``_budget_bounds``) is above it.
+      then also when the share bound (``_angle_bounds``: each shared line's stall charged
+      1/|sharers| to each sharer, with budgets the fractional knapsacks) is above it.
+
+    ``bound_j`` of the result is a lower bound on the optimum over every angle (the share bound of
+    the kept angles, the incumbent for the rest).
     """
     E0 = problem.energy_before_j
     inter = problem.xy_inter_w
@@ -90,33 +95,46 @@ def build_model(problem: GatingProblem, incumbent_j: float = math.inf) -> Couple
     if len(kept_angles) == 0:
         kept_angles = np.array([int(np.argmin(lb))])
     model = _build_model(problem, kept_angles, keep_gap, neg_inter, use_inter)
-    if problem.options.has_budget and not neg_inter and len(kept_angles) > 1 and math.isfinite(incumbent_j):
-        lbk = _budget_bounds(model)
-        keep = lbk <= incumbent_j + 1e-9 * max(abs(E0), 1.0)
+    lbk = _angle_bounds(model)
+    tol = 1e-9 * max(abs(E0), 1.0)
+    if len(kept_angles) > 1 and math.isfinite(incumbent_j):
+        # On a 217k-line Cura file under Marlin (shared M18 stalls) this leaves 1 angle of 16 and
+        # bounds the dp start within 8e-6; HiGHS on all 16 (86k gap variables) had not finished
+        # its root in 10 s and reported a 75 % gap
+        keep = lbk <= incumbent_j + tol
         if not keep.all():
             if not keep.any():
                 keep[int(np.argmin(lbk))] = True
             model = _build_model(problem, kept_angles[keep], keep_gap, neg_inter, use_inter)
-    return model
+            lbk = lbk[keep]
+    bound = float(lbk.min()) if len(lbk) else E0
+    return replace(model, bound_j=min(bound, incumbent_j))
 
 
-def _budget_bounds(model: CoupledModel) -> np.ndarray:
-    """Per kept angle, a lower bound on the energy under the budgets: a shared line, split or stall
-    is charged 1/|sharers| to each sharer (their sum never exceeds what is really paid), which makes
-    the budgets separable; each budget alone then gives a fractional knapsack, the larger of the
-    two bounds is kept."""
+def _angle_bounds(model: CoupledModel) -> np.ndarray:
+    """Per kept angle, a lower bound on the energy (the share bound): a shared line, split or
+    stall is charged 1/|sharers| to each sharer (their sum never exceeds what is really paid, and
+    never more than the LP relaxation's ``x <= z`` charges), which makes the gaps independent: every
+    gap of negative charged energy off, plus every negative XY correction. Under budgets each
+    budget alone then gives a fractional knapsack over the same charges; the larger bound is kept."""
     e = model.x_energy_j.copy()
     lines = model.x_lines.copy()
     tau = model.x_stall_s.copy()
-    for i, mem in enumerate(model.z_members):
-        k = len(mem)
-        e[mem] += model.z_energy_j[i] / k
-        lines[mem] += 1.0 / k
-        tau[mem] += model.z_stall_s[i] / k
-    for mem in model.w_members:
-        lines[mem] += 1.0 / len(mem)
-    out = np.full(len(model.angles), model.energy_before_j)
-    for k in range(len(model.angles)):
+    if model.z_members:
+        lens = np.array([len(m) for m in model.z_members])
+        mem = np.concatenate(model.z_members)
+        np.add.at(e, mem, np.repeat(model.z_energy_j / lens, lens))
+        np.add.at(lines, mem, np.repeat(1.0 / lens, lens))
+        np.add.at(tau, mem, np.repeat(model.z_stall_s / lens, lens))
+    if model.w_members:
+        lens = np.array([len(m) for m in model.w_members])
+        np.add.at(lines, np.concatenate(model.w_members), np.repeat(1.0 / lens, lens))
+    ny = len(model.angles)
+    neg_a = np.zeros(ny)
+    if len(model.a_pairs):
+        np.add.at(neg_a, model.x_angle[model.a_pairs[:, 0]], np.minimum(model.a_energy_j, 0.0))
+    out = model.energy_before_j + neg_a
+    for k in range(ny):
         sel = np.flatnonzero((model.x_angle == k) & (e < 0))
         if not len(sel):
             continue
@@ -135,7 +153,7 @@ def _budget_bounds(model: CoupledModel) -> np.ndarray:
             if j < len(g):
                 val += g[j] * (cap - (cw[j - 1] if j else 0.0)) / ww[j]
             best = min(best, val)
-        out[k] = model.energy_before_j - best
+        out[k] -= best
     return out
 
 
@@ -433,6 +451,7 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
         sol = solution_from_gaps(problem, "milp", "optimal", int(model.angles[0]), np.zeros(0, np.int64),
                                  solve_s=time.perf_counter() - t0, bound=problem.energy_before_j)
         return sol
+    share_bound = model.bound_j
     M = _columns(model)
     lp = highspy.HighsLp()
     lp.num_col_ = M["ncol"]
@@ -455,9 +474,10 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     h.setOptionValue("threads", 1)
     h.setOptionValue("presolve", "off")
     h.setOptionValue("random_seed", int(problem.options.seed))
-    if time_limit_s is not None:
-        h.setOptionValue("time_limit", float(time_limit_s))
     h.passModel(lp)
+    if time_limit_s is not None:
+        # the limit is for the whole call: the dp start and the model's build count against it
+        h.setOptionValue("time_limit", max(float(time_limit_s) - (time.perf_counter() - t0), 0.01))
     hv = hint_vector(problem, model, start)
     run_highs(h, start=None if hv is None else _full_start(model, M, *hv))
     status = h.getModelStatus()
@@ -467,8 +487,10 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     solve_s = time.perf_counter() - t0
     if mapped == "infeasible" or not has_sol:
         # no solution of its own (time limit before any, or an error): the incumbent, said so
-        return replace(start, formulation="milp", status="fallback" if mapped != "infeasible" else "infeasible",
-                       solve_s=solve_s, message=f"HiGHS: {h.modelStatusToString(status)}; returned the dp/hint start")
+        st = "fallback" if mapped != "infeasible" else "infeasible"
+        return replace(start, formulation="milp", status=st, solve_s=solve_s,
+                       bound=share_bound, gap=_gap(start.energy_j, share_bound),
+                       message=f"HiGHS: {h.modelStatusToString(status)}; returned the dp/hint start")
     col = np.asarray(h.getSolution().col_value)
     ox, oy = M["offsets"][0], M["offsets"][1]
     xs = col[ox:ox + model.nx] > 0.5
@@ -479,6 +501,7 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     # energy >= dual bound - LINE_WEIGHT_J * lines_ub is a valid bound on energy alone
     lines_ub = float(model.x_lines.sum() + len(model.z_members) + len(model.w_members))
     bound = float(min(info.mip_dual_bound, info.objective_function_value)) - LINE_WEIGHT_J * lines_ub
+    bound = max(bound, share_bound)     # HiGHS stopped before its root LP: the share bound holds
     sol = solution_from_gaps(problem, "milp", mapped, k, chosen, solve_s=solve_s, bound=bound,
                              message=f"HiGHS {h.modelStatusToString(status)}; {model.nx} gap variables, "
                                      f"{len(model.angles)} angle(s), {len(model.pruned)} pruned by bound")
@@ -487,6 +510,11 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     if abs(model_j - sol.energy_j) > 1e-6 * max(abs(sol.energy_j), 1.0):
         sol = replace(sol, message=sol.message + f"; model energy {model_j:.6f} J != scored {sol.energy_j:.6f} J")
     return sol
+
+
+def _gap(energy_j: float, bound_j: float) -> float:
+    """(energy - bound) / energy, as ``solution_from_gaps`` reports it."""
+    return max(0.0, (energy_j - bound_j) / max(abs(energy_j), 1e-12)) if math.isfinite(bound_j) else math.nan
 
 
 def _full_start(model, M, x, y):
