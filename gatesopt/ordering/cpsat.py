@@ -232,18 +232,22 @@ def _solve_circuit(group: Group, t0, time_limit_s, hint, num_workers, seed, clos
     arcs = n_arcs(group, closed)
     build_s, after_s = BUILD_S_PER_ARC * arcs, SOLVER_S_PER_ARC * arcs
     min_solve_s = MIN_SOLVE_S + MIN_SOLVE_S_PER_ARC * arcs
-    if deadline - time.perf_counter() < build_s + after_s + min_solve_s:
-        # too large to be built and solved in the time left (or no time left): not built
+
+    def give_up():
+        # CP-SAT not run: a closed tour has no answer, an open path keeps its warm start
         return None if closed else _kept(group, hint, t0)
+
+    if deadline - time.perf_counter() < build_s + after_s + min_solve_s:
+        return give_up()        # too large to be built and solved in the time left (or none left)
     mod = _Model(group, closed)
     # building is abandoned where it leaves CP-SAT too little (a slower machine, a busy core)
     if not mod.build(deadline - after_s - min_solve_s):
-        return None if closed else _kept(group, hint, t0)
+        return give_up()
     if hint is not None:
         mod.hint(np.asarray(getattr(hint, "order", hint), np.int64))
     left = deadline - time.perf_counter() - after_s
     if left < min_solve_s:
-        return None if closed else _kept(group, hint, t0)
+        return give_up()
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = left
     solver.parameters.num_workers = int(num_workers)
