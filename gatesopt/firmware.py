@@ -21,7 +21,8 @@ the emitter can write the right text:
     Klipper ``klippy/extras/stepper_enable.py`` (read at Klipper3d/klipper@0e30b86 and a 2025 copy):
     ``cmd_SET_STEPPER_ENABLE`` -> ``motor_debug_enable`` runs ``toolhead.dwell(DISABLE_STALL_TIME)``
     (0.100 s), flushes the look-ahead (``get_last_move_time``), switches the pin, and dwells 0.100 s
-    again: ~0.2 s of dwell plus the flush, 0.22 s measured. Re-enable is automatic: ``motor_disable``
+    again: ~0.2 s of dwell plus the flush, 0.22 s measured. Klipper has no ``M17``: ``klippy/gcode.py``
+    ``cmd_default`` answers 'Unknown command:"M17"' and goes on (no dwell, nothing switched). Re-enable is automatic: ``motor_disable``
     re-registers ``add_active_callback(self.motor_enable)``, so the first step of that stepper turns
     it back on at the step's own print time. Old versions take one ``STEPPER=`` per command (newer
     ones also accept ``STEPPERS=a,b`` and call ``STEPPER=`` deprecated), so we write one line per
@@ -31,6 +32,11 @@ the emitter can write the right text:
 ``reprap``
     RepRapFirmware: ``M18 X`` waits for standstill and marks X not homed; the next X move is refused
     by default. X/Y/Z gating is refused with a message; only E may be gated.
+
+A motor line a firmware does not know (``Firmware.executes``: Klipper's missing ``M17``, Marlin's or
+RepRapFirmware's ``SET_STEPPER_ENABLE``, the S-series on stock firmware) is skipped by it as an
+unknown command and stalls nothing; ``stall_durations`` prices every motor line, the file's own and
+gating's, by that rule for the solver and the verifier alike.
 
 Costs under the paper's time model (T = L / F, 3DGates Eq. 2, no acceleration): a stall is a fixed
 time per instruction line, during which the whole printer keeps drawing power (the energy profile
@@ -78,6 +84,8 @@ class Firmware:
     reenable: str                 # "exact" | "auto-first-step" | "early-by-queue"
     homing_kept: bool             # does the axis stay homed after a disable
     allowed_motors: frozenset     # motors this firmware may gate
+    executes: frozenset           # motor instruction words (``motor_line_word``) it carries out; any
+                                  # other motor line is an unknown command to it: skipped, no stall
     refused_note: str = ""        # why other motors are refused
     description: str = ""
 
@@ -123,19 +131,23 @@ PRESETS: dict[str, Firmware] = {
     "3dgates": Firmware(
         name="3dgates", off_word="S0", on_word="S1", merge_motors=True, stall_off_s=0.0,
         stall_on_s=0.0, reenable="exact", homing_kept=True, allowed_motors=frozenset(AXES),
+        executes=frozenset({"S0", "S1", "M17", "M18", "M84"}),
         description="3DGates firmware patch (paper Table 3): S0/S1, exact, no stall"),
     "marlin": Firmware(
         name="marlin", off_word="M18", on_word="M17", merge_motors=True, stall_off_s=MARLIN_STOP_S,
         stall_on_s=0.0, reenable="early-by-queue", homing_kept=True, allowed_motors=frozenset(AXES),
+        executes=frozenset({"M17", "M18", "M84"}),
         description="Marlin 2.x: M18 drains the queue (full stop), M17 enables at parse time"),
     "klipper": Firmware(
         name="klipper", off_word="SET_STEPPER_ENABLE", on_word=None, merge_motors=False,
         stall_off_s=KLIPPER_STALL_S, stall_on_s=KLIPPER_STALL_S, reenable="auto-first-step",
         homing_kept=True, allowed_motors=frozenset(AXES),
+        executes=frozenset({"SET_STEPPER_ENABLE", "M18", "M84"}),
         description="Klipper: SET_STEPPER_ENABLE per stepper, ~0.22 s stall, auto re-enable"),
     "reprap": Firmware(
         name="reprap", off_word="M18", on_word="M17", merge_motors=True, stall_off_s=MARLIN_STOP_S,
         stall_on_s=0.0, reenable="exact", homing_kept=False, allowed_motors=frozenset({"E"}),
+        executes=frozenset({"M17", "M18", "M84"}),
         refused_note="RepRapFirmware's M18 marks X/Y/Z not homed and refuses the next move on them",
         description="RepRapFirmware: M18 waits for standstill and unhomes the axis"),
 }
@@ -175,21 +187,34 @@ def gating_costs(name: str | Firmware) -> GatingCosts:
 
 
 
+def _words(text: str) -> list[str]:
+    """The upper-case words of a line's code (comment and line number ``N<n>`` dropped)."""
+    words = text.split(";", 1)[0].upper().split()
+    if len(words) > 1 and words[0].startswith("N") and words[0][1:].isdigit():  # line number
+        words = words[1:]
+    return words
+
+
+def motor_line_word(text: str) -> str | None:
+    """The instruction word of a motor enable/disable line (``"S0"``, ``"M17"``,
+    ``"SET_STEPPER_ENABLE"``, ...: what ``Firmware.executes`` lists), None for any other line."""
+    if parse_motor_line(text) is None:
+        return None
+    return _words(text)[0]
+
+
 def parse_motor_line(text: str) -> tuple[bool, tuple[str, ...]] | None:
     """``(on, motors)`` for a motor enable/disable line, else None.
 
     Understands ``S0``/``S1`` (3DGates Table 3), ``M17``/``M18``/``M84`` (no axis word: all motors;
     ``M18 S<sec>``/``M84 S<sec>`` only sets the idle timeout and is not a disable) and Klipper's
     ``SET_STEPPER_ENABLE STEPPER=stepper_x[,..]|STEPPERS=.. ENABLE=0|1`` (ENABLE defaults to 1).
+    Whether a given firmware carries the line out at all is ``Firmware.executes``.
     """
-    code = text.split(";", 1)[0].strip()
-    if not code:
+    words = _words(text)
+    if not words:
         return None
-    words = code.upper().split()
     head = words[0]
-    if head.startswith("N") and head[1:].isdigit() and len(words) > 1:  # line number
-        words = words[1:]
-        head = words[0]
     if head in ("S0", "S1", "M17", "M18", "M84"):
         on = head in ("S1", "M17")
         letters: list[str] = []
@@ -258,7 +283,19 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     motion = np.flatnonzero(np.isin(program.kind, MOTION_KINDS))
     last_motion = int(motion[-1]) if len(motion) else -1
     rows = rows[rows < last_motion]
-    ok, on, _ = parse_motor_rows(program, rows)
+    from ._text import distinct_lines
+    inverse, texts = distinct_lines(program, program.line[rows])
+    ok, on, _ = parse_motor_lines(texts)
+    # Only an instruction the firmware carries out stalls it. Any other motor line is an unknown
+    # command to it, answered with a message and skipped: no dwell, no queue drain. Klipper has no
+    # M17 (klippy/gcode.py ``cmd_default``: respond_info 'Unknown command:"M17"'; M18/M84 are
+    # registered by klippy/extras/stepper_enable.py and dwell like SET_STEPPER_ENABLE), and
+    # Marlin / RepRapFirmware know neither SET_STEPPER_ENABLE nor the S-series. A file's own
+    # start G-code ``M17`` therefore costs nothing on Klipper. This is the one place a motor
+    # line's stall is decided: the verifier (``verify.energy_of``) and the gating problem
+    # (``gating.problem.build``, for the file's own lines) both read it from here.
+    ok &= np.array([motor_line_word(t) in fw.executes for t in texts], bool)
+    ok, on = ok[inverse], on[inverse]
     # Klipper's ENABLE=1 dwells too, though we never write it
     out[rows[ok]] = np.where(on[ok], fw.stall_on_s, fw.stall_off_s)
     if planner is not None and fw.name in ("marlin", "reprap"):

@@ -225,7 +225,7 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
                     continue
                 problem = build(prog, opts)
                 sol = solve(problem, formulation)
-                end = float(problem.time_before_s)
+                end = problem.total_s    # the chunk's timeline (time_before_s adds its own stalls)
                 keep = sol.off_end_s < end - 1e-12        # motors on at the chunk boundary
                 if not keep.all():
                     m, a, b = sol.off_motor[keep], sol.off_start_s[keep], sol.off_end_s[keep]

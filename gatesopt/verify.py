@@ -31,6 +31,13 @@ read the two Programs (``gatesopt.parse`` of the original and of the output) and
 5. ``energy``: energy and time of the output, recomputed from its text with the one energy model
    (``gatesopt.energy.step_energy_j``, stall times from ``gatesopt.firmware.stall_durations``),
    agree with what the solver claimed within ``claim_rel_tol``.
+6. ``positions`` (gating output, not re-ordered): every move of the original -- travels, wipes,
+   z-hops, start and end G-code too, not only the extruded segments ``geometry`` sees -- ends in
+   the output where the original's move ends, either as written or under the declared rotation
+   (start and end G-code stay put, the print turns), positions as the parser resolves them in
+   both files; and a relative (G91) move that starts in the rotated frame ends in it: its XY
+   delta is the rotated delta. (A relative wipe written as a travel to where the *unrotated*
+   print ended lands on a point of the original and passes every other check.)
 
 Findings carry the 1-based line number in the output file (or the original, said so).
 
@@ -543,6 +550,138 @@ def check_geometry(original: Program, output: Program, *, tol_mm: float = GEOMET
 
 
 # ------------------------------------------------------------------------------------------------
+# 6. positions
+def _only_motor_between(program: Program, rows: np.ndarray) -> np.ndarray:
+    """(len(rows) - 1,) bool: steps rows[k] and rows[k+1] are separated by motor instruction lines
+    only (what gating inserts), so they may be pieces of one split move."""
+    if len(rows) < 2:
+        return np.zeros(0, bool)
+    motor_cum = np.cumsum(program.kind == Kind.MOTOR)
+    between_motor = motor_cum[rows[1:] - 1] - motor_cum[rows[:-1]]
+    line_gap = program.line[rows[1:]] - program.line[rows[:-1]] - 1
+    return (rows[1:] - rows[:-1] - 1 == between_motor) & (line_gap == between_motor)
+
+
+@njit(cache=True)
+def _match_positions(a_raw, a_rot, a_last, a_rel, a_home, b_end, b_last, tol, e_tol, out_k, out_flag,
+                     out_allowed):
+    """Walk the original's moves (ends ``a_raw``, rotated ``a_rot``: X Y Z E) against the output's
+    (``b_end``) in order. Each original move is one block of output moves (a split move's pieces,
+    joined by motor lines only) whose last move ends at the original's end, as written (flag 1)
+    or rotated (flag 2); the last move of a run of the original (``a_last``: a non-motor line
+    follows) ends the output's run too (``b_last``). Within a run the block ends at the earliest
+    output move that matches, which finds an alignment whenever there is one (matching a
+    subsequence greedily). ``a_rel``: a relative XY move: from a start that is rotated only, its
+    end must be rotated (allowed flags 2), unless homing (``a_home``) came between. Fills
+    ``out_k`` (the output move taken, -1: none left), ``out_flag`` (0: no match) and
+    ``out_allowed``."""
+    n = a_raw.shape[0]
+    m = b_end.shape[0]
+    k = 0
+    prev = 3
+    for i in range(n):
+        if a_home[i]:
+            prev = 3        # homed since the last move: the head is at a machine position
+        allowed = 2 if (a_rel[i] and prev == 2) else 3
+        out_allowed[i] = allowed
+        if k >= m:
+            out_k[i] = -1
+            out_flag[i] = 0
+            prev = 3
+            continue
+        end = k
+        while end < m - 1 and not b_last[end]:
+            end += 1
+        cand_hi = end if a_last[i] else end - 1     # a move inside a run ends before the run does
+        first = end if a_last[i] else k
+        found = -1
+        flag = 0
+        for kk in range(first, cand_hi + 1):
+            f = 0
+            d_raw = 0.0
+            d_rot = 0.0
+            for q in range(3):
+                d_raw = max(d_raw, abs(b_end[kk, q] - a_raw[i, q]))
+                d_rot = max(d_rot, abs(b_end[kk, q] - a_rot[i, q]))
+            de = abs(b_end[kk, 3] - a_raw[i, 3])
+            if de <= e_tol:
+                if d_raw <= tol:
+                    f |= 1
+                if d_rot <= tol:
+                    f |= 2
+            f &= allowed
+            if f:
+                found = kk
+                flag = f
+                break
+        if found < 0:
+            # no match: report it, and go on as if the move were not split
+            found = end if a_last[i] else k
+        out_k[i] = found
+        out_flag[i] = flag
+        prev = flag if flag else 3
+        k = found + 1
+    return 0
+
+
+def check_positions(original: Program, output: Program, *, tol_mm: float = GEOMETRY_TOL_MM,
+                    e_tol_mm: float = 1e-5, max_findings: int = 10) -> list[Finding]:
+    """Every move of the original ends in the output where the original's move ends, as written
+    or rotated by the output's declared rotation (``; gatesopt: rotate_deg=``), and a relative XY
+    move (G91) that starts in the rotated frame ends in it (its delta is the rotated delta, no
+    translation). Positions are the parser's, in both files. For gating output (the original's
+    moves in order, split moves' pieces joined by motor lines); a re-ordering is checked by
+    ``geometry`` and ``gatesopt.ordering.verify``. ``tol_mm`` covers the single-axis snaps of a
+    rotated output; E (the cumulative filament position) must agree within ``e_tol_mm``."""
+    deg, cx, cy = read_rotation(output)
+    ra = np.flatnonzero(np.isin(original.kind, MOTION_KINDS))
+    rb = np.flatnonzero(np.isin(output.kind, MOTION_KINDS))
+    if not len(ra):
+        return []
+    a_raw = np.ascontiguousarray(original.end_mm[ra], dtype=np.float64)
+    a_rot = a_raw.copy()
+    if deg % 360.0 != 0.0:
+        a_rot[:, :2] = _rotate(a_raw[:, :2], deg, (cx, cy))
+    a_last = np.ones(len(ra), bool)
+    a_last[:-1] = ~_only_motor_between(original, ra)
+    b_last = np.ones(len(rb), bool)
+    b_last[:-1] = ~_only_motor_between(output, rb)
+    moves_xy = ((original.end_mm[ra, :2] != original.start_mm[ra, :2]).any(axis=1)
+                | (original.kind[ra] == Kind.ARC))
+    a_rel = np.asarray(original.relative_xyz[ra], bool) & moves_xy
+    home_cum = np.cumsum(original.kind == Kind.HOME)
+    a_home = np.diff(np.concatenate(([0], home_cum[ra]))) > 0    # a G28 since the move before
+    b_end = np.ascontiguousarray(output.end_mm[rb], dtype=np.float64)
+    out_k = np.empty(len(ra), np.int64)
+    out_flag = np.zeros(len(ra), np.int64)
+    out_allowed = np.zeros(len(ra), np.int64)
+    _match_positions(a_raw, a_rot, a_last, a_rel, a_home, b_end, b_last, float(tol_mm), float(e_tol_mm),
+                     out_k, out_flag, out_allowed)
+    out: list[Finding] = []
+    for i in np.flatnonzero(out_flag == 0)[:max_findings].tolist():
+        oline = int(original.line[ra[i]]) + 1
+        k = int(out_k[i])
+        if k < 0:
+            out.append(Finding("positions", oline, "move of the original has no counterpart in the output "
+                                                   "(the output ends before it)", in_original=True))
+            continue
+        b, raw, rot = b_end[k], a_raw[i], a_rot[i]
+        at = f"({b[0]:.4f}, {b[1]:.4f}, {b[2]:.4f})"
+        if out_allowed[i] == 2:
+            out.append(Finding("positions", int(output.line[rb[k]]) + 1,
+                               f"relative move (G91, original line {oline}) from the rotated print ends at "
+                               f"{at}, not at ({rot[0]:.4f}, {rot[1]:.4f}, {rot[2]:.4f}): its XY delta is "
+                               f"not the original's delta rotated by {deg:g} deg"))
+        else:
+            where = (f"({raw[0]:.4f}, {raw[1]:.4f}, {raw[2]:.4f})" + (
+                f", or rotated ({rot[0]:.4f}, {rot[1]:.4f}, {rot[2]:.4f})" if deg % 360.0 != 0.0 else ""))
+            out.append(Finding("positions", int(output.line[rb[k]]) + 1,
+                               f"move ends at {at} E{b[3]:.5f}; the original's move (line {oline}) ends at "
+                               f"{where} E{raw[3]:.5f}"))
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
 # 2. extrusion
 def _layer_e(program: Program) -> tuple[np.ndarray, np.ndarray]:
     """Net filament per layer (all E motion: extrusion, retraction, unretraction). Net, because a
@@ -686,21 +825,117 @@ def check_commands(original: Program, output: Program, *, reordered: bool = Fals
 
 # ------------------------------------------------------------------------------------------------
 # 4. timing
-def _own_motor_texts(original: Program | None) -> frozenset:
-    """The stripped texts of the original's motor lines: the file's own instructions."""
-    if original is None:
-        return frozenset()
-    rows = np.flatnonzero(original.kind == Kind.MOTOR)
-    return frozenset(t.strip() for t in _text.distinct_lines(original, original.line[rows])[1])
+def _anchors(program: Program) -> np.ndarray:
+    """Lines a gating rewrite keeps one for one and in order: every line that is neither a motion
+    (a split move gives several) nor a motor instruction (gating adds those), nor gatesopt's own
+    header in the first 50 lines (``; gatesopt: rotate_deg=``)."""
+    mask = np.ones(program.n_lines, bool)
+    mask[program.line[np.isin(program.kind, MOTION_KINDS) | (program.kind == Kind.MOTOR)]] = False
+    for i in range(min(program.n_lines, 50)):
+        if mask[i] and program.line_text(i).startswith("; gatesopt:"):
+            mask[i] = False
+    return np.flatnonzero(mask)
 
 
-def _motor_rows(program: Program, rows: np.ndarray, own_texts=frozenset()):
+def _step_starts(program: Program) -> np.ndarray:
+    """(n + 1,) stall-free start time of each step, and the end of the print."""
+    return np.concatenate(([0.0], np.cumsum(np.asarray(program.duration_s, float))))
+
+
+def _places_by_anchor(program: Program, rows: np.ndarray, anchors: np.ndarray):
+    """Where steps ``rows`` are: (stretch: the number of ``anchors`` lines before them, stall-free
+    time since the end of the last of those, and inf: the time is always counted from there)."""
+    line = np.asarray(program.line)
+    start = _step_starts(program)
+    seg = np.searchsorted(anchors, line[rows])
+    t_anchor = np.concatenate(([0.0], start[np.searchsorted(line, anchors, "right")]))
+    return seg, start[rows] - t_anchor[seg], np.full(len(rows), np.inf)
+
+
+def _places_by_layer(program: Program, rows: np.ndarray):
+    """Where steps ``rows`` are: (layer, stall-free time since the layer's first step, time to the
+    end of its last step)."""
+    start = _step_starts(program)
+    layer = np.asarray(program.layer, np.int64)
+    key = layer - layer.min() if len(layer) else layer
+    first = np.full(int(key.max()) + 1 if len(key) else 0, len(layer), np.int64)
+    last = np.full(len(first), -1, np.int64)
+    np.minimum.at(first, key, np.arange(len(layer)))
+    np.maximum.at(last, key, np.arange(len(layer)))
+    k = key[rows]
+    return layer[rows], start[rows] - start[first[k]], start[last[k] + 1] - start[rows]
+
+
+def _own_motor_rows(original: Program | None, output: Program, rows: np.ndarray) -> np.ndarray:
+    """Per output step of ``rows`` (motor lines): True if it is one of the original's own motor
+    lines (a start G-code ``M17``, a closing ``M84``), kept by the rewrite, False if the rewrite
+    added it.
+
+    By text alone the two cannot be told apart: Marlin gating writes ``M18 X``, and a file may have
+    an ``M18 X`` of its own. So each own line is paired with an output line of the same text in the
+    same place, nearest in stall-free time to where the original has it. Gating keeps every other
+    non-motion line one for one and in order (``check_commands``; ``_anchors``), so the place is
+    the stretch between two such lines and the time is counted from its start (a split keeps a
+    stretch's time; a rotation only changes the travels into and out of the print). A re-ordered
+    file keeps its layers: the place is the layer, the time counted from the nearer end of it."""
+    own = np.zeros(len(rows), bool)
+    if original is None or not len(rows):
+        return own
+    if output is original:
+        return np.ones(len(rows), bool)
+    orows = np.flatnonzero(original.kind == Kind.MOTOR)
+    if not len(orows):
+        return own
+    oinv, otexts = _text.distinct_lines(original, original.line[orows])
+    ids: dict[str, int] = {}
+    ocode = np.array([ids.setdefault(t.strip(), len(ids)) for t in otexts], np.int64)[oinv]
+    inv, texts = _text.distinct_lines(output, output.line[rows])
+    code = np.array([ids.get(t.strip(), -1) for t in texts], np.int64)[inv]
+    oanch, anch = _anchors(original), _anchors(output)
+    if len(oanch) == len(anch):
+        oplace, o_from, o_to = _places_by_anchor(original, orows, oanch)
+        place, c_from, c_to = _places_by_anchor(output, rows, anch)
+    else:
+        oplace, o_from, o_to = _places_by_layer(original, orows)
+        place, c_from, c_to = _places_by_layer(output, rows)
+    lo_place = min(int(oplace.min()), int(place.min()))
+    width = max(int(oplace.max()), int(place.max())) - lo_place + 1
+    okey = ocode * width + (oplace - lo_place)
+    cand = np.flatnonzero(code >= 0)
+    key = code[cand] * width + (place[cand] - lo_place)
+    order = np.argsort(key, kind="stable")               # by key, then in file order
+    cand, key = cand[order], key[order]
+    # a place with as many lines of a text as the original's: all of them are its own
+    ukeys, ocount = np.unique(okey, return_counts=True)
+    lo, hi = np.searchsorted(key, ukeys, "left"), np.searchsorted(key, ukeys, "right")
+    same = (hi - lo) == ocount
+    for a, b in zip(lo[same].tolist(), hi[same].tolist()):
+        own[cand[a:b]] = True
+    used = np.zeros(len(cand), bool)
+    for i in np.flatnonzero(~np.isin(okey, ukeys[same])).tolist():
+        a, b = int(np.searchsorted(key, okey[i], "left")), int(np.searchsorted(key, okey[i], "right"))
+        if a >= b:
+            continue                    # gone from the output: check_commands reports it
+        c = cand[a:b]
+        if o_from[i] <= o_to[i]:
+            d = np.abs(c_from[c] - o_from[i])
+        else:
+            d = np.abs(c_to[c] - o_to[i])
+        d[used[a:b]] = np.inf
+        j = int(np.argmin(d))
+        if not np.isfinite(d[j]):
+            continue
+        used[a + j] = True
+        own[c[j]] = True
+    return own
+
+
+def _motor_rows(program: Program, rows: np.ndarray, original: Program | None = None):
     """Per step of ``rows``: (a motor line, on, motor mask with bit m = AXES[m], the file's own
-    line (its stripped text in ``own_texts``)); each distinct text is read once."""
+    line (``_own_motor_rows``)); each distinct text is read once."""
     inverse, texts = _text.distinct_lines(program, program.line[rows])
     ok, on, mask = fwmod.parse_motor_lines(texts)
-    own = np.array([t.strip() in own_texts for t in texts], bool)
-    return ok[inverse], on[inverse], mask[inverse], own[inverse]
+    return ok[inverse], on[inverse], mask[inverse], _own_motor_rows(original, program, rows)
 
 
 def check_timing(output: Program, *, firmware="3dgates", start_ahead_s: float = 1.8e-3,
@@ -712,7 +947,7 @@ def check_timing(output: Program, *, firmware="3dgates", start_ahead_s: float = 
     t_start = t_end - dur
     steps = np.asarray(output.steps_motor(), bool)
     motor_rows = np.flatnonzero(output.kind == Kind.MOTOR)
-    parsed, is_on, mask, own = _motor_rows(output, motor_rows, _own_motor_texts(original))
+    parsed, is_on, mask, own = _motor_rows(output, motor_rows, original)
     explicit_on = fw.reenable == "exact"
     out: list[Finding] = []
     for m, letter in enumerate(AXES):
@@ -820,10 +1055,8 @@ def firmware_problem(text: str, firmware="3dgates") -> str | None:
 def _added_motor_lines(original: Program | None, output: Program):
     """The motor enable/disable lines (``firmware.parse_motor_line``) of ``output`` that the rewrite
     added: (rows, per row the index of its stripped text in ``texts``, ``texts``). A line of the
-    original's own (a slicer's closing ``M84``, end G-code's ``M18``) is not one: the output's motor
-    lines are paired in order with the original's of the same stripped text, and any left over
-    still count as the file's own up to the number of times the original has that text -- so a
-    copy the rewrite added of an original line is added, a kept one is not."""
+    original's own (a slicer's closing ``M84``, end G-code's ``M18``) is not one, a copy the rewrite
+    added of an original line is (``_own_motor_rows``)."""
     rows = np.flatnonzero(output.kind == Kind.MOTOR)
     inverse, texts = _text.distinct_lines(output, output.line[rows])
     texts = [t.strip() for t in texts]
@@ -832,30 +1065,7 @@ def _added_motor_lines(original: Program | None, output: Program):
         return rows[:0], inverse[:0], texts
     keep = motor[inverse]
     rows, inverse = rows[keep], inverse[keep]
-    if original is None:
-        return rows, inverse, texts
-    orows = np.flatnonzero(original.kind == Kind.MOTOR)
-    oinv, otexts = _text.distinct_lines(original, original.line[orows])
-    seq = [t for t in (otexts[k].strip() for k in oinv) if fwmod.parse_motor_line(t) is not None]
-    if not seq:
-        return rows, inverse, texts
-    left: dict[str, int] = {}
-    for t in seq:
-        left[t] = left.get(t, 0) + 1
-    cand = np.flatnonzero(np.array([t in left for t in texts], bool)[inverse])
-    own = np.zeros(len(rows), bool)
-    k = 0
-    for c in cand.tolist():                         # in order
-        t = texts[inverse[c]]
-        if k < len(seq) and t == seq[k]:
-            own[c] = True
-            left[t] -= 1
-            k += 1
-    for c in cand.tolist():                         # the original's order changed: by count
-        t = texts[inverse[c]]
-        if not own[c] and left[t] > 0:
-            own[c] = True
-            left[t] -= 1
+    own = _own_motor_rows(original, output, rows)
     return rows[~own], inverse[~own], texts
 
 
@@ -892,15 +1102,15 @@ def detect_firmware(original: Program | None, output: Program) -> str:
 
 # ------------------------------------------------------------------------------------------------
 # 5. energy
-def _file_enable(program: Program, original_motor_text=frozenset()) -> np.ndarray:
+def _file_enable(program: Program, original: Program | None = None) -> np.ndarray:
     """(n, 4) motor state as the slicer's file has it: the parsed state with the effect of every
-    inserted disable undone (a motor held off by a gating line counts as on). Lines whose text is
-    in ``original_motor_text`` are the file's own."""
+    inserted disable undone (a motor held off by a gating line counts as on). ``original`` tells
+    the file's own motor lines from inserted ones (``_own_motor_rows``)."""
     en = np.asarray(program.enabled, bool).copy()
     rows = np.flatnonzero(program.kind == Kind.MOTOR)
     if not len(rows):
         return en
-    parsed, on, mask, own = _motor_rows(program, rows, original_motor_text)
+    parsed, on, mask, own = _motor_rows(program, rows, original)
     inserted_off = ~on & ~own
     idx = np.arange(program.n_steps)
     for m in range(4):
@@ -929,7 +1139,7 @@ def energy_of(program: Program, *, firmware="3dgates", profile="paper", duration
     en = np.asarray(program.enabled, bool).copy()
     motor = program.kind == Kind.MOTOR
     if motor.any():
-        en[motor] = _file_enable(program, _own_motor_texts(original))[motor]
+        en[motor] = _file_enable(program, original)[motor]
     e = step_energy_j(dur, coeffs, en)
     return float(e.sum()), float(dur.sum()), float(stall.sum())
 
@@ -999,6 +1209,13 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     checks.append("geometry")
     findings += check_extrusion(original, output)
     checks.append("extrusion")
+    if reordered:
+        # moves in another order: ``geometry`` and the ordering checks compare them
+        # (``gating.pipeline.run`` checks the positions of the gated re-ordered print itself)
+        checks.append("positions(skipped: re-ordered)")
+    else:
+        findings += check_positions(original, output, tol_mm=geometry_tol_mm)
+        checks.append("positions")
     findings += check_commands(original, output, reordered=reordered)
     checks.append("commands")
     # the firmware's own dialect first: timing read with the wrong firmware's rules means little
@@ -1026,7 +1243,9 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
                 # moves fail; ``gating.pipeline.run`` runs them on the re-ordered file before gating
                 checks.append("ordering(skipped: gated)")
     e_after, t_after, stall = energy_of(output, firmware=fw, profile=profile, original=original)
-    e_before, t_before, _ = energy_of(original, firmware=fw, profile=profile)
+    # the original's motor lines are all its own (a stall priced with the state they leave, as the
+    # solver's ``energy_before_j`` does), not gating lines whose effect is undone
+    e_before, t_before, _ = energy_of(original, firmware=fw, profile=profile, original=original)
     cl = _claimed(claimed)
     if cl is not None:
         checks.append("energy")

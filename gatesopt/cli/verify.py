@@ -10,7 +10,9 @@ from ..parse import parse
 def register(sub) -> None:
     p = sub.add_parser("verify", help="check a rewritten file against its original",
                        description="Re-parse both files and check: extruded geometry per layer "
-                                   "(after undoing a declared rotation), E per layer, control "
+                                   "(after undoing a declared rotation), E per layer, every move's "
+                                   "end point (as written or rotated; a relative move from the "
+                                   "rotated print by the rotated delta), control "
                                    "commands in order, added motor lines in the firmware's dialect, "
                                    "motor timing (start-ahead, end-late), and "
                                    "energy/time against a claimed report. Exit 0 only if all hold.")

@@ -24,7 +24,10 @@ What the text looks like:
   adds the line ``; gatesopt: rotate_deg=<deg> center_x=<x> center_y=<y>`` at the top. A move that
   is single-axis after rotation (other-axis change <= ``snap_mm``) gets exactly the previous text
   on the other axis, so the firmware does not step that motor; ``EmitResult.max_snap_mm`` is the
-  largest such correction.
+  largest such correction. A relative move (G91) that starts in the rotated print says where to go
+  *from there*: its XY delta is rotated (no translation) and it stays in the rotated frame
+  (``rotated_run_end``), and its delta is written from the position the text before it reached,
+  so rounding does not add up over a run of relative moves.
 
 Without rotation the text is written by a compiled pass over the lines (``_emit_kernel``); the
 per-line ``_Emitter`` below is the reference it must equal byte for byte, and still writes the
@@ -45,6 +48,7 @@ import numpy as np
 from .. import firmware as fwmod
 from ..errors import GatesoptError
 from ..program import AXES, Kind, Program, X, Y
+from .problem import rotated_run_end
 
 # Decimals written (mm). Rotated end points: 0.1 um (slicers write 1 um; a rotation makes every
 # coordinate irrational, and 0.1 um keeps the time of each move within 20 us of the solver's at
@@ -61,7 +65,9 @@ _SPLITTABLE_INT = frozenset(int(k) for k in SPLITTABLE)
 _ARC = int(Kind.ARC)
 ROTATE_HEADER = "; gatesopt: rotate_deg={deg} center_x={cx} center_y={cy}"
 
-_WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+)?)")
+# a word's value: a number, or an unexpanded slicer placeholder ("Y{machine_depth}"), which the
+# parser drops as the firmware does (``_scan._parse_words``) and ``_Line.value`` reads as absent
+_WORD = re.compile(r"([A-Za-z])\s*(\{[^}]*\}?|[-+]?(?:\d+\.?\d*|\.\d+)?)")
 _XY_WORD = re.compile(r"[XYxy]\s*[-+.0-9]")
 _LINE_NUMBER = re.compile(rb"(?m)^[ \t]*N\d+")
 
@@ -155,10 +161,15 @@ class _Line:
         return cls(g.upper(), words[1:], suffix)
 
     def value(self, letter: str) -> str | None:
+        """The number text of the first word ``letter``; None if absent or a placeholder (which the
+        firmware ignores: a rewrite writes the axis as a number where it must, see ``rewrite``)."""
         for k, v in self.words:
             if k == letter:
-                return v
+                return None if v.startswith("{") else v
         return None
+
+    def placeholder(self, letter: str) -> bool:
+        return any(k == letter and v.startswith("{") for k, v in self.words)
 
 
 @dataclass(frozen=True)
@@ -218,15 +229,23 @@ class _Emitter:
         self.rotated = self.deg % 360.0 != 0.0
         self.center = (float(center[0]), float(center[1]))
         lo, hi = (0, program.n_steps) if rotate_rows is None else (int(rotate_rows[0]), int(rotate_rows[1]))
+        if self.rotated:
+            # relative moves after the run stay in the rotated frame (``problem._rotate_rows``
+            # already does this; a caller's own ``rotate_rows`` gets it here)
+            hi = rotated_run_end(program, hi)
         self.lo, self.hi = lo, hi
         self.snap = snap
         self.max_snap = 0.0
         self.snap_missed = 0
         self.snap_refused = 0
+        self.placeholders: list[int] = []     # lines whose placeholder axis word became a number
         # the last text written on X/Y, the offset it was written in, and the machine XY it means
         self.em_text = {"X": None, "Y": None}
         self.em_off = [math.nan, math.nan]
-        self.em_val = np.array([math.nan, math.nan])
+        # (before the first row: where the parser puts the head at the start, unrotated -- the
+        # machine does not know about the rotation, so a relative first move starts there)
+        self.em_val = (np.asarray(program.start_mm[0, :2], float).copy() if program.n_steps
+                       else np.array([math.nan, math.nan]))
 
     # -- rotation of one row's end points (rows [lo, hi) end rotated; a row starts where the
     # previous one ended, so rows (lo, hi] start rotated) --------------------------------------------
@@ -277,9 +296,13 @@ class _Emitter:
                 self.em_val = p.end_mm[r, :2].astype(float).copy()
             return
         end = self._point(r, 1.0)
-        self.em_val = end[:2].copy()
         if (p.end_mm[r, :2] == p.start_mm[r, :2]).all():
-            return          # Z/E only: X/Y text unchanged
+            # Z/E only: X/Y text unchanged, and the head is still where the text before put it
+            # (not at the exact rotated point): a relative move after it is written from there
+            if np.isnan(self.em_val).any():
+                self.em_val = end[:2].copy()
+            return
+        self.em_val = end[:2].copy()
         ln = _Line.parse(p.line_text(int(p.line[r])))
         for k, a in enumerate(("X", "Y")):
             v = ln.value(a)
@@ -309,6 +332,10 @@ class _Emitter:
         for a in write:
             if ln.value(a) == "":
                 raise EmitError(f"{p.source}:{int(p.line[r]) + 1}: axis word {a} without a number")
+            if ln.placeholder(a):
+                # "G1 X0 Y{machine_depth}" (Cura's end G-code, unexpanded): the firmware ignores
+                # the Y word and Y stays put; the rotation must write where it stays, as a number
+                self.placeholders.append(int(p.line[r]) + 1)
         if arc and ln.value("P") not in (None, "", "1") and cuts:
             raise EmitError(f"{p.source}:{int(p.line[r]) + 1}: cannot split a G2/G3 with P (several turns)")
         start = self._point(r, 0.0)
@@ -338,6 +365,12 @@ class _Emitter:
         cur_xy = start[:2].copy()     # where the firmware is when this piece starts (arc centre base)
         if rot_row and not np.isnan(self.em_val).any():
             cur_xy = self.em_val.copy()
+        # A relative X/Y is the rotated delta (rotation only, no translation: both ends are in the
+        # output's frame), taken from where the text before left the head (``cur_xy``), not from
+        # the exact rotated start: each rounded delta then corrects the rounding of the ones
+        # before, and a G91 print does not drift off its rotated geometry move by move.
+        base = start.copy()
+        base[:2] = cur_xy
         vals: dict = {}
         for k in range(len(bounds) - 1):
             last = k == len(bounds) - 2
@@ -353,10 +386,10 @@ class _Emitter:
                 if rel[a]:
                     if last:
                         total = (Decimal(ln.value(a)) if keep_text
-                                 else Decimal(_fmt((end[ai] - start[ai]) / scale, dec_end[a])))
+                                 else Decimal(_fmt((end[ai] - base[ai]) / scale, dec_end[a])))
                         vals[a] = _dec_text(total - sums[a])
                     else:
-                        t = Decimal(_fmt((q[ai] - start[ai]) / scale - float(sums[a]), dec[a]))
+                        t = Decimal(_fmt((q[ai] - base[ai]) / scale - float(sums[a]), dec[a]))
                         vals[a] = _dec_text(t)
                         sums[a] += t
                 elif last and keep_text:
@@ -605,6 +638,10 @@ def render(program: Program, placed, *, firmware="3dgates", rotate_deg: float = 
                      f"by more than {SNAP_MM * 1e3:g} um): those moves step both motors")
     if moved:
         notes.append(f"{moved} instruction(s) moved out of a dwell/wait/homing step to its safe side")
+    if em.placeholders:
+        notes.append(f"{len(em.placeholders)} unexpanded placeholder axis word(s) (line "
+                     f"{em.placeholders[0]}{', ...' if len(em.placeholders) > 1 else ''}) written as the "
+                     f"number the firmware stays at (it ignores such a word)")
     return EmitResult("".join(out), added, instr, splits, moved, em.max_snap, float(rotate_deg),
                       (float(center_mm[0]), float(center_mm[1])), tuple(notes))
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from ..parse import parse
 from ..program import Program
-from ..verify import VerifyReport, energy_of, verify
+from ..verify import VerifyReport, check_positions, energy_of, verify
 from .emit import EmitResult, emit_result, render
 from .problem import GatingOptions, GatingSolution, build
 from .solve import solve
@@ -181,9 +181,12 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             extra = list(ov.check(program, ordered_base))
         except ModuleNotFoundError:
             extra = []
-        if extra:
-            rep = dataclasses.replace(rep, ok=False, findings=rep.findings + tuple(extra))
-        rep = dataclasses.replace(rep, checks=rep.checks + ("ordering",))
+        # and the positions check ``verify`` skips for a re-ordering, on what gating rewrote: the
+        # re-ordered print against the output (rotation and gating keep its moves in order)
+        pos = check_positions(ordered_base, out)
+        if extra or pos:
+            rep = dataclasses.replace(rep, ok=False, findings=rep.findings + tuple(extra) + tuple(pos))
+        rep = dataclasses.replace(rep, checks=rep.checks + ("ordering", "positions"))
     order_summary = None
     if summarize is not None:
         # without gating ``verify`` above ran the ordering checks itself: its findings are theirs
@@ -195,5 +198,5 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
 
 def energy_time(program: Program, firmware: str = "3dgates", profile: str = "paper"):
     """(energy J, time s) of a program as it stands (its own motor lines, stalls included)."""
-    e, t, _ = energy_of(program, firmware=firmware, profile=profile)
+    e, t, _ = energy_of(program, firmware=firmware, profile=profile, original=program)
     return e, t

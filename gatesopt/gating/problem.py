@@ -11,7 +11,9 @@ Everything here is on the problem's *timeline*: step ``i`` runs from ``start_s[i
 Klipper's dwell) is a separate piece of time at an instruction line, priced with the coefficients a
 ``Kind.MOTOR`` row at that step would get from the energy profile (``stall_coeffs``) and the motors as
 the file has them (``enable0``): the whole printer keeps drawing power during a stall, no gating
-credit is taken for it.
+credit is taken for it. The file's own motor lines (a start G-code ``M17``, a mid-print ``M84``) stall
+as ``gatesopt.firmware.stall_durations`` says -- the function the verifier prices the output with --
+a fixed cost in ``energy_before_j``/``time_before_s`` and one stall piece each in ``Pieces``.
 
 Energy is computed ONLY with ``gatesopt.energy.step_power_w`` / ``step_energy_j`` (the one model):
 ``rate_w[i, m]`` is what switching motor m off saves per second in step i with the other motors
@@ -202,11 +204,16 @@ class GatingProblem:
     gap_lines: np.ndarray          # (G,) int lines this gap adds on its own (off + on + splits)
     gap_stall_s: np.ndarray        # (G,) stall time this gap adds on its own
     gap_stall_j: np.ndarray        # (G,) energy of that stall
-    # --- totals without gating ----------------------------------------------------------------
+    # --- totals without gating (the file's own motor-line stalls included) ---------------------
     energy_before_j: float = 0.0
-    time_before_s: float = 0.0
+    time_before_s: float = 0.0     # total_s + own_stall_s.sum()
     header: dict = field(default_factory=dict, repr=False)
     notes: tuple[str, ...] = ()    # what the user should know about the choices made (rotation)
+    # --- the file's own motor lines (start G-code M17, a mid-print M84 ...) -----------------------
+    # their firmware stalls (``gatesopt.firmware.stall_durations``, as the verifier prices them):
+    # a fixed cost of the print, whatever gating does; one stall piece each in ``Pieces``
+    own_stall_row: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
+    own_stall_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     @property
     def n_steps(self) -> int:
@@ -643,11 +650,41 @@ def from_moves(start_mm, end_mm, duration_s, options: GatingOptions | None = Non
     return build(program, options, coeffs=coeffs, stall_coeffs=stall_coeffs, rotate_rows=(0, program.n_steps))
 
 
+def rotated_run_end(program: Program, hi: int) -> int:
+    """The first row at or after ``hi`` whose end point a rotation leaves where the slicer put it:
+    where the rotated run [lo, hi) really ends.
+
+    A caller ends the run at the first XY move after the print (``problem._rotate_rows``); that
+    row is the transition (its start rotated, its end not). That is right for an absolute move,
+    which names a position on the bed (parking, "present print"). It is wrong for a relative move
+    (G91): "G1 X5 Y5" means 5 mm from where the head *is*, and after the rotated print the head
+    is in the rotated frame -- Cura's end G-code "G91 / G1 X5 Y5 ;Wipe out" would otherwise be
+    written as a travel to where the *unrotated* print ended, dragging the nozzle across the top
+    of the print. So relative XY moves (lines and arcs), and rows that leave X/Y where they are,
+    carry the rotation on: their end is rotated too, i.e. their XY delta is turned by the
+    rotation alone. The run ends at the first row that sets X/Y to a position of its own: an
+    absolute (G90) move or homing. Rows that do not move X/Y are passed over whatever their mode.
+    """
+    n = int(program.n_steps)
+    hi = int(hi)
+    if hi >= n:
+        return n
+    kind = program.kind[hi:]
+    moves_xy = (program.end_mm[hi:, :2] != program.start_mm[hi:, :2]).any(axis=1) | (kind == Kind.ARC)
+    own = moves_xy & ((kind == Kind.HOME) | ~np.asarray(program.relative_xyz[hi:], bool))
+    k = np.flatnonzero(own)
+    return hi + int(k[0]) if len(k) else n
+
+
 def _rotate_rows(program: Program) -> tuple[int, int]:
     """Rows whose end point a rotation moves: from the XY move that reaches the first extrusion of
-    the print (layer >= 0) up to, not including, the first XY move after the last extrusion. Those
-    two travels are the transitions (one end rotated, one not); start and end G-code (purge line,
-    parking) stay where the slicer put them."""
+    the print (layer >= 0) up to, not including, the first move after the last extrusion that
+    sets X/Y to a position of its own (an absolute move or homing). Those two are the
+    transitions (one end rotated, one not); start and end G-code (purge line, parking) stay where
+    the slicer put them. Relative (G91) moves after the print -- Cura's end G-code "G91 / G1 X5 Y5
+    ;Wipe out" -- are inside the run: they move the head *from* the rotated print, so their XY
+    delta is rotated (``rotated_run_end``); ending the run at such a move would make it a
+    travel to where the unrotated print ended."""
     ext = np.flatnonzero(program.extruding & (program.layer >= 0))
     if not len(ext):
         return 0, 0
@@ -655,8 +692,7 @@ def _rotate_rows(program: Program) -> tuple[int, int]:
     xy = (steps[:, X] | steps[:, Y]) & (program.kind != Kind.HOME)   # arcs step both; homing stays
     before = np.flatnonzero(xy[: ext[0]])
     lo = int(before[-1]) if len(before) else int(ext[0])
-    after = np.flatnonzero(xy[ext[-1] + 1:])
-    hi = int(ext[-1]) + 1 + int(after[0]) if len(after) else program.n_steps
+    hi = rotated_run_end(program, int(ext[-1]) + 1)
     return lo, hi
 
 
@@ -748,6 +784,16 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
     # rounding noise of the subtraction is not a physical interaction
     xy_inter[np.abs(xy_inter) <= 1e-9 * (np.abs(p0) + 1.0)] = 0.0
     stall_w = step_power_w(stall_coeffs, enable0)
+    # The file's own motor lines stall the firmware too (Marlin's M18 in start G-code drains the
+    # queue, Klipper's M84 dwells), or not at all (Klipper has no M17: "Unknown command", skipped).
+    # That is decided in one place, ``firmware.stall_durations``, which the verifier also prices
+    # the output with; here it is a constant of the print, priced like a gating line's stall.
+    own_s = np.zeros(n)
+    if np.any(program.kind == Kind.MOTOR):
+        from .. import firmware as fw_mod
+        own_s = fw_mod.stall_durations(program, o.firmware)
+    own_row = np.flatnonzero(own_s > 0)
+    own_s = own_s[own_row]
 
     steps0 = np.asarray(program.steps_motor(), bool)
     arc = np.asarray(program.kind == Kind.ARC)
@@ -836,7 +882,8 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
     gaps = {nm: np.concatenate([parts[i][nm] for i in ordk]) for nm in parts[0]}
     has_gaps = np.zeros(len(angles), bool)
     has_gaps[built] = True
-    energy_before = float(step_energy_j(dur, coeffs, enable0).sum())
+    energy_before = float(step_energy_j(dur, coeffs, enable0).sum()
+                          + step_energy_j(own_s, stall_coeffs.take(own_row), enable0[own_row]).sum())
     ro = lambda a: _readonly(a)
     return GatingProblem(
         options=o, source=program.source, n_lines=max(int(program.n_lines), n), duration_s=ro(dur),
@@ -849,8 +896,8 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
         angle_straight_moves=ro(np.array(straight, np.int64)), angle_saving_ub_j=ro(ub),
         angle_built=ro(has_gaps),
         **{k: ro(v) for k, v in gaps.items()},
-        energy_before_j=energy_before, time_before_s=T, header=dict(program.header),
-        notes=tuple(notes))
+        energy_before_j=energy_before, time_before_s=T + float(own_s.sum()), header=dict(program.header),
+        notes=tuple(notes), own_stall_row=ro(own_row.astype(np.int64)), own_stall_s=ro(own_s))
 
 
 def _readonly(a):
@@ -946,13 +993,14 @@ def _pieces(problem, off_motor, off_start_s, off_end_s, ins: Instructions | None
         j = np.searchsorted(aa, mid, "right") - 1
         off = (j >= 0) & (mid < bb[np.maximum(j, 0)])
         enable[off, mm] = False
-    # firmware stalls: one piece per instruction line, motors as in the file (no gating credit)
+    # firmware stalls: one piece per instruction line, motors as in the file (no gating credit);
+    # the file's own motor lines stall too, whatever gating does (``GatingProblem.own_stall_s``)
     if ins is None:
         ins = _instructions(problem, m, a, b)
     st = ins.stall_s > 0
-    s_row = np.minimum(ins.row[st], n - 1)
+    s_row = np.concatenate((np.minimum(ins.row[st], n - 1), problem.own_stall_row)).astype(np.int64)
     row = np.concatenate((p_row, s_row)).astype(np.int64)
-    dur = np.concatenate((p_dur, ins.stall_s[st]))
+    dur = np.concatenate((p_dur, ins.stall_s[st], problem.own_stall_s))
     en = np.concatenate((enable, problem.enable0[s_row]))
     stall = np.concatenate((np.zeros(len(p_row), bool), np.ones(len(s_row), bool)))
     return Pieces(row, dur, en, stall)
