@@ -477,11 +477,21 @@ def _match(ka: np.ndarray, kb: np.ndarray, tol: float):
     return np.array(miss_a, np.int64), np.flatnonzero(~used)
 
 
+def _undone_tol(tol_mm: float, deg: float) -> float:
+    """``tol_mm`` per axis of a rotated output's own frame, seen in the original's frame where the
+    geometry is compared: the box |dx|, |dy| <= tol turned by ``deg`` reaches tol * (|cos| + |sin|)
+    on each axis (1.37x at 30 deg, 1.41x at 45). A rotated output's single-axis snap moves a point
+    by up to ``SNAP_MM`` on each of the output's axes (both, for a move of a micrometre or two):
+    a Cura file rotated by 30 deg failed here on a 1 um travel between two extrusions."""
+    t = math.radians(deg % 360.0)
+    return tol_mm * (abs(math.cos(t)) + abs(math.sin(t)))
+
+
 def _segment_pair(original: Program, output: Program, tol_mm: float = GEOMETRY_TOL_MM):
     """``_segments`` of the original and of the output (its split moves joined back)."""
     deg, cx, cy = read_rotation(output)
     return (_segments(original, tol_mm=tol_mm),
-            _segments(output, deg, (cx, cy), tol_mm=tol_mm, vertices=_vertices(original),
+            _segments(output, deg, (cx, cy), tol_mm=_undone_tol(tol_mm, deg), vertices=_vertices(original),
                       original_moves=_moves(original)))
 
 
@@ -517,6 +527,7 @@ def check_geometry(original: Program, output: Program, *, tol_mm: float = GEOMET
                    max_findings: int = 10, segments=None) -> list[Finding]:
     """``segments``: ``_segment_pair(original, output, tol_mm)`` if the caller has it already."""
     (la, ka, ra, ea), (lb, kb, rb, eb) = segments or _segment_pair(original, output, tol_mm)
+    tol_mm = _undone_tol(tol_mm, read_rotation(output)[0])
     out: list[Finding] = []
     if original.n_layers != output.n_layers:
         # the layer finder saw the two files differently (a z-change file whose XY moved): compare

@@ -132,6 +132,37 @@ def test_rotated_output_verifies():
     assert rep.rotate_deg == 33
 
 
+def _rotated_square(deg: float, shift_mm: float) -> str:
+    """SQUARE rotated by ``deg`` about (10, 10), as gatesopt writes it (4 decimals), with the corner
+    (20, 20) moved by ``shift_mm`` on both of the output's axes: what two single-axis snaps of a
+    move of a micrometre or two do to a point."""
+    import math
+    import re
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    out = [f"; gatesopt: rotate_deg={deg:g} center_x=10 center_y=10"]
+    for ln in SQUARE.splitlines():
+        m = re.match(r"G1 X(\S+) Y(\S+)(.*)", ln)
+        if m:
+            x, y = float(m.group(1)), float(m.group(2))
+            rx, ry = 10 + c * (x - 10) - s * (y - 10), 10 + s * (x - 10) + c * (y - 10)
+            if (x, y) == (20.0, 20.0):
+                rx, ry = rx + shift_mm, ry + shift_mm
+            ln = f"G1 X{rx:.4f} Y{ry:.4f}{m.group(3)}"
+        out.append(ln)
+    return "\n".join(out) + "\n"
+
+
+def test_geometry_tolerance_is_per_axis_of_the_rotated_output():
+    """The snap tolerance holds on each axis of the output's own frame; the verifier compares in
+    the original's, where that box turned by 30 deg reaches 1.37x as far on an axis. A Cura file
+    rotated by 30 deg with a 1 um travel between two extrusions (both axes snapped) was refused."""
+    p = gatesopt.parse(SQUARE)
+    rep = verify(p, gatesopt.parse(_rotated_square(30, 1.0e-3)))
+    assert rep.ok, [str(f) for f in rep.findings]
+    rep = verify(p, gatesopt.parse(_rotated_square(30, 1.5e-3)))      # more than any snap
+    assert not rep.ok and "geometry" in _checks(rep)
+
+
 # reduced from PrusaSlicer 2.5 output (marlin2, complete_objects, a cylinder): gated at 45 deg, the
 # first piece of a split move ends, as written, within the tolerance of an unrelated original
 # vertex (100.029, 102.71); the verifier took that piece for an unrotated row and refused a
