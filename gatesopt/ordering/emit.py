@@ -475,7 +475,13 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     w.reissue(_states_at(plan.req, [last + 1]), 0)
     for i in range(last + 1, p.n_lines):
         w.copy_line(i)
-    return "".join(w.out)
+    text = "".join(w.out)
+    if p.n_lines and not p.data.endswith(b"\n") and text.endswith(w.nl):
+        # the file ends without a line ending (FullControl's closing "M84 ; disable steppers"):
+        # so does the output. ``copy_line`` ends every line, for the lines a re-ordering moves;
+        # the added one made the original's last line differ from its copy byte for byte
+        text = text[:-len(w.nl)]
+    return text
 
 
 _FIXED = "fixed"                # the memo's entry for what every emit of the program shares
