@@ -250,15 +250,6 @@ def parse_motor_lines(texts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return ok, on, mask
 
 
-def parse_motor_rows(program: Program, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``parse_motor_lines`` of the lines of steps ``rows``, each distinct text parsed once (a gated
-    file has millions of instruction lines and a handful of texts)."""
-    from ._text import distinct_lines
-    inverse, texts = distinct_lines(program, program.line[rows])
-    ok, on, mask = parse_motor_lines(texts)
-    return ok[inverse], on[inverse], mask[inverse]
-
-
 def motor_line_is_on(text: str) -> bool | None:
     """True for an enable line, False for a disable line, None if ``text`` is neither."""
     r = parse_motor_line(text)
@@ -283,6 +274,7 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     motion = np.flatnonzero(np.isin(program.kind, MOTION_KINDS))
     last_motion = int(motion[-1]) if len(motion) else -1
     rows = rows[rows < last_motion]
+    # each distinct text parsed once: a gated file has millions of instruction lines, a few texts
     from ._text import distinct_lines
     inverse, texts = distinct_lines(program, program.line[rows])
     ok, on, _ = parse_motor_lines(texts)
@@ -294,7 +286,7 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     # start G-code ``M17`` therefore costs nothing on Klipper. This is the one place a motor
     # line's stall is decided: the verifier (``verify.energy_of``) and the gating problem
     # (``gating.problem.build``, for the file's own lines) both read it from here.
-    ok &= np.array([motor_line_word(t) in fw.executes for t in texts], bool)
+    ok &= np.array([bool(k) and _words(t)[0] in fw.executes for k, t in zip(ok, texts)], bool)
     ok, on = ok[inverse], on[inverse]
     # Klipper's ENABLE=1 dwells too, though we never write it
     out[rows[ok]] = np.where(on[ok], fw.stall_on_s, fw.stall_off_s)

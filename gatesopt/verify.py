@@ -574,13 +574,15 @@ def _only_motor_between(program: Program, rows: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _match_positions(a_raw, a_rot, a_last, a_rel, a_home, b_end, b_last, tol, e_tol, out_k, out_flag,
+def _match_positions(a_raw, a_rot, a_last, a_rel, a_home, b_end, b_run_end, tol, e_tol, out_k, out_flag,
                      out_allowed):
     """Walk the original's moves (ends ``a_raw``, rotated ``a_rot``: X Y Z E) against the output's
     (``b_end``) in order. Each original move is one block of output moves (a split move's pieces,
     joined by motor lines only) whose last move ends at the original's end, as written (flag 1)
     or rotated (flag 2); the last move of a run of the original (``a_last``: a non-motor line
-    follows) ends the output's run too (``b_last``). Within a run the block ends at the earliest
+    follows) ends the output's run too (``b_run_end[k]``: the last move of the output's run holding
+    move k, found once for all, not per move: a file with no other line between its moves is one
+    run). Within a run the block ends at the earliest
     output move that matches, which finds an alignment whenever there is one (matching a
     subsequence greedily). ``a_rel``: a relative XY move: from a start that is rotated only, its
     end must be rotated (allowed flags 2), unless homing (``a_home``) came between. Fills
@@ -600,9 +602,7 @@ def _match_positions(a_raw, a_rot, a_last, a_rel, a_home, b_end, b_last, tol, e_
             out_flag[i] = 0
             prev = 3
             continue
-        end = k
-        while end < m - 1 and not b_last[end]:
-            end += 1
+        end = b_run_end[k]
         cand_hi = end if a_last[i] else end - 1     # a move inside a run ends before the run does
         first = end if a_last[i] else k
         found = -1
@@ -657,6 +657,8 @@ def check_positions(original: Program, output: Program, *, tol_mm: float = GEOME
     a_last[:-1] = ~_only_motor_between(original, ra)
     b_last = np.ones(len(rb), bool)
     b_last[:-1] = ~_only_motor_between(output, rb)
+    ends = np.flatnonzero(b_last)
+    b_run_end = ends[np.searchsorted(ends, np.arange(len(rb)))]     # b_last[-1] holds: never past it
     moves_xy = ((original.end_mm[ra, :2] != original.start_mm[ra, :2]).any(axis=1)
                 | (original.kind[ra] == Kind.ARC))
     a_rel = np.asarray(original.relative_xyz[ra], bool) & moves_xy
@@ -666,7 +668,7 @@ def check_positions(original: Program, output: Program, *, tol_mm: float = GEOME
     out_k = np.empty(len(ra), np.int64)
     out_flag = np.zeros(len(ra), np.int64)
     out_allowed = np.zeros(len(ra), np.int64)
-    _match_positions(a_raw, a_rot, a_last, a_rel, a_home, b_end, b_last, float(tol_mm), float(e_tol_mm),
+    _match_positions(a_raw, a_rot, a_last, a_rel, a_home, b_end, b_run_end, float(tol_mm), float(e_tol_mm),
                      out_k, out_flag, out_allowed)
     out: list[Finding] = []
     for i in np.flatnonzero(out_flag == 0)[:max_findings].tolist():
@@ -1024,12 +1026,9 @@ def _dialect(fw: fwmod.Firmware) -> tuple[str, ...]:
 
 
 def _motor_word(text: str) -> str:
-    """The instruction word of a motor line (``S0``, ``M18``, ``SET_STEPPER_ENABLE``), upper case,
-    after a line number; ``M84`` read as ``M18``."""
-    words = text.split(";", 1)[0].upper().split()
-    if len(words) > 1 and words[0].startswith("N") and words[0][1:].isdigit():
-        words = words[1:]
-    word = words[0] if words else ""
+    """The instruction word of a motor line (``firmware.motor_line_word``: ``S0``, ``M18``,
+    ``SET_STEPPER_ENABLE``), ``M84`` read as ``M18``."""
+    word = fwmod.motor_line_word(text) or ""
     return _SAME_WORD.get(word, word)
 
 

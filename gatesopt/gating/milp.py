@@ -350,8 +350,9 @@ def hint_vector(problem: GatingProblem, model: CoupledModel, hint: GatingSolutio
 
 
 def incumbent(problem: GatingProblem, hint: GatingSolution | None = None) -> GatingSolution:
-    """A feasible start: the better of ``hint`` and dp with its budget repair."""
-    start = dp.solve(problem)
+    """A feasible start: the better of ``hint`` and dp's pass with its budget repair (not
+    ``dp.solve``, which would build the model once more for its bound)."""
+    start = dp.heuristic(problem)
     if hint is not None and _feasible(problem, hint) and (hint.energy_j, hint.lines_added) < (start.energy_j, start.lines_added):
         start = hint
     return start
