@@ -1178,15 +1178,14 @@ def _order_changed(original: Program, output: Program, segments=None) -> bool:
 
 
 def _without_motor_lines(program: Program, original: Program) -> Program:
-    """The program with its motor instruction lines removed (re-parsed): what the ordering checks
-    see, since gating's lines are checked here and are no barrier for a re-ordering."""
-    rows = np.flatnonzero(program.kind == Kind.MOTOR)
+    """The program without the motor lines the rewrite added (``_added_motor_lines``; the file's
+    own, such as a start G-code's ``M17``, stay: they are barriers for a re-ordering), re-parsed:
+    what the ordering checks see."""
+    rows = _added_motor_lines(original, program)[0]
     if not len(rows):
         return program
     from .parse import parse
-    keep = {original.line_text(int(original.line[r])).strip()
-            for r in np.flatnonzero(original.kind == Kind.MOTOR)}
-    drop = {int(program.line[r]) for r in rows if program.line_text(int(program.line[r])).strip() not in keep}
+    drop = set(program.line[rows].tolist())
     text = "".join(program.line_text(i) for i in range(program.n_lines) if i not in drop)
     return parse(text, source=program.source)
 
@@ -1240,18 +1239,20 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
         except ModuleNotFoundError:
             ov = None
         if ov is not None and hasattr(ov, "check"):
-            if deg % 360.0 != 0.0:
-                # rotated: the ordering checks compare moves in the original's frame (the
-                # geometry check above un-rotates; ``gating.pipeline.run`` runs the ordering
-                # checks on the re-ordered file before rotating it)
-                checks.append("ordering(skipped: rotated)")
-            elif _without_motor_lines(output, original).n_lines == output.n_lines:
+            bare = _without_motor_lines(output, original)
+            if deg % 360.0 == 0.0 and bare.n_lines == output.n_lines:
                 findings += list(ov.check(original, output))
                 checks.append("ordering")
             else:
-                # re-ordered and gated: the ordering checks compare move by move, which split
-                # moves fail; ``gating.pipeline.run`` runs them on the re-ordered file before gating
-                checks.append("ordering(skipped: gated)")
+                # rotated or gated: the ordering checks' move-by-move comparison fails on rotated
+                # and on split moves, and ``geometry`` above has compared those already (un-rotated,
+                # splits joined). What a move-free comparison can still see holds for any output:
+                # no extrusion crossed a barrier (per-bin sums of E and path length, with the
+                # gating lines taken out and a rotation's snap allowed per move)
+                findings += list(ov.check_barriers(
+                    original, bare,
+                    snap_tol_mm=_undone_tol(geometry_tol_mm, deg) if deg % 360.0 else 0.0))
+                checks.append("ordering(barriers; moves: geometry)")
     e_after, t_after, stall = energy_of(output, firmware=fw, profile=profile, original=original)
     # the original's motor lines are all its own (a stall priced with the state they leave, as the
     # solver's ``energy_before_j`` does), not gating lines whose effect is undone

@@ -12,6 +12,7 @@ import gatesopt
 from gatesopt.ordering import (OrderingOptions, build, emit, from_polylines, solve)
 from gatesopt.ordering import cpsat, dp, greedy, milp, tsp, auto
 from gatesopt.ordering.bounds import lower_bound_mm
+from gatesopt.program import Kind
 from gatesopt.ordering.problem import Group
 from gatesopt.ordering.verify import check
 from conftest import PROJECT_INSTANCES
@@ -709,3 +710,29 @@ def test_summary_layer_counts_match_its_per_layer_rows():
         assert seen["kept"] == s["layers_kept"] >= 1           # the first layer at least
         for status in ("optimal", "feasible", "fallback"):
             assert seen[status] == s[f"layers_{status}"], (mode, status)
+
+
+@pytest.mark.parametrize("rotate", [0.0, 30.0])
+def test_standalone_verify_checks_barriers_of_reordered_and_gated_output(rotate):
+    """``gatesopt verify ORIG OUT`` on ``solve``'s output (re-ordered, then gated, maybe rotated):
+    the ordering checks' move-by-move comparison cannot run there (split and rotated moves), but
+    the barrier check can, with the gating lines taken out: it passes on the real output and
+    catches an extrusion moved across the fan barrier in it."""
+    from gatesopt.gating import GatingOptions
+    from gatesopt.gating.pipeline import run
+    from gatesopt.verify import verify
+    prog = gatesopt.parse(_handmade_gcode())
+    res = run(prog, GatingOptions(rotate=rotate), order_options=OrderingOptions(mode="safe"))
+    assert res.ordered and res.report.ok
+    lines = res.text.splitlines()
+    out = gatesopt.parse(res.text)
+    assert (out.kind == Kind.MOTOR).sum() > (prog.kind == Kind.MOTOR).sum()      # gated
+    rep = verify(prog, out)
+    assert rep.ok, [str(f) for f in rep.findings]
+    assert "ordering(barriers; moves: geometry)" in rep.checks
+    # move the layer-1 fan barrier back over the extrusion that precedes it
+    fan = lines.index("M106 S128")
+    ext = max(i for i in range(fan) if " E" in lines[i] and lines[i].startswith(("G1 X", "G1 Y", "G2", "G3")))
+    moved = lines[:ext] + ["M106 S128"] + lines[ext:fan] + lines[fan + 1:]
+    bad = verify(prog, gatesopt.parse("\n".join(moved) + "\n"))
+    assert any(f.check == "barriers" for f in bad.findings), [str(f) for f in bad.findings]

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import verify as _verify
 from ..program import Kind, Program
 from .build import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, LINE_NEUTRAL,
                     Layout, layout)
@@ -481,8 +482,15 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
         # so does the output. ``copy_line`` ends every line, for the lines a re-ordering moves;
         # the added one made the original's last line differ from its copy byte for byte
         text = text[:-len(w.nl)]
+    if text != p.to_gcode():
+        # says what this file is to ``gatesopt verify ORIG OUT``: a re-ordering, checked curve
+        # by curve, even where no curve visibly moved (kept order, rebuilt travels)
+        text = ORDER_HEADER + w.nl + text
     return text
 
+
+#: the first line of a re-ordered file (``gatesopt.verify.ORDER_PREFIX`` reads it)
+ORDER_HEADER = _verify.ORDER_PREFIX
 
 _FIXED = "fixed"                # the memo's entry for what every emit of the program shares
 

@@ -41,7 +41,10 @@ def _barrier_bins(program: Program):
 ARC_LENGTH_TOL_MM = 0.01
 
 
-def check_barriers(original: Program, output: Program, *, rel_tol: float = 1e-4) -> list[Finding]:
+def check_barriers(original: Program, output: Program, *, rel_tol: float = 1e-4,
+                   snap_tol_mm: float = 0.0) -> list[Finding]:
+    """``snap_tol_mm``: how far a rotated output's snap may have moved each end point of a move
+    (``gatesopt.verify._undone_tol``): each move's length may differ by twice that."""
     na, la, ba, ea, sa, arc_a = _barrier_bins(original)
     nb, lb, bb, eb, sb, arc_b = _barrier_bins(output)
     if na != nb:
@@ -58,7 +61,9 @@ def check_barriers(original: Program, output: Program, *, rel_tol: float = 1e-4)
     e_a, s_a = np.bincount(ia, ea, m), np.bincount(ia, sa, m)
     n_arc = np.bincount(ia, arc_a.astype(float), m)
     e_b, s_b = np.bincount(ib, eb, m), np.bincount(ib, sb, m)
-    len_tol = rel_tol * np.maximum(s_a, s_b) + 1e-3 + ARC_LENGTH_TOL_MM * n_arc
+    n_moves = np.bincount(ia, minlength=m) + np.bincount(ib, minlength=m)
+    len_tol = (rel_tol * np.maximum(s_a, s_b) + 1e-3 + ARC_LENGTH_TOL_MM * n_arc
+               + snap_tol_mm * n_moves)
     bad = ((np.abs(e_a - e_b) > rel_tol * np.maximum(np.abs(e_a), np.abs(e_b)) + 1e-6)
            | (np.abs(s_a - s_b) > len_tol))
     for i in np.flatnonzero(bad)[:5].tolist():
