@@ -3,12 +3,24 @@ from __future__ import annotations
 
 from pathlib import Path
 
+#: a block a person wrote into a generated section (what a run showed, read by hand): kept, at
+#: the end of the section, when a benchmark writes the section again without one of its own
+KEEP_OPEN, KEEP_CLOSE = "<!-- hand-written -->", "<!-- /hand-written -->"
+
+
+def _kept_block(text: str) -> str:
+    a = text.find(KEEP_OPEN)
+    b = text.find(KEEP_CLOSE, a + 1)
+    return text[a:b + len(KEEP_CLOSE)] if a >= 0 and b > a else ""
+
 
 def replace_section(path: Path, section: str) -> None:
     """Put ``section`` (its first line is its '## ' heading) into the Markdown file ``path``.
 
     The section whose heading line is the same line is replaced, up to the next '## ' heading;
-    a section not there yet is appended. Other sections are kept as they are.
+    a section not there yet is appended. Other sections are kept as they are. A block between
+    ``KEEP_OPEN`` and ``KEEP_CLOSE`` in the old section is carried into the new one (at its end)
+    unless the new one brings its own.
     """
     path = Path(path)
     heading = section.lstrip().splitlines()[0].rstrip()
@@ -20,6 +32,9 @@ def replace_section(path: Path, section: str) -> None:
         path.write_text(text.rstrip("\n") + "\n\n" + body)
         return
     end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
+    kept = _kept_block("".join(lines[start:end]))
+    if kept and not _kept_block(body):
+        body = body.rstrip("\n") + "\n\n" + kept + "\n"
     rest = "".join(lines[end:])
     path.write_text("".join(lines[:start]) + body + ("\n" + rest if rest else ""))
 

@@ -10,6 +10,18 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+
+def code_words(line):
+    """The upper-case words of one line's code (``str`` or ``bytes``, as given): the comment after
+    ``;`` and a line number ``N<n>`` dropped. The one reading of a line's instruction word for
+    every module that decides from a line's text (firmware, planner, ordering)."""
+    semi = b";" if isinstance(line, (bytes, bytearray)) else ";"
+    words = line.split(semi, 1)[0].upper().split()
+    if len(words) > 1 and words[0][:1] in (b"N", "N") and words[0][1:].isdigit():
+        words = words[1:]
+    return words
+
+
 _FNV_OFFSET = np.uint64(14695981039346656037)
 _FNV_PRIME = np.uint64(1099511628211)
 

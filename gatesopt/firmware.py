@@ -51,6 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _text
 from .errors import GatesoptError
 from .program import AXES, MOTION_KINDS, Kind, Program
 
@@ -187,12 +188,7 @@ def gating_costs(name: str | Firmware) -> GatingCosts:
 
 
 
-def _words(text: str) -> list[str]:
-    """The upper-case words of a line's code (comment and line number ``N<n>`` dropped)."""
-    words = text.split(";", 1)[0].upper().split()
-    if len(words) > 1 and words[0].startswith("N") and words[0][1:].isdigit():  # line number
-        words = words[1:]
-    return words
+_words = _text.code_words      # a line's upper-case code words (comment, line number dropped)
 
 
 def motor_line_word(text: str) -> str | None:

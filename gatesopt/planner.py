@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _planner_kernel as _k
+from ._text import code_words
 from .errors import GatesoptError
 from .limits import MachineLimits, machine_limits
 from .program import E, MOTION_KINDS, Kind, Program, X, Y, Z
@@ -262,10 +263,8 @@ def drains_queue(program: Program) -> np.ndarray:
     out = np.isin(kind, np.asarray((Kind.DWELL, Kind.WAIT, Kind.HOME), dtype=kind.dtype))
     for r in np.flatnonzero(kind == Kind.MOTOR).tolist():
         i = int(program.line[r])
-        words = program.data[program.line_start[i]:program.line_start[i + 1]].split(b";", 1)[0].split()
-        if words and words[0][:1] in (b"N", b"n") and words[0][1:].isdigit():
-            words = words[1:]
-        out[r] = not (words and words[0].upper() in _NO_DRAIN_WORDS)
+        words = code_words(program.data[program.line_start[i]:program.line_start[i + 1]])
+        out[r] = not (words and words[0] in _NO_DRAIN_WORDS)
     return out
 
 

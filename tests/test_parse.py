@@ -368,3 +368,22 @@ def test_slic3r_verbose_layer_comment_on_the_layer_change_move_is_a_marker():
     # the purge, at the first layer's Z, is before the first marker: not part of the print
     purge = np.flatnonzero(prog.extruding & (prog.end_mm[:, 1] == 5.0))
     assert prog.layer[purge[0]] == -1
+
+
+def test_line_numbered_instructions_read_as_without_numbers():
+    """A host-numbered line (``N7 M106 S255``) is the same instruction as ``M106 S255`` for every
+    module that reads a line's instruction word (``_text.code_words``): the ordering's state
+    lines, the planner's queue drains."""
+    from gatesopt._text import code_words
+    from gatesopt.ordering.build import state_key_of
+    from gatesopt.planner import drains_queue
+    assert code_words("N7 m106 s255 ; fan") == ["M106", "S255"]
+    assert code_words(b"N7 M106 S255") == [b"M106", b"S255"]
+    text = "G28\nG1 X10 Y10 F3000\nN7 M106 S255\nM106 S128\nN8 M17\nM17\nN9 M18 X\nG4 P0\n"
+    prog = parse(text)
+    assert state_key_of(prog, 2) == state_key_of(prog, 3) == ("fan",)
+    drains = drains_queue(prog)
+    motor = [int(prog.line[r]) for r in np.flatnonzero(prog.kind == Kind.MOTOR)]
+    by_line = {int(prog.line[r]): bool(drains[r]) for r in range(prog.n_steps)}
+    assert motor == [4, 5, 6]
+    assert [by_line[i] for i in motor] == [False, False, True]     # M17 does not drain, M18 does

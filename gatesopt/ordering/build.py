@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._text import code_words
 from ..program import Kind, Program
 from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
 
@@ -86,8 +87,8 @@ def _line_text_bytes(program: Program, i: int) -> bytes:
 
 
 def _code_words(program: Program, i: int) -> list[bytes]:
-    """The words of line ``i`` before its comment, upper-cased."""
-    return _line_text_bytes(program, i).split(b";")[0].upper().split()
+    """The words of line ``i`` before its comment, upper-cased, line number dropped."""
+    return code_words(_line_text_bytes(program, i))
 
 
 def state_key_of(program: Program, i: int):
@@ -150,7 +151,8 @@ def layout(program: Program) -> Layout:
     cls[fw_unretract] = LINE_FW_UNRETRACT
     ext = np.flatnonzero(letter == ord("@"))
     for i in ext:
-        head = _line_text_bytes(program, int(i)).strip().split(b" ")[0].upper()
+        words = _code_words(program, int(i))
+        head = words[0] if words else b""
         if head in STATE_EXT:
             cls[i] = LINE_STATE
     # object labels written as comments are barriers (M486 / EXCLUDE_OBJECT are barriers already)
