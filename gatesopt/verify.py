@@ -129,17 +129,52 @@ class VerifyReport:
 
 
 # ------------------------------------------------------------------------------------------------
-def read_rotation(program: Program) -> tuple[float, float, float]:
-    """(deg, center_x, center_y) from a ``; gatesopt: rotate_deg=`` line in the first 50 lines."""
+def _rotation_headers(program: Program) -> list[tuple[float, float, float]]:
+    """Every ``; gatesopt: rotate_deg=`` line in the first 50 lines, as (deg, center_x, center_y),
+    in file order: the newest first (each rotating rewrite puts its line on top of the text it
+    read, which may hold the lines of an earlier one)."""
+    out = []
     for i in range(min(program.n_lines, 50)):
         t = program.line_text(i).strip()
         if t.startswith(ROTATE_PREFIX):
             try:
                 kv = dict(w.split("=", 1) for w in t[len("; gatesopt:"):].split() if "=" in w)
-                return float(kv["rotate_deg"]), float(kv.get("center_x", 0)), float(kv.get("center_y", 0))
+                out.append((float(kv["rotate_deg"]), float(kv.get("center_x", 0)),
+                            float(kv.get("center_y", 0))))
             except (KeyError, ValueError):
                 raise GatesoptError(f"{program.source}:{i + 1}: unreadable rotation header: {t[:80]}") from None
-    return 0.0, 0.0, 0.0
+    return out
+
+
+def read_rotation(program: Program, original: Program | None = None) -> tuple[float, float, float]:
+    """(deg, center_x, center_y): the rotation ``program`` declares against ``original``.
+
+    The rotation lines ``original`` has itself (a gatesopt output solved again) came along with its
+    text and are not this rewrite's; the others, if there are several (an output rewritten twice,
+    compared with the slicer's file), compose into one rotation: about a centre c, p -> c +
+    e^{i deg}(p - c), so two of them make p -> w p + t with w = e^{i(a + b)}, whose centre is
+    t / (1 - w). Rotations that add up to a whole turn with a shift left over cannot be undone
+    as a rotation: an error."""
+    heads = _rotation_headers(program)
+    if original is not None and heads:
+        own = _rotation_headers(original)
+        if own and heads[len(heads) - len(own):] == own:
+            heads = heads[:len(heads) - len(own)]
+    if not heads:
+        return 0.0, 0.0, 0.0
+    if len(heads) == 1:
+        return heads[0]
+    w, t, deg = 1 + 0j, 0j, 0.0
+    for d, cx, cy in reversed(heads):           # the oldest was applied first
+        r = complex(math.cos(math.radians(d)), math.sin(math.radians(d)))
+        w, t, deg = r * w, r * t + (1 - r) * complex(cx, cy), deg + d
+    if abs(1 - w) < 1e-12:
+        if abs(t) > 1e-9:
+            raise GatesoptError(f"{program.source}: its {len(heads)} rotation headers add up to a "
+                                "whole turn and a shift, which verify cannot undo")
+        return 0.0, 0.0, 0.0
+    c = t / (1 - w)
+    return math.remainder(deg, 360.0), c.real, c.imag
 
 
 def _has_line(program: Program, prefix: str, within: int = 50) -> bool:
@@ -489,7 +524,7 @@ def _undone_tol(tol_mm: float, deg: float) -> float:
 
 def _segment_pair(original: Program, output: Program, tol_mm: float = GEOMETRY_TOL_MM):
     """``_segments`` of the original and of the output (its split moves joined back)."""
-    deg, cx, cy = read_rotation(output)
+    deg, cx, cy = read_rotation(output, original)
     return (_segments(original, tol_mm=tol_mm),
             _segments(output, deg, (cx, cy), tol_mm=_undone_tol(tol_mm, deg), vertices=_vertices(original),
                       original_moves=_moves(original)))
@@ -527,7 +562,7 @@ def check_geometry(original: Program, output: Program, *, tol_mm: float = GEOMET
                    max_findings: int = 10, segments=None) -> list[Finding]:
     """``segments``: ``_segment_pair(original, output, tol_mm)`` if the caller has it already."""
     (la, ka, ra, ea), (lb, kb, rb, eb) = segments or _segment_pair(original, output, tol_mm)
-    tol_mm = _undone_tol(tol_mm, read_rotation(output)[0])
+    tol_mm = _undone_tol(tol_mm, read_rotation(output, original)[0])
     out: list[Finding] = []
     if original.n_layers != output.n_layers:
         # the layer finder saw the two files differently (a z-change file whose XY moved): compare
@@ -644,7 +679,7 @@ def check_positions(original: Program, output: Program, *, tol_mm: float = GEOME
     moves in order, split moves' pieces joined by motor lines); a re-ordering is checked by
     ``geometry`` and ``gatesopt.ordering.verify``. ``tol_mm`` covers the single-axis snaps of a
     rotated output; E (the cumulative filament position) must agree within ``e_tol_mm``."""
-    deg, cx, cy = read_rotation(output)
+    deg, cx, cy = read_rotation(output, original)
     ra = np.flatnonzero(np.isin(original.kind, MOTION_KINDS))
     rb = np.flatnonzero(np.isin(output.kind, MOTION_KINDS))
     if not len(ra):
@@ -1213,7 +1248,7 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
             original, output, segments if geometry_tol_mm == GEOMETRY_TOL_MM else None)
     findings: list[Finding] = []
     checks = []
-    deg, cx, cy = read_rotation(output)
+    deg, cx, cy = read_rotation(output, original)
     findings += check_geometry(original, output, tol_mm=geometry_tol_mm, segments=segments)
     checks.append("geometry")
     findings += check_extrusion(original, output)

@@ -268,3 +268,46 @@ def test_verify_refuses_unrotated_relative_moves(deg, which):
     rep = verify(p, gatesopt.parse(bad))
     assert not rep.ok
     assert any(f.check == "positions" for f in rep.findings), [str(f) for f in rep.findings]
+
+
+def test_a_twice_rotated_output_verifies_against_either_input():
+    """An output rotated again (its input a rotated gatesopt output, gated with no lines added)
+    carries two rotation headers. Against the slicer's file they compose into one rotation (30 +
+    45 deg about another centre); against its own input, only the new one counts: the input's
+    header came along with its text."""
+    p = gatesopt.parse(CURA_LIKE)
+    def rows(q):
+        b = build(q, GatingOptions(rotate="none"))
+        return b.rotate_lo, b.rotate_hi
+    once = gatesopt.parse(render(p, [], rotate_deg=30, center_mm=(60.0, 60.0), rotate_rows=rows(p)).text)
+    twice = gatesopt.parse(render(once, [], rotate_deg=45, center_mm=(10.0, -5.0),
+                                  rotate_rows=rows(once)).text)
+    assert verify_mod.read_rotation(twice, once) == (45.0, 10.0, -5.0)
+    deg, cx, cy = verify_mod.read_rotation(twice, p)
+    assert deg == pytest.approx(75.0)
+    # the composed centre is the fixed point of both rotations applied in turn
+    a, b = math.radians(30), math.radians(45)
+    c = complex(cx, cy)
+    first = 60 + 60j + complex(math.cos(a), math.sin(a)) * (c - (60 + 60j))
+    assert abs((10 - 5j) + complex(math.cos(b), math.sin(b)) * (first - (10 - 5j)) - c) < 1e-9
+    for original in (p, once):
+        rep = verify(original, twice)
+        assert rep.ok, [str(f) for f in rep.findings]
+        assert "positions" in rep.checks
+    # the slicer's file itself declares no rotation against anything
+    assert verify_mod.read_rotation(p, p) == (0.0, 0.0, 0.0)
+
+
+def test_a_gated_file_is_not_rotated_again():
+    """Gating lines in the input (gatesopt's own earlier output) were placed for its X and Y
+    moves: rotated, they would hold a motor off while it steps. ``auto`` keeps 0 deg and says
+    why; a fixed angle is refused with the file and line of the first such line."""
+    from gatesopt.errors import GatesoptError
+    p = gatesopt.parse(CURA_LIKE)
+    gated = run(p, GatingOptions(rotate=30), order=False)
+    assert gated.report.ok and gated.solution.instructions().time_s.size
+    again = run(gated.output, GatingOptions(rotate="auto"), order=False)
+    assert again.report.ok and again.report.rotate_deg == 0.0
+    assert any("rotation kept at 0 deg" in n and "already gated" in n for n in again.notes)
+    with pytest.raises(GatesoptError, match=r"\(output\):\d+: the file switches an X/Y motor off"):
+        run(gated.output, GatingOptions(rotate=90), order=False)

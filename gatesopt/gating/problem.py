@@ -724,6 +724,22 @@ def _sequential_words(drop) -> str:
             f"after Z={drop[2]:g})")
 
 
+def _own_xy_disable(program: Program, lo: int, hi: int):
+    """The first row in [lo, hi) whose own motor line switches the X or Y motor off (a gated file:
+    gatesopt's output, the paper's re-compiler's), or None. Such lines were placed for the moves
+    of that file's X and Y axes; rotated, the moves each motor makes change, and the lines would
+    hold a motor off while it steps."""
+    rows = np.flatnonzero(program.kind[lo:hi] == Kind.MOTOR) + lo
+    if not len(rows):
+        return None
+    from .. import firmware as fw_mod
+    for r in rows.tolist():
+        m = fw_mod.parse_motor_line(program.line_text(int(program.line[r])))
+        if m is not None and not m[0] and ("X" in m[1] or "Y" in m[1]):
+            return r
+    return None
+
+
 def _where(program: Program, row: int) -> str:
     return f"{program.source}:{int(program.line[row]) + 1}"
 
@@ -820,7 +836,20 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
         notes.append(f"rotation kept at 0 deg: {_sequential_words(drop)} "
                      f"({_where(program, drop[0])}); rotated, the print head could hit an object "
                      f"already printed")
-    if o.rotate == "none" or hi <= lo or not (X in gated or Y in gated) or drop is not None:
+    own_off = None if o.rotate == "none" or hi <= lo else _own_xy_disable(program, lo, hi)
+    if own_off is not None:
+        line = program.line_text(int(program.line[own_off])).strip()[:40]
+        if o.rotate != "auto" and float(o.rotate) % 360.0 != 0.0:
+            raise InfeasibleError(
+                f"{_where(program, own_off)}: the file switches an X/Y motor off inside the print "
+                f"itself ({line!r}: already gated?); rotated by {float(o.rotate):g} deg, that line "
+                "would hold a motor off while it steps: use --rotate none, or gate the slicer's "
+                "original")
+        notes.append(f"rotation kept at 0 deg: the file switches an X/Y motor off inside the print "
+                     f"itself ({_where(program, own_off)}: {line!r}; already gated?); rotated, "
+                     "that line would hold a motor off while it steps")
+    if (o.rotate == "none" or hi <= lo or not (X in gated or Y in gated) or drop is not None
+            or own_off is not None):
         cands = [0.0]
     elif o.rotate == "auto":
         cands = _candidate_angles(program.start_mm, program.end_mm, dur, steps0, arc, lo, hi, center, o, asym)
