@@ -736,3 +736,23 @@ def test_standalone_verify_checks_barriers_of_reordered_and_gated_output(rotate)
     moved = lines[:ext] + ["M106 S128"] + lines[ext:fan] + lines[fan + 1:]
     bad = verify(prog, gatesopt.parse("\n".join(moved) + "\n"))
     assert any(f.check == "barriers" for f in bad.findings), [str(f) for f in bad.findings]
+
+
+def test_a_gated_file_keeps_the_order_of_its_gated_layers():
+    """An already gated file (gatesopt's own output ordered or solved again): its motor lines were
+    placed for the moves around them, so a layer where one switches X or Y off keeps its order
+    (no curve re-ordered or reversed past it), and ordering it changes no extruded move."""
+    from gatesopt.gating import GatingOptions
+    from gatesopt.gating.pipeline import run
+    from gatesopt.ordering.build import layout
+    prog = gatesopt.parse(_handmade_gcode())
+    assert not any("motor" in w for w in layout(prog).layer_why)
+    gated = run(prog, GatingOptions(rotate="none"), order=False).output
+    lay = layout(gated)
+    kept = [w for w in lay.layer_why if "motor switched off" in w]
+    assert kept and all(lay.layer_keep[i] for i, w in enumerate(lay.layer_why) if "motor switched off" in w)
+    prob = build(gated, OrderingOptions(mode="free"))
+    out = gatesopt.parse(emit(gated, prob, solve(prob, "auto", time_limit_s=2)))
+    ka = np.flatnonzero(gated.extruding)
+    kb = np.flatnonzero(out.extruding)
+    assert np.array_equal(gated.start_mm[ka], out.start_mm[kb]) and np.array_equal(gated.end_mm[ka], out.end_mm[kb])

@@ -323,7 +323,12 @@ def run_solve(args) -> int:
             print(format_solve_report(s))
         where = "the input is unchanged" if args.in_place else f"nothing written to {out}"
         first = str(result.report.findings[0]) if result.report.findings else "see above"
-        raise GatesoptError(f"the output failed verification ({first}); {where}")
+        from ..gating.problem import own_xy_disable
+        own = own_xy_disable(program, 0, program.n_steps)
+        hint = "" if own is None else (
+            f"; the input switches an X/Y motor off itself ({program.source}:"
+            f"{int(program.line[own]) + 1}: already gated?): gate the slicer's original")
+        raise GatesoptError(f"the output failed verification ({first}); {where}{hint}")
     if out == "-":
         sys.stdout.buffer.write(result.text.encode("utf-8", "surrogateescape"))
         sys.stdout.flush()

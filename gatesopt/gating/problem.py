@@ -724,7 +724,7 @@ def _sequential_words(drop) -> str:
             f"after Z={drop[2]:g})")
 
 
-def _own_xy_disable(program: Program, lo: int, hi: int):
+def own_xy_disable(program: Program, lo: int, hi: int):
     """The first row in [lo, hi) whose own motor line switches the X or Y motor off (a gated file:
     gatesopt's output, the paper's re-compiler's), or None. Such lines were placed for the moves
     of that file's X and Y axes; rotated, the moves each motor makes change, and the lines would
@@ -836,7 +836,7 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
         notes.append(f"rotation kept at 0 deg: {_sequential_words(drop)} "
                      f"({_where(program, drop[0])}); rotated, the print head could hit an object "
                      f"already printed")
-    own_off = None if o.rotate == "none" or hi <= lo else _own_xy_disable(program, lo, hi)
+    own_off = None if o.rotate == "none" or hi <= lo else own_xy_disable(program, lo, hi)
     if own_off is not None:
         line = program.line_text(int(program.line[own_off])).strip()[:40]
         if o.rotate != "auto" and float(o.rotate) % 360.0 != 0.0:

@@ -17,7 +17,8 @@ slicer's travel (retract, wipe, z-hop, travel, unretract) plus any other lines. 
 - *E reset*: an E-only ``G92 E..``; it ends a curve and travels with the next one;
 - *barrier*: anything else (heaters, other fans, G92 with X/Y/Z, modal switches, object labels M486 / EXCLUDE_OBJECT /
   ``; printing object`` / ``;MESH:``, dwells, unknown commands): no curve crosses it;
-- *fatal*: tool changes (T), filament change (M600...), homing: the layer keeps its order.
+- *fatal*: tool changes (T), filament change (M600...), homing: the layer keeps its order (so does
+  a layer with an X/Y motor switched off between its curves: an already gated file).
 
 A gap is a *boundary* when it holds a barrier or the layer changes. Groups never span a boundary.
 ``--order-mode safe`` further splits at every change of feature (``;TYPE:``) and keeps walls,
@@ -235,6 +236,22 @@ def layout(program: Program) -> Layout:
                 if 0 <= c < n:
                     layer_keep[curve_layer[c]] = True
                     why[curve_layer[c]] = why[curve_layer[c]] or "G92 sets X, Y or Z in the layer"
+        # an X/Y motor switched off between the first curve and the last (an already gated file):
+        # its place was chosen for the moves around it; curves re-ordered or reversed around it
+        # would step a motor it holds off (a closing M84 after the last curve is not one)
+        from ..firmware import parse_motor_line
+        for r in np.flatnonzero(kind == Kind.MOTOR).tolist():
+            i = int(program.line[r])
+            if not l0[0] < i < l1[-1]:
+                continue
+            m = parse_motor_line(program.line_text(i))
+            if m is None or m[0] or not ("X" in m[1] or "Y" in m[1]):
+                continue
+            after = int(np.searchsorted(l0, i))
+            for c in (after - 1, after):
+                if 0 <= c < n:
+                    layer_keep[curve_layer[c]] = True
+                    why[curve_layer[c]] = why[curve_layer[c]] or "an X/Y motor switched off in the layer (already gated?)"
         # Z that changes while extruding (spiral vase): reversing would run Z backwards
         dz = np.abs(program.end_mm[es, 2] - program.start_mm[es, 2]) > 1e-6
         for lay in np.unique(program.layer[es[dz]]):
