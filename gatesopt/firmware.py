@@ -246,6 +246,21 @@ def parse_motor_lines(texts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return ok, on, mask
 
 
+def xy_disable_rows(program: Program) -> np.ndarray:
+    """Rows of ``program``'s own motor lines that switch the X or Y motor off (``M18``, ``M18 X``,
+    ``S0 X Y``, ...), ascending; each distinct text parsed once (a gated file has many such lines,
+    a few texts). Where a file has them inside its print it is already gated: they were placed
+    for the moves around them (``gating.problem.own_xy_disable``, ``ordering.build.layout``)."""
+    rows = np.flatnonzero(program.kind == Kind.MOTOR)
+    if not len(rows):
+        return rows
+    inverse, texts = _text.distinct_lines(program, program.line[rows])
+    ok, on, mask = parse_motor_lines(texts)
+    xy = (1 << AXES.index("X")) | (1 << AXES.index("Y"))
+    off_xy = ok & ~on & ((mask & xy) != 0)
+    return rows[off_xy[inverse]]
+
+
 def motor_line_is_on(text: str) -> bool | None:
     """True for an enable line, False for a disable line, None if ``text`` is neither."""
     r = parse_motor_line(text)
@@ -271,8 +286,7 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     last_motion = int(motion[-1]) if len(motion) else -1
     rows = rows[rows < last_motion]
     # each distinct text parsed once: a gated file has millions of instruction lines, a few texts
-    from ._text import distinct_lines
-    inverse, texts = distinct_lines(program, program.line[rows])
+    inverse, texts = _text.distinct_lines(program, program.line[rows])
     ok, on, _ = parse_motor_lines(texts)
     # Only an instruction the firmware carries out stalls it. Any other motor line is an unknown
     # command to it, answered with a message and skipped: no dwell, no queue drain. Klipper has no

@@ -725,19 +725,14 @@ def _sequential_words(drop) -> str:
 
 
 def own_xy_disable(program: Program, lo: int, hi: int):
-    """The first row in [lo, hi) whose own motor line switches the X or Y motor off (a gated file:
-    gatesopt's output, the paper's re-compiler's), or None. Such lines were placed for the moves
-    of that file's X and Y axes; rotated, the moves each motor makes change, and the lines would
-    hold a motor off while it steps."""
-    rows = np.flatnonzero(program.kind[lo:hi] == Kind.MOTOR) + lo
-    if not len(rows):
-        return None
+    """The first row in [lo, hi) whose own motor line switches the X or Y motor off
+    (``firmware.xy_disable_rows``: a gated file, gatesopt's output or the paper's re-compiler's),
+    or None. Such lines were placed for the moves of that file's X and Y axes; rotated, the moves
+    each motor makes change, and the lines would hold a motor off while it steps."""
     from .. import firmware as fw_mod
-    for r in rows.tolist():
-        m = fw_mod.parse_motor_line(program.line_text(int(program.line[r])))
-        if m is not None and not m[0] and ("X" in m[1] or "Y" in m[1]):
-            return r
-    return None
+    rows = fw_mod.xy_disable_rows(program)
+    rows = rows[(rows >= lo) & (rows < hi)]
+    return int(rows[0]) if len(rows) else None
 
 
 def _where(program: Program, row: int) -> str:

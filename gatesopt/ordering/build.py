@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._text import code_words
+from ..firmware import xy_disable_rows
 from ..program import Kind, Program
 from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
 
@@ -239,13 +240,8 @@ def layout(program: Program) -> Layout:
         # an X/Y motor switched off between the first curve and the last (an already gated file):
         # its place was chosen for the moves around it; curves re-ordered or reversed around it
         # would step a motor it holds off (a closing M84 after the last curve is not one)
-        from ..firmware import parse_motor_line
-        for r in np.flatnonzero(kind == Kind.MOTOR).tolist():
-            i = int(program.line[r])
+        for i in program.line[xy_disable_rows(program)].tolist():
             if not l0[0] < i < l1[-1]:
-                continue
-            m = parse_motor_line(program.line_text(i))
-            if m is None or m[0] or not ("X" in m[1] or "Y" in m[1]):
                 continue
             after = int(np.searchsorted(l0, i))
             for c in (after - 1, after):
