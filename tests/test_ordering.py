@@ -756,3 +756,26 @@ def test_a_gated_file_keeps_the_order_of_its_gated_layers():
     ka = np.flatnonzero(gated.extruding)
     kb = np.flatnonzero(out.extruding)
     assert np.array_equal(gated.start_mm[ka], out.start_mm[kb]) and np.array_equal(gated.end_mm[ka], out.end_mm[kb])
+
+
+def test_a_layer_whose_only_change_is_a_turned_curve_is_not_reported_kept():
+    """PrusaSlicer 2.5's rectilinear star: one layer's only decision is a single curve, printed
+    from its other end by the solver. The output differs there, so the report must not count that
+    layer as "order kept" (it did: only groups of >= 2 curves made a layer "decided")."""
+    from gatesopt.ordering import pipeline
+    prog = _corpus_program("prusa25_star_rect15_m82.gcode.gz")
+    res = pipeline.order_program(prog, OrderingOptions(mode="safe"))
+    assert res.ok
+    sol, prob = res.solution, res.problem
+    sizes = np.diff(prob.group_curve_start)
+    turned = [g for g in np.flatnonzero(~np.asarray(prob.group_fixed) & (sizes == 1))
+              if sol.curve_reversed[prob.group_curve_start[g]]]
+    re_layers = {int(prob.group_layer[g]) for g in np.flatnonzero(prob.group_reorderable)}
+    only_turned = {int(prob.group_layer[g]) for g in turned} - re_layers
+    assert only_turned, "the file no longer has such a layer: pick another"
+    s = res.summary
+    status = {row["layer"]: row["status"] for row in s["per_layer"]}
+    assert {status[lay] for lay in only_turned} == {"optimal"}      # a one-curve choice is exact
+    assert s["layers_kept"] + s["layers_optimal"] + s["layers_feasible"] + s["layers_fallback"] \
+        == len(status)
+    assert s["layers_kept"] == sum(v == "kept" for v in status.values())

@@ -8,6 +8,7 @@ import pytest
 import gatesopt
 from gatesopt.ordering import OrderingOptions, auto, build, dp, greedy, ils, milp
 from gatesopt.ordering.ils import _apply_move, _apply_reverse
+from gatesopt.ordering.problem import GroupSolution
 
 from conftest import SHARED_INSTANCES, needs_shared
 from test_ordering import random_problem
@@ -144,3 +145,36 @@ def test_link_lists_equal_a_full_row_sort(m):
         np.testing.assert_allclose(D, D_ref, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(near_out, np.argsort(far, axis=1, kind="stable")[:, :k])
         np.testing.assert_array_equal(near_in, np.argsort(far.T, axis=1, kind="stable")[:, :k])
+
+
+def test_auto_spends_the_limit_the_exact_step_left_on_the_path(monkeypatch):
+    """The exact step stopping early without a proof (a root gap too wide to branch on) leaves
+    the rest of the group's limit to ILS: the path gets shorter, never longer, and stays
+    "feasible" with the bound it had; an exact step that used its whole limit is returned as is."""
+    auto.warm_up()
+    prob = random_problem(12, 40, closed_share=0.0)     # ILS shortens its matching path
+    grp = prob.group(0, prob.origin_xy)
+    poor = np.arange(grp.n_curves, dtype=np.int64) * 2          # the curves in input order
+    calls = []
+
+    def gave_up(group, *, time_limit_s, hint=None, **kw):
+        calls.append(time_limit_s)
+        return GroupSolution.make(poor, group.path_cost_mm(poor), 0.0, "feasible", 0.0, "milp")
+
+    monkeypatch.setattr(milp, "solve", gave_up)
+    a = auto.solve(grp, time_limit_s=2.0)
+    assert calls, "the group never reached the exact step"
+    assert a.method == "auto:milp+ils" and a.status == "feasible"
+    # auto never keeps an exact step's path worse than its own warm start: ILS went on from that
+    assert a.objective_mm < greedy.solve(grp).objective_mm - 1e-6
+    assert a.objective_mm == pytest.approx(grp.path_cost_mm(a.order))
+    assert a.bound_mm <= a.objective_mm
+
+    def used_it_all(group, *, time_limit_s, hint=None, **kw):
+        import time
+        time.sleep(time_limit_s)
+        return GroupSolution.make(poor, group.path_cost_mm(poor), 0.0, "feasible", 0.0, "milp")
+
+    monkeypatch.setattr(milp, "solve", used_it_all)
+    b = auto.solve(grp, time_limit_s=0.3)
+    assert b.method == "auto:milp" and b.objective_mm > a.objective_mm
