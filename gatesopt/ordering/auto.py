@@ -101,6 +101,20 @@ def _matching_path(group: Group, heur: GroupSolution) -> GroupSolution:
     return GroupSolution.make(best, obj, bound, status, heur.solve_s, method)
 
 
+def _ils_from(group: Group, start: GroupSolution, bound_mm: float, deadline: float, method: str,
+              **kwargs) -> GroupSolution:
+    """``start``, or the ILS path from it (``ils.improve_ils`` until ``deadline``, stopped once
+    it reaches ``bound_mm``) if that is shorter: then with its status against ``bound_mm``,
+    ``start``'s solve time and ``method``."""
+    order = ils.improve_ils(group, start.order, deadline=deadline,
+                            target_mm=bound_mm + OPTIMAL_ABS_TOL_MM, **kwargs)
+    obj = group.path_cost_mm(order)
+    if obj >= start.objective_mm - 1e-9:
+        return start
+    status = "optimal" if obj - bound_mm <= OPTIMAL_ABS_TOL_MM else "feasible"
+    return GroupSolution.make(order, obj, bound_mm, status, start.solve_s, method)
+
+
 def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
           exact_max_cands: int = EXACT_MAX_CANDS) -> GroupSolution:
     t0 = time.perf_counter()
@@ -141,16 +155,11 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         # pay for its link matrix and a kick, past the deadline, for next to nothing
         return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "fallback",
                                   time.perf_counter() - t0, "auto:greedy")
-    order = ils.improve_ils(group, heur.order, kicks=kicks, deadline=deadline,
-                            local_optimum=heur.method in ("greedy", "matching"),
-                            target_mm=heur.bound_mm + OPTIMAL_ABS_TOL_MM)
-    obj = group.path_cost_mm(order)
-    if obj < heur.objective_mm - 1e-9:
-        status = "optimal" if obj - heur.bound_mm <= OPTIMAL_ABS_TOL_MM else "feasible"
-        heur = GroupSolution.make(order, obj, heur.bound_mm, status, heur.solve_s, "ils")
-        if status == "optimal":
-            return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "optimal",
-                                      time.perf_counter() - t0, "auto:ils+bound")
+    heur = _ils_from(group, heur, heur.bound_mm, deadline, "ils", kicks=kicks,
+                     local_optimum=heur.method in ("greedy", "matching"))
+    if heur.status == "optimal":
+        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "optimal",
+                                  time.perf_counter() - t0, "auto:ils+bound")
     if not exact_next:
         return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "fallback",
                                   time.perf_counter() - t0, "auto:ils")
@@ -175,12 +184,9 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         # "peers on large groups": 249, 299, 107 curves, 2 s each) the model stopped after
         # 0.3 / 0.8 / 0.06 s: 166.0 / 182.5 / 77.8 mm, now 158.8 / 182.4 / 76.6 (LKH 156.4 /
         # 182.0 / 76.8)
-        order = ils.improve_ils(group, ex.order, deadline=deadline,
-                                target_mm=bound + OPTIMAL_ABS_TOL_MM)
-        obj = group.path_cost_mm(order)
-        if obj < ex.objective_mm - 1e-9:
-            status = "optimal" if obj - bound <= OPTIMAL_ABS_TOL_MM else "feasible"
-            return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0,
-                                      "auto:milp+ils")
+        polished = _ils_from(group, ex, bound, deadline, "auto:milp+ils")
+        if polished is not ex:
+            return GroupSolution.make(polished.order, polished.objective_mm, bound, polished.status,
+                                      time.perf_counter() - t0, polished.method)
     return GroupSolution.make(ex.order, ex.objective_mm, bound, ex.status,
                               time.perf_counter() - t0, "auto:milp")

@@ -254,13 +254,11 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         counts[gs.status if gs.status in counts else "fallback"] += 1
     lay_counts = {"optimal": 0, "feasible": 0, "fallback": 0, "kept": 0}
     decided_layers = {int(problem.group_layer[g]) for g, _ in decided}
-    # a group of one curve is no re-ordering (the counts above leave it out), but printing that
-    # curve from its other end, or from another seam, changes the layer: it is not "kept" (its
-    # choice is exact: both ways compared)
+    # a layer with a curve printed from its other end or another seam changed too, even with no
+    # group of >= 2 curves (the counts above leave one-curve groups out; their choice is exact:
+    # both ways compared). Fixed groups keep the slicer's direction, so this adds only those
     turned = np.asarray(solution.curve_reversed, bool) | (np.asarray(solution.curve_seam) != 0)
-    for g in np.flatnonzero(~np.asarray(problem.group_fixed, bool) & (sizes == 1)).tolist():
-        if turned[problem.group_curve_start[g]]:
-            decided_layers.add(int(problem.group_layer[g]))
+    decided_layers.update(np.unique(problem.curve_layer[turned]).tolist())
     for row in layers:
         if row["layer"] in decided_layers:
             lay_counts[row["status"] if row["status"] in lay_counts else "fallback"] += 1
