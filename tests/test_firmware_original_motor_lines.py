@@ -164,3 +164,15 @@ def test_cli_solve_with_start_m17_verifies(tmp_path, capsys, fw):
     assert out.exists()
     assert main(["verify", str(src), str(out), "--firmware", fw]) == 0
     capsys.readouterr()
+
+
+def test_closing_disable_is_not_inside_the_print():
+    """Cura's closing 'M84 X Y E' after the last move switches nothing off that steps again: the
+    file is not 'already gated' and may be rotated; an 'M18 X' between moves is."""
+    from gatesopt.gating.problem import own_xy_disable
+    head = "G90\nM82\nG92 E0\n;LAYER:0\nG1 Z0.2 F600\nG0 X10 Y10 F6000\nG1 X20 Y10 E1 F1200\n"
+    closing = parse(head + "G1 X20 Y20 E2\nG91\nG1 Z5\nG90\nM84 X Y E\n")
+    assert own_xy_disable(closing, 0, closing.n_steps) is None
+    inside = parse(head + "M18 X\nG1 X20 Y20 E2\nG1 X30 Y20 E3\nM84 X Y E\n")
+    row = own_xy_disable(inside, 0, inside.n_steps)
+    assert row is not None and inside.line_text(int(inside.line[row])).startswith("M18 X")

@@ -779,3 +779,25 @@ def test_a_layer_whose_only_change_is_a_turned_curve_is_not_reported_kept():
     assert s["layers_kept"] + s["layers_optimal"] + s["layers_feasible"] + s["layers_fallback"] \
         == len(status)
     assert s["layers_kept"] == sum(v == "kept" for v in status.values())
+
+
+def test_emit_renumbers_e_on_moves_only():
+    """Cura's closing 'M84 X Y E' names the extruder motor: where the output's running E is off
+    by float noise from the original's (rebuilt travels), a move's E word is re-numbered but the
+    motor line is copied as written (it was written 'M84 X Y E450.09901', which verify then took
+    for an added gating line in the wrong dialect: issue 37)."""
+    from gatesopt.ordering.build import layout
+    from gatesopt.ordering.emit import _Writer
+    text = ("M82\nG92 E0\n;LAYER:0\nG1 Z0.2 F3000\nG0 X10 Y10 F6000\nG1 X20 Y10 E1.0 F1200\n"
+            "G1 X30 Y10 E2.0\nM84 X Y E ;Disable all steppers but Z\n")
+    program = gatesopt.parse(text)
+    lay = layout(program)
+    w = _Writer(program, lay)
+    lines = text.splitlines()
+    for i in range(6):
+        w.copy_line(i)
+    w.e += 1e-6                      # the output's running E, off by rebuilt travels' rounding
+    w.copy_line(6)
+    w.copy_line(7)
+    assert w.out[6].startswith("G1 X30 Y10 E2.000001")      # a move: re-numbered
+    assert w.out[7].rstrip("\n") == lines[7]                  # a motor line: as written

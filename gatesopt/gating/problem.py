@@ -35,9 +35,9 @@ import numpy as np
 from ..energy import PowerCoefficients, load_profile, step_energy_j, step_power_w
 from ..errors import GatesoptError, InfeasibleError
 from ..program import AXES, Kind, Program, X, Y
+from ..solvers import STATUSES
 from . import _kernels as _k
 
-STATUSES = ("optimal", "feasible", "fallback", "infeasible")
 _TIME_EPS_S = 1e-12          # a boundary closer than this to a step boundary is on it (no split)
 
 
@@ -731,7 +731,12 @@ def own_xy_disable(program: Program, lo: int, hi: int):
     each motor makes change, and the lines would hold a motor off while it steps."""
     from .. import firmware as fw_mod
     rows = fw_mod.xy_disable_rows(program)
-    rows = rows[(rows >= lo) & (rows < hi)]
+    # a disable after the last X/Y step (the slicer's closing 'M84 X Y E', with no move after it
+    # in the run) holds nothing off that steps: the print is over
+    steps = program.steps_motor()
+    xy = np.flatnonzero((steps[:, X] | steps[:, Y])[lo:hi])
+    last_xy = lo + int(xy[-1]) if len(xy) else lo
+    rows = rows[(rows >= lo) & (rows < min(hi, last_xy))]
     return int(rows[0]) if len(rows) else None
 
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import verify as _verify
-from ..program import Kind, Program
+from ..program import MOTION_KINDS, Kind, Program
 from .build import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, LINE_NEUTRAL,
                     Layout, layout)
 from .problem import OrderingProblem, OrderingSolution
@@ -207,7 +207,7 @@ class _Writer:
         self.feature = None
         (self.line_cls, self.line_step, self.line_de, self.line_travel, self.step_relative_e,
          self.step_feed, self.step_logical_e, self.step_end_xyz, self.layer_lines, self.arc_steps,
-         self.command_lines, self.command_set) = lists or self.per_line(program, lay)
+         self.command_lines, self.command_set, self.step_moves) = lists or self.per_line(program, lay)
         # neutral commands written so far: the k-th one written is the original's k-th (below)
         self.n_commands = 0
 
@@ -229,7 +229,8 @@ class _Writer:
                 np.ascontiguousarray(program.end_mm[:, :3]),    # rows are views: never written
                 frozenset(program.layer_line.tolist()),
                 frozenset(np.flatnonzero(program.kind == Kind.ARC).tolist()),
-                commands, frozenset(commands))
+                commands, frozenset(commands),
+                np.isin(program.kind, MOTION_KINDS).tolist())
 
     # -- copying original lines -------------------------------------------------------------
     def copy_line(self, i: int) -> None:
@@ -246,7 +247,10 @@ class _Writer:
         cls = self.line_cls[i]
         if s >= 0:
             new_e = self.e + self.line_de[i]
-            if not self.step_relative_e[s]:
+            # only a move's E word is a position to re-number: a motor line's bare 'E' (Cura's
+            # closing 'M84 X Y E') names the extruder motor, and writing a number there made it
+            # an 'M84 ... E450.1' that verify read as an added gating line
+            if not self.step_relative_e[s] and self.step_moves[s]:
                 want = new_e - self.e_off
                 if abs(want - self.step_logical_e[s]) > 1e-7:
                     code, sep, comment = text.partition(";")

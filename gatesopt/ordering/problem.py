@@ -27,8 +27,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-STATUSES = ("optimal", "feasible", "fallback", "infeasible")
-
 #: closed-loop tolerance: a curve whose end lies within this of its start is a closed loop
 CLOSED_TOL_MM = 1e-3
 
