@@ -36,6 +36,7 @@ import numpy as np
 from .._text import code_words
 from ..firmware import xy_disable_rows
 from ..program import Kind, Program
+from ..slicers import FIXED_FEATURE
 from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
 
 LINE_MOTION, LINE_NEUTRAL, LINE_STATE, LINE_BARRIER, LINE_FATAL, LINE_CURVE = range(6)
@@ -57,8 +58,6 @@ STATE_EXT = (b"SET_VELOCITY_LIMIT", b"SET_PRESSURE_ADVANCE", b"M204")
 #: in the lower-cased text: a case-insensitive regex took 0.27 s on a 6 MB file, this 0.02 s
 OBJECT_LABEL_WORDS = (b"printing object", b";mesh:", b"exclude_object", b"m486")
 FEATURE_LINE = re.compile(rb"\n(;[ \t]*(?:TYPE:|FEATURE:|feature )[ \t]*)([^\r\n]*)")
-FIXED_FEATURE = re.compile(r"perimeter|wall|ironing|skirt|brim|wipe|prime|tower|shell|inset|outline",
-                           re.I)
 #: a curve without a feature comment whose end lies this close to its start is a clipped loop
 #: (a wall) in safe mode
 LOOP_GAP_MM = 0.5

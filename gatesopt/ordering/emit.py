@@ -34,6 +34,7 @@ import numpy as np
 
 from .. import verify as _verify
 from ..program import MOTION_KINDS, Kind, Program
+from ..slicers import WALL_FEATURE
 from .build import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, LINE_NEUTRAL,
                     Layout, layout)
 from .problem import OrderingProblem, OrderingSolution
@@ -80,7 +81,6 @@ COMB_SHARE = 0.2
 #: a rebuilt travel is trimmed by this much at each end before the wall-crossing test (its ends
 #: are curve ends, which touch walls)
 COMB_TRIM_MM = 0.3
-_WALL_FEATURE = re.compile(r"wall|perimeter|shell|skirt|brim", re.I)
 
 
 def _cross_z(o, v, w):
@@ -99,7 +99,7 @@ class WallCrossing:
     def __init__(self, program: Program, problem: OrderingProblem, lay: Layout):
         names = program.feature_names
         feat = program.feature[lay.curve_s0]
-        is_wall = np.array([f >= 0 and bool(_WALL_FEATURE.search(names[f])) for f in feat], bool)
+        is_wall = np.array([f >= 0 and bool(WALL_FEATURE.search(names[f])) for f in feat], bool)
         self.wall = is_wall | problem.curve_closed
         self.problem = problem
         self.cache: dict = {}
