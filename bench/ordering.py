@@ -105,7 +105,7 @@ def report(args) -> str:
              "with other jobs):", "", "```", *commands,
              "python bench/ordering.py report --write docs/RESULTS.md", "```", "",
              "Travel = non-extruding XY moves from the first layer on, measured on the parsed input and "
-             "the parsed, verified output (every row passed `gatesopt.ordering.verify.check`, else "
+             "the parsed, verified output (every row passed `gatesopt.verify.ordering.check`, else "
              "it says so). *groups* = re-orderable groups of >= 2 curves; *optimal* = proven "
              "(DP, bound, matching or MILP), *feasible* = exact solver stopped at the per-group time limit with "
              "a gap, *fallback* = not given to an exact step (too large, or too little of the budget "

@@ -10,7 +10,7 @@ runs of
 - after putting back ``--put-back`` % of its re-ordered layers (``pipeline.keep_layers``, what the
   time guard does with layers that got slower): the emit again without the memo and with the
   memo the first emit filled (``emit(..., memo)``, as ``pipeline.emit_guarded`` does),
-- ``ordering.verify.check`` of the re-ordered output against the original (what every ``order``
+- ``verify.ordering.check`` of the re-ordered output against the original (what every ``order``
   and ``solve`` run ends with).
 
 Both emits of the last step are checked to give the same text.
@@ -37,7 +37,7 @@ SECTION = "## Curve-ordering emit and verify"
 import gatesopt  # noqa: E402
 from gatesopt.ordering import OrderingOptions, build, emit, solve  # noqa: E402
 from gatesopt.ordering.pipeline import keep_layers  # noqa: E402
-from gatesopt.ordering.verify import check  # noqa: E402
+from gatesopt.verify.ordering import check  # noqa: E402
 
 
 def best_of(fn, repeat: int) -> tuple[float, object]:
@@ -111,7 +111,7 @@ def main() -> None:
              "parse of the same file is the peer; the last two columns are the time guard's second "
              f"emit after putting back {args.put_back:g} % of the re-ordered layers, without and "
              "with the memo of the first emit (`ordering.emit(..., memo)`); both give the same text. "
-             "Verify: `ordering.verify.check` of the re-ordered output against the original.",
+             "Verify: `verify.ordering.check` of the re-ordered output against the original.",
              "", "| file | lines | parse s | emit s | emit / parse | emit k lines/s | layers put back "
              "| re-emit s | with memo s | memo speed-up | same text | verify s | verify / parse |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|"]

@@ -14,7 +14,7 @@ from gatesopt.ordering import cpsat, dp, greedy, milp, tsp, auto
 from gatesopt.ordering.bounds import lower_bound_mm
 from gatesopt.program import Kind
 from gatesopt.ordering.problem import Group
-from gatesopt.ordering.verify import check
+from gatesopt.verify.ordering import check
 from conftest import PROJECT_INSTANCES
 
 INSTANCES = Path(__file__).resolve().parents[2] / "shared" / "instances"

@@ -217,7 +217,7 @@ def test_verify_catches_a_missing_fan_reissue():
     fan_at = [i for i, t in enumerate(lines) if t == "M106 S255"]
     assert fan_at
     broken = "\n".join(lines[:fan_at[0]] + lines[fan_at[0] + 1:]) + "\n"
-    from gatesopt.ordering.verify import check
+    from gatesopt.verify.ordering import check
     found = check(prog, gatesopt.parse(broken))
     fan = [f for f in found if "part fan" in f.message]
     # said once, by the move-by-move check (not again by the per-layer filament-by-duty one)
@@ -320,7 +320,7 @@ def test_verify_catches_progress_stepping_back():
     lines = res.text.splitlines()
     at = [i for i, t in enumerate(lines) if t.startswith("M73")]
     lines[at[2]], lines[at[3]] = lines[at[3]], lines[at[2]]
-    from gatesopt.ordering.verify import check
+    from gatesopt.verify.ordering import check
     found = check(prog, gatesopt.parse("\n".join(lines) + "\n"))
     assert [f.line for f in found if f.check == "commands"][:1] == [at[2] + 1]
     assert any("M73 P40" in f.message and "M73 P30" in f.message for f in found)

@@ -189,7 +189,7 @@ G1 X100.029 Y102.71 E2.46494
 def test_a_rotated_piece_ending_on_an_unrelated_vertex_still_verifies():
     from gatesopt.gating.pipeline import run
     from gatesopt.gating.problem import GatingOptions
-    from gatesopt.verify import _near
+    from gatesopt.verify.geometry import _near
     p = gatesopt.parse(ROTATED_SPLIT)
     res = run(p, GatingOptions(rotate=45.0), formulation="dp", order=False)
     assert res.report.ok, [str(f) for f in res.report.findings]

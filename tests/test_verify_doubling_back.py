@@ -81,7 +81,7 @@ def test_a_wrong_piece_of_that_split_is_still_caught(bad_tail):
 def test_many_ambiguous_runs_are_looked_up_in_one_batch(monkeypatch):
     # a verify of a real Cura file (0.05 mm layers) took 11 s instead of 2 s when each ambiguous
     # run made its own lookup (a hash and a k-d tree over all the original's moves, every time)
-    import gatesopt.verify as v
+    import gatesopt.verify.geometry as v
     orig, out = ["G90", "M83"], ["G90", "M83"]
     for k in range(200):        # 200 retracing moves, each split where the move before started
         x = 10 + k

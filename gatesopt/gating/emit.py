@@ -47,6 +47,7 @@ import numpy as np
 
 from .. import firmware as fwmod
 from ..errors import GatesoptError
+from ..headers import ROTATE_HEADER
 from ..program import AXES, Kind, Program, X, Y
 from .problem import rotated_run_end
 
@@ -63,7 +64,6 @@ TIME_EPS_S = 1e-9
 SPLITTABLE = (Kind.TRAVEL, Kind.EXTRUDE, Kind.RETRACT, Kind.UNRETRACT, Kind.Z_ONLY, Kind.ARC)
 _SPLITTABLE_INT = frozenset(int(k) for k in SPLITTABLE)
 _ARC = int(Kind.ARC)
-ROTATE_HEADER = "; gatesopt: rotate_deg={deg} center_x={cx} center_y={cy}"
 
 # a word's value: a number, or an unexpanded slicer placeholder ("Y{machine_depth}"), which the
 # parser drops as the firmware does (``_scan._parse_words``) and ``_Line.value`` reads as absent

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from ..parse import parse
 from ..program import Program
-from ..verify import VerifyReport, check_positions, energy_of, verify
+from ..verify import VerifyReport, check_ordering, check_positions, energy_of, verify
 from .emit import EmitResult, emit_result, render
 from .problem import GatingOptions, GatingSolution, build
 from .solve import solve
@@ -176,11 +176,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     extra = []
     if ordered and sol is not None:
         # the ordering's own checks, on the re-ordered print before gating split any move
-        try:
-            ov = importlib.import_module("gatesopt.ordering.verify")
-            extra = list(ov.check(program, ordered_base))
-        except ModuleNotFoundError:
-            extra = []
+        extra = list(check_ordering(program, ordered_base))
         # and the positions check ``verify`` skips for a re-ordering, on what gating rewrote: the
         # re-ordered print against the output (rotation and gating keep its moves in order)
         pos = check_positions(ordered_base, out)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import verify as _verify
+from ..headers import ORDER_HEADER
 from ..program import MOTION_KINDS, Kind, Program
 from ..slicers import WALL_FEATURE
 from .build import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, LINE_NEUTRAL,
@@ -492,9 +492,6 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
         text = ORDER_HEADER + w.nl + text
     return text
 
-
-#: the first line of a re-ordered file (``gatesopt.verify.ORDER_PREFIX`` reads it)
-ORDER_HEADER = _verify.ORDER_PREFIX
 
 _FIXED = "fixed"                # the memo's entry for what every emit of the program shares
 

@@ -16,11 +16,11 @@ import numpy as np
 from .. import _jit
 from ..parse import parse
 from ..program import Kind, Program
+from ..verify.ordering import check
 from .build import build, firmware_retraction
 from .emit import emit
 from .layers import model_travel_mm, solve
 from .problem import OrderingOptions, OrderingProblem, OrderingSolution
-from .verify import check
 
 
 @dataclass(frozen=True, eq=False)

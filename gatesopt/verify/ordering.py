@@ -1,11 +1,11 @@
-"""Verify re-ordered G-code against its original (issue 4, "Verified on every output").
+"""Check ``ordering``: re-ordered G-code against its original (issue 4, "Verified on every output").
 
 ``geometry``: per layer, the multiset of extruded moves is the same up to direction — move by
 move, without merging collinear pieces (re-ordering never splits a move, and merging is
 order-dependent: a reversed piece next to a forward one would not merge as in the original).
 A move is its two end points (ordered), arc centre and turning sense, and its E. Then the shared checks
-of ``gatesopt.verify`` (``Finding``): E per layer equal, heater/tool commands (and fans other than
-the part-cooling fan) in the same order; ``fan``: every extruded move sees the part-cooling fan
+(``verify.extrusion``, ``verify.commands``): E per layer equal, heater/tool commands (and fans other
+than the part-cooling fan) in the same order; ``fan``: every extruded move sees the part-cooling fan
 duty it saw in the original (emit re-issues M106 / M107); and
 ``barriers``: between two consecutive barrier lines (heaters, G92, object labels, tool
 changes, see ``gatesopt.ordering.build``) each layer extrudes the same filament over the same
@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import verify as _v
+from ..ordering.build import LINE_BARRIER, LINE_FATAL, layout
 from ..program import Kind, Program
-from .build import LINE_BARRIER, LINE_FATAL, layout
-
-Finding = _v.Finding
+from .commands import check_commands, fan_duty_s
+from .extrusion import check_extrusion
+from .finding import Finding
 
 
 def _barrier_bins(program: Program):
@@ -44,7 +44,7 @@ ARC_LENGTH_TOL_MM = 0.01
 def check_barriers(original: Program, output: Program, *, rel_tol: float = 1e-4,
                    snap_tol_mm: float = 0.0) -> list[Finding]:
     """``snap_tol_mm``: how far a rotated output's snap may have moved each end point of a move
-    (``gatesopt.verify._undone_tol``): each move's length may differ by twice that."""
+    (``gatesopt.verify.rotation.undone_tol``): each move's length may differ by twice that."""
     na, la, ba, ea, sa, arc_a = _barrier_bins(original)
     nb, lb, bb, eb, sb, arc_b = _barrier_bins(output)
     if na != nb:
@@ -162,7 +162,7 @@ def check_fan(original: Program, output: Program, *, max_findings: int = 3,
     Layers whose moves differ are the geometry check's; the others are compared move by move.
     ``keys``: as for ``check_geometry``."""
     (ra, qa, _), (rb, qb, _) = keys or (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
-    duty_a, duty_b = _v.fan_duty_s(original, ra), _v.fan_duty_s(output, rb)
+    duty_a, duty_b = fan_duty_s(original, ra), fan_duty_s(output, rb)
     la, lb = original.layer[ra], output.layer[rb]
     out = []
     for L in _layers_differing(la, np.column_stack([qa, duty_a]), lb, np.column_stack([qb, duty_b])).tolist():
@@ -190,8 +190,8 @@ def check_fan(original: Program, output: Program, *, max_findings: int = 3,
 def check(original: Program, output: Program) -> list[Finding]:
     """All findings for a re-ordered output (empty list: it prints what the original printed)."""
     keys = (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
-    return (check_geometry(original, output, keys=keys) + _v.check_extrusion(original, output)
+    return (check_geometry(original, output, keys=keys) + check_extrusion(original, output)
             # the fan move by move (check_fan) implies the per-layer filament by fan duty that
             # check_commands would check too: one finding per fault, the stricter one
-            + _v.check_commands(original, output, reordered=True, fan_duty=False)
+            + check_commands(original, output, reordered=True, fan_duty=False)
             + check_fan(original, output, keys=keys) + check_barriers(original, output))
