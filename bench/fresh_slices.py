@@ -495,6 +495,12 @@ def _pinned(cmd: list[str]) -> list[str]:
     return cmd
 
 
+# With address randomisation off, the memory layout still depends on the environment's and the
+# command line's sizes: the slicers run in OUT with relative paths and this fixed environment, so
+# that the output does not depend on where OUT is or on the caller's environment.
+_FIXED_ENV = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": "/tmp", "LC_ALL": "C"}
+
+
 def _run(cmd: list[str], env=None, cwd=None) -> subprocess.CompletedProcess:
     return subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd, timeout=1800)
 
@@ -566,17 +572,16 @@ def slice_prusa(job: Job, model: str, solids, out: Path, gcode: Path) -> tuple[l
     center = BEDS[job.machine]
     complete = extra.get("complete_objects") == "1"
     stls = _place(out, model, solids, center, job.machine)
-    cmd = ["prusa-slicer", "--export-gcode", "--load", str(ini)]
+    cmd = ["prusa-slicer", "--export-gcode", "--load", f"configs/{ini.name}"]
     if len(stls) > 1:  # one print of several objects (without --merge each file is sliced alone)
         cmd += ["--merge"] + ([] if complete else ["--dont-arrange"])  # own layout unless sequential
     else:
         cmd += ["--center", f"{center[0]:g},{center[1]:g}"]
-    cmd += ["-o", str(gcode)] + [str(p) for p in stls]
-    r = _run(_pinned(cmd))
+    cmd += ["-o", gcode.name] + [f"stl/{p.name}" for p in stls]
+    r = _run(_pinned(cmd), _FIXED_ENV, cwd=out)
     if r.returncode != 0 or not gcode.is_file():
         raise RuntimeError(f"prusa-slicer exit {r.returncode}: {(r.stderr + r.stdout).strip()[-500:]}")
-    shown = " ".join(["setarch -R taskset -c N prusa-slicer --export-gcode --load", f"configs/{ini.name}"] + cmd[4:-len(stls) - 2]
-                     + ["-o", gcode.name] + [f"stl/{p.name}" for p in stls])
+    shown = "setarch -R taskset -c N " + " ".join(cmd)
     desc = f"{vendor}: {printer} / {print_} / {filament}; flavor {cfg.get('gcode_flavor', '?')}"
     if job.settings:
         desc += "; " + ", ".join(f"{k}={v}" for k, v in job.settings)
@@ -596,18 +601,16 @@ def slice_slic3r(job: Job, model: str, solids, out: Path, gcode: Path) -> tuple[
     ini = out / "configs" / f"{job.name}_{model}.ini"
     settings = dict(SLIC3R_SETTINGS) | dict(job.settings)
     ini.write_text("".join(f"{k} = {v}\n" for k, v in sorted(settings.items())))
-    cmd = ["slic3r", "--no-gui", "--threads", "1", "--load", str(ini)]
+    cmd = ["slic3r", "--no-gui", "--threads", "1", "--load", f"configs/{ini.name}"]
     if len(stls) > 1:
         cmd += ["--merge", "--dont-arrange"]  # one print, the plate's own layout
     else:
         cmd += ["--print-center", f"{center[0]:g},{center[1]:g}"]
-    cmd += ["-o", str(gcode)] + [str(p) for p in stls]
-    env = {**os.environ, "PERL_HASH_SEED": "0", "PERL_PERTURB_KEYS": "0"}
-    r = _run(_pinned(cmd), env)
+    cmd += ["-o", gcode.name] + [f"stl/{p.name}" for p in stls]
+    r = _run(_pinned(cmd), {**_FIXED_ENV, "PERL_HASH_SEED": "0", "PERL_PERTURB_KEYS": "0"}, cwd=out)
     if r.returncode != 0 or not gcode.is_file():
         raise RuntimeError(f"slic3r exit {r.returncode}: {(r.stderr + r.stdout).strip()[-500:]}")
-    shown = " ".join(["setarch -R taskset -c N slic3r --no-gui --threads 1 --load", f"configs/{ini.name}"] + cmd[6:-len(stls) - 2]
-                     + ["-o", gcode.name] + [f"stl/{p.name}" for p in stls])
+    shown = "setarch -R taskset -c N " + " ".join(cmd)
     return [shown], ", ".join(f"{k}={v}" for k, v in settings.items())
 
 
