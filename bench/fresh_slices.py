@@ -54,7 +54,7 @@ import struct
 import subprocess
 import sys
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -394,8 +394,6 @@ def flatten_preset(sections: dict, kind: str, name: str) -> dict:
         raise KeyError(f"{kind}:{name}")
     out: dict = {}
     parents = [p.strip() for p in sec.get("inherits", "").split(";") if p.strip()]
-    if not parents and f"{kind}:*common*" in sections and name != "*common*":
-        parents = []  # a root preset: nothing inherited
     for p in parents:
         out.update(flatten_preset(sections, kind, p.strip('"')))
     out.update(sec)
