@@ -8,7 +8,7 @@ of ``gatesopt.verify`` (``Finding``): E per layer equal, heater/tool commands (a
 the part-cooling fan) in the same order; ``fan``: every extruded move sees the part-cooling fan
 duty it saw in the original (emit re-issues M106 / M107); and
 ``barriers``: between two consecutive barrier lines (heaters, G92, object labels, tool
-changes, see ``gatesopt.ordering.build``) each layer extrudes the same filament over the same
+changes, see ``gatesopt.ordering.layout``) each layer extrudes the same filament over the same
 path length in both files — so no extrusion moved across a barrier.
 """
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import verify as _v
 from ..program import Kind, Program
-from .build import LINE_BARRIER, LINE_FATAL, layout
+from .layout import LINE_BARRIER, LINE_FATAL, layout
 
 Finding = _v.Finding
 
