@@ -34,15 +34,12 @@ EXACT_MAX_CANDS = 160
 #: largest group (candidates) for the symmetric model (formulations/ordering.md, "milp,
 #: symmetric"): sparse columns with pricing keep its LP small, but it holds a few N x N arrays
 SYMMETRIC_MAX_CANDS = 1000
-#: ILS kicks per curve before the symmetric model (it builds its own incumbent from the LP point;
-#: measured on 86 real groups of 17-170 curves: the same 83 proven with 0, 2 or 15 kicks per curve,
-#: and 15 cost 20 % more time in all; on 219 Cura bunny groups of 13-49 curves, all proven either
-#: way, 0 kicks took 4.7-4.8 s of CPU and 2 kicks 6.6-7.0 s)
+#: ILS kicks per curve before the symmetric model: none, it builds its own incumbent from the LP
+#: point and kicks proved no more groups, only slower (docs/BENCHMARKS.md, "Curve-ordering constants")
 SYMMETRIC_WARM_KICKS_PER_CURVE = 0
 #: up to this many curves the subset DP goes first; above it (up to ``dp.fits``, ~16 curves) the
-#: DP takes 20-50 ms and the symmetric model is tried first where it applies (Cura bunny's 40
-#: groups of 13-16 curves: DP 1.37 s, greedy + symmetric 0.51 s, all 40 proven), the DP after it
-#: if the model did not prove the group in time
+#: DP takes 20-50 ms and the symmetric model, faster there, is tried first where it applies, the
+#: DP after it if the model did not prove the group in time (docs/BENCHMARKS.md)
 DP_FIRST_CURVES = 12
 #: below this per-group limit (a spent budget) the exact step is not even built
 MIN_EXACT_S = 0.05
@@ -50,10 +47,7 @@ MIN_EXACT_S = 0.05
 #: curve), which a shared budget must give a group it wants proven
 #: without an exact step next, ILS runs only if this much time per curve is left before the
 #: group's deadline: it first builds its link matrix (~10 us per curve) and each kick runs a local
-#: search, so a short ILS overruns its deadline and rarely improves the path. Measured on 60 Cura
-#: bunny groups of 40-190 curves: given 80 us per curve (a budget's heuristic share) ILS cut
-#: their travel by 0.17 % and took 37 us per curve on top of the 72 of the greedy path and the
-#: matching; given 400 us, by 0.9 %; their gaps and the share within 2 % did not move
+#: search, so a short ILS overruns its deadline and rarely improves the path (docs/BENCHMARKS.md)
 MIN_FALLBACK_ILS_S_PER_CURVE = 2e-4
 #: stop after the MILP's LP cutting-plane rounds if they leave more than this gap
 GIVE_UP_GAP = None   # measured: with 0.15, free-mode Cura groups lost most proofs the branch loop finds

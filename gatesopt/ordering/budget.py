@@ -4,7 +4,7 @@ Proof time grows much faster than linearly with a group's size, so proofs per se
 on the small groups: the plan (``BudgetPlan``) gives the smallest groups still to come the time
 an exact step needs to be tried at all (``exact_time_s``), the rest the greedy path's, as many of
 the smallest as the time left pays for. ``runner.GroupRunner`` asks it for each group's limit.
-The rates below are measured; their history is in docs/BENCHMARKS.md, "Ordering budget".
+The rates below are measured; their history is in docs/BENCHMARKS.md, "Curve-ordering constants".
 """
 from __future__ import annotations
 

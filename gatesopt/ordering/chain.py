@@ -22,8 +22,7 @@ LOOKAHEAD_TRIES = 2
 #: a re-solve may take this multiple of the group's first solve (at least its
 #: ``budget.exact_time_s``, at most the per-group limit). Only groups proven the first time are
 #: solved again (a fallback would take its limit). A fixed end can make the proof several times
-#: slower: a 40-curve KISSlicer 1.6.3 group proven in ~5 ms with a free end stopped at 2x (gap
-#: 35.7 %) and at 10x, and closed at 20x; the chain took the unproven path all the same
+#: slower (docs/BENCHMARKS.md, "Curve-ordering constants")
 LOOKAHEAD_TIME_FACTOR = 20.0
 
 

@@ -25,24 +25,16 @@ from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution, trivial_solution
 
 #: integer cost scale: 1 unit = 0.1 µm of travel (rounding error <= n * 0.05 µm per path)
 SCALE = 10_000
-#: building the model (``_Model.build`` and its hint), per arc of the circuit (``n_arcs``):
-#: measured 1.6-2.4 us on 20 groups of 13-171 curves (650-95k arcs; 0.17 s at 308 candidates) of
-#: two robustness-sweep Cura files, one core. Through CpModel's Python API (NewBoolVar, AddHint
-#: and a ``sum`` objective per arc) it took ~12 us per arc: 0.8 s for a 260-candidate group, so a
-#: budget's small per-group limits were overrun many times over
+#: building the model (``_Model.build`` and its hint), per arc of the circuit (``n_arcs``),
+#: measured; written straight into the proto because CpModel's Python API was ~5x slower and
+#: overran a budget's small limits (docs/BENCHMARKS.md, "Curve-ordering constants")
 BUILD_S_PER_ARC = 2.5e-6
 #: what CP-SAT takes beyond ``max_time_in_seconds`` (copying and loading the model before its
-#: first time check, handing the solution back) and reading the solution, per arc: measured
-#: 1.6-4.6 us on the same groups (2 workers on one core, limit 1 ms; 0.3-0.4 s at 260-308
-#: candidates)
+#: first time check, handing the solution back) and reading the solution, per arc (measured)
 SOLVER_S_PER_ARC = 4e-6
 #: CP-SAT is not started (the model not built) with less than MIN_SOLVE_S + MIN_SOLVE_S_PER_ARC *
 #: arcs left for it: the warm start is kept. Given a complete, feasible hint it still returns
-#: nothing (UNKNOWN) until its presolve (probing: 1 deterministic second) is done; measured time
-#: to its first solution, 2 workers on one core: 0.02 s at 650 arcs, 0.34-0.53 s at 5-7k, 1.6-1.9 s
-#: at 15-23k, 2.4-3.8 s at 40-95k arcs (40-111 us per arc; 12 groups of 13-171 curves, two Cura
-#: files and random lines). Under a budget, 40 groups of 32-39 curves given ~0.08 s each spent
-#: 3 s of a 4 s solve on models that returned nothing
+#: nothing (UNKNOWN) until its presolve is done, which takes about this long (docs/BENCHMARKS.md)
 MIN_SOLVE_S = 0.01
 MIN_SOLVE_S_PER_ARC = 3e-5
 #: variables written per step of ``_Model.build`` (the deadline is checked between steps)

@@ -27,9 +27,8 @@ from .greedy import (IMPROVE_EPS_MM, clusters, improve, keep_smallest, nearest_n
                      orient_dp, path_cost)
 from .problem import Group
 
-#: kicks per curve in the group, and the cap. Measured on the 12 hardest groups of
-#: bench/ordering_peers.py (26-78 curves): ~3 kicks per curve matched LKH-3's tour on 9, ~15 on
-#: 10 and beat it on 1; the other 2 are left to the exact step. A kick costs ~0.15 ms at 60 curves.
+#: kicks per curve in the group, and the cap: enough to match LKH-3's tour on most of the hardest
+#: peer groups (docs/BENCHMARKS.md, "Curve-ordering constants"); a kick costs ~0.15 ms at 60 curves
 KICKS_PER_CURVE = 15
 MAX_KICKS = 3000
 #: longest segment a kick moves (a local double bridge: far-apart segments rarely pay on layers)

@@ -39,9 +39,7 @@ _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
 #: travel edges per node in the first LP (nearest other-curve end points)
 K_NEIGHBOURS = 8
 #: no branching when reduced-cost fixing leaves more columns than this per node: the root gap
-#: is then too wide to close within seconds (measured with HiGHS's MIP, before our own
-#: branch-and-cut: 166 k columns for a 312-curve group with an 11 % root gap, nothing closed in
-#: 20 s)
+#: is then too wide to close within seconds (docs/BENCHMARKS.md, "Curve-ordering constants")
 MAX_BRANCH_COLUMNS_PER_NODE = 40
 #: ILS kicks per curve spent on the path built from the root LP point (it starts close to the
 #: optimum; the warm start's search already spent its share)
@@ -331,8 +329,8 @@ class SymmetricModel:
         rc = self.rc
         col_rc = np.asarray(h.getSolution().col_dual, float)
         n_old = len(col_rc)
-        gap = best_obj - bound + 1e-6
-        iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(rc) & (rc <= gap), 1))
+        open_mm = best_obj - bound + 1e-6       # UB - LB: an edge costing more is in no better path
+        iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(rc) & (rc <= open_mm), 1))
         if n_old + len(iu) > MAX_BRANCH_COLUMNS_PER_NODE * self.N:
             return best, best_obj, bound, False
         self.add_columns(iu, iv)
