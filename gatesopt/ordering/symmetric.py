@@ -15,6 +15,10 @@ enter when their reduced cost is negative (column generation); at the end every 
 reduced cost ``rc_e`` proves that no path cheaper than the incumbent uses it when
 ``rc_e > UB - LB`` (reduced-cost fixing), so the branch-and-cut runs on the sparse graph and its
 optimum is the optimum of the whole problem.
+
+The graph, the matching's odd sets and the compiled graph kernels are in ``symmetric_graph``; the
+separation of subtour and blossom cuts in ``separation``; this module holds the LP model
+(``SymmetricModel``: columns, rows, duals, pricing, root, branch-and-cut) and ``solve``.
 """
 from __future__ import annotations
 
