@@ -55,7 +55,7 @@ def run(args) -> None:
                 s = dict(res.summary)
                 sizes = np.diff(res.problem.group_curve_start)
                 groups = [{"n": int(sizes[g]), "status": gs.status, "gap": gs.gap,
-                           "solve_s": gs.solve_s, "method": gs.method}
+                           "solve_s": gs.solve_s, "method": gs.formulation}
                           for g, gs in enumerate(res.solution.groups)
                           if res.problem.group_reorderable[g]]
                 s.update(file=name, slicer=man[name]["slicer"], infill=man[name]["infill_pattern"],

@@ -11,7 +11,7 @@ each bound gatesopt has against the best path found:
 
 - *cheap*: ``bounds.lower_bound_mm``, the bound a budget's fallback groups reported before the
   matching;
-- *matching*: the cheapest perfect matching of the end points (``symmetric.matching_path``: the
+- *matching*: the cheapest perfect matching of the end points (``symmetric_graph.matching_path``: the
   bound fallback groups report now, its time, and its patched path polished by the local search);
 - *degree LP*: the symmetric model's LP with pricing but no cuts (a fractional matching);
 - *root*: the same LP with subtour and blossom cuts (``SymmetricModel.root``), and its time;
@@ -47,10 +47,10 @@ FALLBACK_S_PER_CURVE = 0.002
 def _groups(file: str, mode: str, lo: int, hi: int):
     import gatesopt
     from gatesopt.ordering import OrderingOptions, build
-    from gatesopt.ordering import symmetric
+    from gatesopt.ordering import symmetric_graph
     from ordering_peers import group_instances
     prob = build(gatesopt.parse(str(INSTANCES / file)), OrderingOptions(mode=mode))
-    return [(g, grp) for g, grp in group_instances(prob, lo, hi) if symmetric.applies(grp)]
+    return [(g, grp) for g, grp in group_instances(prob, lo, hi) if symmetric_graph.applies(grp)]
 
 
 def _root(grp, incumbent, cuts: bool, seconds: float = 30.0):
@@ -62,7 +62,7 @@ def _root(grp, incumbent, cuts: bool, seconds: float = 30.0):
 
 
 def measure(args) -> None:
-    from gatesopt.ordering import auto, greedy, ils, symmetric
+    from gatesopt.ordering import auto, greedy, ils, symmetric, symmetric_graph
     auto.warm_up()
     gs = _groups(args.file, args.mode, args.min_curves, args.max_curves)
     rng = np.random.default_rng(args.seed)
@@ -79,10 +79,10 @@ def measure(args) -> None:
     with open(args.out, "a") as out:
         for g, grp, at1 in picked:
             heur = greedy.solve(grp)
-            fb = ils.improve_ils(grp, heur.order, local_optimum=heur.method == "greedy",
+            fb = ils.improve_ils(grp, heur.order, local_optimum=heur.formulation == "greedy",
                                  deadline=time.perf_counter() + FALLBACK_S_PER_CURVE * grp.n_curves)
             t = time.perf_counter()
-            m_order, m_bound = symmetric.matching_path(grp)
+            m_order, m_bound = symmetric_graph.matching_path(grp)
             m_s = time.perf_counter() - t
             m_path = grp.path_cost_mm(greedy.improve(grp, m_order)) if m_order is not None else None
             _, deg, deg_s = _root(grp, heur.order, cuts=False)
@@ -147,7 +147,7 @@ def report(args) -> str:
         for name, vals, ts in (
                 ("cheap bound (`bounds.py`, what fallback groups reported before the matching)", [_pct(o, r["cheap_mm"]) for o, r in zip(opt, allr)], None),
                 ("degree LP (no cuts, with pricing)", [_pct(o, r["degree_lp_mm"]) for o, r in zip(opt, allr)], [r["degree_lp_s"] for r in allr]),
-                *([("matching bound (`symmetric.matching_path`: graph, matching, patched path; what fallback groups report)", [_pct(o, r["matching_mm"]) for o, r in zip(opt, allr)],
+                *([("matching bound (`symmetric_graph.matching_path`: graph, matching, patched path; what fallback groups report)", [_pct(o, r["matching_mm"]) for o, r in zip(opt, allr)],
                     [r["matching_s"] for r in allr])] if has_matching else []),
                 ("root LP (subtour + blossom cuts)", [_pct(o, r["root_mm"]) for o, r in zip(opt, allr)], [r["root_s"] for r in allr]),
                 ("greedy path (above)", [100 * (r["greedy_mm"] - o) / o for o, r in zip(opt, allr)], None),

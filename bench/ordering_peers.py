@@ -54,7 +54,6 @@ LKH_PRECISION = 100   # LKH's default: internal costs are PRECISION * c
 
 def group_instances(problem, min_curves, max_curves):
     """Non-fixed groups with min..max curves, as solver instances (deduplicated)."""
-    from gatesopt.ordering.layers import _key
     out, seen = [], set()
     pos = np.asarray(problem.origin_xy, float)
     for g in range(problem.n_groups):
@@ -65,7 +64,7 @@ def group_instances(problem, min_curves, max_curves):
         n = len(curves)
         if not problem.group_fixed[g] and min_curves <= n <= max_curves:
             grp = problem.group(g, pos, end)
-            k = _key(grp)
+            k = grp.key()
             if k not in seen:
                 seen.add(k)
                 out.append((g, grp))
@@ -238,8 +237,8 @@ def score(grp, order):
 def run(args) -> None:
     import gatesopt
     from gatesopt.ordering import OrderingOptions, build
-    from gatesopt.ordering.layers import FORMULATIONS
-    exact_fn = FORMULATIONS[args.formulation]
+    from gatesopt.ordering.formulations import group_solver
+    exact_fn = group_solver(args.formulation)
     files = [f for f in args.files.split(",") if f]
     todo = []
     for name in files:
@@ -275,7 +274,7 @@ def run(args) -> None:
         row = {"run": run_id, "file": name, "mode": mode, "group": int(g), "label": grp.label,
                "curves": grp.n_curves, "cands": grp.n_cands, "has_end": grp.end_xy is not None,
                "exact": {"travel_mm": ex_obj, "status": ex.status, "bound_mm": ex.bound_mm,
-                         "gap": ex.gap, "method": ex.method, "solve_s": ex_s, "error": err},
+                         "gap": ex.gap, "method": ex.formulation, "solve_s": ex_s, "error": err},
                "lkh": {"travel_mm": lk_obj, "solve_s": lk.get("solve_s"), "wall_s": lk.get("wall_s"),
                        "contiguous": lk.get("contiguous"), "scale": lk.get("scale"), "error": lk_err},
                "ortools": {"travel_mm": ot_obj, "solve_s": ot.get("solve_s"), "error": ot_err},

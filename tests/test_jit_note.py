@@ -40,7 +40,7 @@ def test_compile_spans_are_counted_from_a_given_time():
 def test_a_budget_does_not_count_time_spent_compiling(monkeypatch):
     """A group's limit under a budget is what is left of it; seconds the process spent compiling
     kernels since the solve began are not gone (as if a first run were a later one)."""
-    from gatesopt.ordering import layers
+    from gatesopt.ordering import runner as runner_module
     from gatesopt.ordering.polylines import from_polylines
     from gatesopt.ordering.problem import GroupSolution, OrderingOptions
     rng = np.random.default_rng(3)
@@ -57,7 +57,7 @@ def test_a_budget_does_not_count_time_spent_compiling(monkeypatch):
         t0 = time.perf_counter() - 0.3          # 0.3 s of a 0.5 s budget gone, to compiling or not
         monkeypatch.setattr(_jit, "compile_s_since",
                             (lambda t: time.perf_counter() - t) if compiling else (lambda t: 0.0))
-        runner = layers._GroupRunner(prob, record, 5.0, 0.5, t0, {}, other_alive=lambda: True)
+        runner = runner_module.GroupRunner(prob, record, 5.0, 0.5, t0, {}, other_alive=lambda: True)
         runner.run(0, prob.group(0, prob.origin_xy))
     assert given[0] < 0.21 and given[1] > 0.4, given
 
@@ -80,9 +80,9 @@ def test_the_cli_notes_what_a_command_compiled_on_stderr_only(monkeypatch, tmp_p
 def test_a_group_whose_limit_went_to_compiling_is_solved_again(monkeypatch):
     """A group solve that compiled kernels (a first run) and did not prove its group runs once
     more; one that compiled nothing, or proved its group, does not."""
-    from gatesopt.ordering import layers
     from gatesopt.ordering.polylines import from_polylines
     from gatesopt.ordering.problem import GroupSolution, OrderingOptions
+    from gatesopt.ordering.runner import GroupRunner
     rng = np.random.default_rng(4)
     prob = from_polylines([[rng.uniform(0, 60, (2, 2)) for _ in range(20)] for _ in range(3)],
                           options=OrderingOptions(mode="free"))
@@ -96,7 +96,7 @@ def test_a_group_whose_limit_went_to_compiling_is_solved_again(monkeypatch):
         status = "optimal" if len(calls) == 3 else "feasible"
         return GroupSolution.make(order, grp.path_cost_mm(order), 0.0, status, 0.0, "stand-in")
 
-    runner = layers._GroupRunner(prob, solver, 1.0, None, time.perf_counter(), {})
+    runner = GroupRunner(prob, solver, 1.0, None, time.perf_counter(), {})
     assert runner.run(0, prob.group(0, prob.origin_xy)).status == "feasible"
     assert len(calls) == 2                  # compiled 1 s, not proven: solved again
     assert runner.run(1, prob.group(1, prob.origin_xy)).status == "optimal"

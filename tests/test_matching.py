@@ -7,7 +7,7 @@ import functools
 import numpy as np
 import pytest
 
-from gatesopt.ordering import auto, dp, symmetric
+from gatesopt.ordering import auto, dp, symmetric, symmetric_graph
 from gatesopt.ordering.matching import min_cost_perfect_matching
 
 from tests.test_ordering import random_problem
@@ -122,14 +122,14 @@ def test_matching_bound_and_path_on_ordering_groups(seed):
     prob = random_problem(900 + seed, 12, closed_share=0.3 if seed % 2 else 0.0,
                           clustered=seed % 3 == 0)
     grp = prob.group(0, prob.origin_xy, None if seed % 4 else np.array([5.0, 5.0]))
-    assert symmetric.applies(grp) and dp.fits(grp)
+    assert symmetric_graph.applies(grp) and dp.fits(grp)
     opt = dp.solve(grp)
-    order, bound = symmetric.matching_path(grp)
+    order, bound = symmetric_graph.matching_path(grp)
     grp.check_order(order)
     assert bound <= opt.objective_mm + 1e-6
     assert grp.path_cost_mm(order) >= opt.objective_mm - 1e-6
     model = symmetric.SymmetricModel(grp, opt.order)
-    _, masks, _ = symmetric.odd_sets(model.C, model.deg, grp.end_xy is None)
+    _, masks, _ = symmetric_graph.odd_sets(model.C, model.deg, grp.end_xy is None)
     travel = model.tour_edges(opt.order)
     for inside in masks:
         assert np.count_nonzero(inside[travel[:, 0]] != inside[travel[:, 1]]) >= 1
@@ -144,7 +144,7 @@ def test_auto_takes_the_matching_bound_and_stays_exact():
     opt = dp.solve(grp).objective_mm
     quick = auto.solve(grp, time_limit_s=1e-4)
     assert quick.bound_mm <= opt + 1e-6 and quick.objective_mm >= opt - 1e-6
-    _, mbound = symmetric.matching_path(grp)
+    _, mbound = symmetric_graph.matching_path(grp)
     assert quick.bound_mm >= mbound - 1e-9
     full = auto.solve(grp, time_limit_s=5.0)
     assert full.status == "optimal" and full.objective_mm == pytest.approx(opt, abs=1e-6)

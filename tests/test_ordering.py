@@ -1,7 +1,6 @@
 """Curve ordering: formulations against brute force and each other; build/emit/verify on G-code."""
 from __future__ import annotations
 
-import importlib
 import itertools
 from pathlib import Path
 
@@ -463,27 +462,27 @@ def test_emit_memo_reuses_unchanged_layers_and_writes_what_a_fresh_emit_writes(n
 @pytest.mark.parametrize("name", ["star_lines_m82.gcode", "cyl_lines_zhop.gcode"])
 def test_emit_copies_unchanged_curves_in_one_piece_as_line_by_line(name, monkeypatch):
     # an unchanged curve whose lines are all extruding steps is copied as one slice of the file
-    # (_Writer.copy_steps) unless an E word must be re-numbered: the text must be the one the
+    # (Writer.copy_steps) unless an E word must be re-numbered: the text must be the one the
     # line-by-line copy writes, for a re-ordered solution and for the slicer's own order
-    emit_module = importlib.import_module("gatesopt.ordering.emit")   # the name is the function
+    from gatesopt.ordering import writer
     from gatesopt.ordering.pipeline import keep_layers
     prog = gatesopt.parse(str(PROJECT_INSTANCES / name))
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
     kept = keep_layers(prob, sol, list(range(prog.n_layers)))
     used = []
-    copy_steps = emit_module._Writer.copy_steps
+    copy_steps = writer.Writer.copy_steps
 
     def counted(self, *a):
         ok = copy_steps(self, *a)
         used.append(ok)
         return ok
-    monkeypatch.setattr(emit_module._Writer, "copy_steps", counted)
+    monkeypatch.setattr(writer.Writer, "copy_steps", counted)
     fast = [emit(prog, prob, s) for s in (sol, kept)]
     assert sum(used) >= 10                          # the one-piece copy did happen
     if name.endswith("_m82.gcode"):
         assert not all(used)                        # and an absolute-E layer re-ordered declined it
-    monkeypatch.setattr(emit_module._Writer, "copy_steps", lambda self, *a: False)
+    monkeypatch.setattr(writer.Writer, "copy_steps", lambda self, *a: False)
     assert fast == [emit(prog, prob, s) for s in (sol, kept)]
     assert fast[1] == prog.to_gcode()               # the slicer's order: the file itself
 
@@ -660,14 +659,14 @@ def test_an_e_reset_is_not_a_barrier_but_a_coordinate_reset_is(reset):
 def test_look_ahead_ends_a_group_where_the_next_small_group_is_cheap_to_enter(monkeypatch):
     """Six short strokes in a row, started right of their middle: alone, the shortest path goes
     right first and ends at the left end (74 mm); the next layer's one stroke lies right of the
-    row. The look-ahead (layers._look_ahead) ends the row at its right end instead, which costs
+    row. The look-ahead (chain.look_ahead) ends the row at its right end instead, which costs
     2 mm more in the row and saves ~50 mm into the next layer."""
-    from gatesopt.ordering import layers
+    from gatesopt.ordering import chain, layers
     row = [np.array([[x, 0.0], [x, 1.0]]) for x in range(50, -10, -10)]     # the slicer's: right first
     nxt = [np.array([[55.0, 1.0], [55.0, 2.0]])]
     prob = from_polylines([row, nxt], origin_xy=(26.0, 1.0))
     ahead = solve(prob, "auto", time_limit_s=1.0)
-    monkeypatch.setattr(layers, "LOOKAHEAD_CURVES", 0)
+    monkeypatch.setattr(chain, "LOOKAHEAD_CURVES", 0)
     alone = solve(prob, "auto", time_limit_s=1.0)
     greedy = solve(prob, "greedy")
     assert alone.travel_after_mm > 120.0          # the row ends at x = 0, 55 mm from the stroke
@@ -744,7 +743,7 @@ def test_a_gated_file_keeps_the_order_of_its_gated_layers():
     (no curve re-ordered or reversed past it), and ordering it changes no extruded move."""
     from gatesopt.gating import GatingOptions
     from gatesopt.gating.pipeline import run
-    from gatesopt.ordering.build import layout
+    from gatesopt.ordering.layout import layout
     prog = gatesopt.parse(_handmade_gcode())
     assert not any("motor" in w for w in layout(prog).layer_why)
     gated = run(prog, GatingOptions(rotate="none"), order=False).output
@@ -786,13 +785,13 @@ def test_emit_renumbers_e_on_moves_only():
     by float noise from the original's (rebuilt travels), a move's E word is re-numbered but the
     motor line is copied as written (it was written 'M84 X Y E450.09901', which verify then took
     for an added gating line in the wrong dialect: issue 37)."""
-    from gatesopt.ordering.build import layout
-    from gatesopt.ordering.emit import _Writer
+    from gatesopt.ordering.layout import layout
+    from gatesopt.ordering.writer import Writer
     text = ("M82\nG92 E0\n;LAYER:0\nG1 Z0.2 F3000\nG0 X10 Y10 F6000\nG1 X20 Y10 E1.0 F1200\n"
             "G1 X30 Y10 E2.0\nM84 X Y E ;Disable all steppers but Z\n")
     program = gatesopt.parse(text)
     lay = layout(program)
-    w = _Writer(program, lay)
+    w = Writer(program, lay)
     lines = text.splitlines()
     for i in range(6):
         w.copy_line(i)

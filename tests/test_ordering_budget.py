@@ -1,16 +1,29 @@
-"""Budget plan (layers._BudgetPlan), auto's order of DP and symmetric model for 13-16 curves, and
+"""Budget plan (budget.BudgetPlan), auto's order of DP and symmetric model for 13-16 curves, and
 the compiled kernels that replaced library calls (nearest-neighbour scan, union-find components):
 each against the behaviour it must keep."""
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 
-from gatesopt.ordering import auto, dp, greedy, layers, symmetric
+from gatesopt.ordering import auto, budget, dp, formulations, greedy, layers, symmetric_graph
 from gatesopt.ordering.polylines import from_polylines
 from gatesopt.ordering.problem import GroupSolution, OrderingOptions
+from gatesopt.ordering.runner import GroupRunner
+from gatesopt.solvers import Formulation
 
 from test_ordering import random_problem
+
+
+def _stand_in(monkeypatch, name: str, fn) -> None:
+    """Formulation ``name`` answered by ``fn`` in this process: its registry record points at this
+    module, whose ``solve`` is ``fn`` while the test runs (a helper process, a fresh interpreter,
+    still has the real one). Its paths are chained with look-ahead; no kernels are warmed up."""
+    monkeypatch.setattr(sys.modules[__name__], "solve", fn, raising=False)
+    monkeypatch.setitem(formulations.FORMULATIONS, name,
+                        Formulation(name, __name__, capabilities=frozenset({"look_ahead"})))
 
 
 def _layers_of(sizes, seed=0):
@@ -21,7 +34,7 @@ def _layers_of(sizes, seed=0):
 
 def _shape(n):
     """What the plan charges per unit of the learnt ratio for an exact group of n curves."""
-    return float(auto.exact_time_s(n)) * (n / layers.EXACT_SHAPE_CURVES) ** layers.EXACT_SHAPE_EXPONENT
+    return float(auto.exact_time_s(n)) * (n / budget.EXACT_SHAPE_CURVES) ** budget.EXACT_SHAPE_EXPONENT
 
 
 def _charge(n, ratio):
@@ -31,7 +44,7 @@ def _charge(n, ratio):
 def test_plan_charges_an_exact_group_by_a_shape_that_grows_faster_than_its_exact_time():
     sizes = [150, 20]
     prob = from_polylines(_layers_of(sizes, seed=2), options=OrderingOptions(mode="free"))
-    plan = layers._BudgetPlan(prob)
+    plan = budget.BudgetPlan(prob)
     # small groups use a smaller share of their exact time than large ones (measured on the
     # corpus): one learnt ratio, applied to a shape growing with n, charges them less
     share = plan.shape_s / plan.exact_s                 # sorted by size: 20, then 150
@@ -41,19 +54,19 @@ def test_plan_charges_an_exact_group_by_a_shape_that_grows_faster_than_its_exact
     # charged more than its exact time, so what pays that time still gets it
     plan.measured(0, float(auto.exact_time_s(150)), 50 * _shape(150))
     assert plan.used_ratio * _shape(20) > float(auto.exact_time_s(20))
-    left = float(auto.exact_time_s(20)) + layers.HEURISTIC_S_PER_CURVE * 150 + 0.001
+    left = float(auto.exact_time_s(20)) + budget.HEURISTIC_S_PER_CURVE * 150 + 0.001
     assert plan.limit(1, left) >= float(auto.exact_time_s(20))
 
 
 def test_plan_gives_the_smallest_groups_their_exact_time_first():
     sizes = [80, 20, 150, 30, 5, 60]          # 5 curves: the DP's, no claim on the budget
     prob = from_polylines(_layers_of(sizes), options=OrderingOptions(mode="free"))
-    plan = layers._BudgetPlan(prob)
+    plan = budget.BudgetPlan(prob)
     exact = {n: float(auto.exact_time_s(n)) for n in sizes}
-    heur = {n: layers.HEURISTIC_S_PER_CURVE * n for n in sizes}
+    heur = {n: budget.HEURISTIC_S_PER_CURVE * n for n in sizes}
     # an exact group is charged its shape times the ratio proofs used of it so far
     r = plan.used_ratio
-    assert r == pytest.approx(layers.EXACT_PRIOR_RATIO)
+    assert r == pytest.approx(budget.EXACT_PRIOR_RATIO)
     # enough for the charge of 20 and 30, heuristic for the rest, and 1 ms to spare
     left = _charge(20, r) + _charge(30, r) + heur[80] + heur[150] + heur[60] + 0.001
     scale = left / (left - 0.001)
@@ -72,23 +85,23 @@ def test_plan_gives_the_smallest_groups_their_exact_time_first():
 def test_plan_learns_what_proofs_use_of_their_exact_time():
     sizes = [80, 20, 150, 30, 60]
     prob = from_polylines(_layers_of(sizes, seed=4), options=OrderingOptions(mode="free"))
-    plan = layers._BudgetPlan(prob)
+    plan = budget.BudgetPlan(prob)
     exact = {n: float(auto.exact_time_s(n)) for n in sizes}
-    heur = {n: layers.HEURISTIC_S_PER_CURVE * n for n in sizes}
+    heur = {n: budget.HEURISTIC_S_PER_CURVE * n for n in sizes}
     # a group given less than its exact time did not try the exact step: not counted
     plan.measured(0, 0.5 * exact[80], 0.5 * exact[80])
-    assert plan.used_ratio == pytest.approx(layers.EXACT_PRIOR_RATIO)
+    assert plan.used_ratio == pytest.approx(budget.EXACT_PRIOR_RATIO)
     # two proofs that took 1 % of their exact time: the ratio falls towards it
     for g, n in ((1, 20), (3, 30)):
         plan.measured(g, exact[n], 0.01 * exact[n])
         plan.done(g)
-    learnt = ((layers.EXACT_PRIOR_RATIO * layers.EXACT_PRIOR_S + 0.01 * (exact[20] + exact[30]))
-              / (layers.EXACT_PRIOR_S + _shape(20) + _shape(30)))
+    learnt = ((budget.EXACT_PRIOR_RATIO * budget.EXACT_PRIOR_S + 0.01 * (exact[20] + exact[30]))
+              / (budget.EXACT_PRIOR_S + _shape(20) + _shape(30)))
     assert plan.used_ratio == pytest.approx(learnt)
-    assert learnt < 0.85 * layers.EXACT_PRIOR_RATIO
+    assert learnt < 0.85 * budget.EXACT_PRIOR_RATIO
     # what is left pays for the exact time of 60 and 80 at the learnt ratio, not at the prior
     left = _charge(60, learnt) + _charge(80, learnt) + heur[150] + 0.001
-    assert left < _charge(60, layers.EXACT_PRIOR_RATIO) + _charge(80, layers.EXACT_PRIOR_RATIO) + heur[150]
+    assert left < _charge(60, budget.EXACT_PRIOR_RATIO) + _charge(80, budget.EXACT_PRIOR_RATIO) + heur[150]
     assert plan.limit(0, left) >= exact[80]          # planned exact
     assert plan.limit(2, left) < exact[150]
 
@@ -96,8 +109,8 @@ def test_plan_learns_what_proofs_use_of_their_exact_time():
 def test_plan_scales_down_when_even_the_heuristic_share_does_not_fit():
     sizes = [40, 50]
     prob = from_polylines(_layers_of(sizes, seed=1), options=OrderingOptions(mode="free"))
-    plan = layers._BudgetPlan(prob)
-    heur = [layers.HEURISTIC_S_PER_CURVE * n for n in sizes]
+    plan = budget.BudgetPlan(prob)
+    heur = [budget.HEURISTIC_S_PER_CURVE * n for n in sizes]
     left = 0.5 * sum(heur)
     assert plan.limit(0, left) == pytest.approx(heur[0] * 0.5)
     assert plan.limit(0, left) + plan.limit(1, left) == pytest.approx(left)
@@ -116,7 +129,7 @@ def test_budgeted_solve_gives_small_groups_the_exact_time_first(monkeypatch):
         obj = grp.path_cost_mm(order)
         return GroupSolution.make(order, obj, 0.0, "fallback", 0.0, "stand-in")
 
-    monkeypatch.setitem(layers.FORMULATIONS, "auto", record)
+    _stand_in(monkeypatch, "auto", record)
     layers.solve(prob, "auto", time_limit_s=2.0, budget_s=0.4)
     assert all(given[n] >= auto.exact_time_s(n) for n in (20, 22, 24)), given
     assert given[200] < auto.exact_time_s(200), given
@@ -136,10 +149,9 @@ def test_a_group_never_gets_more_than_the_wall_clock_time_left(monkeypatch):
         return GroupSolution.make(order, grp.path_cost_mm(order), 0.0, "fallback", 0.0, "stand-in")
 
     import time
-    runner = layers._GroupRunner(prob, record, 5.0, 0.5, time.perf_counter(), {},
-                                 other_alive=lambda: True)
+    runner = GroupRunner(prob, record, 5.0, 0.5, time.perf_counter(), {}, other_alive=lambda: True)
     runner.run(0, prob.group(0, prob.origin_xy))
-    after = layers.OVERHEAD_S_PER_CURVE * 6 + layers.TAIL_S_PER_CURVE * 156
+    after = budget.OVERHEAD_S_PER_CURVE * 6 + budget.TAIL_S_PER_CURVE * 156
     assert runner.rest_s(0) == pytest.approx(after)
     assert 0.4 < given[0] <= 0.5 - after, given
 
@@ -149,22 +161,22 @@ def test_auto_tries_the_model_before_the_dp_above_12_curves_and_stays_exact(seed
     auto.warm_up()          # on a fresh clone the first call compiles the kernels (seconds)
     prob = random_problem(700 + seed, 14, closed_share=0.0, clustered=seed % 2 == 0)
     grp = prob.group(0, prob.origin_xy)
-    assert dp.fits(grp) and symmetric.applies(grp)
+    assert dp.fits(grp) and symmetric_graph.applies(grp)
     opt = dp.solve(grp).objective_mm
     a = auto.solve(grp, time_limit_s=5.0)
-    assert a.status == "optimal" and a.method in ("auto:milp", "auto:bound", "auto:matching",
+    assert a.status == "optimal" and a.formulation in ("auto:milp", "auto:bound", "auto:matching",
                                                     "auto:ils+bound")
     assert a.objective_mm == pytest.approx(opt, abs=1e-6)
     # a limit below the DP's own time (it cannot be stopped): no DP, the heuristic path, never
     # called optimal unless it is
     assert dp.time_s(grp) > 1e-4
     b = auto.solve(grp, time_limit_s=1e-4)
-    assert b.method != "auto:dp" and b.objective_mm >= opt - 1e-6
+    assert b.formulation != "auto:dp" and b.objective_mm >= opt - 1e-6
     assert b.status != "optimal" or b.objective_mm == pytest.approx(opt, abs=1e-6)
     # no time for the model but enough for the DP (by its estimate): the DP, still exact
     monkeypatch.setattr(dp, "S_PER_WORK", 1e-4 / dp.work(grp))
     c = auto.solve(grp, time_limit_s=2e-4)
-    assert c.status == "optimal" and c.method == "auto:dp"
+    assert c.status == "optimal" and c.formulation == "auto:dp"
     assert c.objective_mm == pytest.approx(opt, abs=1e-6)
 
 
@@ -189,7 +201,7 @@ def test_components_equal_scipy(seed):
     n = 30 + 20 * seed
     m = rng.integers(0, 2 * n)
     r, c = rng.integers(0, n, m), rng.integers(0, n, m)
-    k, lab = symmetric.components(n, r, c)
+    k, lab = symmetric_graph.components(n, r, c)
     k2, lab2 = connected_components(coo_matrix((np.ones(m), (r, c)), shape=(n, n)), directed=False)
     assert k == k2
     np.testing.assert_array_equal(lab, lab2)
@@ -222,7 +234,7 @@ def test_helper_process_gives_the_same_answer_as_one_process(monkeypatch):
         time.sleep(0.4)         # 20 groups: 8 s, time for a fresh interpreter to compile and answer
         return greedy.solve(grp, **kw)
 
-    monkeypatch.setitem(layers.FORMULATIONS, "greedy", slow_greedy)
+    _stand_in(monkeypatch, "greedy", slow_greedy)
     two = layers.solve(prob, "greedy", time_limit_s=1.0, workers=2)
     assert len(calls) < len(helper.groups_to_solve(prob)), "the helper answered no group"
     np.testing.assert_array_equal(one.curve_order, two.curve_order)
@@ -293,15 +305,15 @@ def test_helper_solves_the_chain_from_the_back(monkeypatch):
         time.sleep(0.4)
         return dp.solve(grp, **kw)
 
-    monkeypatch.setitem(layers.FORMULATIONS, "dp", slow_dp)
+    _stand_in(monkeypatch, "dp", slow_dp)
     two = layers.solve(prob, "dp", workers=2)
     assert len(calls) < prob.n_groups, "the helper answered no group"
-    back = [g for g, gs in enumerate(two.groups) if gs.method.endswith("+back")]
+    back = [g for g, gs in enumerate(two.groups) if gs.formulation.endswith("+back")]
     assert back, "no group was solved from the back"
     checked = 0
     for g in back:
         gs, nxt = two.groups[g], (two.groups[g + 1] if g + 1 < prob.n_groups else None)
-        if nxt is None or "+kept" in nxt.method or "+kept" in gs.method:
+        if nxt is None or "+kept" in nxt.formulation or "+kept" in gs.formulation:
             continue
         # proven optimal for its end (the entry of the next group's path), its start free
         entry = prob.group(g + 1, np.zeros(2)).cand_entry_xy[nxt.order[0]]
@@ -315,7 +327,7 @@ def test_helper_solves_the_chain_from_the_back(monkeypatch):
     # the file's last group was solved from a guessed start and scored from the real one: its
     # bound must hold from there
     last, prev = two.groups[-1], two.groups[-2]
-    if "+kept" not in prev.method:
+    if "+kept" not in prev.formulation:
         start = prob.group(prob.n_groups - 2, np.zeros(2)).cand_exit_xy[prev.order[-1]]
         grp = prob.group(prob.n_groups - 1, start)
         assert last.objective_mm == pytest.approx(grp.path_cost_mm(last.order))
@@ -383,7 +395,7 @@ def test_one_slow_group_early_does_not_starve_the_groups_after_it(monkeypatch):
         order = np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
         return GroupSolution.make(order, grp.path_cost_mm(order), 0.0, "fallback", 0.0, "stand-in")
 
-    monkeypatch.setitem(layers.FORMULATIONS, "auto", record)
+    _stand_in(monkeypatch, "auto", record)
     layers.solve(prob, "auto", time_limit_s=2.0, budget_s=2.0)
     small = [lim for n, lim in given if n == 20]
     assert len(small) == 60
@@ -409,11 +421,11 @@ def test_a_fallback_group_runs_ils_only_when_its_limit_leaves_time_for_it(monkey
     assert limit < auto.exact_time_s(grp.n_curves)
     small = auto.solve(grp, time_limit_s=limit)
     assert small.status in ("fallback", "optimal") and calls == []
-    assert small.method in ("auto:greedy", "auto:matching", "auto:bound")
+    assert small.formulation in ("auto:greedy", "auto:matching", "auto:bound")
     # no exact step for this group (none may take it), and time enough: ILS runs
     monkeypatch.setattr(auto, "SYMMETRIC_MAX_CANDS", 0)
     monkeypatch.setattr(auto, "EXACT_MAX_CANDS", 0)
     big = auto.solve(grp, time_limit_s=0.2)
     if small.status != "optimal":
-        assert len(calls) == 1 and big.method == "auto:ils"
+        assert len(calls) == 1 and big.formulation == "auto:ils"
         assert big.objective_mm <= small.objective_mm + 1e-9

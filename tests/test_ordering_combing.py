@@ -7,8 +7,8 @@ import pytest
 
 import gatesopt
 from gatesopt.ordering import OrderingOptions, build
-from gatesopt.ordering.build import layout
-from gatesopt.ordering.emit import WallCrossing, travel_style
+from gatesopt.ordering.layout import layout
+from gatesopt.ordering.travel import WallCrossing, travel_style
 from gatesopt.ordering.pipeline import order_program
 
 from conftest import SHARED_INSTANCES, needs_shared

@@ -164,7 +164,7 @@ def test_auto_spends_the_limit_the_exact_step_left_on_the_path(monkeypatch):
     monkeypatch.setattr(milp, "solve", gave_up)
     a = auto.solve(grp, time_limit_s=2.0)
     assert calls, "the group never reached the exact step"
-    assert a.method == "auto:milp+ils" and a.status == "feasible"
+    assert a.formulation == "auto:milp+ils" and a.status == "feasible"
     # auto never keeps an exact step's path worse than its own warm start: ILS went on from that
     assert a.objective_mm < greedy.solve(grp).objective_mm - 1e-6
     assert a.objective_mm == pytest.approx(grp.path_cost_mm(a.order))
@@ -177,4 +177,4 @@ def test_auto_spends_the_limit_the_exact_step_left_on_the_path(monkeypatch):
 
     monkeypatch.setattr(milp, "solve", used_it_all)
     b = auto.solve(grp, time_limit_s=0.3)
-    assert b.method == "auto:milp" and b.objective_mm > a.objective_mm
+    assert b.formulation == "auto:milp" and b.objective_mm > a.objective_mm

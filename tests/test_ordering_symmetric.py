@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from gatesopt.ordering import auto, cpsat, dp, greedy, milp, symmetric
+from gatesopt.ordering import auto, cpsat, dp, greedy, milp, separation, symmetric, symmetric_graph
 from gatesopt.ordering.polylines import from_polylines
 from gatesopt.ordering.problem import OPTIMAL_ABS_TOL_MM
 
@@ -32,7 +32,7 @@ def _groups():
 
 @pytest.mark.parametrize("grp", _groups(), ids=lambda g: f"n{g.n_curves}")
 def test_symmetric_model_matches_the_dp_and_its_bound_is_valid(grp):
-    assert symmetric.applies(grp)
+    assert symmetric_graph.applies(grp)
     opt = dp.solve(grp).objective_mm
     start = greedy.nearest_neighbour(grp)
     order, obj, bound, proven = symmetric.solve(grp, start, time.perf_counter() + 30)
@@ -126,7 +126,7 @@ def test_exact_blossoms_cut_off_what_the_heuristic_left_and_keep_every_path():
     found = raised = 0
     for seed in range(40):
         grp = _chord_group(seed)
-        assert symmetric.applies(grp) and dp.fits(grp)
+        assert symmetric_graph.applies(grp) and dp.fits(grp)
         opt = dp.solve(grp)
         model = symmetric.SymmetricModel(grp, greedy.nearest_neighbour(grp))
         base = model.root(time.perf_counter() + 30, exact_blossoms_s=0.0)
@@ -189,10 +189,10 @@ def test_real_groups_are_proven_and_agree_with_cpsat(name, mode, layer, n_curves
     """Real groups: the symmetric model proves them within seconds; where CP-SAT also proves its
     answer the two optima agree, and the proven optimum is never worse than the ILS path."""
     grp = _slicer_chain_group(name, mode, layer, n_curves)
-    assert symmetric.applies(grp)
+    assert symmetric_graph.applies(grp)
     a = auto.solve(grp, time_limit_s=20.0)
     grp.check_order(a.order)
-    assert a.status == "optimal" and a.method == "auto:milp"
+    assert a.status == "optimal" and a.formulation == "auto:milp"
     assert a.objective_mm - a.bound_mm <= OPTIMAL_ABS_TOL_MM
     m = milp.solve(grp, time_limit_s=20.0)
     assert m.objective_mm == pytest.approx(a.objective_mm, abs=2e-3)
@@ -212,7 +212,7 @@ def test_branch_and_cut_closes_root_gaps_to_the_dp_optimum():
         prob = random_problem(3000 + seed, 13 + seed % 3, closed_share=0.2 if seed % 2 else 0.0,
                               clustered=seed % 3 != 0)
         grp = prob.group(0, prob.origin_xy, end_xy=(25.0, 0.0) if seed % 4 == 1 else None)
-        if not (symmetric.applies(grp) and dp.fits(grp)):
+        if not (symmetric_graph.applies(grp) and dp.fits(grp)):
             continue
         opt = dp.solve(grp).objective_mm
         start = greedy.nearest_neighbour(grp)
@@ -282,7 +282,7 @@ def test_travel_graph_lays_out_open_curves_and_loops():
     prob = from_polylines([lines])
     for end in (None, np.array([20.0, 0.0])):
         grp = prob.group(0, np.array([-1.0, 0.0]), end)
-        pos, node_curve, deg, C, curve_nodes, first_cand = symmetric.travel_graph(grp)
+        pos, node_curve, deg, C, curve_nodes, first_cand = symmetric_graph.travel_graph(grp)
         assert node_curve.tolist() == [-1, -2, 0, 0, 1, 2, 2]
         assert deg.tolist() == [1, 1, 1, 1, 2, 1, 1]
         assert [len(nd) for nd in curve_nodes] == [2, 1, 2]
@@ -303,10 +303,10 @@ def test_tree_cuts_below_gives_nested_cuts_together_smallest_first():
     """A chain 0 - 1 - 2 - 3 - 4 of capacities 1, 0.5, 3, 1.5: the cuts below 2 are nested (each
     holds the next); all three come back in one call, the smallest first, as sides without 0."""
     u, v, w = [0, 1, 2, 3], [1, 2, 3, 4], [1.0, 0.5, 3.0, 1.5]
-    cuts = symmetric.tree_cuts_below(5, u, v, w, 2.0, 40, 10.0)
+    cuts = separation.tree_cuts_below(5, u, v, w, 2.0, 40, 10.0)
     assert [np.flatnonzero(c).tolist() for c in cuts] == [[2, 3, 4], [1, 2, 3, 4], [4]]
-    assert len(symmetric.tree_cuts_below(5, u, v, w, 2.0, 1, 10.0)) == 1
-    ring = symmetric.tree_cuts_below(5, [0, 1, 2, 3, 4], [1, 2, 3, 4, 0], np.ones(5), 2.0, 40, 10.0)
+    assert len(separation.tree_cuts_below(5, u, v, w, 2.0, 1, 10.0)) == 1
+    ring = separation.tree_cuts_below(5, [0, 1, 2, 3, 4], [1, 2, 3, 4, 0], np.ones(5), 2.0, 40, 10.0)
     assert ring == []                   # every cut of a ring of 1s crosses it twice
 
 
@@ -321,7 +321,7 @@ def test_tree_cuts_below_agree_with_every_cut_by_brute_force(seed):
     u, v = iu[keep], iv[keep]
     w = np.round(rng.random(len(u)) * 2, 2)
     limit = 1.5
-    cuts = symmetric.tree_cuts_below(n, u, v, w, limit, 40, 10.0)
+    cuts = separation.tree_cuts_below(n, u, v, w, limit, 40, 10.0)
     value = lambda side: float(w[side[u] != side[v]].sum())   # noqa: E731
     best = min(value(np.array([m >> k & 1 for k in range(n)], bool)) for m in range(1, 2 ** n - 1))
     assert all(value(c) < limit and not c[0] and c.any() for c in cuts)

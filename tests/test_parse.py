@@ -375,7 +375,7 @@ def test_line_numbered_instructions_read_as_without_numbers():
     module that reads a line's instruction word (``_text.code_words``): the ordering's state
     lines, the planner's queue drains."""
     from gatesopt._text import code_words
-    from gatesopt.ordering.build import state_key_of
+    from gatesopt.ordering.layout import state_key_of
     from gatesopt.planner import drains_queue
     assert code_words("N7 m106 s255 ; fan") == ["M106", "S255"]
     assert code_words(b"N7 M106 S255") == [b"M106", b"S255"]

@@ -23,7 +23,9 @@ import time
 
 import numpy as np
 
-from . import dp, greedy, ils, matching, milp, symmetric
+from ..solvers import Status
+from . import dp, greedy, ils, matching, milp, symmetric, symmetric_graph
+from .budget import exact_time_s
 from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
 #: largest group (in candidates, i.e. ~2x curves) handed to the exact formulation (HiGHS: its
@@ -32,29 +34,20 @@ EXACT_MAX_CANDS = 160
 #: largest group (candidates) for the symmetric model (formulations/ordering.md, "milp,
 #: symmetric"): sparse columns with pricing keep its LP small, but it holds a few N x N arrays
 SYMMETRIC_MAX_CANDS = 1000
-#: ILS kicks per curve before the symmetric model (it builds its own incumbent from the LP point;
-#: measured on 86 real groups of 17-170 curves: the same 83 proven with 0, 2 or 15 kicks per curve,
-#: and 15 cost 20 % more time in all; on 219 Cura bunny groups of 13-49 curves, all proven either
-#: way, 0 kicks took 4.7-4.8 s of CPU and 2 kicks 6.6-7.0 s)
+#: ILS kicks per curve before the symmetric model: none, it builds its own incumbent from the LP
+#: point and kicks proved no more groups, only slower (docs/BENCHMARKS.md, "Curve-ordering constants")
 SYMMETRIC_WARM_KICKS_PER_CURVE = 0
 #: up to this many curves the subset DP goes first; above it (up to ``dp.fits``, ~16 curves) the
-#: DP takes 20-50 ms and the symmetric model is tried first where it applies (Cura bunny's 40
-#: groups of 13-16 curves: DP 1.37 s, greedy + symmetric 0.51 s, all 40 proven), the DP after it
-#: if the model did not prove the group in time
+#: DP takes 20-50 ms and the symmetric model, faster there, is tried first where it applies, the
+#: DP after it if the model did not prove the group in time (docs/BENCHMARKS.md)
 DP_FIRST_CURVES = 12
 #: below this per-group limit (a spent budget) the exact step is not even built
 MIN_EXACT_S = 0.05
-#: the same for the symmetric model, plus a share per curve: below it (a budget spread thin over
-#: ~1000 groups) the root rarely finishes and the ILS path alone is the better use of the time
-#: (real groups of 20-60 curves are often proven in 10-30 ms, of ~100 curves in 0.1-0.5 s)
-MIN_SYMMETRIC_S = 0.01
-MIN_SYMMETRIC_S_PER_CURVE = 0.002
+#: the same for the symmetric model: ``budget.exact_time_s`` (MIN_SYMMETRIC_S plus a share per
+#: curve), which a shared budget must give a group it wants proven
 #: without an exact step next, ILS runs only if this much time per curve is left before the
 #: group's deadline: it first builds its link matrix (~10 us per curve) and each kick runs a local
-#: search, so a short ILS overruns its deadline and rarely improves the path. Measured on 60 Cura
-#: bunny groups of 40-190 curves: given 80 us per curve (a budget's heuristic share) ILS cut
-#: their travel by 0.17 % and took 37 us per curve on top of the 72 of the greedy path and the
-#: matching; given 400 us, by 0.9 %; their gaps and the share within 2 % did not move
+#: search, so a short ILS overruns its deadline and rarely improves the path (docs/BENCHMARKS.md)
 MIN_FALLBACK_ILS_S_PER_CURVE = 2e-4
 #: stop after the MILP's LP cutting-plane rounds if they leave more than this gap
 GIVE_UP_GAP = None   # measured: with 0.15, free-mode Cura groups lost most proofs the branch loop finds
@@ -80,45 +73,39 @@ def warm_up() -> None:
     symmetric.load_kernels()        # what these groups may not have reached
 
 
-def exact_time_s(n_curves):
-    """The least per-group limit at which the exact step is tried on a group of ``n_curves``
-    (numpy arrays too): what a shared budget must give a group it wants proven."""
-    return MIN_SYMMETRIC_S + MIN_SYMMETRIC_S_PER_CURVE * n_curves
-
-
 def _matching_path(group: Group, heur: GroupSolution) -> GroupSolution:
-    """The better of ``heur`` and the matching's path (``symmetric.matching_path``, polished by
-    the greedy local search), with the better of the two bounds."""
-    order, bound = symmetric.matching_path(group)
+    """The better of ``heur`` and the matching's path (``symmetric_graph.matching_path``,
+    polished by the greedy local search), with the better of the two bounds."""
+    order, bound = symmetric_graph.matching_path(group)
     bound = max(bound, heur.bound_mm)
-    best, obj, method = heur.order, heur.objective_mm, heur.method
+    best, obj, formulation = heur.order, heur.objective_mm, heur.formulation
     if order is not None:
         order = greedy.improve(group, order)
         o = group.path_cost_mm(order)
         if o < obj - 1e-9:
-            best, obj, method = order, o, "matching"
-    status = "optimal" if obj - bound <= OPTIMAL_ABS_TOL_MM else "feasible"
-    return GroupSolution.make(best, obj, bound, status, heur.solve_s, method)
+            best, obj, formulation = order, o, "matching"
+    status = Status.OPTIMAL if obj - bound <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
+    return GroupSolution.make(best, obj, bound, status, heur.solve_s, formulation)
 
 
-def _ils_from(group: Group, start: GroupSolution, bound_mm: float, deadline: float, method: str,
-              **kwargs) -> GroupSolution:
+def _ils_from(group: Group, start: GroupSolution, bound_mm: float, deadline: float,
+              formulation: str, **kwargs) -> GroupSolution:
     """``start``, or the ILS path from it (``ils.improve_ils`` until ``deadline``, stopped once
     it reaches ``bound_mm``) if that is shorter: then with its status against ``bound_mm``,
-    ``start``'s solve time and ``method``."""
+    ``start``'s solve time and ``formulation``."""
     order = ils.improve_ils(group, start.order, deadline=deadline,
                             target_mm=bound_mm + OPTIMAL_ABS_TOL_MM, **kwargs)
     obj = group.path_cost_mm(order)
     if obj >= start.objective_mm - 1e-9:
         return start
-    status = "optimal" if obj - bound_mm <= OPTIMAL_ABS_TOL_MM else "feasible"
-    return GroupSolution.make(order, obj, bound_mm, status, start.solve_s, method)
+    status = Status.OPTIMAL if obj - bound_mm <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
+    return GroupSolution.make(order, obj, bound_mm, status, start.solve_s, formulation)
 
 
 def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
           exact_max_cands: int = EXACT_MAX_CANDS) -> GroupSolution:
     t0 = time.perf_counter()
-    sym = symmetric.applies(group)
+    sym = symmetric_graph.applies(group)
     sym_next = (sym and group.n_cands <= SYMMETRIC_MAX_CANDS
                 and time_limit_s >= exact_time_s(group.n_curves))
     if dp.fits(group) and (group.n_curves <= DP_FIRST_CURVES
@@ -127,19 +114,19 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         # 10-140 ms and cannot be stopped: under a budget's small share it would take the time of
         # several proofs by the model from the groups after it
         ex = dp.solve(group)
-        return GroupSolution.make(ex.order, ex.objective_mm, ex.bound_mm, "optimal",
+        return GroupSolution.make(ex.order, ex.objective_mm, ex.bound_mm, Status.OPTIMAL,
                                   time.perf_counter() - t0, "auto:dp")
     heur = greedy.solve(group, hint=hint)
-    if heur.status == "optimal" or group.n_curves <= 1:
-        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "optimal",
+    if heur.status == Status.OPTIMAL or group.n_curves <= 1:
+        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.OPTIMAL,
                                   time.perf_counter() - t0, "auto:bound")
     if sym and 2 * group.n_curves + 2 <= matching.MAX_VERTICES:
         # the cheapest perfect matching of the end points: a bound within ~2 % of the optimum
         # on real groups (the cheap bound: ~20 %), and, patched into one path, a path that is
         # often the optimum (formulations/ordering.md, "Bounds")
         heur = _matching_path(group, heur)
-        if heur.status == "optimal":
-            return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "optimal",
+        if heur.status == Status.OPTIMAL:
+            return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.OPTIMAL,
                                       time.perf_counter() - t0, "auto:matching")
     # escape the local optimum before anything else: a better incumbent is what lets the exact
     # step (or the bound) prove it, and what a fallback group keeps. Before the symmetric model a
@@ -153,30 +140,30 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
             and deadline - time.perf_counter() < MIN_FALLBACK_ILS_S_PER_CURVE * group.n_curves):
         # a budget's heuristic share, spent by the greedy path and the matching: ILS would still
         # pay for its link matrix and a kick, past the deadline, for next to nothing
-        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "fallback",
+        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.FALLBACK,
                                   time.perf_counter() - t0, "auto:greedy")
     heur = _ils_from(group, heur, heur.bound_mm, deadline, "ils", kicks=kicks,
-                     local_optimum=heur.method in ("greedy", "matching"))
-    if heur.status == "optimal":
-        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "optimal",
+                     local_optimum=heur.formulation in ("greedy", "matching"))
+    if heur.status == Status.OPTIMAL:
+        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.OPTIMAL,
                                   time.perf_counter() - t0, "auto:ils+bound")
     if not exact_next:
-        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, "fallback",
+        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.FALLBACK,
                                   time.perf_counter() - t0, "auto:ils")
     left = max(time_limit_s - (time.perf_counter() - t0), 0.05)
     ex = milp.solve(group, time_limit_s=left, hint=heur, give_up_gap=GIVE_UP_GAP,
                     known_bound_mm=heur.bound_mm)
     if ex.objective_mm > heur.objective_mm:        # never worse than the warm start
         ex = GroupSolution.make(heur.order, heur.objective_mm, max(ex.bound_mm, heur.bound_mm),
-                                "feasible", ex.solve_s, ex.method)
-    if ex.status != "optimal" and dp.fits(group) and dp.time_s(group) <= time_limit_s:
+                                Status.FEASIBLE, ex.solve_s, ex.formulation)
+    if ex.status != Status.OPTIMAL and dp.fits(group) and dp.time_s(group) <= time_limit_s:
         # the model did not prove it in time: the DP will, in at most about one limit more
         d = dp.solve(group)
-        return GroupSolution.make(d.order, d.objective_mm, d.bound_mm, "optimal",
+        return GroupSolution.make(d.order, d.objective_mm, d.bound_mm, Status.OPTIMAL,
                                   time.perf_counter() - t0, "auto:dp")
     bound = max(ex.bound_mm, heur.bound_mm)
     deadline = t0 + time_limit_s
-    if (ex.status != "optimal"
+    if (ex.status != Status.OPTIMAL
             and deadline - time.perf_counter() >= MIN_FALLBACK_ILS_S_PER_CURVE * group.n_curves):
         # the exact step gave up with time left (a root gap too wide to branch on: strips of
         # parallel lines, zig-zag infill): the rest of the limit goes to the path, as for a
@@ -187,6 +174,6 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         polished = _ils_from(group, ex, bound, deadline, "auto:milp+ils")
         if polished is not ex:
             return GroupSolution.make(polished.order, polished.objective_mm, bound, polished.status,
-                                      time.perf_counter() - t0, polished.method)
+                                      time.perf_counter() - t0, polished.formulation)
     return GroupSolution.make(ex.order, ex.objective_mm, bound, ex.status,
                               time.perf_counter() - t0, "auto:milp")

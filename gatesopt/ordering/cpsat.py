@@ -18,53 +18,36 @@ import time
 import numpy as np
 from ortools.sat.python import cp_model
 
+from ..solvers import Status
 from .bounds import lower_bound_mm
 from .ils import warm_start
-from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
+from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution, trivial_solution
 
 #: integer cost scale: 1 unit = 0.1 µm of travel (rounding error <= n * 0.05 µm per path)
 SCALE = 10_000
-#: building the model (``_Model.build`` and its hint), per arc of the circuit (``n_arcs``):
-#: measured 1.6-2.4 us on 20 groups of 13-171 curves (650-95k arcs; 0.17 s at 308 candidates) of
-#: two robustness-sweep Cura files, one core. Through CpModel's Python API (NewBoolVar, AddHint
-#: and a ``sum`` objective per arc) it took ~12 us per arc: 0.8 s for a 260-candidate group, so a
-#: budget's small per-group limits were overrun many times over
+#: building the model (``_Model.build`` and its hint), per arc of the circuit (``n_arcs``),
+#: measured; written straight into the proto because CpModel's Python API was ~5x slower and
+#: overran a budget's small limits (docs/BENCHMARKS.md, "Curve-ordering constants")
 BUILD_S_PER_ARC = 2.5e-6
 #: what CP-SAT takes beyond ``max_time_in_seconds`` (copying and loading the model before its
-#: first time check, handing the solution back) and reading the solution, per arc: measured
-#: 1.6-4.6 us on the same groups (2 workers on one core, limit 1 ms; 0.3-0.4 s at 260-308
-#: candidates)
+#: first time check, handing the solution back) and reading the solution, per arc (measured)
 SOLVER_S_PER_ARC = 4e-6
 #: CP-SAT is not started (the model not built) with less than MIN_SOLVE_S + MIN_SOLVE_S_PER_ARC *
 #: arcs left for it: the warm start is kept. Given a complete, feasible hint it still returns
-#: nothing (UNKNOWN) until its presolve (probing: 1 deterministic second) is done; measured time
-#: to its first solution, 2 workers on one core: 0.02 s at 650 arcs, 0.34-0.53 s at 5-7k, 1.6-1.9 s
-#: at 15-23k, 2.4-3.8 s at 40-95k arcs (40-111 us per arc; 12 groups of 13-171 curves, two Cura
-#: files and random lines). Under a budget, 40 groups of 32-39 curves given ~0.08 s each spent
-#: 3 s of a 4 s solve on models that returned nothing
+#: nothing (UNKNOWN) until its presolve is done, which takes about this long (docs/BENCHMARKS.md)
 MIN_SOLVE_S = 0.01
 MIN_SOLVE_S_PER_ARC = 3e-5
 #: variables written per step of ``_Model.build`` (the deadline is checked between steps)
 BUILD_CHUNK = 8192
 
+#: CP-SAT's answer in the solver vocabulary (gatesopt.solvers.Status)
 STATUS = {
-    cp_model.OPTIMAL: "optimal",
-    cp_model.FEASIBLE: "feasible",
-    cp_model.INFEASIBLE: "infeasible",
-    cp_model.MODEL_INVALID: "infeasible",
-    cp_model.UNKNOWN: "fallback",
+    cp_model.OPTIMAL: Status.OPTIMAL,
+    cp_model.FEASIBLE: Status.FEASIBLE,
+    cp_model.INFEASIBLE: Status.INFEASIBLE,
+    cp_model.MODEL_INVALID: Status.INFEASIBLE,
+    cp_model.UNKNOWN: Status.FALLBACK,
 }
-
-
-def _trivial(group: Group, t0: float, method: str) -> GroupSolution | None:
-    """The answer for a group of 0 or 1 curves (no solver needed), else None."""
-    if group.n_curves == 0:
-        return GroupSolution.make([], 0.0, 0.0, "optimal", time.perf_counter() - t0, method)
-    if group.n_curves == 1:
-        c = group.start_cost_mm() + group.end_cost_mm()
-        k = int(np.argmin(c))
-        return GroupSolution.make([k], c[k], c[k], "optimal", time.perf_counter() - t0, method)
-    return None
 
 
 def solve(group: Group, *, time_limit_s: float = 10.0, hint=None, num_workers: int = 2,
@@ -74,7 +57,7 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None, num_workers: i
     time, or would leave CP-SAT too little (``MIN_SOLVE_S``, ``MIN_SOLVE_S_PER_ARC``), keeps the
     warm start (status "fallback" unless the cheap bound proves it)."""
     t0 = time.perf_counter()
-    triv = _trivial(group, t0, "cpsat")
+    triv = trivial_solution(group, t0, "cpsat")
     if triv is not None:
         return triv
     hint = warm_start(group, hint, t0, time_limit_s)
@@ -221,7 +204,7 @@ def _kept(group: Group, hint, t0: float) -> GroupSolution:
     group.check_order(order)
     obj = group.path_cost_mm(order)
     bound = lower_bound_mm(group)
-    status = "optimal" if obj - bound <= OPTIMAL_ABS_TOL_MM else "fallback"
+    status = Status.OPTIMAL if obj - bound <= OPTIMAL_ABS_TOL_MM else Status.FALLBACK
     return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "cpsat")
 
 
@@ -253,12 +236,12 @@ def _solve_circuit(group: Group, t0, time_limit_s, hint, num_workers, seed, clos
     solver.parameters.num_workers = int(num_workers)
     solver.parameters.random_seed = int(seed)
     code = solver.Solve(mod.model)
-    status = STATUS.get(code, "fallback")
+    status = STATUS.get(code, Status.FALLBACK)
     if closed:
-        if status not in ("optimal", "feasible"):
+        if status not in (Status.OPTIMAL, Status.FEASIBLE):
             return None
-        return mod.decode(solver), status == "optimal"
-    if status not in ("optimal", "feasible"):
+        return mod.decode(solver), status == Status.OPTIMAL
+    if status not in (Status.OPTIMAL, Status.FEASIBLE):
         # no solution within the limit: keep the hint (solve always passes one), cheap bound
         return _kept(group, hint, t0)
     order = mod.decode(solver)
@@ -271,6 +254,6 @@ def _solve_circuit(group: Group, t0, time_limit_s, hint, num_workers, seed, clos
     h_obj = group.path_cost_mm(h_order)
     if h_obj < obj - 1e-9:
         order, obj = h_order, h_obj
-    if status == "optimal" or obj - bound <= OPTIMAL_ABS_TOL_MM:
-        status = "optimal"
+    if status == Status.OPTIMAL or obj - bound <= OPTIMAL_ABS_TOL_MM:
+        status = Status.OPTIMAL
     return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "cpsat")

@@ -18,7 +18,8 @@ import time
 import numba
 import numpy as np
 
-from .problem import Group, GroupSolution
+from ..solvers import Status
+from .problem import Group, GroupSolution, OrderingOptionsError
 
 #: largest 2^n * m^2 the DP takes on (about 0.1 s in numba)
 MAX_WORK = 4e7
@@ -78,13 +79,15 @@ def _held_karp(n, cand_curve, ent, ext, start_c, end_c):
 
 
 def solve(group: Group, *, time_limit_s: float = 10.0, hint=None) -> GroupSolution:
-    """Exact for groups that ``fits``; larger ones raise ValueError (use cpsat or milp)."""
+    """Exact for groups that ``fits``; larger ones raise OrderingOptionsError (a ValueError: use
+    cpsat or milp)."""
     t0 = time.perf_counter()
     if group.n_curves == 0:
-        return GroupSolution.make([], 0.0, 0.0, "optimal", 0.0, "dp")
+        return GroupSolution.make([], 0.0, 0.0, Status.OPTIMAL, 0.0, "dp")
     if not fits(group):
-        raise ValueError(f"dp: group of {group.n_curves} curves / {group.n_cands} candidates is too large")
+        raise OrderingOptionsError(f"dp: group of {group.n_curves} curves / {group.n_cands} "
+                                   "candidates is too large")
     order, best = _held_karp(group.n_curves, group.cand_curve, group.cand_entry_xy, group.cand_exit_xy,
                              group.start_cost_mm(), group.end_cost_mm())
     obj = group.path_cost_mm(order)
-    return GroupSolution.make(order, obj, obj, "optimal", time.perf_counter() - t0, "dp")
+    return GroupSolution.make(order, obj, obj, Status.OPTIMAL, time.perf_counter() - t0, "dp")

@@ -21,10 +21,12 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..solvers import Status
 from .bounds import lower_bound_mm
-from .problem import Group, GroupSolution
+from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
-_EPS = 1e-9
+#: a move must shorten the path by more than this (mm) to be taken: float noise is no improvement
+IMPROVE_EPS_MM = 1e-9
 
 
 def nearest_neighbour(group: Group, first: int | None = None) -> np.ndarray:
@@ -132,7 +134,9 @@ def keep_smallest(val, idx, cnt, k, d, b):
 
 
 @numba.njit(cache=True)
-def _path_cost(seq, ent, ext, sx, sy, closed, has_end=False, ex=0.0, ey=0.0):
+def path_cost(seq, ent, ext, sx, sy, closed, has_end=False, ex=0.0, ey=0.0):
+    """Travel (mm) of candidate order ``seq``: from (sx, sy) or, ``closed``, around the tour; on
+    to (ex, ey) with ``has_end``."""
     n = len(seq)
     if n == 0:
         return 0.0
@@ -150,6 +154,9 @@ def _path_cost(seq, ent, ext, sx, sy, closed, has_end=False, ex=0.0, ey=0.0):
 @numba.njit(cache=True)
 def _local_search(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=False, ex=0.0, ey=0.0):
     """2-opt with flips + Or-opt (runs of 1..3, either direction), first improvement.
+
+    One numba kernel of ~120 lines: both moves share the loop over passes and the sequence they
+    rewrite in place; split into calls, each move's scan would pass the arrays again per position.
 
     Open path (``closed`` False): position -1 is the start point (exit only), and after the last
     curve comes the end point (``has_end``: the next fixed group's entry) or nothing (travel 0).
@@ -183,7 +190,7 @@ def _local_search(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=False
                 elif has_end:
                     old += _d(ext[xj, 0], ext[xj, 1], ex, ey)
                     new += _d(ent[ni, 0], ent[ni, 1], ex, ey)
-                if new < old - _EPS:
+                if new < old - IMPROVE_EPS_MM:
                     a, b = i, j
                     while a < b:
                         t = seq[a]
@@ -221,7 +228,7 @@ def _local_search(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=False
                     rem += _d(ext[l, 0], ext[l, 1], ex, ey) - _d(px, py, ex, ey)
                 if closed and L >= n - 1:
                     break
-                best_delta = -_EPS
+                best_delta = -IMPROVE_EPS_MM
                 best_a = -2
                 best_rev = False
                 # insertion after position a (a = -1: right after the start point)
@@ -275,7 +282,7 @@ def _local_search(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=False
 
 
 @numba.njit(cache=True)
-def _orient_dp(curve_seq, cand_start, cand_list, ent, ext, sx, sy, has_end=False, ex=0.0, ey=0.0):
+def orient_dp(curve_seq, cand_start, cand_list, ent, ext, sx, sy, has_end=False, ex=0.0, ey=0.0):
     """Exact candidate choice (direction, seam) for a fixed curve order: DP over clusters."""
     n = len(curve_seq)
     out = np.empty(n, np.int64)
@@ -334,17 +341,17 @@ def improve(group: Group, order: np.ndarray, *, closed: bool = False, max_rounds
     order = np.asarray(order, np.int64)
     if group.n_curves < 2:
         if group.n_curves == 1 and not closed:
-            return _orient_dp(group.cand_curve[order], *clusters(group), ent, ext, sx, sy, he, ex, ey)
+            return orient_dp(group.cand_curve[order], *clusters(group), ent, ext, sx, sy, he, ex, ey)
         return order
     cand_start, cand_list = clusters(group)
     for _ in range(max_rounds):
         order = _local_search(order, ent, ext, group.cand_flip, sx, sy, closed, max_passes, he, ex, ey)
         if closed:
             break
-        new = _orient_dp(group.cand_curve[order], cand_start, cand_list, ent, ext, sx, sy, he, ex, ey)
-        c_new = _path_cost(new, ent, ext, sx, sy, False, he, ex, ey)
-        c_old = _path_cost(order, ent, ext, sx, sy, False, he, ex, ey)
-        if c_new >= c_old - _EPS:
+        new = orient_dp(group.cand_curve[order], cand_start, cand_list, ent, ext, sx, sy, he, ex, ey)
+        c_new = path_cost(new, ent, ext, sx, sy, False, he, ex, ey)
+        c_old = path_cost(order, ent, ext, sx, sy, False, he, ex, ey)
+        if c_new >= c_old - IMPROVE_EPS_MM:
             break               # the orientations were already optimal: a local optimum of both
         order = new             # shorter: search its neighbourhood again
     return order
@@ -360,5 +367,5 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None) -> GroupSoluti
     order = improve(group, order)
     obj = group.path_cost_mm(order)
     lb = lower_bound_mm(group)
-    status = "optimal" if obj - lb <= 1e-3 else "feasible"
+    status = Status.OPTIMAL if obj - lb <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
     return GroupSolution.make(order, obj, lb, status, time.perf_counter() - t0, "greedy")

@@ -14,7 +14,7 @@ Both write where they are into shared memory; the main process takes the helper'
 it reaches those groups, ends its last own group at the entry of the helper's first if that is
 known by then, and the helper stops where they meet. The budget plan's "done" marks are shared
 too, so both plan over the same groups, and both spend the time left at once
-(``layers._GroupRunner``).
+(``runner.GroupRunner``).
 
 The helper is a fresh interpreter started with ``subprocess`` (``python -c``), not
 ``multiprocessing``: "fork" after HiGHS has started its threads can deadlock, and "spawn"
@@ -36,6 +36,10 @@ import threading
 import time
 
 import numpy as np
+
+from . import formulations
+from .chain import end_of, path_options, solve_backwards
+from .runner import GroupRunner
 
 #: fewer groups to solve than this: no helper (its start-up, ~1.5 s for a fresh interpreter with
 #: the imports and kernels, would not pay)
@@ -170,7 +174,6 @@ def main() -> None:
     """The helper process: solve the groups from the back until the main process reaches them."""
     from multiprocessing import resource_tracker, shared_memory
 
-    from .layers import FORMULATIONS, _end_of, _GroupRunner, _options, solve_backwards
     results = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)                               # stray prints (HiGHS, numba) go to stderr
     with open(sys.argv[1], "rb") as f:
@@ -183,13 +186,16 @@ def main() -> None:
     entry = {}          # g -> where the path chosen for group g begins
     try:
         budget_s = None if budget_end is None else max(0.0, budget_end - time.time())
-        runner = _GroupRunner(problem, FORMULATIONS[formulation], time_limit_s, budget_s, t0,
-                              kwargs, shared=done)
+        record = formulations.lookup(formulation)
+        runner = GroupRunner(problem, record.load().solve, time_limit_s, budget_s, t0, kwargs,
+                             shared=done,
+                             warm_up=(formulations.warm_up if "warm_up" in record.capabilities
+                                      else None))
         for g in reversed(todo):
             at[1] = g
             if g <= at[0]:
                 break
-            end = _end_of(problem, g)
+            end = end_of(problem, g)
             if end is None:
                 end = entry.get(g + 1)
             start, guess = known_start(problem, g), None
@@ -201,7 +207,7 @@ def main() -> None:
                 grp = problem.group(g, start, end)
                 gs = runner.run(g, grp)
                 grp.check_order(gs.order)
-                opts = _options(grp, gs)
+                opts = path_options(grp, gs)
             runner.passed(g)
             entry[g] = grp.cand_entry_xy[opts[0].order[0]]     # (groups to solve are not empty)
             body = pickle.dumps((g, opts, entry[g], guess))

@@ -23,13 +23,12 @@ import time
 import numba
 import numpy as np
 
-from .greedy import (_EPS, _orient_dp, _path_cost, clusters, improve, keep_smallest,
-                     nearest_neighbour)
+from .greedy import (IMPROVE_EPS_MM, clusters, improve, keep_smallest, nearest_neighbour,
+                     orient_dp, path_cost)
 from .problem import Group
 
-#: kicks per curve in the group, and the cap. Measured on the 12 hardest groups of
-#: bench/ordering_peers.py (26-78 curves): ~3 kicks per curve matched LKH-3's tour on 9, ~15 on
-#: 10 and beat it on 1; the other 2 are left to the exact step. A kick costs ~0.15 ms at 60 curves.
+#: kicks per curve in the group, and the cap: enough to match LKH-3's tour on most of the hardest
+#: peer groups (docs/BENCHMARKS.md, "Curve-ordering constants"); a kick costs ~0.15 ms at 60 curves
 KICKS_PER_CURVE = 15
 MAX_KICKS = 3000
 #: longest segment a kick moves (a local double bridge: far-apart segments rarely pay on layers)
@@ -144,7 +143,7 @@ def _try_curve(seq, posof, cc, flip, D, ds, de, near_out, near_in, c):
                         continue
             if hi <= lo:
                 continue
-            if _gain_2opt(seq, flip, D, ds, de, lo, hi) > _EPS:
+            if _gain_2opt(seq, flip, D, ds, de, lo, hi) > IMPROVE_EPS_MM:
                 p = seq[lo - 1] if lo > 0 else -1
                 q = seq[hi + 1] if hi < n - 1 else -1
                 woken = np.array([_curve(cc, p), cc[seq[lo]], cc[seq[hi]], _curve(cc, q)])
@@ -193,7 +192,7 @@ def _try_curve(seq, posof, cc, flip, D, ds, de, near_out, near_in, c):
                 base = _link(D, ds, de, x, y)
                 fwd = _link(D, ds, de, x, f) + _link(D, ds, de, l, y) - base
                 rv = _link(D, ds, de, x, flip[l]) + _link(D, ds, de, flip[f], y) - base
-                if fwd < rem - _EPS or rv < rem - _EPS:
+                if fwd < rem - IMPROVE_EPS_MM or rv < rem - IMPROVE_EPS_MM:
                     woken = np.array([_curve(cc, p), cc[f], cc[l], _curve(cc, q), _curve(cc, x),
                                       _curve(cc, y)])
                     _apply_move(seq, posof, cc, flip, s, k, a, rv < fwd)
@@ -237,7 +236,7 @@ def _ils(seq, cc, cand_start, cand_list, ent, ext, flip, sx, sy, has_end, ex, ey
     n = len(seq)
     n_curves = len(cand_start) - 1
     best = seq.copy()
-    best_cost = _path_cost(best, ent, ext, sx, sy, False, has_end, ex, ey)
+    best_cost = path_cost(best, ent, ext, sx, sy, False, has_end, ex, ey)
     if n < 4:
         return best
     posof = np.zeros(n_curves, np.int64)
@@ -274,9 +273,9 @@ def _ils(seq, cc, cand_start, cand_list, ent, ext, flip, sx, sy, has_end, ex, ey
         _descend(cand, posof, cc, flip, D, ds, de, near_out, near_in, active)
         for t in range(n):
             curve_seq[t] = cc[cand[t]]
-        cand = _orient_dp(curve_seq, cand_start, cand_list, ent, ext, sx, sy, has_end, ex, ey)
-        c = _path_cost(cand, ent, ext, sx, sy, False, has_end, ex, ey)
-        if c < best_cost + _EPS:          # equal too: drifting on plateaus helps escape
+        cand = orient_dp(curve_seq, cand_start, cand_list, ent, ext, sx, sy, has_end, ex, ey)
+        c = path_cost(cand, ent, ext, sx, sy, False, has_end, ex, ey)
+        if c < best_cost + IMPROVE_EPS_MM:          # equal too: drifting on plateaus helps escape
             best, best_cost = cand, min(c, best_cost)
     return best
 

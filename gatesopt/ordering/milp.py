@@ -8,9 +8,9 @@ Each MILP of the loop is a relaxation of the ordering problem, so its dual bound
 bound even when the loop stops at the time limit. The warm start (the hint, or ``ils.warm_start``)
 is passed to HiGHS as the incumbent of every solve; it satisfies every cut.
 
-Groups of open curves and fixed-seam loops (``symmetric.applies``) go to the undirected model of
-``symmetric.py`` instead (formulations/ordering.md, "milp, symmetric model"); this directed model
-serves the rest (several seam candidates per loop).
+Groups of open curves and fixed-seam loops (``symmetric_graph.applies``) go to the undirected
+model of ``symmetric.py`` instead (formulations/ordering.md, "milp, symmetric model"); this
+directed model serves the rest (several seam candidates per loop).
 """
 from __future__ import annotations
 
@@ -20,18 +20,13 @@ import highspy
 import numpy as np
 
 from .._native import run_highs
-
+from ..solvers import Status
+from . import symmetric, symmetric_graph
 from .bounds import lower_bound_mm
 from .ils import warm_start
-from . import symmetric
-from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
+from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution, trivial_solution
 
 _OPT = highspy.HighsModelStatus.kOptimal
-STATUS = {
-    highspy.HighsModelStatus.kOptimal: "optimal",
-    highspy.HighsModelStatus.kTimeLimit: "feasible",
-    highspy.HighsModelStatus.kInfeasible: "infeasible",
-}
 
 
 class _Model:
@@ -130,7 +125,7 @@ class _Model:
         la = np.nonzero(col[self.o_last:self.o_last + m] > 1e-6)[0]
         r = np.concatenate([self.us[on], fi, la])
         c = np.concatenate([self.vs[on], np.full(len(fi), m), np.full(len(la), m)])
-        ncomp, lab = symmetric.components(m + 1, r, c)
+        ncomp, lab = symmetric_graph.components(m + 1, r, c)
         used = col[self.o_y:self.o_y + m] > 1e-6
         cuts = []
         for comp in range(ncomp):
@@ -182,8 +177,7 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     ``known_bound_mm``: a lower bound already proven for this group (else the cheap bound of
     ``bounds.py`` is computed)."""
     t0 = time.perf_counter()
-    from .cpsat import _trivial
-    triv = _trivial(group, t0, "milp")
+    triv = trivial_solution(group, t0, "milp")
     if triv is not None:
         return triv
     hint = warm_start(group, hint, t0, time_limit_s)
@@ -192,20 +186,20 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     # auto passes the bound it has (the cheap one or the matching's: ~0.7 ms to recompute the
     # cheap one on a 100-curve group)
     bound = lower_bound_mm(group) if known_bound_mm is None else float(known_bound_mm)
-    if symmetric.applies(group):
+    if symmetric_graph.applies(group):
         order, obj, lp_bound, proven = symmetric.solve(group, best, t0 + time_limit_s)
         group.check_order(order)
         bound = max(bound, lp_bound)
-        status = "optimal" if proven or obj - bound <= OPTIMAL_ABS_TOL_MM else "feasible"
+        status = Status.OPTIMAL if proven or obj - bound <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
         return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "milp")
     model = _Model(group)
     h = model.h
-    status = "fallback"
+    status = Status.FALLBACK
     bound = max(bound, _lp_rounds(model, t0, time_limit_s))
     if best_obj - bound <= OPTIMAL_ABS_TOL_MM:       # the LP bound alone proves the warm start
-        return GroupSolution.make(best, best_obj, bound, "optimal", time.perf_counter() - t0, "milp")
+        return GroupSolution.make(best, best_obj, bound, Status.OPTIMAL, time.perf_counter() - t0, "milp")
     if give_up_gap is not None and best_obj > 0 and (best_obj - bound) / best_obj > give_up_gap:
-        return GroupSolution.make(best, best_obj, bound, "feasible", time.perf_counter() - t0, "milp")
+        return GroupSolution.make(best, best_obj, bound, Status.FEASIBLE, time.perf_counter() - t0, "milp")
     while True:
         if not run_highs(h, t0 + time_limit_s, start=model.columns_of(best)):
             break
@@ -222,15 +216,15 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
             if obj < best_obj:
                 best, best_obj = path, obj
             if ms == _OPT:
-                status = "optimal"
+                status = Status.OPTIMAL
                 break
-            status = "feasible"
+            status = Status.FEASIBLE
             break
         if ms != _OPT:
-            status = "feasible"
+            status = Status.FEASIBLE
             break
         model.add_rows([model.cut(c) for c in cycles])
     group.check_order(best)
     if best_obj - bound <= OPTIMAL_ABS_TOL_MM:
-        status = "optimal"
+        status = Status.OPTIMAL
     return GroupSolution.make(best, best_obj, bound, status, time.perf_counter() - t0, "milp")

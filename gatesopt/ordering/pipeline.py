@@ -17,9 +17,10 @@ from .. import _jit
 from ..parse import parse
 from ..program import Kind, Program
 from ..verify.ordering import check
-from .build import build, firmware_retraction
-from .emit import emit
+from .emitter import emit
+from .groups import build
 from .layers import model_travel_mm, solve
+from .layout import firmware_retraction
 from .problem import OrderingOptions, OrderingProblem, OrderingSolution
 
 
@@ -65,7 +66,7 @@ def travel_stats(program: Program) -> dict:
 
 
 def firmware_retraction_lines(program: Program) -> np.ndarray:
-    """Lines of firmware retractions (a bare ``G10``, ``build.firmware_retraction``) from the
+    """Lines of firmware retractions (a bare ``G10``, ``layout.firmware_retraction``) from the
     first layer on: the firmware pulls the filament back, so no step shows it."""
     if not len(program.layer_line):
         return np.zeros(0, np.int64)

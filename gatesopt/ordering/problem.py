@@ -23,12 +23,20 @@ Units: ``_mm`` millimetres, ``_s`` seconds, ``_j`` joules (see gatesopt.program)
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import GatesoptError
+from ..solvers import STATUSES, Status, relative_gap
+
 #: closed-loop tolerance: a curve whose end lies within this of its start is a closed loop
 CLOSED_TOL_MM = 1e-3
+
+
+class OrderingOptionsError(GatesoptError, ValueError):
+    """Bad ordering options or formulation: one line from the CLI (a ValueError for callers)."""
 
 
 @dataclass(frozen=True)
@@ -44,11 +52,11 @@ class OrderingOptions:
 
     def __post_init__(self):
         if self.mode not in ("safe", "free"):
-            raise ValueError(f"order mode must be 'safe' or 'free', not {self.mode!r}")
+            raise OrderingOptionsError(f"order mode must be 'safe' or 'free', not {self.mode!r}")
         if self.cost not in ("distance", "time", "energy"):
-            raise ValueError(f"cost must be 'distance', 'time' or 'energy', not {self.cost!r}")
+            raise OrderingOptionsError(f"cost must be 'distance', 'time' or 'energy', not {self.cost!r}")
         if self.seam_candidates < 1:
-            raise ValueError("seam_candidates must be >= 1")
+            raise OrderingOptionsError("seam_candidates must be >= 1")
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,6 +124,14 @@ class Group:
         """Where the path leaves its last curve."""
         return self.cand_exit_xy[order[-1]] if len(order) else self.start_xy
 
+    def key(self) -> bytes:
+        """Exact identity of this group instance (coordinates to 0.1 µm): identical groups recur
+        layer after layer, and a solve's answer is kept under this key."""
+        parts = [self.start_xy, self.cand_entry_xy, self.cand_exit_xy,
+                 np.zeros(2) - 1e9 if self.end_xy is None else self.end_xy]
+        q = np.concatenate([np.ravel(np.rint(np.asarray(a, float) * 1e4)) for a in parts]).astype(np.int64)
+        return q.tobytes() + self.cand_curve.tobytes()
+
     def backwards(self) -> "Group":
         """The mirror image of this group for a path whose end is fixed and whose start is free:
         it starts at ``end_xy`` and ends wherever it likes, each candidate's entry and exit
@@ -129,38 +145,51 @@ class Group:
                      self.cand_reversed, self.cand_seam, None)
 
 
+#: an objective within this of its bound counts as proven optimal (float noise, integer scaling);
+#: also the absolute tolerance of the gap (``solvers.relative_gap``): 0 within it
+OPTIMAL_ABS_TOL_MM = 1e-3
+
+
 @dataclass(frozen=True, eq=False)
 class GroupSolution:
     """A formulation's answer for one Group (objective, bound in mm of travel)."""
 
     order: np.ndarray           # (n_curves,) candidate indices in visiting order
     objective_mm: float
-    bound_mm: float             # proven lower bound (0 where the method has none)
-    status: str                 # "optimal" | "feasible" | "fallback"
+    bound_mm: float             # proven lower bound (0 where the formulation has none)
+    status: Status              # optimal | feasible | fallback (gatesopt.solvers)
     solve_s: float
-    method: str                 # formulation that produced it
-    gap: float = field(default=0.0)
+    formulation: str            # what produced it, e.g. "auto:milp", "greedy+kept"
+    gap: float = field(default=0.0)     # solvers.relative_gap (abs_tol OPTIMAL_ABS_TOL_MM)
 
     @staticmethod
-    def make(order, objective_mm, bound_mm, status, solve_s, method) -> "GroupSolution":
+    def make(order, objective_mm, bound_mm, status, solve_s, formulation) -> "GroupSolution":
         objective_mm = float(objective_mm)
         bound_mm = float(min(max(bound_mm, 0.0), objective_mm))
-        if status == "optimal":
+        if status not in STATUSES:
+            raise ValueError(f"unknown status {status!r}: one of {', '.join(STATUSES)}")
+        status = Status(status)
+        if status == Status.OPTIMAL:
             bound_mm = objective_mm
-        gap = relative_gap(objective_mm, bound_mm)
+        # the bound is finite here (0 at worst: travel is never negative), so the gap is never
+        # NaN: 0 within OPTIMAL_ABS_TOL_MM, else (objective - bound) / objective
+        gap = relative_gap(objective_mm, bound_mm, abs_tol=OPTIMAL_ABS_TOL_MM)
         return GroupSolution(np.asarray(order, dtype=np.int64), objective_mm, bound_mm, status,
-                             float(solve_s), method, gap)
+                             float(solve_s), formulation, gap)
 
 
-#: an objective within this of its bound counts as proven optimal (float noise, integer scaling)
-OPTIMAL_ABS_TOL_MM = 1e-3
-
-
-def relative_gap(objective: float, bound: float) -> float:
-    """(objective - bound) / objective; 0 when both are (nearly) zero."""
-    if objective - bound <= OPTIMAL_ABS_TOL_MM:
-        return 0.0
-    return (objective - bound) / objective
+def trivial_solution(group: Group, t0: float, formulation: str) -> GroupSolution | None:
+    """The answer for a group of 0 or 1 curves (no solver needed; ``t0``: when the solve
+    started), else None."""
+    if group.n_curves == 0:
+        return GroupSolution.make([], 0.0, 0.0, Status.OPTIMAL, time.perf_counter() - t0,
+                                  formulation)
+    if group.n_curves == 1:
+        c = group.start_cost_mm() + group.end_cost_mm()
+        k = int(np.argmin(c))
+        return GroupSolution.make([k], c[k], c[k], Status.OPTIMAL, time.perf_counter() - t0,
+                                  formulation)
+    return None
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,7 +220,7 @@ class OrderingProblem:
     curve_step_stop: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     notes: tuple = ()               # why some layers were left alone (barriers, unsupported)
     travel_feed_mm_s: float = 0.0   # travel speed used for travel time (0: unknown)
-    layout: object = None           # build.Layout for Program-built problems (used by emit)
+    layout: object = None           # layout.Layout for Program-built problems (used by emit)
 
     @property
     def n_curves(self) -> int:

@@ -15,33 +15,36 @@ enter when their reduced cost is negative (column generation); at the end every 
 reduced cost ``rc_e`` proves that no path cheaper than the incumbent uses it when
 ``rc_e > UB - LB`` (reduced-cost fixing), so the branch-and-cut runs on the sparse graph and its
 optimum is the optimum of the whole problem.
+
+The graph, the matching's odd sets and the compiled graph kernels are in ``symmetric_graph``; the
+separation of subtour and blossom cuts in ``separation``; this module holds the LP model
+(``SymmetricModel``: columns, rows, duals, pricing, root, branch-and-cut) and ``solve``.
 """
 from __future__ import annotations
 
+import heapq
 import time
 
 import highspy
 import numba
 import numpy as np
-from scipy.spatial.distance import cdist
 
 from .._native import run_highs
-from . import matching
+from . import separation
+from . import ils
 from .problem import OPTIMAL_ABS_TOL_MM, Group
+from .separation import COLUMN_EPS, gomory_hu_sides, residual_arcs
+from .symmetric_graph import (components, decode_edges, fixed_edges, match_edges, matching_of,
+                              odd_sets, travel_graph)
 
 _OPT = highspy.HighsModelStatus.kOptimal
 _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
-_EPS = 1e-6
 
 #: travel edges per node in the first LP (nearest other-curve end points)
 K_NEIGHBOURS = 8
 #: no branching when reduced-cost fixing leaves more columns than this per node: the root gap
-#: is then too wide to close within seconds (measured with HiGHS's MIP, before our own
-#: branch-and-cut: 166 k columns for a 312-curve group with an 11 % root gap, nothing closed in
-#: 20 s)
+#: is then too wide to close within seconds (docs/BENCHMARKS.md, "Curve-ordering constants")
 MAX_BRANCH_COLUMNS_PER_NODE = 40
-#: edges per vertex the matching's blossom algorithm starts from (``odd_sets``)
-MATCHING_NEIGHBOURS = 10
 #: ILS kicks per curve spent on the path built from the root LP point (it starts close to the
 #: optimum; the warm start's search already spent its share)
 POLISH_KICKS_PER_CURVE = 1
@@ -50,193 +53,8 @@ PRICE_PER_NODE = 1
 #: share of a group's time (from the root's start) in which the root may separate blossoms
 #: exactly (``_blossoms_exact``) once the fast separators find nothing
 EXACT_BLOSSOM_SHARE = 0.25
-EXACT_BLOSSOM_MAX_CUTS = 10
-EXACT_BLOSSOM_MIN_VIOLATION = 0.1
-#: at most this many subtour cuts per separation round (``_min_cuts``)
-MAX_SUBTOUR_CUTS = 40
 #: separation rounds per branch-and-cut node (then it is branched on its last LP point)
 MAX_NODE_CUT_ROUNDS = 50
-
-
-def components(n_nodes: int, r, c):
-    """Connected components (count, label per node; labels numbered in order of each component's
-    lowest node) of the undirected graph with edges (r, c). Union-find compiled: called a few
-    times per LP round, where scipy's csgraph spent ~0.5 ms per call building its sparse matrix."""
-    return _components(int(n_nodes), np.asarray(r, np.int64), np.asarray(c, np.int64))
-
-
-@numba.njit(cache=True)
-def _components(n, r, c):
-    parent = np.arange(n)
-    for i in range(len(r)):
-        a, b = _find(parent, r[i]), _find(parent, c[i])
-        if a != b:
-            parent[max(a, b)] = min(a, b)
-    lab = np.empty(n, np.int64)
-    root_lab = np.full(n, -1)
-    k = 0
-    for v in range(n):
-        root = _find(parent, v)
-        if root_lab[root] < 0:
-            root_lab[root] = k
-            k += 1
-        lab[v] = root_lab[root]
-    return k, lab
-
-
-def applies(group: Group) -> bool:
-    """Every curve: one candidate entering and leaving at one point (a loop's seam), or exactly
-    two candidates that are each other's reverse."""
-    cc = group.cand_curve
-    counts = np.bincount(cc, minlength=group.n_curves)
-    if counts.max(initial=0) > 2:
-        return False
-    one = counts[cc] == 1
-    if not np.allclose(group.cand_entry_xy[one], group.cand_exit_xy[one]):
-        return False
-    two = np.nonzero(counts[cc] == 2)[0]
-    f = group.cand_flip[two]
-    return bool(np.all(f != two) and np.allclose(group.cand_entry_xy[two], group.cand_exit_xy[f]))
-
-
-def travel_graph(group: Group):
-    """The symmetric model's graph: node 0 = S, 1 = E, then the end points of each open curve
-    (joined by the curve: a fixed edge) and each loop's seam. Returns (positions, curve per node
-    (-1 S, -2 E), degree per node (travel edges: 1, a seam 2), cost matrix (inf where no travel
-    edge exists: same curve, S-E, the diagonal; 0 into E when the path may end anywhere), nodes
-    per curve, each curve's first candidate)."""
-    n = group.n_curves
-    cc = group.cand_curve
-    counts = np.bincount(cc, minlength=n)
-    by_curve = np.argsort(cc, kind="stable")
-    first_cand = by_curve[np.searchsorted(cc[by_curve], np.arange(n))]
-    loop = counts == 1                          # a loop: one node (its seam), degree 2
-    per_curve = np.where(loop, 1, 2)            # open: entry of its first candidate, then exit
-    first_node = 2 + np.cumsum(per_curve) - per_curve
-    N = 2 + int(per_curve.sum())
-    pos = np.zeros((N, 2))
-    pos[0] = group.start_xy
-    if group.end_xy is not None:
-        pos[1] = group.end_xy
-    pos[first_node] = group.cand_entry_xy[first_cand]
-    opened = first_node[~loop]
-    pos[opened + 1] = group.cand_exit_xy[first_cand[~loop]]
-    node_curve = np.concatenate([[-1, -2], np.repeat(np.arange(n), per_curve)])
-    deg = np.ones(N)
-    deg[first_node[loop]] = 2.0
-    curve_nodes = [(f,) if lp else (f, f + 1) for f, lp in zip(first_node.tolist(), loop.tolist())]
-    C = cdist(pos, pos)
-    if group.end_xy is None:
-        C[1, :] = C[:, 1] = 0.0                            # the path just ends
-    np.fill_diagonal(C, np.inf)                 # no travel edge within a curve, nor S-E
-    C[opened, opened + 1] = C[opened + 1, opened] = np.inf
-    C[0, 1] = C[1, 0] = np.inf
-    return pos, node_curve, deg, C, curve_nodes, first_cand
-
-
-def tree_cuts_below(n: int, u, v, w, limit: float, max_cuts: int, seconds: float,
-                    keep_out: int = 0) -> list[np.ndarray]:
-    """The distinct cuts of the Gomory–Hu tree of the graph on nodes 0..n-1 (edges u-v of
-    capacity w) whose capacity is below ``limit``, the smallest first, at most ``max_cuts``, each
-    as the boolean side without node ``keep_out``. Every pair of nodes has a minimum cut among the
-    tree's n - 1, so this finds nested cuts together (``SymmetricModel._min_cuts``)."""
-    u, v = np.asarray(u, np.int64), np.asarray(v, np.int64)
-    w = np.asarray(w, float)
-    sides = _gomory_hu_sides(n, *_residual_arcs(n, u, v, w), float(seconds))
-    if len(sides) == 0:
-        return []
-    value = (sides[:, u] != sides[:, v]) @ w
-    below = np.flatnonzero(value < limit)
-    out, seen = [], set()
-    for i in below[np.argsort(value[below], kind="stable")]:
-        side = sides[i] ^ sides[i, keep_out]            # one orientation: one key per cut
-        k = side.tobytes()
-        if k not in seen:
-            seen.add(k)
-            out.append(side)
-            if len(out) >= max_cuts:
-                break
-    return out
-
-
-def fixed_edges(curve_nodes):
-    """The fixed edges of ``travel_graph``: each open curve between its end points, and E-S."""
-    two = [nd for nd in curve_nodes if len(nd) == 2]
-    return (np.array([nd[0] for nd in two] + [0], np.int64),
-            np.array([nd[1] for nd in two] + [1], np.int64))
-
-
-def odd_sets(C: np.ndarray, deg: np.ndarray, free_end: bool):
-    """The cheapest perfect matching of the travel graph (``matching.py``; a seam counted as two
-    vertices): every path's travel edges are one, so its cost is a lower bound (mm, rounded
-    down), and the odd sets H of its dual hold ``x(δ(H)) >= 1`` for every path. Returns (bound,
-    node masks of the odd sets, the matching's edges as node pairs (u, v); None, [], None if the
-    matching failed)."""
-    N = len(C)
-    rep = np.where(deg == 2, 2, 1)
-    idx = np.repeat(np.arange(N), rep)
-    # the blossom algorithm runs on each vertex's nearest edges (and E's), adding the others
-    # whose reduced cost turns negative (``matching.travel_matching``)
-    k = min(MATCHING_NEIGHBOURS, len(idx) - 1)
-    hub = int(np.flatnonzero(idx == 1)[0]) if free_end else None
-    bound, mate, sets = matching.travel_matching(C, idx, k, 1, hub=hub)
-    if bound is None:
-        return None, [], None
-    masks = []
-    for H in sets:
-        cnt = np.bincount(idx[H], minlength=N)
-        if ((cnt > 0) & (cnt < rep)).any():     # a seam split between H and the rest
-            continue
-        inside = cnt > 0
-        if int(deg[inside].sum()) % 2 == 1:
-            masks.append(inside)
-    a = np.flatnonzero(mate > np.arange(len(mate)))
-    return bound / matching.UNITS_PER_MM, masks, (idx[a], idx[mate[a]])
-
-
-#: (group, bound, odd sets) of the last ``matching_path``: its exact step reuses them
-_last_odd_sets = None
-
-
-def matching_path(group: Group):
-    """A path from the cheapest perfect matching (``odd_sets``) and its bound: with the fixed
-    edges the matching is a set of cycles, one through S and E; ``_patch`` joins them into one
-    (Karp's patching). Polished by local search, it is the fallback path where it beats the
-    greedy one (formulations/ordering.md, "Bounds").
-    Returns (candidate order, bound mm), or (None, 0.0) if the matching failed."""
-    global _last_odd_sets
-    pos, node_curve, deg, C, curve_nodes, first_cand = travel_graph(group)
-    bound, masks, edges = odd_sets(C, deg, group.end_xy is None)
-    _last_odd_sets = (group, bound, masks)
-    if bound is None:
-        return None, 0.0
-    fixed_u, fixed_v = fixed_edges(curve_nodes)
-    eu, ev = _patch(len(pos), fixed_u, fixed_v, edges[0].astype(np.int64),
-                    edges[1].astype(np.int64), C)
-    return decode_edges(group, node_curve, curve_nodes, first_cand, eu, ev), bound
-
-
-def decode_edges(group: Group, node_curve, curve_nodes, first_cand, eu, ev) -> np.ndarray:
-    """Candidate order of the tour (of ``travel_graph``'s nodes) whose travel edges are (eu, ev)."""
-    adj: dict[int, list[int]] = {}
-    for u, v in zip(np.asarray(eu).tolist(), np.asarray(ev).tolist()):
-        adj.setdefault(u, []).append(v)
-        adj.setdefault(v, []).append(u)
-    order, came, cur = [], 0, adj[0][0]
-    while cur != 1 and len(order) <= group.n_curves:
-        c = int(node_curve[cur])
-        nodes = curve_nodes[c]
-        k0 = int(first_cand[c])
-        if len(nodes) == 1:                     # loop: leave by its other travel edge
-            k, out = k0, cur
-            nxt = [v for v in adj[cur] if v != came][0]
-        else:                                   # open: traverse to the other end point
-            k = k0 if cur == nodes[0] else int(group.cand_flip[k0])
-            out = nodes[1] if cur == nodes[0] else nodes[0]
-            nxt = adj[out][0]
-        order.append(k)
-        came, cur = out, nxt
-    return np.asarray(order, np.int64)
 
 
 class SymmetricModel:
@@ -335,9 +153,9 @@ class SymmetricModel:
         """Start the LP with the odd-set cuts ``x(δ(H)) >= 1`` of the cheapest perfect matching's
         dual (``odd_sets``): the blossoms the separators would otherwise find a few per round.
         Returns the matching's bound (0 if it failed)."""
-        last = _last_odd_sets           # one read: another thread may replace it meanwhile
-        if last is not None and last[0] is self.group:
-            _, bound, masks = last                  # auto took its path from the same matching
+        last = matching_of(self.group)
+        if last is not None:
+            bound, masks = last                     # auto took its path from the same matching
         else:
             bound, masks, _ = odd_sets(self.C, self.deg, self.group.end_xy is None)
         none = np.zeros(0, np.int64)
@@ -372,17 +190,19 @@ class SymmetricModel:
 
     # -- separation ---------------------------------------------------------------------------
 
-    def _support_components(self, on: np.ndarray):
+    def support_components(self, on: np.ndarray):
+        """Connected components of the columns ``on`` plus the fixed edges (count, label per
+        node)."""
         return components(self.N, np.concatenate([self.eu[on], self.fixed_u]),
                           np.concatenate([self.ev[on], self.fixed_v]))
 
     def separate(self, x: np.ndarray, deadline: float, integer: bool = False,
                  exact_blossoms_until: float = -np.inf) -> int:
-        """Add violated cuts for the point ``x``; returns how many. Components of the support
-        first; a connected support gets exact subtour separation by minimum cuts and the
-        odd-component blossom heuristic; if these find nothing before ``exact_blossoms_until``
-        (a ``time.perf_counter()`` value), exact blossom separation."""
-        ncomp, lab = self._support_components(x > _EPS)
+        """Add violated cuts for the point ``x`` (``separation``); returns how many. Components of
+        the support first; a connected support gets exact subtour separation by minimum cuts and
+        the odd-component blossom heuristic; if these find nothing before
+        ``exact_blossoms_until`` (a ``time.perf_counter()`` value), exact blossom separation."""
+        ncomp, lab = self.support_components(x > COLUMN_EPS)
         if ncomp > 1:
             return self.add_cuts([(lab == comp, None) for comp in range(ncomp)])
         if integer:
@@ -393,139 +213,14 @@ class SymmetricModel:
             n = self._blossoms_exact(x, min(deadline, exact_blossoms_until))
         return n
 
-    def _min_cuts(self, x: np.ndarray, deadline: float, max_cuts: int = MAX_SUBTOUR_CUTS) -> int:
-        """A cut below 2 (capacities x, fixed edges 1) is a violated subtour cut
-        ``x(δ(U)) >= 2 - fixed(δ(U))``. Edges at 1 (fixed ones included) are shrunk first
-        (Padberg–Rinaldi: with x_uv = 1 moving v to u's side never increases a cut, as
-        x(δ(v)) = 2), then the Gomory–Hu tree of what is left gives a minimum cut for every pair
-        of nodes: its cuts below 2, the most violated first, are added all at once. Nested
-        violated cuts are common (a far cluster of curves behind a chain of near ones); a search
-        from S that stops at the first cut per sink found one of them per LP round (measured on 60
-        Cura bunny groups: 1204 LP solves and 4.1 s in all, with the tree 923 and 3.1-3.4 s; one
-        47-curve group took 17 LP rounds and 83 ms, with the tree 6 and 19 ms)."""
-        on = x > 1e-9
-        n_sh, lab = self._support_components(x >= 1 - 1e-9)
-        if n_sh <= 2:
-            return 0
-        u, v = lab[self.eu[on]], lab[self.ev[on]]
-        keep = u != v
-        # parallel edges between two shrunk nodes: one arc with the summed capacity
-        key, inv = np.unique(np.minimum(u, v)[keep] * n_sh + np.maximum(u, v)[keep], return_inverse=True)
-        w = np.bincount(inv, weights=x[on][keep], minlength=len(key))
-        cuts = tree_cuts_below(n_sh, key // n_sh, key % n_sh, w, 2.0 - 1e-6, max_cuts,
-                               float(deadline - time.perf_counter()), keep_out=int(lab[0]))
-        return self.add_cuts([(side[lab], None) for side in cuts])
-
-    def _edges_at_one(self, x: np.ndarray):
-        """The edges at 1 in ``x``, the blossoms' possible teeth: travel columns and every fixed
-        edge, as (u, v, column or -1)."""
-        ones = np.nonzero(x >= 1 - _EPS)[0]
-        return (np.concatenate([self.eu[ones], self.fixed_u]),
-                np.concatenate([self.ev[ones], self.fixed_v]),
-                np.concatenate([ones, np.full(len(self.fixed_u), -1)]))
+    def _min_cuts(self, x: np.ndarray, deadline: float) -> int:
+        return self.add_cuts(separation.subtour_cuts(self, x, deadline))
 
     def _blossoms(self, x: np.ndarray) -> int:
-        """Odd-component heuristic (Padberg–Hong): a handle H = a connected component of the
-        fractional edges; its teeth are the edges at 1 (fixed edges included) leaving H. With an
-        odd number of disjoint teeth the blossom ``x(δ(H) \\ T) - x(T) >= 1 - |T|`` is violated
-        by 1 - x(δ(H) \\ T). Teeth meeting outside H pull their common end point into H."""
-        frac = (x > _EPS) & (x < 1 - _EPS)
-        if not frac.any():
-            return 0
-        one_u, one_v, one_col = self._edges_at_one(x)
-        ncomp, lab = components(self.N, self.eu[frac], self.ev[frac])
-        touched = np.zeros(self.N, bool)
-        touched[self.eu[frac]] = touched[self.ev[frac]] = True
-        found = []
-        for comp in np.unique(lab[touched]):
-            inside = lab == comp
-            if inside.sum() < 3:
-                continue
-            for _ in range(self.N):
-                cross = inside[one_u] != inside[one_v]
-                outer = np.where(inside[one_u[cross]], one_v[cross], one_u[cross])
-                vals, cnt = np.unique(outer, return_counts=True)
-                if (cnt > 1).any():
-                    inside[vals[cnt > 1]] = True
-                    continue
-                break
-            if cross.sum() < 3 or cross.sum() % 2 == 0:
-                continue
-            col = one_col[cross]
-            tooth_col = col[col >= 0]
-            tooth_fixed = inside[self.fixed_u] != inside[self.fixed_v]     # all at 1
-            others = (inside[self.eu] != inside[self.ev]) & (x > _EPS)
-            others[tooth_col] = False
-            if x[others].sum() >= 1 - 1e-4:
-                continue
-            found.append((inside, (tooth_col, tooth_fixed)))
-        return self.add_cuts(found)
+        return self.add_cuts(separation.odd_component_blossoms(self, x))
 
     def _blossoms_exact(self, x: np.ndarray, deadline: float) -> int:
-        """Blossoms the odd-component heuristic misses (Letchford, Reinelt and Theis, "Odd
-        minimum cut sets and b-matchings revisited", 2008). For a handle H the best odd T of
-        δ(H) takes the edges with x > 1/2, and if their number is even the edge with the least
-        |1 - 2x| changes side, so ``x(δ(H) \\ T) + Σ_T (1 - x) = Σ_δ(H) min(x, 1 - x)`` plus that
-        parity term; the blossom is violated when this is below 1. The candidate handles are the
-        minimum cuts of a Gomory–Hu tree (Gusfield's n - 1 maximum flows) under the weights
-        min(x, 1 - x), within each component of the fractional edges (edges at 1 weigh 0). LRT
-        show that a most violated blossom is among such cuts; here teeth need not be disjoint (the
-        inequality is valid for any odd T, by the parity of x(δ(H)) on a tour). The
-        ``EXACT_BLOSSOM_MAX_CUTS`` most violated, by at least ``EXACT_BLOSSOM_MIN_VIOLATION``,
-        enter."""
-        frac = (x > _EPS) & (x < 1 - _EPS)
-        if not frac.any():
-            return 0
-        N = self.N
-        one_u, one_v, one_col = self._edges_at_one(x)
-        fcol = np.nonzero(frac)[0]
-        fu, fv, fx = self.eu[fcol], self.ev[fcol], x[fcol]
-        _, lab = components(N, fu, fv)
-        touched = np.zeros(N, bool)
-        touched[fu] = touched[fv] = True
-        found, seen = [], set()
-        for comp in np.unique(lab[touched]).tolist():
-            nodes = np.flatnonzero(lab == comp)
-            n = len(nodes)
-            if n < 3:
-                continue
-            local = np.full(N, -1)
-            local[nodes] = np.arange(n)
-            mine = lab[fu] == comp
-            w = np.minimum(fx[mine], 1.0 - fx[mine])
-            indptr, head, cap, rev = _residual_arcs(n, local[fu[mine]], local[fv[mine]], w)
-            sides = _gomory_hu_sides(n, indptr, head, cap, rev,
-                                     float(deadline - time.perf_counter()))
-            for side in sides:
-                inside = np.zeros(N, bool)
-                inside[nodes[side]] = True
-                key = inside.tobytes()
-                if key in seen:
-                    continue
-                seen.add(key)
-                cross_f = inside[fu] != inside[fv]
-                xs = fx[cross_f]
-                cross_1 = inside[one_u] != inside[one_v]
-                tooth = xs > 0.5
-                value = float(np.minimum(xs, 1.0 - xs).sum())
-                if (int(tooth.sum()) + int(cross_1.sum())) % 2 == 0:
-                    # parity: the fractional edge with the least |1 - 2x| changes side (an edge at
-                    # 1 leaving T would cost 1: no violation)
-                    if len(xs) == 0:
-                        continue
-                    j = int(np.argmin(np.abs(1.0 - 2.0 * xs)))
-                    value += abs(1.0 - 2.0 * xs[j])
-                    tooth[j] = not tooth[j]
-                if value < 1.0 - EXACT_BLOSSOM_MIN_VIOLATION:
-                    cols = one_col[cross_1]
-                    found.append((value, inside,
-                                  np.concatenate([fcol[cross_f][tooth], cols[cols >= 0]])))
-            if time.perf_counter() > deadline:
-                break
-        found.sort(key=lambda f: f[0])
-        return self.add_cuts([(inside, (tooth_col.astype(np.int64),
-                                        inside[self.fixed_u] != inside[self.fixed_v]))
-                              for _, inside, tooth_col in found[:EXACT_BLOSSOM_MAX_CUTS]])
+        return self.add_cuts(separation.exact_blossoms(self, x, deadline))
 
     # -- duals ------------------------------------------------------------------------------
 
@@ -562,7 +257,7 @@ class SymmetricModel:
     def decode(self, x: np.ndarray) -> np.ndarray | None:
         """Candidate order from an integer point, or None if it has subtours."""
         on = x > 0.5
-        ncomp, _ = self._support_components(on)
+        ncomp, _ = self.support_components(on)
         if ncomp > 1:
             return None
         return self.decode_edges(self.eu[on], self.ev[on])
@@ -577,8 +272,8 @@ class SymmetricModel:
         ``x`` descending, then cost; what is left is joined by the cheapest edges of the whole
         graph. Gives the exact step an incumbent near the LP optimum (ILS polishes it)."""
         key = np.lexsort((self.C[self.eu, self.ev], -np.round(x, 6)))
-        cols = key[x[key] > _EPS]
-        u, v = _match(self.N, self.deg.astype(np.int64), self.fixed_u, self.fixed_v,
+        cols = key[x[key] > COLUMN_EPS]
+        u, v = match_edges(self.N, self.deg.astype(np.int64), self.fixed_u, self.fixed_v,
                       self.eu[cols], self.ev[cols], self.C)
         return self.decode_edges(u, v)
 
@@ -634,13 +329,12 @@ class SymmetricModel:
         path, so the cuts stay for all nodes); branching on the edge closest to 1/2; a path built
         from each fractional point (``tour_from``) may improve the incumbent. Returns (order,
         objective, bound, proven)."""
-        import heapq
         h = self.h
         rc = self.rc
         col_rc = np.asarray(h.getSolution().col_dual, float)
         n_old = len(col_rc)
-        gap = best_obj - bound + 1e-6
-        iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(rc) & (rc <= gap), 1))
+        open_mm = best_obj - bound + 1e-6       # UB - LB: an edge costing more is in no better path
+        iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(rc) & (rc <= open_mm), 1))
         if n_old + len(iu) > MAX_BRANCH_COLUMNS_PER_NODE * self.N:
             return best, best_obj, bound, False
         self.add_columns(iu, iv)
@@ -706,7 +400,7 @@ class SymmetricModel:
                 break
             if outcome == "pruned":
                 continue
-            frac = np.nonzero((x > _EPS) & (x < 1 - _EPS))[0]
+            frac = np.nonzero((x > COLUMN_EPS) & (x < 1 - COLUMN_EPS))[0]
             if len(frac) == 0:                  # integral, connected (separation found nothing)
                 order = self.decode(x)
                 if order is not None:
@@ -734,11 +428,11 @@ class SymmetricModel:
     def _polish(self, order, best, best_obj, bound, deadline):
         """ILS from ``order``, stopped once it reaches ``bound`` (then proven optimal); the
         better of it and ``best``."""
-        from .ils import improve_ils
         if order is None or len(order) != self.group.n_curves:
             return best, best_obj
-        order = improve_ils(self.group, order, kicks=POLISH_KICKS_PER_CURVE * self.group.n_curves,
-                            deadline=deadline, target_mm=bound + OPTIMAL_ABS_TOL_MM)
+        order = ils.improve_ils(self.group, order,
+                                kicks=POLISH_KICKS_PER_CURVE * self.group.n_curves,
+                                deadline=deadline, target_mm=bound + OPTIMAL_ABS_TOL_MM)
         obj = self.group.path_cost_mm(order)
         return (order, obj) if obj < best_obj - 1e-9 else (best, best_obj)
 
@@ -801,186 +495,6 @@ def load_kernels() -> None:
     pts = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [5.0, 0.0]])
     odd_sets(np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1)) + np.diag(np.full(4, np.inf)),
              np.ones(4), True)
-    arcs = _residual_arcs(3, np.array([0, 1, 2]), np.array([1, 2, 0]), np.full(3, 0.5))
-    _gomory_hu_sides(3, *arcs, 1.0)
+    arcs = residual_arcs(3, np.array([0, 1, 2]), np.array([1, 2, 0]), np.full(3, 0.5))
+    gomory_hu_sides(3, *arcs, 1.0)
     _subtract_cut_duals(np.zeros((3, 3)), np.array([[True, False, False]]), np.ones(1))
-
-
-def _residual_arcs(n: int, u, v, w):
-    """An undirected graph (edges u-v of capacity w) as residual arcs for the max flows below:
-    u->v and v->u, each with capacity w, grouped by tail (``indptr``) and paired by ``rev``."""
-    tail = np.concatenate([u, v])
-    head = np.concatenate([v, u])
-    m = len(u)
-    rev = np.concatenate([np.arange(m, 2 * m), np.arange(m)])
-    srt = np.argsort(tail, kind="stable")
-    inv = np.empty_like(srt)
-    inv[srt] = np.arange(len(srt))
-    indptr = np.searchsorted(tail[srt], np.arange(n + 1)).astype(np.int64)
-    return (indptr, head[srt].astype(np.int64), np.concatenate([w, w])[srt].astype(np.float64),
-            inv[rev[srt]].astype(np.int64))
-
-
-@numba.njit(cache=True)
-def _max_flow(indptr, head, cap, rev, s, t, limit, queue, parent):
-    """Edmonds–Karp maximum flow from s to t (residual arcs of ``_residual_arcs``), stopped once
-    it reaches ``limit``. Returns (flow, side); below the limit, ``side`` is the source side of a
-    minimum cut: the nodes the last search reached in the residual graph (it ran to the end)."""
-    r = cap.copy()
-    flow = 0.0
-    while flow < limit - 1e-6:
-        parent[:] = -2
-        parent[s] = -1
-        qh, qt = 0, 1
-        queue[0] = s
-        while qh < qt and parent[t] == -2:
-            a = queue[qh]
-            qh += 1
-            for e in range(indptr[a], indptr[a + 1]):
-                b = head[e]
-                if parent[b] == -2 and r[e] > 1e-9:
-                    parent[b] = e
-                    queue[qt] = b
-                    qt += 1
-        if parent[t] == -2:
-            break
-        # bottleneck along the path, then push
-        f = limit - flow
-        b = t
-        while b != s:
-            e = parent[b]
-            f = min(f, r[e])
-            b = head[rev[e]]
-        b = t
-        while b != s:
-            e = parent[b]
-            r[e] -= f
-            r[rev[e]] += f
-            b = head[rev[e]]
-        flow += f
-    return flow, parent != -2
-
-
-@numba.njit(cache=True)
-def _gomory_hu_sides(n, indptr, head, cap, rev, seconds):
-    """Gusfield's Gomory–Hu cut tree: for s = 1 .. n-1 a minimum cut between s and its current
-    tree neighbour t, whose s side re-hangs the later nodes of t that it holds. Returns the s side
-    of each of these n - 1 cuts (fewer if ``seconds`` run out)."""
-    tree = np.zeros(n, np.int64)
-    sides = np.zeros((n - 1, n), np.bool_)
-    queue = np.empty(n, np.int64)
-    parent = np.empty(n, np.int64)
-    with numba.objmode(t0="f8"):
-        t0 = time.perf_counter()
-    k = 0
-    for s in range(1, n):
-        if s % 16 == 0:
-            with numba.objmode(now="f8"):
-                now = time.perf_counter()
-            if now - t0 > seconds:
-                break
-        t = tree[s]
-        _, side = _max_flow(indptr, head, cap, rev, s, t, np.inf, queue, parent)
-        sides[k] = side
-        k += 1
-        for i in range(s + 1, n):
-            if side[i] and tree[i] == t:
-                tree[i] = s
-    return sides[:k]
-
-
-@numba.njit(cache=True)
-def _find(parent, a):
-    while parent[a] != a:
-        parent[a] = parent[parent[a]]
-        a = parent[a]
-    return a
-
-
-@numba.njit(cache=True)
-def _patch(n, fixed_u, fixed_v, eu, ev, C):
-    """Karp's patching: the travel edges (eu, ev) and the fixed edges form cycles; while there
-    is more than one, the cheapest exchange of a travel edge (a, b) of the cycle through S for a
-    travel edge (c, d) of another cycle, (a, b) + (c, d) -> (a, c) + (b, d) or (a, d) + (b, c),
-    joins the two. Returns the travel edges of the one cycle."""
-    m = len(eu)
-    eu = eu.copy()
-    ev = ev.copy()
-    while True:
-        _, lab = _components(n, np.concatenate((fixed_u, eu)), np.concatenate((fixed_v, ev)))
-        root = lab[0]
-        best, bi, bj, cross = np.inf, -1, -1, False
-        for j in range(m):
-            if lab[eu[j]] == root:
-                continue
-            c, d = eu[j], ev[j]
-            for i in range(m):
-                a, b = eu[i], ev[i]
-                if lab[a] != root:
-                    continue
-                base = C[a, b] + C[c, d]
-                v1 = C[a, c] + C[b, d] - base
-                if v1 < best:
-                    best, bi, bj, cross = v1, i, j, False
-                v2 = C[a, d] + C[b, c] - base
-                if v2 < best:
-                    best, bi, bj, cross = v2, i, j, True
-        if bi < 0:
-            return eu, ev
-        a, b, c, d = eu[bi], ev[bi], eu[bj], ev[bj]
-        if cross:
-            c, d = d, c
-        eu[bi], ev[bi], eu[bj], ev[bj] = a, c, b, d
-
-
-@numba.njit(cache=True)
-def _match(n, deg, fixed_u, fixed_v, pref_u, pref_v, C):
-    """Greedy edge matching to one Hamiltonian cycle through the fixed edges: first the preferred
-    edges in their order, then the cheapest remaining edges between fragment ends. Returns the
-    travel edges (u, v)."""
-    parent = np.arange(n)
-    need = deg.copy()
-    for i in range(len(fixed_u)):
-        parent[_find(parent, fixed_u[i])] = _find(parent, fixed_v[i])
-    out_u = np.empty(n, np.int64)
-    out_v = np.empty(n, np.int64)
-    k = 0
-    n_edges = 0
-    for i in range(n):
-        n_edges += deg[i]
-    n_edges //= 2                       # travel edges of the tour
-    for i in range(len(pref_u)):
-        a, b = pref_u[i], pref_v[i]
-        if need[a] == 0 or need[b] == 0:
-            continue
-        ra, rb = _find(parent, a), _find(parent, b)
-        if ra == rb and k + 1 < n_edges:
-            continue
-        parent[ra] = rb
-        need[a] -= 1
-        need[b] -= 1
-        out_u[k] = a
-        out_v[k] = b
-        k += 1
-    while k < n_edges:                  # join fragments: cheapest edge between free ends
-        best, ba, bb = np.inf, -1, -1
-        for a in range(n):
-            if need[a] == 0:
-                continue
-            ra = _find(parent, a)
-            for b in range(a + 1, n):
-                if need[b] == 0 or not np.isfinite(C[a, b]):
-                    continue
-                if _find(parent, b) == ra and k + 1 < n_edges:
-                    continue
-                if C[a, b] < best:
-                    best, ba, bb = C[a, b], a, b
-        if ba < 0:
-            break
-        parent[_find(parent, ba)] = _find(parent, bb)
-        need[ba] -= 1
-        need[bb] -= 1
-        out_u[k] = ba
-        out_v[k] = bb
-        k += 1
-    return out_u[:k], out_v[:k]

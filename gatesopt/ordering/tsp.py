@@ -14,8 +14,10 @@ import time
 
 import numpy as np
 
+from ..solvers import Status
 from . import greedy
 from .bounds import lower_bound_mm
+from .cpsat import closed_tour
 from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
 
 
@@ -47,10 +49,9 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
         order = np.zeros(0, np.int64) if n == 0 else np.array(
             [int(np.argmin(group.start_cost_mm() + group.end_cost_mm()))])
         obj = group.path_cost_mm(order)
-        return GroupSolution.make(order, obj, obj, "optimal", time.perf_counter() - t0, "tsp")
+        return GroupSolution.make(order, obj, obj, Status.OPTIMAL, time.perf_counter() - t0, "tsp")
     tour = None
     if n <= exact_max_curves:
-        from .cpsat import closed_tour
         res = closed_tour(group, time_limit_s=time_limit_s)
         tour = None if res is None else res[0]
     if tour is None:
@@ -58,5 +59,5 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     order = cut_open(group, tour)
     obj = group.path_cost_mm(order)
     lb = lower_bound_mm(group)
-    status = "optimal" if obj - lb <= OPTIMAL_ABS_TOL_MM else "feasible"
+    status = Status.OPTIMAL if obj - lb <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
     return GroupSolution.make(order, obj, lb, status, time.perf_counter() - t0, "tsp")

@@ -8,14 +8,14 @@ A move is its two end points (ordered), arc centre and turning sense, and its E.
 than the part-cooling fan) in the same order; ``fan``: every extruded move sees the part-cooling fan
 duty it saw in the original (emit re-issues M106 / M107); and
 ``barriers``: between two consecutive barrier lines (heaters, G92, object labels, tool
-changes, see ``gatesopt.ordering.build``) each layer extrudes the same filament over the same
+changes, see ``gatesopt.ordering.layout``) each layer extrudes the same filament over the same
 path length in both files — so no extrusion moved across a barrier.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..ordering.build import LINE_BARRIER, LINE_FATAL, layout
+from ..ordering.layout import LINE_BARRIER, LINE_FATAL, layout
 from ..program import Kind, Program
 from .commands import check_commands, fan_duty_s
 from .extrusion import check_extrusion

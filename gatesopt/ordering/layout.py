@@ -1,4 +1,6 @@
-"""Program -> OrderingProblem: curves, gaps, barriers and groups (formulations/ordering.md, "Build").
+"""Where the curves and gaps of a Program lie: every line classified, the curves found, the layers
+that keep their order (formulations/ordering.md, "Build"). ``groups.build`` makes the
+OrderingProblem from this ``Layout``; ``emitter.emit`` rewrites the file along it.
 
 A *curve* is a maximal run of extruding steps (layer >= 0) whose lines are separated only by
 neutral lines (comments, blank lines, F-only ``G1 F..``, progress ``M73``, messages ``M117``). Between two curves lies a *gap*: the
@@ -20,11 +22,9 @@ slicer's travel (retract, wipe, z-hop, travel, unretract) plus any other lines. 
 - *fatal*: tool changes (T), filament change (M600...), homing: the layer keeps its order (so does
   a layer with an X/Y motor switched off between its curves: an already gated file).
 
-A gap is a *boundary* when it holds a barrier or the layer changes. Groups never span a boundary.
-``--order-mode safe`` further splits at every change of feature (``;TYPE:``) and keeps walls,
-ironing, skirt/brim and (without feature comments) closed loops, or loops whose end stops short
-of their start by at most ``LOOP_GAP_MM`` (the seam gap slicers clip), in the slicer's order and
-direction; the first layer keeps its order in both modes (adhesion, and start G-code purges).
+A gap is a *boundary* when it holds a barrier or the layer changes (groups never span one:
+``groups.build``). The first layer with curves keeps its order (adhesion, and start G-code purges),
+and so do layers with a fatal line and the others ``_kept_layers`` names.
 """
 from __future__ import annotations
 
@@ -36,8 +36,6 @@ import numpy as np
 from .._text import code_words
 from ..firmware import xy_disable_rows
 from ..program import Kind, Program
-from ..slicers import FIXED_FEATURE
-from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
 
 LINE_MOTION, LINE_NEUTRAL, LINE_STATE, LINE_BARRIER, LINE_FATAL, LINE_CURVE = range(6)
 LINE_FW_RETRACT, LINE_FW_UNRETRACT = 6, 7
@@ -58,15 +56,12 @@ STATE_EXT = (b"SET_VELOCITY_LIMIT", b"SET_PRESSURE_ADVANCE", b"M204")
 #: in the lower-cased text: a case-insensitive regex took 0.27 s on a 6 MB file, this 0.02 s
 OBJECT_LABEL_WORDS = (b"printing object", b";mesh:", b"exclude_object", b"m486")
 FEATURE_LINE = re.compile(rb"\n(;[ \t]*(?:TYPE:|FEATURE:|feature )[ \t]*)([^\r\n]*)")
-#: a curve without a feature comment whose end lies this close to its start is a clipped loop
-#: (a wall) in safe mode
-LOOP_GAP_MM = 0.5
 MOTION_KINDS = (Kind.TRAVEL, Kind.RETRACT, Kind.UNRETRACT, Kind.Z_ONLY, Kind.ARC, Kind.EXTRUDE)
 
 
 @dataclass(frozen=True, eq=False)
 class Layout:
-    """Where curves and gaps lie in the file (shared by build and emit)."""
+    """Where curves and gaps lie in the file (shared by ``groups.build`` and ``emitter.emit``)."""
 
     line_class: np.ndarray      # (n_lines,) int8: LINE_*
     step_of_line: np.ndarray    # (n_lines,) int64: the step a line holds (-1: none)
@@ -120,10 +115,38 @@ def firmware_retraction(program: Program) -> tuple[np.ndarray, np.ndarray]:
 
 def layout(program: Program) -> Layout:
     """Classify every line and find the curves (see module docstring)."""
+    step_of_line = np.full(program.n_lines, -1, np.int64)
+    step_of_line[program.line] = np.arange(program.n_steps)
+    cls, g92_xyz = _line_classes(program, step_of_line)
+    skey = {int(i): state_key_of(program, int(i)) for i in np.flatnonzero(cls == LINE_STATE)}
+    # the first line of each state key is a barrier as well: before it the file sets no value
+    # (the firmware's default, unknown here), which emit could not re-issue to a curve moved
+    # from before it to after it. It stays in ``state_key``: emit still tracks what it sets
+    first_of_key: dict = {}
+    for i, k in skey.items():
+        first_of_key.setdefault(k, i)
+    cls[list(first_of_key.values())] = LINE_BARRIER
+    s0, s1, l0, l1 = _curves(program, cls)
+    n = len(s0)
+    barrier_count = np.concatenate(([0], np.cumsum((cls == LINE_BARRIER) | (cls == LINE_FATAL))))
+    gap_boundary = np.ones(n, bool)
+    if n > 1:
+        gl0, gl1 = l1[:-1] + 1, l0[1:]                         # gap lines [gl0, gl1)
+        gap_boundary[1:] = ((barrier_count[gl1] - barrier_count[gl0]) > 0) | (
+            program.layer[s0[1:]] != program.layer[s0[:-1]])
+    layer_fatal, layer_keep, why, notes = _kept_layers(program, cls, s0, l0, l1, g92_xyz)
+    fm = FEATURE_LINE.search(b"\n" + program.data)
+    prefix = fm.group(1).decode() if fm else ";TYPE:"
+    return Layout(cls, step_of_line, s0.astype(np.int64), s1.astype(np.int64), l0.astype(np.int64),
+                  l1.astype(np.int64), gap_boundary, layer_fatal, layer_keep, tuple(why), prefix,
+                  skey, tuple(notes))
+
+
+def _line_classes(program: Program, step_of_line: np.ndarray) -> tuple[np.ndarray, list[int]]:
+    """LINE_* of every line before the curves are found (module docstring), and the lines of
+    G92 with X, Y or Z (each keeps its layer's order: ``_kept_layers``)."""
     n_lines = program.n_lines
     letter, number = program.line_letter, program.line_number
-    step_of_line = np.full(n_lines, -1, np.int64)
-    step_of_line[program.line] = np.arange(program.n_steps)
     cls = np.full(n_lines, LINE_BARRIER, np.int8)
     is_step = step_of_line >= 0
     cls[(letter == 0) & ~is_step] = LINE_NEUTRAL
@@ -175,17 +198,13 @@ def layout(program: Program) -> Layout:
     cls[steps[motion]] = LINE_MOTION
     cls[steps[~motion]] = LINE_BARRIER           # dwell, heat wait, homing handled as FATAL above
     cls[steps[sk == Kind.HOME]] = LINE_FATAL
+    return cls, g92_xyz
 
-    skey = {int(i): state_key_of(program, int(i)) for i in np.flatnonzero(cls == LINE_STATE)}
-    # the first line of each state key is a barrier as well: before it the file sets no value
-    # (the firmware's default, unknown here), which emit could not re-issue to a curve moved
-    # from before it to after it. It stays in ``state_key``: emit still tracks what it sets
-    first_of_key: dict = {}
-    for i, k in skey.items():
-        first_of_key.setdefault(k, i)
-    cls[list(first_of_key.values())] = LINE_BARRIER
 
-    # ---- curves: runs of extruding steps in layers >= 0 separated only by neutral lines
+def _curves(program: Program, cls: np.ndarray) -> tuple:
+    """(first step, one past the last step, first line, last line) of each curve: runs of
+    extruding steps in layers >= 0 separated only by neutral lines. Marks their lines LINE_CURVE
+    in ``cls``."""
     extr = program.extruding & (program.layer >= 0)
     es = np.flatnonzero(extr)
     cls[program.line[es]] = LINE_CURVE
@@ -205,14 +224,16 @@ def layout(program: Program) -> Layout:
     else:
         s0 = s1 = np.zeros(0, np.int64)
     l0, l1 = program.line[s0], program.line[s1 - 1] if len(s1) else np.zeros(0, np.int64)
+    return s0, s1, l0, l1
+
+
+def _kept_layers(program: Program, cls: np.ndarray, s0, l0, l1, g92_xyz) -> tuple:
+    """Per layer: whether it holds a fatal line, whether it keeps the slicer's order and why;
+    and the notes to report (module docstring: tool changes, G92 with X/Y/Z, an X/Y motor
+    switched off, spiral vase, the first layer, relative XYZ or inch units)."""
     n = len(s0)
-    barrier_count = np.concatenate(([0], np.cumsum((cls == LINE_BARRIER) | (cls == LINE_FATAL))))
+    es = np.flatnonzero(program.extruding & (program.layer >= 0))
     fatal_count = np.concatenate(([0], np.cumsum(cls == LINE_FATAL)))
-    gap_boundary = np.ones(n, bool)
-    if n > 1:
-        gl0, gl1 = l1[:-1] + 1, l0[1:]                         # gap lines [gl0, gl1)
-        gap_boundary[1:] = ((barrier_count[gl1] - barrier_count[gl0]) > 0) | (
-            program.layer[s0[1:]] != program.layer[s0[:-1]])
     n_layers = max(program.n_layers, int(program.layer.max()) + 1 if program.n_steps else 0)
     layer_fatal = np.zeros(n_layers, bool)
     layer_keep = np.zeros(n_layers, bool)
@@ -273,119 +294,4 @@ def layout(program: Program) -> Layout:
         notes.append(f"relative XYZ (G91) or inch units (G20) while extruding in "
                      f"{len(rel_layers)} layer(s) from layer {int(rel_layers[0])}: "
                      "their order kept")
-    fm = FEATURE_LINE.search(b"\n" + program.data)
-    prefix = fm.group(1).decode() if fm else ";TYPE:"
-    return Layout(cls, step_of_line, s0.astype(np.int64), s1.astype(np.int64), l0.astype(np.int64),
-                  l1.astype(np.int64), gap_boundary, layer_fatal, layer_keep, tuple(why), prefix,
-                  skey, tuple(notes))
-
-
-def _fixed_features(program: Program) -> np.ndarray:
-    """(n_features,) bool: features whose order and direction the slicer fixed."""
-    fixed = np.array([bool(FIXED_FEATURE.search(nm)) for nm in program.feature_names], bool)
-    # solid fills printed monotonic or concentric keep their order too
-    return fixed
-
-
-_MONOTONIC_CFG = re.compile(rb"\n; *(top_fill_pattern|bottom_fill_pattern|solid_fill_pattern|fill_pattern|"
-                            rb"top_surface_pattern|bottom_surface_pattern|infill_pattern|"
-                            rb"top_bottom_pattern)\s*=\s*(\w+)")
-_ORDERED_PATTERNS = (b"monotonic", b"monotonicline", b"concentric")
-_SOLID_FEATURE = re.compile(r"solid|top|bottom|skin|surface", re.I)
-_SPARSE_FEATURE = re.compile(r"internal infill|^fill$|sparse", re.I)
-
-
-def _pattern_fixed(program: Program) -> np.ndarray:
-    """Features whose fill pattern the slicer orders on purpose (monotonic, concentric)."""
-    tail = program.data[-200_000:]
-    cfg = {m.group(1).lower(): m.group(2).lower() for m in _MONOTONIC_CFG.finditer(b"\n" + tail)}
-    solid_ordered = any(cfg.get(k, b"") in _ORDERED_PATTERNS for k in (
-        b"top_fill_pattern", b"bottom_fill_pattern", b"solid_fill_pattern", b"top_surface_pattern",
-        b"bottom_surface_pattern", b"top_bottom_pattern"))
-    sparse_ordered = any(cfg.get(k, b"") in _ORDERED_PATTERNS for k in (b"fill_pattern", b"infill_pattern"))
-    out = np.zeros(len(program.feature_names), bool)
-    for i, nm in enumerate(program.feature_names):
-        if solid_ordered and _SOLID_FEATURE.search(nm):
-            out[i] = True
-        if sparse_ordered and _SPARSE_FEATURE.search(nm):
-            out[i] = True
-    return out
-
-
-def build(program: Program, options: OrderingOptions | None = None, lay: Layout | None = None) -> OrderingProblem:
-    """Curves and groups of ``program`` (see module docstring)."""
-    options = options or OrderingOptions()
-    lay = lay or layout(program)
-    s0, s1 = lay.curve_s0, lay.curve_s1
-    n = len(s0)
-    start_xy = program.start_mm[s0, :2] if n else np.zeros((0, 2))
-    end_xy = program.end_mm[s1 - 1, :2] if n else np.zeros((0, 2))
-    closed = np.hypot(*(end_xy - start_xy).T) <= CLOSED_TOL_MM if n else np.zeros(0, bool)
-    # polyline vertices: the start of each step and the end of the last
-    counts = (s1 - s0) + 1
-    pstart = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
-    if n:
-        idx = np.concatenate([np.arange(a, b) for a, b in zip(s0, s1)])
-        owner = np.repeat(np.arange(n), s1 - s0)
-        pts = np.empty((pstart[-1], 2))
-        pos_in = pstart[owner] + (idx - s0[owner])
-        pts[pos_in] = program.start_mm[idx, :2]
-        pts[pstart[1:] - 1] = end_xy
-        # arcs cannot start a rotated loop (their centre would move with the seam): no seam there
-        has_arc = np.zeros(n, bool)
-        np.logical_or.at(has_arc, owner, program.kind[idx] == Kind.ARC)
-        closed = closed & ~(has_arc & options.move_seams)
-    else:
-        pts = np.zeros((0, 2))
-    # a wall where no feature comment says what a curve is: a closed loop, or one whose end stops
-    # just short of its start (Slic3r and PrusaSlicer clip 15 % of the nozzle off a loop's end
-    # against a seam bulge: 0.06-0.1 mm); safe mode keeps such curves' order and direction
-    gap_mm = np.hypot(*(end_xy - start_xy).T) if n else np.zeros(0)
-    wall_like = closed | ((gap_mm <= LOOP_GAP_MM) & (s1 - s0 >= 3))
-    layer = program.layer[s0].astype(np.int64)
-    feature = program.feature[s0].astype(np.int64)
-    fixed_feat = _fixed_features(program) | _pattern_fixed(program)
-    has_features = len(program.feature_names) > 0
-    # ---- groups
-    gstart, glayer, gfixed, glabel = [], [], [], []
-    for c in range(n):
-        lay_c = int(layer[c])
-        keep = bool(lay.layer_keep[lay_c]) if lay_c < len(lay.layer_keep) else True
-        if options.mode == "safe":
-            if keep:
-                fx = True
-            elif has_features and feature[c] >= 0:
-                fx = bool(fixed_feat[feature[c]])
-            else:
-                fx = bool(wall_like[c])
-            key = (feature[c], fx)
-        else:
-            fx = keep
-            key = (fx,)
-        new = c == 0 or lay.gap_boundary[c] or layer[c] != layer[c - 1] or key != prev_key
-        if new:
-            gstart.append(c)
-            glayer.append(lay_c)
-            gfixed.append(fx)
-            fname = program.feature_names[feature[c]] if feature[c] >= 0 else ("loops" if wall_like[c] else "curves")
-            glabel.append(f"L{lay_c} {fname if options.mode == 'safe' else 'all'}")
-        prev_key = key
-    gstart.append(n)
-    origin = program.start_mm[s0[0], :2] if n else np.zeros(2)
-    feed = options.travel_feed_mm_s
-    if feed is None:
-        tr = (program.kind == Kind.TRAVEL) & (program.length_mm > 1.0)
-        feed = float(np.median(program.feed_mm_s[tr])) if tr.any() else 100.0
-    per_mm = {"distance": 1.0, "time": 1.0 / feed, "energy": options.travel_power_w / feed}[options.cost]
-    unit = {"distance": "mm", "time": "s", "energy": "J"}[options.cost]
-    notes = list(lay.notes)
-    for i, w in enumerate(lay.layer_why):
-        if w and i > 0:
-            notes.append(f"layer {i}: {w}")
-    return OrderingProblem(
-        curve_start_xy=start_xy, curve_end_xy=end_xy, curve_closed=np.asarray(closed, bool),
-        curve_layer=layer, points_xy=pts, curve_point_start=pstart,
-        group_curve_start=np.asarray(gstart, np.int64), group_layer=np.asarray(glayer, np.int64),
-        group_fixed=np.asarray(gfixed, bool), group_label=tuple(glabel), origin_xy=origin,
-        options=options, cost_per_mm=per_mm, cost_unit=unit,
-        curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), travel_feed_mm_s=feed, layout=lay)
+    return layer_fatal, layer_keep, why, notes

@@ -1,0 +1,140 @@
+"""How a shared time budget is spent over a file's groups (formulations/ordering.md, "Budget").
+
+Proof time grows much faster than linearly with a group's size, so proofs per second are highest
+on the small groups: the plan (``BudgetPlan``) gives the smallest groups still to come the time
+an exact step needs to be tried at all (``exact_time_s``), the rest the greedy path's, as many of
+the smallest as the time left pays for. ``runner.GroupRunner`` asks it for each group's limit.
+The rates below are measured; their history is in docs/BENCHMARKS.md, "Curve-ordering constants".
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .problem import OrderingProblem
+
+#: groups up to this many curves are settled by the subset DP (``dp.fits``) in milliseconds
+DP_CURVES = 12
+#: the least per-group limit at which ``auto`` builds the symmetric model: below it (a budget
+#: spread thin over ~1000 groups) the root rarely finishes and the ILS path alone is the better
+#: use of the time (real groups of 20-60 curves are often proven in 10-30 ms, of ~100 curves in
+#: 0.1-0.5 s): MIN_SYMMETRIC_S plus MIN_SYMMETRIC_S_PER_CURVE per curve
+MIN_SYMMETRIC_S = 0.01
+MIN_SYMMETRIC_S_PER_CURVE = 0.002
+#: what a group costs in the plan without an exact step, per curve: the greedy path and the
+#: matching's bound and path (``auto._matching_path``), measured (docs/BENCHMARKS.md)
+HEURISTIC_S_PER_CURVE = 8e-5
+#: what the main process spends outside the solvers, kept out of a budget: per curve still to
+#: come, building its group and taking the helper's answers; per curve of the file, the chain DP
+#: and the travel totals after the last group; and stopping the helper process (measured)
+OVERHEAD_S_PER_CURVE = 6e-6
+TAIL_S_PER_CURVE = 2e-6
+STOP_HELPER_S = 0.05
+#: what a group takes beyond its limit (the greedy path and the cheap bound run whatever the
+#: limit; model building; a last ILS kick), per curve. The reserve for the groups to come is the
+#: rate measured so far, starting from this prior as if measured on OVERRUN_PRIOR_CURVES curves,
+#: so that one slow group early does not reserve the whole budget (docs/BENCHMARKS.md)
+OVERRUN_S_PER_CURVE = 3.5e-5
+OVERRUN_PRIOR_CURVES = 5000
+#: a group given its exact time mostly needs a fraction of it: the plan charges each exact group
+#: ``exact_s`` times the ratio the exact groups solved so far used of it, starting from
+#: EXACT_PRIOR_RATIO as if measured on EXACT_PRIOR_S seconds (a light prior: charged in full, too
+#: few groups got their proofs; docs/BENCHMARKS.md)
+EXACT_PRIOR_RATIO = 0.5
+EXACT_PRIOR_S = 0.25
+#: what a proof uses of its exact time grows with the group's size: the plan charges an exact
+#: group ``rho * e * (n / EXACT_SHAPE_CURVES) ** EXACT_SHAPE_EXPONENT`` (at most ``e``) and learns
+#: ``rho`` against the same shape (one ratio learnt on large groups kept the small ones from
+#: their proofs; the exponent is fitted, docs/BENCHMARKS.md)
+EXACT_SHAPE_EXPONENT = 0.5
+EXACT_SHAPE_CURVES = 100.0
+
+
+def exact_time_s(n_curves):
+    """The least per-group limit at which the exact step is tried on a group of ``n_curves``
+    (numpy arrays too): what a shared budget must give a group it wants proven."""
+    return MIN_SYMMETRIC_S + MIN_SYMMETRIC_S_PER_CURVE * n_curves
+
+
+def budget_weights(problem: OrderingProblem) -> np.ndarray:
+    """Per group, its claim on a shared budget: its curve count if some solver will have to work
+    on it (not fixed, too large for the subset DP, geometry not seen in an earlier group), else 0."""
+    w = np.zeros(problem.n_groups)
+    seen = set()
+    for g in range(problem.n_groups):
+        curves = problem.group_curves(g)
+        if problem.group_fixed[g] or len(curves) <= DP_CURVES:
+            continue
+        key = np.rint(np.concatenate([problem.curve_start_xy[curves], problem.curve_end_xy[curves]])
+                      * 1e4).astype(np.int64).tobytes()
+        if key not in seen:
+            seen.add(key)
+            w[g] = len(curves)
+    return w
+
+
+class BudgetPlan:
+    """How a shared budget is spent (module docstring). Of the groups still to come, the smallest
+    get ``exact_time_s(n)``, the rest ``HEURISTIC_S_PER_CURVE * n``. Most proofs take a fraction
+    of their exact time, the smaller the group the smaller, so the plan charges an exact group a
+    shape of its size (``shape_s``, at most its exact time) times the ratio measured so far
+    (``used_ratio``). Each group's limit is its exact or heuristic time scaled by time left / time
+    planned, so what finished early flows to the groups after it, and every re-plan promotes the
+    next smallest."""
+
+    def __init__(self, problem: OrderingProblem, shared=None):
+        w = budget_weights(problem)
+        self.claims = w > 0
+        n = w[self.claims]
+        self.groups = np.flatnonzero(self.claims)[np.argsort(n, kind="stable")]  # smallest first
+        n = w[self.groups]
+        self.curves = n
+        self.exact_s = exact_time_s(n)
+        self.shape_s = self.exact_s * (n / EXACT_SHAPE_CURVES) ** EXACT_SHAPE_EXPONENT
+        self.heuristic_s = HEURISTIC_S_PER_CURVE * n
+        # per group, 1 once solved (or taken by the other process when shared with a helper)
+        self.done_mask = np.zeros(problem.n_groups, np.int8) if shared is None else shared
+        self.rank = np.empty(problem.n_groups, np.int64)
+        self.rank[self.groups] = np.arange(len(self.groups))
+        self.exact_used_s = EXACT_PRIOR_RATIO * EXACT_PRIOR_S       # the prior
+        self.exact_planned_s = EXACT_PRIOR_S
+
+    @property
+    def used_ratio(self) -> float:
+        """What the groups given their exact time used so far (within their limits), per
+        second of their ``shape_s``."""
+        return self.exact_used_s / self.exact_planned_s
+
+    @property
+    def pending(self) -> np.ndarray:
+        """Per claim (sorted by size), whether it is still to be solved."""
+        return self.done_mask[self.groups] == 0
+
+    def pending_curves(self) -> float:
+        return float(self.curves[self.pending].sum())
+
+    def limit(self, g: int, left_s: float) -> float:
+        """Time for group ``g`` out of ``left_s`` seconds left for it and the groups after it."""
+        if not self.claims[g]:
+            return left_s          # DP, repeat: takes next to nothing, capped by what is left
+        pending = self.pending
+        pending[self.rank[g]] = True
+        h = self.heuristic_s[pending]
+        e = np.minimum(self.used_ratio * self.shape_s[pending], self.exact_s[pending])
+        # the longest prefix (smallest groups) that can have its exact time, the rest heuristic
+        cost = np.cumsum(np.maximum(e, h) - h) + h.sum()
+        n_exact = int(np.searchsorted(cost, left_s, side="right"))
+        planned = cost[n_exact - 1] if n_exact else h.sum()
+        i = int(self.rank[g])
+        pos = int(np.count_nonzero(pending[:i]))        # g's place among the pending groups
+        mine = self.exact_s[i] if pos < n_exact else self.heuristic_s[i]
+        return float(mine * left_s / planned) if planned > 0 else left_s
+
+    def measured(self, g: int, limit_s: float, used_s: float) -> None:
+        """Group ``g`` was given ``limit_s`` and used ``used_s`` of it: if that was its exact
+        time, it counts towards ``used_ratio``."""
+        if self.claims[g] and limit_s >= self.exact_s[self.rank[g]]:
+            self.exact_used_s += used_s
+            self.exact_planned_s += float(self.shape_s[self.rank[g]])
+
+    def done(self, g: int) -> None:
+        self.done_mask[g] = 1

@@ -1,0 +1,226 @@
+"""Re-emit G-code with the curves in the solved order and direction (``emit``).
+
+Rules (formulations/ordering.md, "Emit"; ``layout`` explains the line classes):
+
+- A curve printed as the slicer printed it keeps its lines byte for byte, except the E word in
+  absolute-E (M82) files, re-numbered from the cumulative E of the new order. A reversed curve,
+  or a loop that starts at another vertex, is written move by move (``G1 X Y E F``; arcs with G2
+  and G3 swapped and I/J re-computed from the new start point).
+- A gap whose two neighbours are still neighbours (same curves, same ends) is copied as it was:
+  the slicer's own retraction, wipe, z-hop, combing path.
+- Any other gap is rebuilt the way the slicer builds its travels (``gaps.rebuilt_gap``), with
+  parameters read from the file (``travel.TravelStyle``): retract (if the travel is at least the
+  shortest travel the slicer retracted for), z-hop, one straight travel, lower, unretract. If the slicer combs (it made
+  long travels without retracting), a rebuilt travel that crosses no wall of its layer and is
+  no longer than the slicer's own dry travels skips the retraction, as the slicer would
+  (``travel.WallCrossing``). Its non-motion lines are kept:
+  a boundary gap's lines (layer change, barriers) stay at the boundary in their order; a gap
+  inside a group travels with the curve that followed it (minus ``;TYPE:``/wipe comments, which
+  are re-derived).
+- State every extrusion sees (fan, acceleration, jerk, flow, pressure advance, feature label,
+  feedrate) is tracked through the output; before each curve, every value that differs from what
+  that curve saw in the original is re-issued with the original line (``writer.Writer``).
+- An E-only G92 travels with the next curve (E after it continues from it: E is numbered from the
+  output's own running total and the offset each copied G92 sets); a G92 with X/Y/Z is a barrier.
+"""
+from __future__ import annotations
+
+import bisect
+
+import numpy as np
+
+from ..headers import ORDER_HEADER
+from ..program import Program
+from .gaps import rebuilt_gap
+from .layout import Layout, layout
+from .problem import OrderingProblem, OrderingSolution
+from .travel import TravelStyle, WallCrossing, travel_style
+from .writer import F_WORD, Writer, gcode_number, required_state, states_at
+
+
+def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
+         memo: dict | None = None) -> str:
+    """G-code text with the curves of ``problem`` in the order of ``solution``.
+
+    ``memo``: a dict kept between calls on the same program and problem (the time guard emits
+    again after putting a few layers back, ``pipeline.emit_guarded``). A layer whose curves, in
+    the same order and directions, are entered from the same state (previous curve, position,
+    feedrate, state lines, feature, E up to ``MEMO_E_TOL_MM``) gets the text it got before; E
+    words differ from a fresh emit by at most that tolerance, where rounding tips a last digit."""
+    program.check_rewritable()
+    lay = problem.layout if problem.layout is not None else layout(program)
+    p = program
+    n = len(lay.curve_s0)
+    if n == 0:
+        return program.to_gcode()
+    order = np.asarray(solution.curve_order, np.int64)
+    rev = np.asarray(solution.curve_reversed, bool)
+    seam = np.asarray(solution.curve_seam, np.int64)
+    if len(order) != n or not np.array_equal(np.sort(order), np.arange(n)):
+        raise ValueError("solution does not order every curve of the program exactly once")
+    # what depends on the program and problem only (travel style, walls and their per-layer
+    # segments, per-line and per-curve lists) is made once per memo, not once per guard pass
+    fixed = memo.get(_FIXED) if memo is not None else None
+    if fixed is None:
+        style = travel_style(program, lay)
+        walls = WallCrossing(program, problem, lay) if style.comb_max_mm > 0 else None
+        fixed = (style, walls, Writer.per_line(program, lay), _Plan.per_curve(p, problem, lay))
+        if memo is not None:
+            memo[_FIXED] = fixed
+    style, walls, lists, per_curve = fixed
+    w = Writer(program, lay, lists)
+    plan = _Plan(p, lay, style, walls, order, rev, seam, per_curve)
+    changed, gap_lines = plan.changed, plan.gap_lines
+
+    # prefix + first gap: verbatim (the first layer keeps its order, so curve 0 stays first)
+    prev = -1
+    for i in gap_lines(order[0]) if order[0] == 0 else gap_lines(0):
+        w.copy_line(i)
+    # one block of the order per layer (a layer's curves are contiguous in any solution)
+    lay_of = problem.curve_layer[order]
+    cuts = np.flatnonzero(np.diff(lay_of)) + 1
+    starts, ends = np.concatenate(([0], cuts)), np.concatenate((cuts, [n]))
+    for k0, k1 in zip(starts.tolist(), ends.tolist()):
+        key = None
+        if memo is not None:
+            blk = order[k0:k1]
+            key = (int(lay_of[k0]), prev, bool(changed[prev]) if prev >= 0 else False,
+                   blk.tobytes(), rev[blk].tobytes(), seam[blk].tobytes(), w.entry_key())
+            hit = memo.get(key[:-1])
+            if hit is not None and same_entry(hit[0], key[-1]):
+                w.extend_from(hit[0], hit[1], hit[2])
+                prev = int(order[k1 - 1])
+                continue
+            start = len(w.out)
+        for k in range(k0, k1):
+            prev = _emit_curve(plan, w, k, prev)
+        if key is not None:
+            memo[key[:-1]] = (key[-1], w.out[start:], w.snapshot())
+    # state the remainder of the file expects, then the remainder verbatim
+    last = plan.l1[n - 1]
+    w.reissue(states_at(plan.req, [last + 1]), 0)
+    for i in range(last + 1, p.n_lines):
+        w.copy_line(i)
+    text = "".join(w.out)
+    if p.n_lines and not p.data.endswith(b"\n") and text.endswith(w.nl):
+        # the file ends without a line ending (FullControl's closing "M84 ; disable steppers"):
+        # so does the output. ``copy_line`` ends every line, for the lines a re-ordering moves;
+        # the added one made the original's last line differ from its copy byte for byte
+        text = text[:-len(w.nl)]
+    if text != p.to_gcode():
+        # says what this file is to ``gatesopt verify ORIG OUT``: a re-ordering, checked curve
+        # by curve, even where no curve visibly moved (kept order, rebuilt travels)
+        text = ORDER_HEADER + w.nl + text
+    return text
+
+
+
+_FIXED = "fixed"                # the memo's entry for what every emit of the program shares
+
+#: a memoized layer is reused when its entry's logical E (absolute-E files) differs by at most
+#: this: re-ordered layers sum the same E in another order, so E at the next layer's start drifts
+#: by ~1e-12 mm; the output writes E with 6 decimals
+MEMO_E_TOL_MM = 1e-7
+
+
+def same_entry(memo_entry: tuple, entry: tuple) -> bool:
+    """Whether a memoized layer's entry state is this one (E within MEMO_E_TOL_MM)."""
+    return memo_entry[:5] == entry[:5] and abs(memo_entry[5] - entry[5]) <= MEMO_E_TOL_MM
+
+
+class _Plan:
+    """What ``emit`` knows about the file and the solution, per curve as Python lists (numpy
+    scalar indexing curve by curve was a fifth of the emit)."""
+
+    def __init__(self, p: Program, lay: Layout, style: TravelStyle, walls, order, rev, seam,
+                 per_curve: tuple):
+        self.p, self.lay, self.style, self.walls = p, lay, style, walls
+        self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
+        self.changed = (rev | (seam != 0)).tolist()
+        (self.group_first, self.layer, self.l0, self.l1, self.feature, self.req,
+         self.curve_state, self.block) = per_curve
+
+    @staticmethod
+    def per_curve(p: Program, problem: OrderingProblem, lay: Layout) -> tuple:
+        """What does not depend on the order: each curve's group's original first curve, layer,
+        first and last line, feature, the state lines in force at any line and, per state key,
+        the text in force at each curve's first line (``states_at``)."""
+        gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
+        req = required_state(p, lay)
+        curve_state = states_at(req, lay.curve_l0)
+        # a curve whose lines are all extruding steps, not the file's last line, is copied in
+        # one piece when unchanged (``Writer.copy_steps``): (first byte, end byte), else None
+        steps_before = np.concatenate(([0], np.cumsum(lay.step_of_line >= 0)))
+        l0, l1 = lay.curve_l0, lay.curve_l1
+        whole = ((steps_before[l1 + 1] - steps_before[l0] == l1 - l0 + 1)
+                 & (l1 + 1 < p.n_lines)).tolist()
+        block = [(b0, b1) if ok else None for ok, b0, b1 in
+                 zip(whole, p.line_start[l0].tolist(), p.line_start[l1 + 1].tolist())]
+        return (problem.group_curve_start[gidx].tolist(), problem.curve_layer.tolist(),
+                l0.tolist(), l1.tolist(), p.feature[lay.curve_s0].tolist(), req, curve_state,
+                block)
+
+    def gap_lines(self, c: int) -> range:
+        """The original lines between curve c - 1 and curve c."""
+        return range(self.l1[c - 1] + 1 if c > 0 else 0, self.l0[c])
+
+
+def _emit_curve(plan: _Plan, w: Writer, k: int, prev: int) -> int:
+    """The k-th curve of the new order with the gap before it; returns that curve."""
+    p, lay = plan.p, plan.lay
+    c = plan.order[k]
+    if k > 0:
+        if prev == c - 1 and not plan.changed[prev] and not plan.changed[c]:
+            for i in plan.gap_lines(c):
+                w.copy_line(i)
+        else:
+            lines = []
+            first = plan.group_first[c]
+            if first != plan.group_first[prev]:             # crossing into c's group
+                lines.append((plan.gap_lines(first), True))
+                if c != first:
+                    lines.append((plan.gap_lines(c), False))
+            elif c != first:
+                lines.append((plan.gap_lines(c), False))
+            rebuilt_gap(w, p, lay, plan.style, lines, c,
+                         _entry_mm(p, lay, c, plan.rev[c], plan.seam[c]), plan.walls, plan.layer[c])
+    w.reissue(plan.curve_state, c)      # state the curve saw in the original
+    fi = plan.feature[c]
+    if fi >= 0 and w.feature != p.feature_names[fi]:
+        w.write(f"{lay.feature_prefix}{p.feature_names[fi]}")
+        w.feature = p.feature_names[fi]
+    _curve(w, p, lay, c, plan.rev[c], plan.seam[c], plan.block[c])
+    return c
+
+
+def _curve(w: Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int,
+           block=None) -> None:
+    a, b = int(lay.curve_s0[c]), int(lay.curve_s1[c])
+    if not reverse and seam == 0:
+        if w.feed is None or abs(w.feed - p.feed_mm_s[a]) > 1e-9:
+            # the first move may rely on a modal F set before it: set it explicitly
+            if not F_WORD.search(p.line_text(int(p.line[a])).split(";")[0]):
+                w.write(f"G1 F{gcode_number(p.feed_mm_s[a] * 60.0, 3)}")
+                w.feed = float(p.feed_mm_s[a])
+        l0, l1 = int(lay.curve_l0[c]), int(lay.curve_l1[c])
+        if block is not None and w.copy_steps(l0, l1, *block):
+            return
+        for i in range(l0, l1 + 1):
+            w.copy_line(i)
+        return
+    # neutral commands inside the curve (progress M73, messages M117) are not moves: written
+    # move by move the curve would lose them, so they go first, in their order
+    cmd = w.command_lines
+    for k in range(bisect.bisect_right(cmd, int(lay.curve_l0[c])),
+                   bisect.bisect_left(cmd, int(lay.curve_l1[c]))):
+        w.copy_line(cmd[k])
+    steps = range(b - 1, a - 1, -1) if reverse else list(range(a + seam, b)) + list(range(a, a + seam))
+    for s in steps:
+        w.step(s, reverse)
+
+
+def _entry_mm(p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> np.ndarray:
+    """XYZ where curve c starts when printed ``reverse``d / from vertex ``seam``."""
+    if reverse:
+        return p.end_mm[int(lay.curve_s1[c]) - 1, :3]
+    return p.start_mm[int(lay.curve_s0[c]) + seam, :3]

@@ -1,0 +1,135 @@
+"""Program -> OrderingProblem: the curves of a ``layout.Layout`` cut into groups (formulations/
+ordering.md, "Build").
+
+Groups never span a boundary (a barrier line or a layer change). ``--order-mode safe`` further
+splits at every change of feature (``;TYPE:``) and keeps walls, ironing, skirt/brim, fills the
+slicer orders on purpose (monotonic, concentric) and (without feature comments) closed loops, or
+loops whose end stops short of their start by at most ``LOOP_GAP_MM`` (the seam gap slicers clip),
+in the slicer's order and direction; ``free`` puts each layer's curves in one group, as the paper
+does. Layers the layout keeps (the first, fatal lines, ...) are fixed in both modes.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ..program import Kind, Program
+from ..slicers import FIXED_FEATURE
+from .layout import Layout, layout
+from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
+
+#: a curve without a feature comment whose end lies this close to its start is a clipped loop
+#: (a wall) in safe mode
+LOOP_GAP_MM = 0.5
+
+
+def _fixed_features(program: Program) -> np.ndarray:
+    """(n_features,) bool: features whose order and direction the slicer fixed."""
+    fixed = np.array([bool(FIXED_FEATURE.search(nm)) for nm in program.feature_names], bool)
+    # solid fills printed monotonic or concentric keep their order too
+    return fixed
+
+
+_MONOTONIC_CFG = re.compile(rb"\n; *(top_fill_pattern|bottom_fill_pattern|solid_fill_pattern|fill_pattern|"
+                            rb"top_surface_pattern|bottom_surface_pattern|infill_pattern|"
+                            rb"top_bottom_pattern)\s*=\s*(\w+)")
+_ORDERED_PATTERNS = (b"monotonic", b"monotonicline", b"concentric")
+_SOLID_FEATURE = re.compile(r"solid|top|bottom|skin|surface", re.I)
+_SPARSE_FEATURE = re.compile(r"internal infill|^fill$|sparse", re.I)
+
+
+def _pattern_fixed(program: Program) -> np.ndarray:
+    """Features whose fill pattern the slicer orders on purpose (monotonic, concentric)."""
+    tail = program.data[-200_000:]
+    cfg = {m.group(1).lower(): m.group(2).lower() for m in _MONOTONIC_CFG.finditer(b"\n" + tail)}
+    solid_ordered = any(cfg.get(k, b"") in _ORDERED_PATTERNS for k in (
+        b"top_fill_pattern", b"bottom_fill_pattern", b"solid_fill_pattern", b"top_surface_pattern",
+        b"bottom_surface_pattern", b"top_bottom_pattern"))
+    sparse_ordered = any(cfg.get(k, b"") in _ORDERED_PATTERNS for k in (b"fill_pattern", b"infill_pattern"))
+    out = np.zeros(len(program.feature_names), bool)
+    for i, nm in enumerate(program.feature_names):
+        if solid_ordered and _SOLID_FEATURE.search(nm):
+            out[i] = True
+        if sparse_ordered and _SPARSE_FEATURE.search(nm):
+            out[i] = True
+    return out
+
+
+def build(program: Program, options: OrderingOptions | None = None, lay: Layout | None = None) -> OrderingProblem:
+    """Curves and groups of ``program`` (see module docstring)."""
+    options = options or OrderingOptions()
+    lay = lay or layout(program)
+    s0, s1 = lay.curve_s0, lay.curve_s1
+    n = len(s0)
+    start_xy = program.start_mm[s0, :2] if n else np.zeros((0, 2))
+    end_xy = program.end_mm[s1 - 1, :2] if n else np.zeros((0, 2))
+    closed = np.hypot(*(end_xy - start_xy).T) <= CLOSED_TOL_MM if n else np.zeros(0, bool)
+    # polyline vertices: the start of each step and the end of the last
+    counts = (s1 - s0) + 1
+    pstart = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+    if n:
+        idx = np.concatenate([np.arange(a, b) for a, b in zip(s0, s1)])
+        owner = np.repeat(np.arange(n), s1 - s0)
+        pts = np.empty((pstart[-1], 2))
+        pos_in = pstart[owner] + (idx - s0[owner])
+        pts[pos_in] = program.start_mm[idx, :2]
+        pts[pstart[1:] - 1] = end_xy
+        # arcs cannot start a rotated loop (their centre would move with the seam): no seam there
+        has_arc = np.zeros(n, bool)
+        np.logical_or.at(has_arc, owner, program.kind[idx] == Kind.ARC)
+        closed = closed & ~(has_arc & options.move_seams)
+    else:
+        pts = np.zeros((0, 2))
+    # a wall where no feature comment says what a curve is: a closed loop, or one whose end stops
+    # just short of its start (Slic3r and PrusaSlicer clip 15 % of the nozzle off a loop's end
+    # against a seam bulge: 0.06-0.1 mm); safe mode keeps such curves' order and direction
+    gap_mm = np.hypot(*(end_xy - start_xy).T) if n else np.zeros(0)
+    wall_like = closed | ((gap_mm <= LOOP_GAP_MM) & (s1 - s0 >= 3))
+    layer = program.layer[s0].astype(np.int64)
+    feature = program.feature[s0].astype(np.int64)
+    fixed_feat = _fixed_features(program) | _pattern_fixed(program)
+    has_features = len(program.feature_names) > 0
+    # ---- groups
+    gstart, glayer, gfixed, glabel = [], [], [], []
+    for c in range(n):
+        lay_c = int(layer[c])
+        keep = bool(lay.layer_keep[lay_c]) if lay_c < len(lay.layer_keep) else True
+        if options.mode == "safe":
+            if keep:
+                fx = True
+            elif has_features and feature[c] >= 0:
+                fx = bool(fixed_feat[feature[c]])
+            else:
+                fx = bool(wall_like[c])
+            key = (feature[c], fx)
+        else:
+            fx = keep
+            key = (fx,)
+        new = c == 0 or lay.gap_boundary[c] or layer[c] != layer[c - 1] or key != prev_key
+        if new:
+            gstart.append(c)
+            glayer.append(lay_c)
+            gfixed.append(fx)
+            fname = program.feature_names[feature[c]] if feature[c] >= 0 else ("loops" if wall_like[c] else "curves")
+            glabel.append(f"L{lay_c} {fname if options.mode == 'safe' else 'all'}")
+        prev_key = key
+    gstart.append(n)
+    origin = program.start_mm[s0[0], :2] if n else np.zeros(2)
+    feed = options.travel_feed_mm_s
+    if feed is None:
+        tr = (program.kind == Kind.TRAVEL) & (program.length_mm > 1.0)
+        feed = float(np.median(program.feed_mm_s[tr])) if tr.any() else 100.0
+    per_mm = {"distance": 1.0, "time": 1.0 / feed, "energy": options.travel_power_w / feed}[options.cost]
+    unit = {"distance": "mm", "time": "s", "energy": "J"}[options.cost]
+    notes = list(lay.notes)
+    for i, w in enumerate(lay.layer_why):
+        if w and i > 0:
+            notes.append(f"layer {i}: {w}")
+    return OrderingProblem(
+        curve_start_xy=start_xy, curve_end_xy=end_xy, curve_closed=np.asarray(closed, bool),
+        curve_layer=layer, points_xy=pts, curve_point_start=pstart,
+        group_curve_start=np.asarray(gstart, np.int64), group_layer=np.asarray(glayer, np.int64),
+        group_fixed=np.asarray(gfixed, bool), group_label=tuple(glabel), origin_xy=origin,
+        options=options, cost_per_mm=per_mm, cost_unit=unit,
+        curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), travel_feed_mm_s=feed, layout=lay)
