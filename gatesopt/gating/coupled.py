@@ -24,8 +24,9 @@ from .timeline import TIME_EPS_S, integral, is_split, row_at
 
 @dataclass(frozen=True, eq=False)
 class CoupledModel:
-    """Variables: x (one per kept idle interval), y (one per kept angle), z (shared lines), w (shared splits),
-    a (XY AND pairs). Costs in J; lines and stall seconds per variable for the budgets."""
+    """Variables: x (one per kept idle interval), y (one per kept angle), z (shared lines),
+    w (shared splits), a (XY AND pairs). Costs in J; lines and stall seconds per variable for the
+    budgets."""
 
     x_idle: np.ndarray          # (nx,) problem idle-interval index of each x
     x_angle: np.ndarray         # (nx,) position in ``angles`` of each x
