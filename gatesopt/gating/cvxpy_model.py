@@ -166,7 +166,8 @@ def solve(problem: GatingProblem, *, solver: str = "HIGHS", time_limit_s: float 
     """Export and solve with cvxpy's ``solver`` (the ``solve(problem, ...)`` signature of the
     formulations; ``hint`` is not passed on: cvxpy has no portable warm start for a MIP). HiGHS
     gets ``milp``'s options unless given others: with HiGHS's defaults (presolve on, restarts)
-    the 259k-line PrusaSlicer bunny under a Marlin 1 % budget took 374 s in HiGHS instead of 6 s."""
+    the 259k-line PrusaSlicer bunny under a Marlin 1 % budget took 374-497 s in HiGHS instead of
+    6-9 s (docs/BENCHMARKS.md)."""
     m = to_cvxpy(problem)
     if solver == "HIGHS":
         solver_options = {**highs_options(problem, time_limit_s), **solver_options}
