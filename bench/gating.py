@@ -24,7 +24,7 @@ sys.path.insert(0, str(REPO))
 
 import gatesopt  # noqa: E402
 from gatesopt.gating import GatingOptions  # noqa: E402
-from gatesopt.gating.pipeline import run  # noqa: E402
+from gatesopt.rewrite import run  # noqa: E402
 
 SHARED = REPO.parent / "shared" / "instances"
 

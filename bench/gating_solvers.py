@@ -65,7 +65,7 @@ def speed(tmp: Path, repeat: int) -> list[str]:
         t_build, problem = best_of(lambda: build(program, opts), repeat)
         t_dp, sol = best_of(lambda: solve(problem, "dp"), repeat)
         t_gr, gsol = best_of(lambda: solve(problem, "greedy"), repeat)
-        rows.append(f"| {rotate} | {program.n_lines:,} | {problem.n_angles} | {problem.n_gaps:,} | "
+        rows.append(f"| {rotate} | {program.n_lines:,} | {problem.n_angles} | {problem.n_idle_intervals:,} | "
                     f"{t_parse:.3f} | {t_build:.3f} | {t_dp:.3f} | {t_build + t_dp:.3f} | "
                     f"{(t_build + t_dp) / t_parse:.1f}x | {t_dp / t_parse:.1f}x | {t_gr:.3f} | "
                     f"{sol.saving_pct:.2f} % @ {sol.rotation_deg:.3f}° | {gsol.saving_pct:.2f} % @ {gsol.rotation_deg:.0f}° |")
@@ -96,7 +96,7 @@ def budgets(tmp: Path, files, cpsat_files, time_limit: float, mip_gap: float) ->
             for f in ("milp", "cpsat") if name in cpsat_files else ("milp",):
                 s = solve(problem, f, time_limit_s=time_limit)
                 b = ", ".join(f"{k.split('_')[2]} {v:g} %" for k, v in budget.items()) or "none"
-                rows.append(f"| {name.replace('.gz', '')} | {fw} | {b} | {f} | {problem.n_gaps:,} | {t_build:.2f} | "
+                rows.append(f"| {name.replace('.gz', '')} | {fw} | {b} | {f} | {problem.n_idle_intervals:,} | {t_build:.2f} | "
                             f"{s.solve_s:.2f} | {s.status} | {100 * s.gap:.4f} % | {s.saving_pct:.3f} % | "
                             f"{d.saving_pct:.3f} % | {s.lines_added:,} | {s.added_time_s:.2f} |")
                 print(rows[-1], flush=True)

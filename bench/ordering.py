@@ -5,7 +5,7 @@
     python bench/ordering.py report [--out ...] [--write docs/RESULTS.md]
 
 ``run`` appends one JSON line per (file, mode, formulation): the verified pipeline
-(``gatesopt.ordering.pipeline.order_program``: build -> solve -> emit -> re-parse -> verify), with
+(``gatesopt.rewrite.order_program``: build -> solve -> emit -> re-parse -> verify), with
 travel measured on the parsed files, group statuses, gaps, solve time, and per layer the largest
 group and its solve time (Fleming Fig. 3). ``report`` turns the lines into the tables of
 docs/RESULTS.md, section "## Curve ordering" (replaced in place with ``--write``).
@@ -37,7 +37,7 @@ def manifest() -> dict:
 def run(args) -> None:
     import gatesopt
     from gatesopt.ordering import OrderingOptions
-    from gatesopt.ordering.pipeline import order_program
+    from gatesopt.rewrite.order import order_program
     man = manifest()
     files = sorted(f for f in man if fnmatch.fnmatch(f, args.files))
     out = Path(args.out)
@@ -84,7 +84,7 @@ def _slicer_family(s: str) -> str:
 
 
 def report(args) -> str:
-    from gatesopt.ordering import pipeline
+    from gatesopt.rewrite import order as pipeline
     rows = [json.loads(l) for l in open(args.out) if l.strip()]
     last = {}
     for r in rows:                      # the latest run of each (file, mode, formulation, limits)
@@ -118,7 +118,7 @@ def report(args) -> str:
              "`bounds.py` and the cheapest perfect matching of the end points, formulations/ordering.md "
              "\"Matching bound\"), not measured distances to the optimum. `--budget 10` is for the whole run of a file, parse "
              "to verified output, as `gatesopt order --budget 10`: the solve gets 10 s less what "
-             "parse and build took and an estimate of the rest (`pipeline.solve_budget_s`: "
+             "parse and build took and an estimate of the rest (`rewrite.order.solve_budget_s`: "
              f"{pipeline.FINISH_S_PER_LINE * 1e6:g} us per line of the file + "
              f"{pipeline.FINISH_FIXED_S:g} s), and spends it on kernel warm-up, greedy paths, bounds and "
              "exact steps (what a group takes beyond its limit is reserved for the groups after it). "

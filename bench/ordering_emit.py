@@ -7,9 +7,9 @@ runs of
 
 - ``gatesopt.parse`` of the file (the peer: the same number of lines, read instead of written),
 - ``ordering.emit`` of the whole re-ordered file,
-- after putting back ``--put-back`` % of its re-ordered layers (``pipeline.keep_layers``, what the
+- after putting back ``--put-back`` % of its re-ordered layers (``rewrite.order.keep_layers``, what the
   time guard does with layers that got slower): the emit again without the memo and with the
-  memo the first emit filled (``emit(..., memo)``, as ``pipeline.emit_guarded`` does),
+  memo the first emit filled (``emit(..., memo)``, as ``rewrite.order.emit_guarded`` does),
 - ``verify.ordering.check`` of the re-ordered output against the original (what every ``order``
   and ``solve`` run ends with).
 
@@ -36,7 +36,7 @@ SECTION = "## Curve-ordering emit and verify"
 
 import gatesopt  # noqa: E402
 from gatesopt.ordering import OrderingOptions, build, emit, solve  # noqa: E402
-from gatesopt.ordering.pipeline import keep_layers  # noqa: E402
+from gatesopt.rewrite.order import keep_layers  # noqa: E402
 from gatesopt.verify.ordering import check  # noqa: E402
 
 

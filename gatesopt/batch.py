@@ -78,8 +78,8 @@ def _infill_pattern(program: Program) -> str:
 
 def process_file(path: str, options: BatchOptions) -> dict:
     """Solve + verify one file; a row of ``COLUMNS``. Never raises: errors become the ``error`` column."""
-    from .gating.pipeline import run
-    from .gating.problem import GatingOptions
+    from .gating.options import GatingOptions
+    from .rewrite.pipeline import run
     from .parse import parse
 
     t0 = time.perf_counter()

@@ -250,7 +250,7 @@ def xy_disable_rows(program: Program) -> np.ndarray:
     """Rows of ``program``'s own motor lines that switch the X or Y motor off (``M18``, ``M18 X``,
     ``S0 X Y``, ...), ascending; each distinct text parsed once (a gated file has many such lines,
     a few texts). Where a file has them inside its print it is already gated: they were placed
-    for the moves around them (``gating.problem.own_xy_disable``, ``ordering.layout.layout``)."""
+    for the moves around them (``gating.rotation.own_xy_disable``, ``ordering.layout.layout``)."""
     rows = np.flatnonzero(program.kind == Kind.MOTOR)
     if not len(rows):
         return rows

@@ -196,7 +196,8 @@ def fig_formulations(rows):
 # ------------------------------------------------------------------------------------------------
 def rotation_sweep(path, angles=tuple(range(0, 360, 30)), formulation: str = "dp") -> list[tuple[float, float]]:
     """Gated energy at each fixed rotation (the paper's Fig. 14 experiment) for one file."""
-    from .gating.problem import GatingOptions, build
+    from .gating.options import GatingOptions
+    from .gating.problem import build
     from .gating.solve import solve
     from .parse import parse
     program = parse(path)

@@ -190,7 +190,9 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
     No rotation (a rotation must be chosen over the whole print, which a stream cannot see first).
     """
     from .gating.emit import emit
-    from .gating.problem import GatingOptions, build, score
+    from .gating.options import GatingOptions
+    from .gating.problem import build
+    from .gating.scoring import score
     from .gating.solve import solve
     from .verify import verify
 

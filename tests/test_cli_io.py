@@ -54,7 +54,7 @@ def test_in_place_failure_leaves_the_original_untouched(tmp_path, capsys):
 
 def test_in_place_failed_verification_leaves_the_original(tmp_path, monkeypatch, capsys):
     import dataclasses
-    from gatesopt.gating import pipeline
+    from gatesopt.rewrite import pipeline
     real = pipeline.run
 
     def broken(*a, **k):
@@ -88,7 +88,7 @@ def test_option_combinations_are_refused(tmp_path, capsys):
 
 def test_solve_gives_the_ordering_a_budget(tmp_path, monkeypatch):
     # `solve` re-orders before gating; on a large file 2 s per group without a cap took minutes
-    from gatesopt.ordering import pipeline as ordering_pipeline
+    from gatesopt.rewrite import order as ordering_pipeline
     seen = []
     real = ordering_pipeline.solve
 
@@ -101,7 +101,7 @@ def test_solve_gives_the_ordering_a_budget(tmp_path, monkeypatch):
     assert main(["solve", str(p), "-o", str(tmp_path / "a.gcode")]) == 0
     assert main(["solve", str(p), "-o", str(tmp_path / "b.gcode"), "--order-budget", "3"]) == 0
     # the budget covers the ordering's build and emit too: the solve gets less
-    from gatesopt.ordering.pipeline import FINISH_FIXED_S, FINISH_S_PER_LINE
+    from gatesopt.rewrite.order import FINISH_FIXED_S, FINISH_S_PER_LINE
     est = FINISH_FIXED_S + FINISH_S_PER_LINE * parse(str(p)).n_lines
     assert len(seen) == 2 and seen[0] <= 10.0 - est and seen[1] <= 3.0 - est and seen[1] > 0
 
@@ -157,7 +157,7 @@ def test_a_file_with_the_extruder_on_axis_a_is_never_rewritten(tmp_path, capsys)
     import pytest
 
     from gatesopt.errors import GcodeError
-    from gatesopt.gating.pipeline import run
+    from gatesopt.rewrite import run
     from gatesopt.stream import gate_stream
 
     src = tmp_path / "mach3.gcode"

@@ -17,8 +17,8 @@ import pytest
 from gatesopt import Kind, parse
 from gatesopt import firmware as fwmod
 from gatesopt.cli import main
-from gatesopt.gating.pipeline import run
-from gatesopt.gating.problem import GatingOptions, build
+from gatesopt.rewrite import run
+from gatesopt.gating import GatingOptions, build
 from gatesopt.verify import energy_of, verify
 
 PRESETS = tuple(fwmod.PRESETS)          # 3dgates, marlin, klipper, reprap
@@ -169,7 +169,7 @@ def test_cli_solve_with_start_m17_verifies(tmp_path, capsys, fw):
 def test_closing_disable_is_not_inside_the_print():
     """Cura's closing 'M84 X Y E' after the last move switches nothing off that steps again: the
     file is not 'already gated' and may be rotated; an 'M18 X' between moves is."""
-    from gatesopt.gating.problem import own_xy_disable
+    from gatesopt.gating.rotation import own_xy_disable
     head = "G90\nM82\nG92 E0\n;LAYER:0\nG1 Z0.2 F600\nG0 X10 Y10 F6000\nG1 X20 Y10 E1 F1200\n"
     closing = parse(head + "G1 X20 Y20 E2\nG91\nG1 Z5\nG90\nM84 X Y E\n")
     assert own_xy_disable(closing, 0, closing.n_steps) is None

@@ -156,7 +156,7 @@ def test_switch_on_a_step_boundary_does_not_split():
 
 def test_rotation_header_and_coordinates():
     p = gatesopt.parse(ABS_E)
-    r = render(p, [], rotate_deg=90, center_mm=(5, 5))
+    r = render(p, [], rotation_deg=90, center_mm=(5, 5))
     assert r.text.splitlines()[0] == "; gatesopt: rotate_deg=90 center_x=5 center_y=5"
     q = gatesopt.parse(r.text)
     m = _motion(q)
@@ -173,7 +173,7 @@ def test_rotation_single_axis_moves_have_equal_text():
     text = "G21\nG90\nM82\nG1 F1200\n" + f"G1 X{rot[0][0]:.3f} Y{rot[0][1]:.3f}\n" + "".join(
         f"G1 X{x:.3f} Y{y:.3f} E{k + 1}\n" for k, (x, y) in enumerate(rot[1:]))
     p = gatesopt.parse(text)
-    r = render(p, [], rotate_deg=-30, center_mm=(50, 50))
+    r = render(p, [], rotation_deg=-30, center_mm=(50, 50))
     q = gatesopt.parse(r.text)
     d = np.abs(q.end_mm[1:, :2] - q.start_mm[1:, :2])
     assert np.all(d.min(axis=1) == 0.0)          # every side is exactly single-axis in the text
@@ -247,7 +247,7 @@ def test_unsplittable_step_moves_switch_to_safe_side():
 # ------------------------------------------------------------------------------------------------
 def _e2e(path, formulation, fw="3dgates", rotate="none"):
     from gatesopt.gating import GatingOptions
-    from gatesopt.gating.pipeline import run
+    from gatesopt.rewrite import run
     from gatesopt.gating.solve import is_installed
     try:
         import importlib
@@ -320,11 +320,12 @@ KERNEL_CASES = {
 
 
 def _kernel_and_reference(p, switches, fw="3dgates"):
-    from gatesopt.gating.emit import PlacedArrays, _render_plain, place_switches
+    from gatesopt.gating.emit import PlacedArrays, place_switches
+    from gatesopt.gating.emit_plain import render_plain
     arrays = PlacedArrays.from_placed(place_switches(p, switches))
     fwm = firmware.get(fw)
-    return (_render_plain(p, fwm, arrays, 0.0, (0, 0)),
-            _render_plain(p, fwm, arrays, 0.0, (0, 0), split_in_kernel=False))
+    return (render_plain(p, fwm, arrays, 0.0, (0, 0)),
+            render_plain(p, fwm, arrays, 0.0, (0, 0), split_in_kernel=False))
 
 
 @pytest.mark.parametrize("case", sorted(KERNEL_CASES))
@@ -352,8 +353,9 @@ def test_kernel_leaves_a_rounding_tie_to_the_reference():
 
 @pytest.mark.parametrize("name", ["real_prusa240_m486_arcwelder.gcode", "real_slic3r131_stars.gcode"])
 def test_kernel_equals_the_reference_on_real_files(name):
-    from gatesopt.gating.emit import _render_plain, solution_arrays
-    from gatesopt.gating.problem import GatingOptions, build
+    from gatesopt.gating.emit import solution_arrays
+    from gatesopt.gating.emit_plain import render_plain
+    from gatesopt.gating import GatingOptions, build
     from gatesopt.gating.solve import solve
     path = SHARED / name
     if not path.exists():
@@ -362,6 +364,6 @@ def test_kernel_equals_the_reference_on_real_files(name):
     for fw in ("3dgates", "marlin"):
         sol = solve(build(p, GatingOptions.for_firmware(fw, motors=("X", "Y", "Z", "E"), rotate="none")), "dp")
         arrays, fwm = solution_arrays(sol), firmware.get(fw)
-        fast = _render_plain(p, fwm, arrays, 0.0, (0, 0))
+        fast = render_plain(p, fwm, arrays, 0.0, (0, 0))
         assert fast.splits > 100
-        assert fast == _render_plain(p, fwm, arrays, 0.0, (0, 0), split_in_kernel=False)
+        assert fast == render_plain(p, fwm, arrays, 0.0, (0, 0), split_in_kernel=False)

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from gatesopt.energy import step_energy_j
 from gatesopt.errors import GatesoptError, InfeasibleError
 from gatesopt.gating import GatingOptions, build, from_moves, score, solve
-from gatesopt.gating.problem import GatingOptionsError, check_feasible, steps_motor_at
+from gatesopt.gating import GatingOptionsError, check_feasible, steps_motor_at
 
 INSTANCES = Path(__file__).resolve().parents[2] / "shared" / "instances"
 EXACT = ("dp", "milp", "cpsat")
@@ -51,16 +51,16 @@ def with_xy_off(coeffs, value_w):
 
 
 def brute_force(problem):
-    """Lexicographic (energy, lines) optimum over every subset of every angle's gaps, scored by
+    """Lexicographic (energy, lines) optimum over every subset of every angle's idle intervals, scored by
     ``score`` (the one energy function over the pieces), budgets enforced."""
     best = None
     for k in range(problem.n_angles):
-        g = problem.gaps_of(k)
+        g = problem.idle_intervals_of(k)
         assert len(g) <= 12, "instance too big for brute force"
         for r in range(len(g) + 1):
             for sub in itertools.combinations(g, r):
                 sub = np.array(sub, np.int64)
-                sc = score(problem, problem.gap_motor[sub], problem.gap_start_s[sub], problem.gap_end_s[sub])
+                sc = score(problem, problem.idle_motor[sub], problem.idle_start_s[sub], problem.idle_end_s[sub])
                 if sc.added_time_s > problem.max_added_time_s + 1e-9 or sc.lines_added > problem.max_added_lines:
                     continue
                 key = (sc.energy_j, sc.lines_added)
@@ -112,39 +112,39 @@ def small_problem(**opts):
     return from_moves(s, e, d, GatingOptions(**{"rotate": "none", **opts}))
 
 
-def test_gaps_respect_start_ahead_end_late():
+def test_idle_intervals_respect_start_ahead_end_late():
     p = small_problem()
     steps, _ = steps_motor_at(p, 0)
-    for g in range(p.n_gaps):
-        m = p.gap_motor[g]
+    for g in range(p.n_idle_intervals):
+        m = p.idle_motor[g]
         rows = np.flatnonzero(steps[:, m])
-        before = rows[p.start_s[rows + 1] <= p.gap_start_s[g] + 1e-12]
-        after = rows[p.start_s[rows] >= p.gap_end_s[g] - 1e-12]
-        assert len(before) + len(after) == len(rows)                  # no step inside a gap
+        before = rows[p.start_s[rows + 1] <= p.idle_start_s[g] + 1e-12]
+        after = rows[p.start_s[rows] >= p.idle_end_s[g] - 1e-12]
+        assert len(before) + len(after) == len(rows)                  # no step inside an idle interval
         if len(before):
-            assert math.isclose(p.gap_start_s[g], p.start_s[before[-1] + 1] + 1e-3)
+            assert math.isclose(p.idle_start_s[g], p.start_s[before[-1] + 1] + 1e-3)
         if len(after):
-            assert math.isclose(p.gap_end_s[g], p.start_s[after[0]] - 1.8e-3)
+            assert math.isclose(p.idle_end_s[g], p.start_s[after[0]] - 1.8e-3)
 
 
 @pytest.mark.parametrize("opts", [{}, {"stall_off_s": 0.2, "stall_on_s": 0.1}, {"on_line": False, "stall_off_s": 0.2},
                                   {"rotate": "auto"}])
-def test_gap_table_agrees_with_scoring_each_gap_alone(opts):
+def test_idle_interval_table_agrees_with_scoring_each_alone(opts):
     p = small_problem(**opts)
-    assert p.n_gaps > 0
-    for g in range(p.n_gaps):
-        sc = score(p, p.gap_motor[[g]], p.gap_start_s[[g]], p.gap_end_s[[g]])
-        assert math.isclose(p.energy_before_j - sc.energy_j, p.gap_net_j[g], abs_tol=1e-9)
-        assert sc.lines_added == p.gap_lines[g]
-        assert math.isclose(sc.added_time_s, p.gap_stall_s[g])
+    assert p.n_idle_intervals > 0
+    for g in range(p.n_idle_intervals):
+        sc = score(p, p.idle_motor[[g]], p.idle_start_s[[g]], p.idle_end_s[[g]])
+        assert math.isclose(p.energy_before_j - sc.energy_j, p.idle_net_j[g], abs_tol=1e-9)
+        assert sc.lines_added == p.idle_lines[g]
+        assert math.isclose(sc.added_time_s, p.idle_stall_s[g])
 
 
-def test_paper_firmware_switches_off_in_every_gap():
-    # 3dgates: no stall, so every gap with a saving is off in the optimum (issue #3)
+def test_paper_firmware_switches_off_in_every_idle_interval():
+    # 3dgates: no stall, so every idle interval with a saving is off in the optimum (issue #3)
     p = small_problem()
     sol = solve(p, "dp")
     assert sol.status == "optimal"
-    saving = p.gap_saving_j > 0
+    saving = p.idle_saving_j > 0
     assert len(sol.off_motor) == int(saving.sum())
     check_solution(sol)
 
@@ -170,8 +170,8 @@ def test_exact_formulations_match_brute_force(opts):
         assert sol.status == "optimal", (f, sol.message)
         assert math.isclose(sol.energy_j, best[0], abs_tol=1e-6), (f, sol.energy_j, best)
         assert sol.lines_added == best[1], (f, sol.lines_added, best)
-        if not math.isnan(sol.bound):
-            assert sol.bound <= sol.energy_j + 1e-6
+        if not math.isnan(sol.bound_j):
+            assert sol.bound_j <= sol.energy_j + 1e-6
 
 
 @pytest.mark.parametrize("opts", [
@@ -181,7 +181,7 @@ def test_exact_formulations_match_brute_force(opts):
 ])
 def test_shared_enable_pin_matches_brute_force(opts):
     p = small_problem(shared_enable=(("X", "Y"),), **opts)
-    assert set(p.gap_motor.tolist()) == {0}            # the group's gaps belong to its first motor
+    assert set(p.idle_motor.tolist()) == {0}            # the group's idle intervals belong to its first motor
     best = brute_force(p)
     for f in EXACT:
         sol = solve(p, f)
@@ -298,7 +298,7 @@ def test_rotation_found_on_parsed_gcode():
     p = build(prog, GatingOptions(bed_size_mm=(220, 220)))
     # the purge line and the park move stay put: rotation starts at the travel to the square
     assert prog.extruding[p.rotate_lo + 1] and not prog.extruding[p.rotate_lo]
-    assert np.allclose(p.center_xy, (100, 100), atol=1e-3)
+    assert np.allclose(p.center_mm, (100, 100), atol=1e-3)
     sol = solve(p, "dp")
     check_solution(sol)
     assert math.isclose(sol.rotation_deg % 90.0, 73.0, abs_tol=0.01)   # coordinates have 3 decimals
@@ -413,15 +413,15 @@ def test_share_bound_never_exceeds_the_optimum(p):
     """``build_model``'s bound (each shared line's stall charged 1/|sharers| to each sharer, negative
     XY corrections all taken, budgets as fractional knapsacks) prunes angles and is reported when a
     solver stops early: it must hold on every problem, budgets, shared pins and XY power included."""
-    from gatesopt.gating import dp, milp
+    from gatesopt.gating import coupled, dp, milp
     best = brute_force(p)[0]
     for incumbent_j in (math.inf, dp.solve(p).energy_j):
-        model = milp.build_model(p, incumbent_j)
+        model = coupled.build_model(p, incumbent_j)
         assert model.bound_j <= best + 1e-6, (incumbent_j, model.bound_j, best)
     # dp reports it too where it is a heuristic (not separable), and calls its answer optimal only
     # within the exact solvers' relative gap of it
     d = dp.solve(p)
-    assert d.bound <= best + 1e-6 and d.bound <= d.energy_j + 1e-9
+    assert d.bound_j <= best + 1e-6 and d.bound_j <= d.energy_j + 1e-9
     assert (d.status == "optimal") == (p.separable or d.gap <= p.options.mip_rel_gap), (d.status, d.gap)
 
 
@@ -455,10 +455,10 @@ def test_real_file_budget(stars):
         check_solution(s)
         assert s.added_time_s <= p.max_added_time_s + 1e-9 and s.lines_added <= p.max_added_lines
     assert m.status == "optimal" and m.energy_j <= d.energy_j + 1e-9
-    assert m.bound <= m.energy_j
+    assert m.bound_j <= m.energy_j
     # both exact methods prove the same optimum (within their 1e-6 relative gap)
     assert c.status == "optimal" and math.isclose(c.energy_j, m.energy_j, rel_tol=2e-6)
-    assert c.bound <= m.energy_j + 1e-6 and m.bound <= c.energy_j + 1e-6
+    assert c.bound_j <= m.energy_j + 1e-6 and m.bound_j <= c.energy_j + 1e-6
 
 
 def sequential_squares_gcode(deg=17.0, n_layers=8) -> str:
@@ -524,7 +524,7 @@ def test_a_stopped_solver_still_reports_the_share_bound(stars, monkeypatch):
     """HiGHS stopped before it has anything (here: never run) returns the dp start as a fallback,
     with the share bound and its gap, not an unknown gap. On a 217k-line Cura file under Marlin
     HiGHS had not finished its root LP in 10 s and reported a 75 % gap where this bound gives 8e-6."""
-    from gatesopt.gating import dp, milp
+    from gatesopt.gating import coupled, dp, milp
     p = build(stars, GatingOptions.for_firmware("marlin"))
     exact = solve(p, "milp", time_limit_s=60)
     assert exact.status == "optimal"
@@ -532,9 +532,9 @@ def test_a_stopped_solver_still_reports_the_share_bound(stars, monkeypatch):
     sol = solve(p, "milp", time_limit_s=60)
     start = dp.solve(p)
     assert sol.status == "fallback" and sol.energy_j == pytest.approx(start.energy_j, rel=1e-12)
-    model = milp.build_model(p, start.energy_j)
-    assert sol.bound == pytest.approx(model.bound_j, rel=1e-12)
-    assert sol.bound <= exact.energy_j + 1e-6
+    model = coupled.build_model(p, start.energy_j)
+    assert sol.bound_j == pytest.approx(model.bound_j, rel=1e-12)
+    assert sol.bound_j <= exact.energy_j + 1e-6
     # the bound is tight on real output: far inside the gap HiGHS's unfinished root gave
     assert 0.0 < sol.gap < 0.01
     # and it prunes: under Marlin's shared stalls most of the 18 angles cannot beat the dp start

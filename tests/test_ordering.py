@@ -185,7 +185,7 @@ def test_safe_mode_keeps_walls_that_stop_short_of_their_seam():
     safe = build(prog, OrderingOptions(mode="safe"))
     assert not safe.curve_closed.any()              # geometrically open: 0.075 mm short
     assert safe.group_fixed.all()
-    from gatesopt.ordering.pipeline import order_program
+    from gatesopt.rewrite.order import order_program
     res = order_program(prog, OrderingOptions(mode="safe"))
     assert res.ok and res.text == prog.to_gcode()   # nothing to decide: the file comes back as is
     free = build(prog, OrderingOptions(mode="free"))
@@ -395,7 +395,7 @@ def test_a_layer_slower_re_ordered_keeps_the_slicers_order(monkeypatch):
     # the objective is travel distance, and a rebuilt travel may retract where the slicer combed
     # (found on CuraEngine output: prints 2.4 % slower with 13 % less travel); a layer whose
     # re-ordered print takes longer comes back in the slicer's order, the others stay re-ordered
-    from gatesopt.ordering import pipeline
+    from gatesopt.rewrite import order as pipeline
     prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
     free = OrderingOptions(mode="free")
     unguarded = pipeline.order_program(prog, free, time_guard=False)
@@ -440,7 +440,7 @@ def _layer_xy(p, layer):
 def test_emit_memo_reuses_unchanged_layers_and_writes_what_a_fresh_emit_writes(name):
     # the time guard emits again after putting layers back; the memo re-emits only the layers
     # whose curves or entry state changed, and the text is the one a fresh emit writes
-    from gatesopt.ordering.pipeline import keep_layers
+    from gatesopt.rewrite.order import keep_layers
     prog = gatesopt.parse(str(PROJECT_INSTANCES / name))
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
@@ -465,7 +465,7 @@ def test_emit_copies_unchanged_curves_in_one_piece_as_line_by_line(name, monkeyp
     # (Writer.copy_steps) unless an E word must be re-numbered: the text must be the one the
     # line-by-line copy writes, for a re-ordered solution and for the slicer's own order
     from gatesopt.ordering import writer
-    from gatesopt.ordering.pipeline import keep_layers
+    from gatesopt.rewrite.order import keep_layers
     prog = gatesopt.parse(str(PROJECT_INSTANCES / name))
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
@@ -488,7 +488,7 @@ def test_emit_copies_unchanged_curves_in_one_piece_as_line_by_line(name, monkeyp
 
 
 def test_progress_is_called_after_every_group_with_the_proofs_so_far():
-    from gatesopt.ordering import pipeline
+    from gatesopt.rewrite import order as pipeline
     prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
     calls = []
     res = pipeline.order_program(prog, OrderingOptions(mode="free"), progress=lambda *a: calls.append(a))
@@ -540,7 +540,7 @@ def test_time_guard_puts_back_the_neighbour_a_kept_layer_still_pays_for(monkeypa
     # Stand-in emit and parse: layer B is 0.6 s slower whenever it or its neighbour A is
     # re-ordered; A re-ordered saves gain_s. With 0.1 s the pair is slower: both go back; with
     # 1.0 s the print is faster with A re-ordered: only B goes back.
-    from gatesopt.ordering import pipeline
+    from gatesopt.rewrite import order as pipeline
     prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
@@ -585,7 +585,7 @@ def test_time_guard_that_does_not_settle_never_returns_a_slower_print(monkeypatc
     # is 0.5 s slower re-ordered; a re-ordered layer right after one put back is 5 s slower. With
     # two passes the guard cannot settle: it returns the tried state with the shortest print (the
     # first), or, when every tried state is slower than the slicer's, the slicer's order.
-    from gatesopt.ordering import pipeline
+    from gatesopt.rewrite import order as pipeline
     prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
@@ -631,7 +631,7 @@ def test_an_e_reset_is_not_a_barrier_but_a_coordinate_reset_is(reset):
     layer). ``G92 X0 Y0`` sets the coordinate system from where the head is: a barrier, and the
     layer keeps the slicer's order (re-ordered, its curves before the G92 ended 10 mm away and
     every move after it came out shifted by 10 mm; the verifier caught it)."""
-    from gatesopt.ordering import pipeline
+    from gatesopt.rewrite import order as pipeline
     out = ["G21", "G90", "M82", "G92 E0", ";LAYER:0", "G1 Z0.2 F600", "G1 X10 Y0 E1 F1800",
            ";LAYER:1", "G1 Z0.4 F600"]
     e, ys = 1.0, [0, 40, 10, 50, 20, 60, 30, 70]
@@ -701,7 +701,7 @@ def test_summary_layer_counts_match_its_per_layer_rows():
     """A layer with nothing to re-order is "kept" in the per-layer rows as in the counts (it was
     "optimal" there: its fixed groups are trivially optimal), in both modes."""
     from collections import Counter
-    from gatesopt.ordering.pipeline import order_program
+    from gatesopt.rewrite.order import order_program
     prog = gatesopt.parse(_handmade_gcode(4))
     for mode in ("safe", "free"):
         s = order_program(prog, OrderingOptions(mode=mode), time_limit_s=1.0).summary
@@ -718,7 +718,7 @@ def test_standalone_verify_checks_barriers_of_reordered_and_gated_output(rotate)
     the barrier check can, with the gating lines taken out: it passes on the real output and
     catches an extrusion moved across the fan barrier in it."""
     from gatesopt.gating import GatingOptions
-    from gatesopt.gating.pipeline import run
+    from gatesopt.rewrite import run
     from gatesopt.verify import verify
     prog = gatesopt.parse(_handmade_gcode())
     res = run(prog, GatingOptions(rotate=rotate), order_options=OrderingOptions(mode="safe"))
@@ -742,7 +742,7 @@ def test_a_gated_file_keeps_the_order_of_its_gated_layers():
     placed for the moves around them, so a layer where one switches X or Y off keeps its order
     (no curve re-ordered or reversed past it), and ordering it changes no extruded move."""
     from gatesopt.gating import GatingOptions
-    from gatesopt.gating.pipeline import run
+    from gatesopt.rewrite import run
     from gatesopt.ordering.layout import layout
     prog = gatesopt.parse(_handmade_gcode())
     assert not any("motor" in w for w in layout(prog).layer_why)
@@ -761,7 +761,7 @@ def test_a_layer_whose_only_change_is_a_turned_curve_is_not_reported_kept():
     """PrusaSlicer 2.5's rectilinear star: one layer's only decision is a single curve, printed
     from its other end by the solver. The output differs there, so the report must not count that
     layer as "order kept" (it did: only groups of >= 2 curves made a layer "decided")."""
-    from gatesopt.ordering import pipeline
+    from gatesopt.rewrite import order as pipeline
     prog = _corpus_program("prusa25_star_rect15_m82.gcode.gz")
     res = pipeline.order_program(prog, OrderingOptions(mode="safe"))
     assert res.ok

@@ -336,7 +336,7 @@ def test_helper_solves_the_chain_from_the_back(monkeypatch):
 
 
 def test_a_budget_is_for_the_whole_run_and_the_solve_gets_what_the_rest_leaves():
-    from gatesopt.ordering.pipeline import (FINISH_FIXED_S, FINISH_S_PER_LINE, MIN_SOLVE_SHARE,
+    from gatesopt.rewrite.order import (FINISH_FIXED_S, FINISH_S_PER_LINE, MIN_SOLVE_SHARE,
                                             solve_budget_s)
     assert solve_budget_s(None, 10 ** 6, 3.0) is None
     assert solve_budget_s(10.0, 100_000, 0.5) == pytest.approx(
@@ -350,7 +350,7 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
 
     import gatesopt
     from gatesopt import _jit
-    from gatesopt.ordering import pipeline
+    from gatesopt.rewrite import order as pipeline
 
     from conftest import PROJECT_INSTANCES
     prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))

@@ -9,7 +9,7 @@ import gatesopt
 from gatesopt.ordering import OrderingOptions, build
 from gatesopt.ordering.layout import layout
 from gatesopt.ordering.travel import WallCrossing, travel_style
-from gatesopt.ordering.pipeline import order_program
+from gatesopt.rewrite.order import order_program
 
 from conftest import SHARED_INSTANCES, needs_shared
 
@@ -122,7 +122,7 @@ def test_firmware_retraction_is_rebuilt_with_the_travel():
     rebuilt travel the slicer would have retracted for is retracted by one G10 and one G11 (never
     two G10 in a row, every extrusion unretracted). The report counts G10 as a retraction; a
     RepRapFirmware ``G10 P0 S205`` is a heater command and stays a barrier."""
-    from gatesopt.ordering.pipeline import travel_stats
+    from gatesopt.ordering.travel_stats import travel_stats
     prog = gatesopt.parse(_firmware_retract_gcode())
     assert travel_stats(prog)["retractions"] == 17        # 16 travels and the final one
     res = order_program(prog, OrderingOptions(mode="free"))
@@ -257,7 +257,7 @@ def test_solve_output_keeps_the_fan_each_extrusion_saw():
     """Re-ordered and gated (``gatesopt solve``): the moves are split by gating, so the verifier's
     fan check there is per layer, filament by fan duty; it holds for the output and catches a
     missing re-issue."""
-    from gatesopt.gating.pipeline import run
+    from gatesopt.rewrite import run
     from gatesopt.verify import verify
     prog = gatesopt.parse(_bridge_fan_gcode())
     res = run(prog, order_options=OrderingOptions(mode="free"), formulation="milp")

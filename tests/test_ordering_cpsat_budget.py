@@ -13,7 +13,7 @@ import gatesopt
 from gatesopt.ordering import cpsat, dp, greedy, tsp
 from gatesopt.ordering.bounds import lower_bound_mm
 from gatesopt.ordering.layers import solve
-from gatesopt.ordering.pipeline import order_program
+from gatesopt.rewrite.order import order_program
 from gatesopt.ordering.polylines import from_polylines
 from gatesopt.ordering.problem import OPTIMAL_ABS_TOL_MM, OrderingOptions
 

@@ -10,7 +10,8 @@ import pytest
 
 from gatesopt import parse
 from gatesopt.cli import main
-from gatesopt.ordering.pipeline import order_program, travel_stats
+from gatesopt.ordering.travel_stats import travel_stats
+from gatesopt.rewrite import order_program
 from gatesopt.ordering.plot import (HEIGHT_PX, WIDTH_PX, default_layer, layer_segments,
                                     plot_ordering, travel_per_layer_mm)
 from gatesopt.plot import PlotError

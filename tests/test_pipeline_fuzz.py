@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from gatesopt import parse
 from gatesopt.cli import main
-from gatesopt.gating.pipeline import run
-from gatesopt.gating.problem import GatingOptions
+from gatesopt.rewrite import run
+from gatesopt.gating import GatingOptions
 
 from conftest import PROJECT_INSTANCES
 
@@ -145,7 +145,7 @@ def test_mutated_real_files_give_a_clear_error_or_a_verified_output(tmp_path, ca
 
 
 def test_ctrl_c_during_an_exact_solve_still_gives_a_verified_answer(monkeypatch):
-    from gatesopt.gating import pipeline
+    from gatesopt.rewrite import pipeline
     real = pipeline.solve
 
     def interrupted(problem, formulation, **kw):
@@ -163,7 +163,7 @@ def test_ctrl_c_during_an_exact_solve_still_gives_a_verified_answer(monkeypatch)
 
 
 def test_ctrl_c_during_ordering_keeps_the_slicer_order(monkeypatch):
-    from gatesopt.ordering import pipeline as ordering_pipeline
+    from gatesopt.rewrite import order as ordering_pipeline
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt

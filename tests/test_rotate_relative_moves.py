@@ -15,8 +15,8 @@ import pytest
 
 import gatesopt
 from gatesopt.gating.emit import render
-from gatesopt.gating.pipeline import run
-from gatesopt.gating.problem import GatingOptions, build
+from gatesopt.rewrite import run
+from gatesopt.gating import GatingOptions, build
 from gatesopt.program import MOTION_KINDS
 from gatesopt import verify as verify_mod
 from gatesopt.verify import verify
@@ -132,8 +132,8 @@ def _rotate_only(p, deg):
     """Rotation alone, with the pipeline's rotated rows and centre: one output move per move."""
     prob = build(p, GatingOptions(rotate=deg))
     assert float(prob.angles_deg[0]) == pytest.approx(deg % 360)
-    center = tuple(float(v) for v in prob.center_xy)
-    r = render(p, [], rotate_deg=deg, center_mm=center, rotate_rows=(prob.rotate_lo, prob.rotate_hi))
+    center = tuple(float(v) for v in prob.center_mm)
+    r = render(p, [], rotation_deg=deg, center_mm=center, rotate_rows=(prob.rotate_lo, prob.rotate_hi))
     return r, gatesopt.parse(r.text), center
 
 
@@ -196,7 +196,7 @@ def test_whole_file_rotation_with_g91_at_the_start(deg):
     text = "G21\nM82\nG91\nG1 X15 Y5 F3000\nG1 X5\nG2 X5 Y5 I5 J0\nG90\nG1 X40 Y10 E1 F1200\nG1 X40 Y30 E2\n"
     p = gatesopt.parse(text)
     center = (25.0, 20.0)
-    r = render(p, [], rotate_deg=deg, center_mm=center)
+    r = render(p, [], rotation_deg=deg, center_mm=center)
     q = gatesopt.parse(r.text)
     _assert_positions(p, q, deg, center, _rotated_rows(p, None))
     assert verify(p, q).ok
@@ -279,8 +279,8 @@ def test_a_twice_rotated_output_verifies_against_either_input():
     def rows(q):
         b = build(q, GatingOptions(rotate="none"))
         return b.rotate_lo, b.rotate_hi
-    once = gatesopt.parse(render(p, [], rotate_deg=30, center_mm=(60.0, 60.0), rotate_rows=rows(p)).text)
-    twice = gatesopt.parse(render(once, [], rotate_deg=45, center_mm=(10.0, -5.0),
+    once = gatesopt.parse(render(p, [], rotation_deg=30, center_mm=(60.0, 60.0), rotate_rows=rows(p)).text)
+    twice = gatesopt.parse(render(once, [], rotation_deg=45, center_mm=(10.0, -5.0),
                                   rotate_rows=rows(once)).text)
     assert verify_mod.read_rotation(twice, once) == (45.0, 10.0, -5.0)
     deg, cx, cy = verify_mod.read_rotation(twice, p)

@@ -96,7 +96,7 @@ def test_streamed_gating_gives_the_input_warnings_once(tmp_path):
 
 
 def test_streamed_gating_is_verified_and_close_to_whole_file(tmp_path):
-    from gatesopt.gating.problem import GatingOptions, build
+    from gatesopt.gating import GatingOptions, build
     from gatesopt.gating.solve import solve
     src = PROJECT_INSTANCES / "cyl_grid.gcode"
     out = tmp_path / "out.gcode"

@@ -126,7 +126,7 @@ def test_wrong_rotation_header_is_caught():
 def test_rotated_output_verifies():
     from gatesopt.gating.emit import render
     p = gatesopt.parse(SQUARE)
-    q = gatesopt.parse(render(p, [], rotate_deg=33, center_mm=(10, 10)).text)
+    q = gatesopt.parse(render(p, [], rotation_deg=33, center_mm=(10, 10)).text)
     rep = verify(p, q)
     assert rep.ok, [str(f) for f in rep.findings]
     assert rep.rotate_deg == 33
@@ -187,8 +187,8 @@ G1 X100.029 Y102.71 E2.46494
 
 
 def test_a_rotated_piece_ending_on_an_unrelated_vertex_still_verifies():
-    from gatesopt.gating.pipeline import run
-    from gatesopt.gating.problem import GatingOptions
+    from gatesopt.rewrite import run
+    from gatesopt.gating import GatingOptions
     from gatesopt.verify.geometry import _near
     p = gatesopt.parse(ROTATED_SPLIT)
     res = run(p, GatingOptions(rotate=45.0), formulation="dp", order=False)
@@ -289,8 +289,8 @@ def test_distinct_lines_groups_exactly_equal_texts():
 
 @pytest.fixture(scope="module")
 def gated_stars():
-    from gatesopt.gating.pipeline import run
-    from gatesopt.gating.problem import GatingOptions
+    from gatesopt.rewrite import run
+    from gatesopt.gating import GatingOptions
     path = SHARED / "real_slic3r131_stars.gcode"
     if not path.exists():
         pytest.skip("../shared/instances absent")

@@ -9,7 +9,7 @@ import pytest
 
 import gatesopt
 from gatesopt.gating import GatingOptions
-from gatesopt.gating.pipeline import run
+from gatesopt.rewrite import run
 from gatesopt.verify import verify
 
 TEXT = ("G21\nG90\nM83\nM104 S200\nM109 S200\nG28\nG92 E0\n;LAYER_CHANGE\n;Z:0.2\nG1 Z0.200 F600\n"

@@ -1,6 +1,6 @@
 """``gatesopt solve`` and ``gatesopt compare``: motor power gating (3DGates) from the command line.
 
-Option parsing and printing only; the work is ``gatesopt.gating.pipeline.run`` (order -> build ->
+Option parsing and printing only; the work is ``gatesopt.rewrite.run`` (order -> build ->
 solve -> emit -> re-parse -> verify). Every output is verified before it is written; a file is
 written to a temporary name in the target folder and renamed, never over an existing file without
 ``--force``, never over the input.
@@ -109,7 +109,7 @@ def register(sub) -> None:
 
 # ------------------------------------------------------------------------------------------------
 def options_from_args(args):
-    from ..gating.problem import GatingOptions
+    from ..gating.options import GatingOptions
     motors = tuple(m.strip().upper() for m in args.motors.split(",") if m.strip())
     rotate = args.rotate
     if rotate not in ("auto", "none"):
@@ -206,7 +206,7 @@ def write_atomic(path: str, text: str, like: str | None = None) -> None:
 
 
 def ordering_result_lines(s: dict) -> list[str]:
-    """The lines of a re-ordering's report (``ordering.pipeline.order_summary``) that say what it
+    """The lines of a re-ordering's report (``rewrite.order.order_summary``) that say what it
     did: travel, times, travels, curves, groups and layers (``order`` and ``solve`` print them)."""
     def pct(a, b):
         return f"{100.0 * (a / b - 1.0):+.1f} %" if b else "n/a"
@@ -286,7 +286,7 @@ def _solve_paths(args) -> tuple[str, str]:
 
 
 def run_solve(args) -> int:
-    from ..gating.pipeline import run
+    from ..rewrite.pipeline import run
     if not (math.isfinite(args.order_budget) and args.order_budget > 0):
         raise GatesoptError(f"--order-budget must be > 0 s, not {args.order_budget}")
     if args.no_gating and args.rotate not in ("auto", "none"):
@@ -323,7 +323,7 @@ def run_solve(args) -> int:
             print(format_solve_report(s))
         where = "the input is unchanged" if args.in_place else f"nothing written to {out}"
         first = str(result.report.findings[0]) if result.report.findings else "see above"
-        from ..gating.problem import own_xy_disable
+        from ..gating.rotation import own_xy_disable
         own = own_xy_disable(program, 0, program.n_steps)
         hint = "" if own is None else (
             f"; the input switches an X/Y motor off itself ({program.source}:"
@@ -375,8 +375,8 @@ def formulation_rows(program, formulations, known, solve_row, installed=lambda n
 
 def compare_rows(program, options, formulations, time_limit_s) -> list[dict]:
     """One row per gating formulation (greedy first), each a verified run (nothing written)."""
-    from ..gating.pipeline import run
     from ..gating.solve import FORMULATIONS, is_installed
+    from ..rewrite.pipeline import run
 
     def solve_row(name):
         r = run(program, options, formulation=name, time_limit_s=time_limit_s, order=False)
@@ -440,7 +440,7 @@ def plot_compare(rows: list[dict], path: str, ordering: bool = False) -> None:
 def compare_order_rows(program, options, formulations, budget_s: float, workers: int) -> list[dict]:
     """``compare --ordering``: one row per curve-ordering formulation (greedy, the Fleming et al.
     baseline, first), each a verified run with ``budget_s`` for the whole of it (nothing written)."""
-    from ..ordering.pipeline import order_program
+    from ..rewrite.order import order_program
 
     def solve_row(name):
         r = order_program(program, options, formulation=name, budget_s=budget_s, workers=workers)

@@ -1,6 +1,6 @@
 """``gatesopt order``: re-order each layer's curves to cut travel (Fleming et al.).
 
-Option parsing and printing only; the work is ``gatesopt.ordering.pipeline.order_program``
+Option parsing and printing only; the work is ``gatesopt.rewrite.order_program``
 (build -> solve -> emit -> re-parse -> verify). The output is verified before it is written, written
 to a temporary file beside the target and renamed; never over the input, never over an existing
 file without ``--force``.
@@ -65,7 +65,7 @@ def default_workers() -> int:
 def run(args) -> int:
     started_s = time.perf_counter()     # a --budget counts from here: imports, parse, all of it
     from ..ordering import OrderingOptions
-    from ..ordering.pipeline import order_program
+    from ..rewrite.order import order_program
     if not (math.isfinite(args.time_limit) and args.time_limit > 0):
         raise GatesoptError(f"--time-limit must be > 0 s, not {args.time_limit}")
     if args.budget is not None and not (math.isfinite(args.budget) and args.budget > 0):

@@ -1,16 +1,16 @@
 """The compiled core of gating emission without rotation: one pass over the lines of a file.
 
-``emit.render`` decides *what* goes where (instruction lines before a line, moves split at a
+``emit_plain.render_plain`` decides *what* goes where (instruction lines before a line, moves split at a
 fraction of their time) with numpy; this kernel writes the bytes. Lines that are not rewritten are
 copied as they are; instruction lines are copied from a small table of texts; a split move is
 written here when its line is in the plain form slicers write (``G1 X.. Y.. E.. F..``: upper-case
 letters, one space between words, ASCII) and every number it needs can be rounded here exactly as
 Python's ``format`` rounds. Any other split move (arcs, unusual spelling, a number within a few
-ulps of a rounding tie) is left to ``emit._Emitter.rewrite``, the reference implementation: the
+ulps of a rounding tie) is left to ``emit_line.LineRewriter.rewrite``, the reference implementation: the
 kernel records where its text goes and the caller splices it in. The two must write the same bytes
 (tests/test_gating_emit.py compares them line by line).
 
-Number texts follow ``emit._fmt`` and ``emit._dec_text``: rounded to a fixed number of decimals,
+Number texts follow ``emit_line.fmt_number`` and ``emit_line._dec_text``: rounded to a fixed number of decimals,
 trailing zeros and a trailing '.' dropped, "-0" written "0". Relative values (G91, M83) are summed
 as integers in units of the last decimal, which is what the reference's ``Decimal`` arithmetic is.
 """
@@ -27,7 +27,7 @@ _TIE_REL = 4.5e-16      # 4 x the relative error of one rounded product: x * 10*
 _MAX_SCALED = 1.0e15    # |x| * 10**d below 2**50: its integer and fractional parts are exact
 _MERGE_FRACTION = 1e-12  # cuts this close to a group's first cut share one split (as emit.render)
 
-# decimals of split points per axis X Y Z E (emit.DECIMALS_SPLIT_MM; inches: two more)
+# decimals of split points per axis X Y Z E (emit_line.DECIMALS_SPLIT_MM; inches: two more)
 DECIMALS_SPLIT = np.array([5, 5, 5, 6], np.int64)
 
 _SP, _DOT, _MINUS, _PLUS, _SEMI = 32, 46, 45, 43, 59
@@ -164,8 +164,10 @@ def _put_code(out, p, code, code_ptr, txt_id, txt_buf, txt_ptr, nl):
 def _split_row(out, p, buf, a, b, r, e0, e1, cut_frac, cut_code, code_ptr, txt_id, txt_buf, txt_ptr, nl,
                start_mm, end_mm, offset_mm, rel_xyz, rel_e, inch, tok_a, tok_b, tok_axis):
     """Write line buf[a:b] (step r) split at the cuts e0..e1 (sorted by fraction) with their lines
-    between the pieces, as ``emit._Emitter.rewrite`` does without rotation. Returns (position
-    after it, lines added), or (-1, 0) when the line is left to the reference implementation."""
+    between the pieces, as ``emit_line.LineRewriter.rewrite`` does without rotation. Returns
+    (position after it, lines added), or (-1, 0) when the line is left to the reference
+    implementation. (A numba kernel over 120 lines: one pass over one line's words and pieces,
+    kept whole so that it reads in the order of ``LineRewriter.rewrite`` it must equal.)"""
     # body: the line without its ending; code: up to the first ';', right-stripped
     body = b
     while body > a and (buf[body - 1] == 10 or buf[body - 1] == 13):

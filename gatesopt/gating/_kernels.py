@@ -1,14 +1,15 @@
 """Sequential cores of the gating problem builder (numba): one pass over the steps per rotation.
 
-The semantics are those of ``problem.py`` (formulations/gating.md §1 and §6); these loops only
-make them linear-time without temporaries. ``EPS_S`` must equal ``problem._TIME_EPS_S``.
+The semantics are those of ``problem.py`` and ``rotation.py`` (formulations/gating.md §1 and §6);
+these loops only make them linear-time without temporaries, with the timeline's tolerance
+(``timeline.TIME_EPS_S``).
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-EPS_S = 1e-12
+from .timeline import TIME_EPS_S as EPS_S
 
 
 @njit(cache=True)
@@ -64,10 +65,10 @@ def single_axis_time(dx, dy, w, c, s, snap_mm):
 
 
 @njit(cache=True)
-def gaps(start_s, steps, rate, cum, stall_w, sa, el, on_line, stall_off_s, stall_on_s, per_event):
-    """Gaps of one motor (or enable group): (start, end, off_row, on_row, prev_row, next_row,
-    saving_j, lines, stall_s, stall_j), all of length = number of gaps. ``per_event``: instruction
-    lines (each with its stall) per off or on moment."""
+def idle_intervals(start_s, steps, rate, cum, stall_w, sa, el, on_line, stall_off_s, stall_on_s, per_event):
+    """Idle intervals of one motor (or enable group): (start, end, off_row, on_row, prev_row,
+    next_row, saving_j, lines, stall_s, stall_j), all of length = number of intervals.
+    ``per_event``: instruction lines (each with its stall) per off or on moment."""
     n = steps.shape[0]
     T = start_s[n]
     cap = 1

@@ -13,18 +13,22 @@ As published, in our terms (formulations/gating.md "greedy"):
    that moment falls inside it (lines 11-16).
 
 Weaknesses kept on purpose: it counts moves instead of weighing energy (a long retraction or a
-slow short move between clusters stays on, a gap whose firmware stall costs more than it saves is
-still switched off), knows no budget, and only tries 30° steps. Its off intervals are exactly the
-problem's gaps between clusters, so it is feasible by construction and scored with the same energy
-function as every other formulation.
+slow short move between clusters stays on, an idle interval whose firmware stall costs more than it
+saves is still switched off), knows no budget, and only tries 30° steps. Its off intervals are
+exactly the problem's idle intervals between clusters, so it is feasible by construction and scored
+with the same energy function as every other formulation.
 """
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
-from .problem import GatingProblem, GatingSolution, greedy_angle, solution_from_gaps
+from ..solvers import Status
+from .problem import GatingProblem
+from .rotation import greedy_angle
+from .solution import GatingSolution, solution_from_idle
 
 
 def choose_angle(problem: GatingProblem) -> int:
@@ -32,14 +36,14 @@ def choose_angle(problem: GatingProblem) -> int:
     return greedy_angle(problem.angles_deg, problem.angle_straight_moves)
 
 
-def choose_gaps(problem: GatingProblem, k: int) -> np.ndarray:
-    """Gaps of angle k that separate clusters (Algorithm 1 grouping with neigh_t)."""
-    g = problem.gaps_of(k)
+def choose_idle_intervals(problem: GatingProblem, k: int) -> np.ndarray:
+    """Idle intervals of angle k that separate clusters (Algorithm 1 grouping with neigh_t)."""
+    g = problem.idle_intervals_of(k)
     n = problem.n_steps
     xy = np.hypot(*(problem.end_mm[:, :2] - problem.start_mm[:, :2]).T)
     cum = np.concatenate(([0.0], np.cumsum(xy)))
-    prev = problem.gap_prev_row[g]
-    nxt = problem.gap_next_row[g]
+    prev = problem.idle_prev_row[g]
+    nxt = problem.idle_next_row[g]
     # XY path travelled between the two clusters (the moves strictly between their steps)
     path = cum[np.clip(nxt, 0, n)] - cum[np.clip(prev + 1, 0, n)]
     edge = (prev < 0) | (nxt >= n)
@@ -54,14 +58,13 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
           hint: GatingSolution | None = None) -> GatingSolution:
     t0 = time.perf_counter()
     k = choose_angle(problem)
-    chosen = choose_gaps(problem, k)
-    sol = solution_from_gaps(problem, "greedy", "feasible", k, chosen, solve_s=time.perf_counter() - t0)
+    chosen = choose_idle_intervals(problem, k)
+    sol = solution_from_idle(problem, "greedy", Status.FEASIBLE, k, chosen, solve_s=time.perf_counter() - t0)
     over = []
     if sol.added_time_s > problem.max_added_time_s + 1e-9:
         over.append(f"added time {sol.added_time_s:.3f} s > budget {problem.max_added_time_s:.3f} s")
     if sol.lines_added > problem.max_added_lines:
         over.append(f"added lines {sol.lines_added} > budget {problem.max_added_lines:.0f}")
     if over:
-        from dataclasses import replace
-        sol = replace(sol, status="infeasible", message="the paper's re-compiler knows no budget: " + "; ".join(over))
+        sol = replace(sol, status=Status.INFEASIBLE, message="the paper's re-compiler knows no budget: " + "; ".join(over))
     return sol

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from ..errors import GatesoptError
 from ..solvers import Formulation, lookup
-from .problem import GatingProblem, GatingSolution
+from .problem import GatingProblem
+from .solution import GatingSolution
 
 FORMULATIONS: dict[str, Formulation] = {
     "greedy": Formulation("greedy", "gatesopt.gating.greedy",

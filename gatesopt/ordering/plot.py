@@ -2,7 +2,7 @@
 every layer (the per-layer view of Fleming et al.'s travel reduction).
 
 Everything is read from the two parsed files, with the report's definition of travel
-(``pipeline.travel_mask``), so the plot and the report's numbers agree. Arcs are drawn as their
+(``travel.travel_mask``), so the plot and the report's numbers agree. Arcs are drawn as their
 chords (the picture is about where the nozzle travels, not the shape of each extrusion).
 matplotlib is imported inside ``plot_ordering`` and drawn through its Agg canvas, as in
 ``gatesopt.plot``.
@@ -16,7 +16,7 @@ import numpy as np
 
 from ..plot import DPI, PlotError, check_png_path, save_png
 from ..program import Program
-from .pipeline import travel_mask
+from .travel_stats import travel_mask
 
 WIDTH_PX, HEIGHT_PX = 1500, 560
 EXTRUSION_COLOR, TRAVEL_COLOR = "#9a9a9a", "#d62728"

@@ -150,7 +150,7 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     checks.append("extrusion")
     if reordered:
         # moves in another order: ``geometry`` and the ordering checks compare them
-        # (``gating.pipeline.run`` checks the positions of the gated re-ordered print itself)
+        # (``rewrite.pipeline.run`` checks the positions of the gated re-ordered print itself)
         checks.append("positions(skipped: re-ordered)")
     else:
         findings += check_positions(original, output, tol_mm=geometry_tol_mm)

@@ -1,9 +1,9 @@
-"""The whole re-ordering as one library call: build -> solve -> emit -> re-parse -> verify -> report.
+"""The curve ordering's whole job: build -> solve within a budget -> emit with the time guard ->
+re-parse -> verify -> report (``order_program``; ``reorder`` stops before the verification, which
+``rewrite.pipeline.run`` does on the gated output).
 
-Travel numbers in the report are measured on the two parsed files (not the solver's model):
-travel = every non-extruding XY move (straight or arc) from the first layer on; travel time under
-the paper's T = L/F; retractions = steps that pull filament back (E decreasing), and firmware
-retractions (a bare ``G10``).
+Travel numbers in the report are measured on the two parsed files (``ordering.travel``), not the
+solver's model.
 """
 from __future__ import annotations
 
@@ -14,18 +14,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _jit
+from ..ordering.emitter import emit
+from ..ordering.groups import build
+from ..ordering.layers import model_travel_mm, solve
+from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
+from ..ordering.travel_stats import travel_stats
 from ..parse import parse
-from ..program import Kind, Program
+from ..program import Program
 from ..verify.ordering import check
-from .emitter import emit
-from .groups import build
-from .layers import model_travel_mm, solve
-from .layout import firmware_retraction
-from .problem import OrderingOptions, OrderingProblem, OrderingSolution
 
 
 @dataclass(frozen=True, eq=False)
 class OrderResult:
+    """A verified re-ordering (``order_program``): nothing is written to disk here."""
+
     program: Program
     problem: OrderingProblem
     solution: OrderingSolution
@@ -37,41 +39,6 @@ class OrderResult:
     @property
     def ok(self) -> bool:
         return not self.findings
-
-
-def travel_mask(program: Program) -> np.ndarray:
-    """(n_steps,) bool: the travel moves the report counts: every non-extruding XY move
-    (straight or arc) from the first layer on."""
-    d = program.delta_mm
-    xy = np.hypot(d[:, 0], d[:, 1])
-    return ((program.layer >= 0) & ~program.extruding & np.isin(program.kind, (Kind.TRAVEL, Kind.ARC))
-            & (xy > 0))
-
-
-def travel_stats(program: Program) -> dict:
-    """Travel distance/time, travel moves and retractions from the first layer on."""
-    d = program.delta_mm
-    printing = program.layer >= 0
-    travel = travel_mask(program)
-    retract = printing & (d[:, 3] < 0)
-    # a retraction spread over several wipe moves counts once
-    starts = retract & ~np.concatenate(([False], retract[:-1]))
-    n_retract = int(starts.sum()) + len(firmware_retraction_lines(program))
-    return {"travel_mm": float(program.length_mm[travel].sum()),
-            "travel_s": float(program.duration_s[travel].sum()),
-            # everything from the first layer on (paper time model): extrusion is the same in
-            # both files, so a change is travel, retractions and z-hops together
-            "print_s": float(program.duration_s[printing].sum()),
-            "travels": int(travel.sum()), "retractions": n_retract}
-
-
-def firmware_retraction_lines(program: Program) -> np.ndarray:
-    """Lines of firmware retractions (a bare ``G10``, ``layout.firmware_retraction``) from the
-    first layer on: the firmware pulls the filament back, so no step shows it."""
-    if not len(program.layer_line):
-        return np.zeros(0, np.int64)
-    lines = firmware_retraction(program)[0]
-    return lines[lines >= program.layer_line[0]]
 
 
 #: emit-and-compare passes of the time guard (``emit_guarded``): each pass after the first is a
@@ -195,7 +162,7 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
             progress=None, started_s: float | None = None):
     """build -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
     ``started_s``, default now) -> ``emit_guarded``, without verifying (``order_program`` does;
-    gating's pipeline verifies its own output). Returns (problem, the solve's budget, solution,
+    ``rewrite.pipeline.run`` verifies its own output). Returns (problem, the solve's budget, solution,
     text, parsed output, layers the time guard put back)."""
     t0 = time.perf_counter() if started_s is None else started_s
     problem = build(program, options or OrderingOptions())
@@ -219,7 +186,7 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     verified result; the solve gets what ``solve_budget_s`` leaves it.
     ``time_guard``: a layer whose re-ordered print takes longer than the slicer's (paper time
     model: its rebuilt travels retract and hop more often) keeps the slicer's order.
-    ``progress``: passed to ``layers.solve`` (called after each group)."""
+    ``progress``: passed to ``ordering.layers.solve`` (called after each group)."""
     program.check_rewritable()
     t0 = time.perf_counter() if started_s is None else started_s
     options = options or OrderingOptions()
@@ -234,20 +201,15 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     return OrderResult(program, problem, solution, text, out, findings, summary)
 
 
-def order_summary(program: Program, out: Program, problem: OrderingProblem,
-                  solution: OrderingSolution, options: OrderingOptions, slower_layers,
-                  findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
-                  solve_budget_s: float | None, workers: int, wall_s: float) -> dict:
-    """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` adds its travel
-    and group keys): travel, travel and print time, travels and retractions measured on the
-    parsed input and output, how each group and layer was solved."""
-    before, after = travel_stats(program), travel_stats(out)
+def _solve_counts(problem: OrderingProblem, solution: OrderingSolution, slower_layers):
+    """(per-layer rows, group status counts, layer status counts, decided groups): how each group
+    and layer was solved. A layer the time guard put back, or with nothing in it to re-order, is
+    "kept"."""
     layers = solution.layer_summary(problem)
     put_back = set(slower_layers.tolist())
     for row in layers:
         if row["layer"] in put_back:
             row["status"] = "kept"          # re-ordered it took longer: the slicer's order
-    sizes = np.diff(problem.group_curve_start)
     reorderable = problem.group_reorderable
     decided = [(g, gs) for g, gs in enumerate(solution.groups) if reorderable[g]]
     counts = {"optimal": 0, "feasible": 0, "fallback": 0}
@@ -268,10 +230,11 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
             # order, as the counts say (its fixed groups are trivially "optimal" for the solver)
             row["status"] = "kept"
             lay_counts["kept"] += 1
+    return layers, counts, lay_counts, decided
 
-    def pct(a, b):
-        return 100.0 * (a / b - 1.0) if b else 0.0
 
+def _slower_notes(before: dict, after: dict, slower_layers) -> list[str]:
+    """The report's lines on a re-ordered print that is slower (or layers kept because they were)."""
     slower = []
     if len(slower_layers):
         slower.append(kept_slower_note(len(slower_layers)))
@@ -280,8 +243,25 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
                       f"longer (paper time model): its travels retract {after['retractions']:,} "
                       f"times instead of {before['retractions']:,}; the objective counts travel "
                       "distance only")
+    return slower
 
-    summary = {
+
+def order_summary(program: Program, out: Program, problem: OrderingProblem,
+                  solution: OrderingSolution, options: OrderingOptions, slower_layers,
+                  findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
+                  solve_budget_s: float | None, workers: int, wall_s: float) -> dict:
+    """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` adds its travel
+    and group keys): travel, travel and print time, travels and retractions measured on the
+    parsed input and output, how each group and layer was solved."""
+    before, after = travel_stats(program), travel_stats(out)
+    layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
+    sizes = np.diff(problem.group_curve_start)
+
+    def pct(a, b):
+        return 100.0 * (a / b - 1.0) if b else 0.0
+
+    slower = _slower_notes(before, after, slower_layers)
+    return {
         "source": program.source, "formulation": formulation, "order_mode": options.mode,
         "move_seams": options.move_seams, "time_limit_s": time_limit_s, "budget_s": budget_s,
         "solve_budget_s": solve_budget_s, "workers": workers,
@@ -308,4 +288,3 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
                                                       if len(problem.notes) > 20 else []),
         "per_layer": layers,
     }
-    return summary

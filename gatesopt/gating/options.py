@@ -1,0 +1,127 @@
+"""Gating options: what to gate, how the firmware behaves, and the budgets.
+
+3DGates (Chen et al., ASPLOS'17) Section 4.2 gives the defaults: Start-Ahead 1.8 ms (NEMA 17
+start-up delay) and End-Late 1.0 ms (empirical stop delay). Firmware numbers (stall per motor line,
+whether re-enable needs a line, whether motors share a line) are plain numbers here;
+``GatingOptions.for_firmware(name)`` fills them from ``gatesopt.firmware``'s presets.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+from .. import firmware as fw_mod
+from ..errors import GatesoptError
+from ..program import AXES
+
+
+class GatingOptionsError(GatesoptError, ValueError):
+    """Bad gating options (unknown motor, negative time, ...)."""
+
+
+@dataclass(frozen=True)
+class GatingOptions:
+    """What to gate, how the firmware behaves, and the budgets.
+
+    Firmware numbers are plain numbers here; ``GatingOptions.for_firmware(name)`` fills them from
+    the presets in ``gatesopt.firmware``.
+    """
+
+    motors: tuple[str, ...] = ("X", "Y")
+    start_ahead_s: float = 1.8e-3       # 3DGates Sec. 4.2: NEMA 17 start-up delay
+    end_late_s: float = 1.0e-3          # 3DGates Sec. 4.2: empirical stop delay
+    rotate: str | float = "auto"        # "auto" | "none" | degrees (counter-clockwise)
+    max_angles: int = 16                # cap on rotation candidates under "auto" (plus 0/30/60)
+    snap_mm: float = 1e-3               # other-axis displacement below this -> single-axis move
+    bed_size_mm: tuple[float, float] | None = None   # None: program.header["bed_size_mm"], else no check
+    profile: str = "paper"              # energy profile name or TOML path
+    firmware: str = "3dgates"           # label only (the numbers below are what the solver uses)
+    stall_off_s: float = 0.0            # stall per off line (whole printer keeps drawing power)
+    stall_on_s: float = 0.0             # stall per on line
+    on_line: bool = True                # re-enable needs a line (False: automatic at the first step)
+    merge_lines: bool = True            # instructions of several motors at one moment share a line
+    max_added_time_pct: float | None = None    # budget on stall time, % of the print time
+    max_added_lines_pct: float | None = None   # budget on added lines, % of the file's lines
+    num_workers: int = 2                # CP-SAT workers
+    seed: int = 0                       # CP-SAT random seed
+    mip_rel_gap: float = 1e-6           # MILP/CP-SAT relative gap at which to stop
+    neighbour_mm: float = 0.5           # greedy grouping threshold (3DGates Algorithm 1 neigh_t)
+    shared_enable: tuple = ()           # groups of motors wired to one enable pin, e.g. (("X", "Y"),)
+
+    def __post_init__(self):
+        motors = tuple(str(m).upper() for m in self.motors)
+        bad = [m for m in motors if m not in AXES]
+        if bad or not motors or len(set(motors)) != len(motors):
+            raise GatingOptionsError(f"motors must be distinct letters of {','.join(AXES)}, not "
+                                     f"{','.join(self.motors) or 'nothing'}")
+        object.__setattr__(self, "motors", tuple(m for m in AXES if m in motors))
+        for name in ("start_ahead_s", "end_late_s", "stall_off_s", "stall_on_s", "snap_mm"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise GatingOptionsError(f"{name} must be a finite number >= 0, not {v!r}")
+        for name in ("max_added_time_pct", "max_added_lines_pct"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and v >= 0):
+                raise GatingOptionsError(f"{name} must be >= 0 or None, not {v!r}")
+        r = self.rotate
+        if isinstance(r, str) and r not in ("auto", "none"):
+            try:
+                r = float(r)
+            except ValueError:
+                raise GatingOptionsError(f"rotate must be 'auto', 'none' or degrees, not {r!r}") from None
+            object.__setattr__(self, "rotate", r)
+        if not isinstance(self.rotate, str) and not math.isfinite(float(self.rotate)):
+            raise GatingOptionsError(f"rotate must be finite, not {self.rotate!r}")
+        if self.bed_size_mm is not None:
+            b = tuple(float(v) for v in self.bed_size_mm)
+            if len(b) != 2 or min(b) <= 0:
+                raise GatingOptionsError(f"bed_size_mm must be two positive numbers, not {self.bed_size_mm!r}")
+            object.__setattr__(self, "bed_size_mm", b)
+        if self.max_angles < 1:
+            raise GatingOptionsError("max_angles must be >= 1")
+        groups, seen = [], set()
+        for grp in self.shared_enable:
+            g = tuple(m for m in AXES if m in {str(x).upper() for x in grp})
+            if len(g) < 2 or len(g) != len(tuple(grp)) or seen & set(g):
+                raise GatingOptionsError(f"shared_enable groups must be disjoint sets of 2+ motors of "
+                                         f"{','.join(AXES)}, not {grp!r}")
+            inside = [m for m in g if m in self.motors]
+            if inside and len(inside) != len(g):
+                raise GatingOptionsError(f"motors {','.join(g)} share one enable pin: gate all of them or none")
+            seen |= set(g)
+            groups.append(g)
+        object.__setattr__(self, "shared_enable", tuple(groups))
+
+    @property
+    def motor_index(self) -> tuple[int, ...]:
+        return tuple(AXES.index(m) for m in self.motors)
+
+    @property
+    def groups(self) -> tuple[tuple[int, ...], ...]:
+        """Gated motors by enable pin: each a tuple of axis indices, its first the representative
+        that carries the group's idle intervals (a motor with its own pin is a group of one)."""
+        out = []
+        for m in self.motors:
+            grp = next((g for g in self.shared_enable if m in g), (m,))
+            if grp[0] == m:
+                out.append(tuple(AXES.index(x) for x in grp))
+        return tuple(out)
+
+    @property
+    def has_budget(self) -> bool:
+        return self.max_added_time_pct is not None or self.max_added_lines_pct is not None
+
+    def replace(self, **changes) -> "GatingOptions":
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def for_firmware(cls, firmware: str = "3dgates", **changes) -> "GatingOptions":
+        """Options with the stall/line numbers of a ``gatesopt.firmware`` preset."""
+        c = fw_mod.gating_costs(firmware)
+        kw = dict(firmware=c.firmware, stall_off_s=c.stall_off_s, stall_on_s=c.stall_on_s,
+                  on_line=c.on_lines_per_gate > 0, merge_lines=c.off_lines_merged)
+        kw.update(changes)
+        opts = cls(**kw)
+        fw_mod.get(firmware).check_motors(opts.motors)
+        return opts
