@@ -681,6 +681,9 @@ class Replay:
     first_extrusion_s: float
     steppers: dict[str, StepperReplay]
     far_intervals: int
+    complete: bool = True
+    host_end_s: float = float("nan")
+    attempts: int = 1
     klippy_s: float = 0.0
     decode_s: float = 0.0
     unknown: dict[str, int] = field(default_factory=dict)
@@ -699,15 +702,25 @@ class Replay:
 
     def as_dict(self) -> dict:
         return {"end_s": self.end_s, "first_extrusion_s": self.first_extrusion_s, "print_s": self.print_s,
+                "complete": self.complete, "host_end_s": self.host_end_s, "attempts": self.attempts,
                 "far_intervals": self.far_intervals, "klippy_s": self.klippy_s,
                 "decode_s": self.decode_s, "unknown_commands": self.unknown,
                 "steppers": {k: v.as_dict() for k, v in self.steppers.items()}}
 
 
 def replay_metrics(stream: McuStream, pins: dict[str, StepperPins]) -> Replay:
-    """Per-stepper metrics of a decoded stream, the steppers and their pins from the config."""
+    """Per-stepper metrics of a decoded stream, the steppers and their pins from the config.
+
+    ``Replay.complete``: every stepper's enable pin goes off for good after its last step.
+    klippy switches every motor off when the input ends (klippy/extras/stepper_enable.py,
+    _handle_request_restart -> motor_off), the last messages it queues; but at exit its
+    background writer is stopped without draining its queue (klippy/chelper/serialqueue.c,
+    serialqueue_exit -> pollreactor_do_exit), so on a loaded machine the tail of the stream,
+    motor-off and sometimes seconds of steps, can be missing. Such a stream is not complete.
+    """
     out = {}
     end = 0
+    complete = True
     for name, sp in pins.items():
         rows = stream.steps.get(sp.step_pin)
         if rows is None:
@@ -726,13 +739,15 @@ def replay_metrics(stream: McuStream, pins: dict[str, StepperPins]) -> Replay:
                               f"{stream.initial.get(sp.enable_pin)}, expected the disabled level")
         s, e = off_intervals(ev, initial_on=False, inverted=sp.enable_inverted)
         out[name] = stepper_replay(name, rows, s, e, stream.freq_hz)
+        if rows.n_steps and not (len(e) and e[-1] == OPEN_END and s[-1] >= rows.last[-1]):
+            complete = False
         if rows.n_steps:
             end = max(end, int(rows.last[-1]))
     # the print starts at the first extruder step (homing and heating come before it)
     e = pins.get("extruder")
     e_rows = stream.steps.get(e.step_pin) if e else None
     e_first = int(e_rows.first[0]) if e_rows is not None and e_rows.n_steps else 0
-    return Replay(end / stream.freq_hz, e_first / stream.freq_hz, out, stream.far_intervals)
+    return Replay(end / stream.freq_hz, e_first / stream.freq_hz, out, stream.far_intervals, complete)
 
 
 # --------------------------------------------------------------------------------------------
@@ -770,9 +785,21 @@ class KlippyRunner:
         self.close()
 
     def run(self, cfg_text: str, gcode_text: str, pins: dict[str, StepperPins] | None = None,
-            via_parsedump: bool = False) -> Replay:
+            via_parsedump: bool = False, attempts: int = 3) -> Replay:
         """Replay G-code text on the printer ``cfg_text``; ReplayError with klippy's own message
-        when it stops on an error."""
+        when it stops on an error. A stream that comes out cut short (Replay.complete false: no
+        final motor-off after the last steps, or its last step well before the print time klippy
+        logs at exit) is replayed again, up to ``attempts`` times in all."""
+        for attempt in range(1, attempts + 1):
+            rep = self._run_once(cfg_text, gcode_text, pins, via_parsedump)
+            ok = rep.complete and not (rep.host_end_s - rep.end_s > 1.0)
+            if ok:
+                return dataclasses.replace(rep, attempts=attempt)
+            _progress(f"klipper_replay: MCU stream cut short (last step {rep.end_s:.3f} s, klippy "
+                      f"exited at {rep.host_end_s:.3f} s), replaying again")
+        raise ReplayError(f"the MCU stream came out cut short {attempts} times in a row")
+
+    def _run_once(self, cfg_text, gcode_text, pins, via_parsedump) -> Replay:
         work = Path(tempfile.mkdtemp(dir=self.tmp))
         try:
             cfg, gc, ser, log = work / "printer.cfg", work / "in.gcode", work / "out.serial", work / "klippy.log"
@@ -802,8 +829,10 @@ class KlippyRunner:
                 cmds = decode_serial(ser.read_bytes(), self.dictionary)
             rep = replay_metrics(decode_stream(cmds), pins or stepper_pins(cfg_text))
             decode_s = time.perf_counter() - t0
+            m = _EXIT_TIME.findall(log_text)
             return dataclasses.replace(rep, klippy_s=klippy_s, decode_s=decode_s,
-                                       unknown=unknown_commands(log_text))
+                                       unknown=unknown_commands(log_text),
+                                       host_end_s=float(m[-1]) if m else float("nan"))
         finally:
             shutil.rmtree(work, ignore_errors=True)
 
@@ -826,6 +855,12 @@ _CONFIG_END = "======================="
 def _klippy_error(log_text: str, stderr: str) -> str:
     """The lines of klippy's log that say why it stopped (after the config dump)."""
     tail = log_text.split(_CONFIG_END)[-1].splitlines()
+    if "Traceback (most recent call last):" in tail:
+        # a config error or a crash: the exception's own line says it
+        i = tail.index("Traceback (most recent call last):")
+        frames = [ln for ln in tail[i + 1:] if ln and not ln.startswith(" ")]
+        head = " ".join(ln.strip() for ln in tail[:i] if ln.strip() and not ln.startswith(("Extruder",)))
+        return (head + ": " if head else "") + (frames[0] if frames else "traceback")
     skip = ("Unknown command", "Exiting", "Unfreezing", "Running full", "Sending MCU", "Configured MCU",
             "Loaded MCU", "MCU '", "Extruder max_extrude", "Starting", "Start printer",
             "Args:", "Git version", "Python:", "CPU:", "Restarting", "Stats ")
@@ -837,6 +872,7 @@ def _klippy_error(log_text: str, stderr: str) -> str:
 
 
 _UNKNOWN = re.compile(r'Unknown command:"([^"]*)"')
+_EXIT_TIME = re.compile(r"Exiting \(print time ([0-9.]+)s\)")
 
 
 def unknown_commands(log_text: str) -> dict[str, int]:
@@ -1213,6 +1249,24 @@ def replay_rows(a) -> tuple[list[dict], list[str]]:
     return rows, notes
 
 
+def cmd_repeat(a) -> int:
+    """Replay each file (unchanged) several times: Klipper's batch mode is not always
+    repeatable (see docs/RESULTS.md), this measures by how much."""
+    host = _host_or_exit(a)
+    cfg = printer_config(parse_shaper(a.input_shaper), _gating_options(a), a.pressure_advance)
+    pins = stepper_pins(cfg)
+    print("| file | replays | end s (min) | spread s | distinct results | klippy s |")
+    print("|---|---:|---:|---:|---:|---:|")
+    with KlippyRunner(host, Path(a.module) if a.module else None) as k:
+        for path in corpus_files(a.files):
+            text = replay_text(read_gcode(path))[0]
+            reps = [k.run(cfg, text, pins) for _ in range(a.times)]
+            ends = [r.end_s for r in reps]
+            print(f"| {path.name} | {a.times} | {min(ends):.3f} | {max(ends) - min(ends):.3f} | "
+                  f"{len(set(ends))} | {np.mean([r.klippy_s for r in reps]):.1f} |", flush=True)
+    return 0
+
+
 def _json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
@@ -1262,6 +1316,11 @@ def main(argv=None) -> int:
     p.add_argument("file")
     p.add_argument("--parsedump", action="store_true", help="decode through klippy's parsedump.py text")
     p.set_defaults(func=cmd_replay)
+    q = sub.add_parser("repeat", help="replay files unchanged several times: how repeatable is batch mode")
+    _host_args(q)
+    q.add_argument("--files")
+    q.add_argument("--times", type=int, default=3)
+    q.set_defaults(func=cmd_repeat)
     c = sub.add_parser("config", help="print the printer.cfg a replay uses")
     c.add_argument("--input-shaper", default="none")
     c.add_argument("--pressure-advance", type=float)
