@@ -50,6 +50,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared" / "instances"
 BASE_CONFIG = Path(__file__).resolve().parent / "klipper" / "printer.cfg"
+# our extras module that holds klippy's exit until the MCU stream is written (see its header)
+DRAIN_MODULE = Path(__file__).resolve().parent / "klipper" / "gatesopt_replay_drain.py"
 RESULTS = REPO / "docs" / "RESULTS.md"
 SECTION = "## Klipper replay: gating in Klipper's own planner"
 
@@ -432,7 +434,7 @@ class McuStream:
     steps: dict[str, StepRows]       # by step pin
     pins: dict[str, PinEvents]       # by pin
     initial: dict[str, int]          # pin -> level on the wire at start
-    far_intervals: int               # queue_step intervals >= 2**31 (a gap this decode cannot see)
+    far_intervals: int               # rows whose 32-bit gap was unwrapped (a stepper idle > 2**32 ticks)
 
 
 def unwrap32(clock32: np.ndarray, ref: np.ndarray) -> np.ndarray:
@@ -492,9 +494,28 @@ def decode_stream(cmds: McuCommands) -> McuStream:
         ref = _ref_at(pos, start + adv, np.array([p]))[0]
         seg[(p, o)] = int(unwrap32(np.array([c32]), np.array([ref]))[0])
         start = compute_starts(seg)
+    # A step more than CLOCK_DIFF_MAX after its stepper's previous one is sent alone with the gap
+    # as its interval, cut to 32 bits, and queued at its own clock (klippy/chelper/stepcompress.c,
+    # stepcompress_flush_far / add_move): after 2**32 ticks of idle (268 s at 16 MHz) the sum of
+    # intervals is short by 2**32. Every row's first step is therefore unwrapped near the latest
+    # step clock queued before it (the stream is sent in clock order: serialqueue.c,
+    # build_and_send_command), and a correction carries to the stepper's later rows.
+    far = 0
+    for _ in range(256):
+        first = start + st["interval"]
+        ref = _ref_at(pos, start + adv, pos)
+        delta = unwrap32(first % CLOCK32, ref) - first
+        if not delta.any():
+            break
+        for o in np.unique(oid[delta != 0]):
+            sel = np.flatnonzero(oid == o)
+            r = np.flatnonzero(delta[sel])[0]      # the stepper's earliest wrapped row
+            start[sel[r:]] += delta[sel[r]]
+            far += 1
+    else:
+        raise ReplayError("MCU stream: step clocks do not settle after unwrapping")
     # direction of each row: the last set_next_step_dir of its stepper before it
     steps = {}
-    far = int(((st["count"] == 1) & (st["interval"] >= CLOCK32 // 2)).sum())
     for o, step_pin in cmds.stepper_oids.items():
         sel = np.flatnonzero(oid == o)
         dsel = np.flatnonzero(cmds.dir["oid"] == o)
@@ -768,6 +789,7 @@ class KlippyRunner:
         self._chelper_cache = _chelper_cache(self.klippy / "chelper")
         if self._chelper_cache.exists():
             shutil.copy2(self._chelper_cache, self.klippy / "chelper" / "c_helper.so")
+        os.symlink(DRAIN_MODULE, self.klippy / "extras" / DRAIN_MODULE.name)
         if module is not None:
             module = Path(module).resolve()
             if not module.is_file():
@@ -803,7 +825,7 @@ class KlippyRunner:
         work = Path(tempfile.mkdtemp(dir=self.tmp))
         try:
             cfg, gc, ser, log = work / "printer.cfg", work / "in.gcode", work / "out.serial", work / "klippy.log"
-            cfg.write_text(cfg_text)
+            cfg.write_text(cfg_text.rstrip("\n") + "\n\n[gatesopt_replay_drain]\n")
             gc.write_text(gcode_text)
             t0 = time.perf_counter()
             r = subprocess.run([str(self.host.python), str(self.klippy / "klippy.py"), str(cfg),

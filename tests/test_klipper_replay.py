@@ -112,6 +112,22 @@ def test_pin_clocks_unwrap_past_32_bits_and_reset_step_clock():
     assert e.start_ahead_min_s == pytest.approx(200 / FREQ)
 
 
+def test_a_step_after_more_than_2_32_ticks_of_idle_is_unwrapped():
+    # Klipper sends a step far after the previous one as a lone queue_step whose interval is the
+    # gap cut to 32 bits (stepcompress.c, stepcompress_flush_far), at its place in clock order
+    big = 2**31 - 300
+    text = (HEAD + "config_stepper oid=4 step_pin=PA5 dir_pin=PA7 invert_step=0 step_pulse_ticks=32\n"
+            "queue_step oid=2 interval=1000 count=1 add=0\n"                 # A: 1000
+            f"queue_step oid=4 interval={big} count=2 add=0\n"               # B: .., 2**32 - 600
+            "queue_step oid=4 interval=3000 count=1 add=0\n"                 # B: 2**32 + 2400
+            f"queue_step oid=2 interval={(2**32 + 3000 - 1000) % 2**32} count=1 add=0\n"  # A far
+            "queue_step oid=2 interval=500 count=1 add=0\n")                 # A: + 500
+    s = stream(text)
+    assert kr.step_clocks(s.steps["PA4"]).tolist() == [1000, 2**32 + 3000, 2**32 + 3500]
+    assert kr.step_clocks(s.steps["PA5"]).tolist() == [big, 2 * big, 2 * big + 3000]
+    assert s.far_intervals == 1
+
+
 def test_unwrap32_picks_the_nearest_64_bit_clock():
     ref = np.array([5, 2**32 - 5, 3 * 2**32 + 7], np.int64)
     got = kr.unwrap32(np.array([2**32 - 3, 4, 1]), ref)
