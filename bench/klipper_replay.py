@@ -20,7 +20,8 @@ greenlet, jinja2, pyserial) and an MCU data dictionary (``--dict`` or $GATESOPT_
 ``out/klipper.dict`` a firmware build for a test MCU leaves, e.g. ``make`` with
 test/configs/atmega2560.config). The checkout is only read: klippy runs from a temporary copy of
 its ``klippy/`` folder (where it compiles its C helper, and where ``--module`` links an extras
-module).
+module; our bench/klipper/gatesopt_replay_drain.py is always linked, it holds klippy's exit until
+the stream is written).
 
 The decode functions (``decode_serial``, ``parse_dump``, ``decode_stream``, ``steps_before``,
 ``off_intervals``, ``stepper_replay``, ``replay_metrics``) are pure functions over numpy arrays.
@@ -777,12 +778,20 @@ def replay_metrics(stream: McuStream, pins: dict[str, StepperPins]) -> Replay:
 
 class KlippyRunner:
     """klippy from a temporary copy of the checkout's klippy/ (the checkout stays untouched;
-    klippy compiles its C helper into the copy on first use), optionally with an extras module
-    linked into the copy's klippy/extras/."""
+    klippy compiles its C helper into the copy on first use, kept in a cache for later copies),
+    with bench/klipper/gatesopt_replay_drain.py (so that the MCU stream is written in full
+    before klippy exits) and optionally another extras module linked into its klippy/extras/."""
 
     def __init__(self, host: KlipperHost, module: Path | None = None, keep: Path | None = None):
         self.host = host
         self.tmp = Path(tempfile.mkdtemp(prefix="gatesopt-klippy-", dir=keep))
+        try:
+            self._setup(host, module)
+        except BaseException:
+            self.close()
+            raise
+
+    def _setup(self, host: KlipperHost, module: Path | None) -> None:
         self.klippy = self.tmp / "klippy"
         shutil.copytree(host.klipper_dir / "klippy", self.klippy, symlinks=True,
                         ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
