@@ -140,14 +140,15 @@ def klipper_setup() -> tuple[Path, Path, Path] | None:
 
 
 def prepare_klippy(checkout: Path, workdir: Path, module: Path = MODULE) -> Path:
-    """A copy of the checkout's klippy/ in workdir with the module linked into extras/."""
+    """A copy of the checkout's klippy/ in workdir with the module in extras/ (a copy, not the
+    link a user makes: a run must not see the module change under it)."""
     dst = workdir / "klippy"
     if not dst.exists():
         shutil.copytree(checkout / "klippy", dst, ignore=shutil.ignore_patterns("*.pyc", "__pycache__"))
-    link = dst / "extras" / "gatesopt_gating.py"
-    if link.exists() or link.is_symlink():
-        link.unlink()
-    link.symlink_to(module.resolve())
+    target = dst / "extras" / "gatesopt_gating.py"
+    if target.exists() or target.is_symlink():
+        target.unlink()
+    shutil.copy(module, target)
     return dst
 
 
@@ -425,6 +426,8 @@ def _fmt(v, scale=1e3):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("files", nargs="+", type=Path)
+    ap.add_argument("--module", type=Path, default=MODULE,
+                    help="the module file to install (default: integrations/klipper/gatesopt_gating.py)")
     args = ap.parse_args(argv)
     setup = klipper_setup()
     if setup is None:
@@ -433,7 +436,7 @@ def main(argv=None) -> int:
     checkout, python, mcu_dict = setup
     with tempfile.TemporaryDirectory(prefix="gatesopt-kmod-") as tmp:
         work = Path(tmp)
-        klippy = prepare_klippy(checkout, work)
+        klippy = prepare_klippy(checkout, work, args.module)
         print("| file | shaper | lines | planned s | lines alone us | module us | stepper | steps while off |"
               " (before Klipper's first enable) | offs | gated | skipped | start-ahead min ms |"
               " end-late min ms | off s |")

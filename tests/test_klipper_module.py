@@ -342,6 +342,19 @@ def test_margins_are_reread_and_the_larger_one_used():
     assert rig.events("stepper_x")[1][0] == pytest.approx(2.0 - 0.03 - LEAD0, abs=1e-12)
 
 
+def test_margins_that_shrink_after_the_line_still_count():
+    """The window read at the line is kept when the shaper is switched off before the off."""
+    rig = Rig(margins={"stepper_x": (0.03, 0.02), "stepper_y": (0.0, 0.0)})
+    rig.th.move(mx(0.5))
+    rig.core.command_gate(["stepper_x"])
+    rig.margins["stepper_x"] = (0.0, 0.0)
+    rig.th.move(my(0.5))
+    rig.th.move(mx(0.3))
+    rig.th.process()
+    assert rig.events("stepper_x") == [(pytest.approx(1.5 + 0.02 + DELAY0, abs=1e-12), 0),
+                                       (pytest.approx(2.0 - 0.03 - LEAD0, abs=1e-12), 1)]
+
+
 def test_off_waits_for_the_proof_when_the_lookahead_flushes_first():
     """t_end known before the moves that prove the interval arrive (lazy look-ahead)."""
     rig = Rig()
@@ -367,6 +380,18 @@ def test_off_waits_for_t_end_when_the_proof_comes_first():
     rig.th.process()
     assert rig.events("stepper_x") == [(pytest.approx(1.5 + DELAY0, abs=1e-12), 0),
                                        (pytest.approx(1.8 - LEAD0, abs=1e-12), 1)]
+
+
+def test_a_window_that_grows_before_t_end_is_checked_again():
+    rig = Rig()
+    rig.th.move(mx(0.5))
+    rig.core.command_gate(["stepper_x"])
+    rig.th.move(my(NEED0 + 0.001))
+    rig.th.move(mx(0.2))                     # proven with no shaper; t_end not known yet
+    rig.margins["stepper_x"] = (0.01, 0.01)
+    rig.th.process()
+    assert rig.events("stepper_x") == []
+    assert rig.core.status()["steppers"]["stepper_x"]["skipped"]["short"] == 1
 
 
 def test_an_off_whose_time_has_passed_is_never_scheduled():

@@ -163,8 +163,7 @@ def enable_refusal(name, kinematic_names, tracking):
 
 class _Interval:
     """One GATESOPT_GATE line for one stepper."""
-    def __init__(self, cum_start_s, pre_s, post_s):
-        self.cum_start_s = cum_start_s
+    def __init__(self, pre_s, post_s):
         self.gap_s = 0.
         self.pre_s = pre_s
         self.post_s = post_s
@@ -285,7 +284,7 @@ class GatingCore:
                 self._skip(g, None, "repeated")
                 continue
             pre, post = self._margins(g)
-            iv = _Interval(self.cum_s, pre, post)
+            iv = _Interval(pre, post)
             g.open = iv
             g.live = [v for v in g.live if v.state in ("open", "pending")]
             g.live.append(iv)
@@ -346,7 +345,11 @@ class GatingCore:
         if iv.state == "open" or iv.state == "pending":
             self._try_off(g, iv)
     def _try_off(self, g, iv):
-        if iv.state == "open" and not self._proven(g, iv):
+        if not self._proven(g, iv):
+            if iv.state == "pending":
+                # proven at the activating move, no longer with a wider
+                # window read since: the interval is final, and too short
+                self._skip(g, iv, "short", "%.4f s of moves" % (iv.gap_s,))
             return
         if not g.tracking.is_motor_enabled():
             self._skip(g, iv, "motor_off")
