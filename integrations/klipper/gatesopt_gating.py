@@ -1,0 +1,680 @@
+# gatesopt_gating: switch stepper enable pins at print time, with no stall
+#
+# gatesopt's own Klipper extras module (MIT, part of the gatesopt project). Install by
+# linking this file into klippy/extras/ and adding a [gatesopt_gating] section; see
+# integrations/klipper/README.md in the gatesopt repository.
+"""Motor power gating for Klipper, scheduled at print time (3DGates, ASPLOS'17, on stock Klipper).
+
+gatesopt writes one line per idle interval of a stepper::
+
+    GATESOPT_GATE STEPPERS=stepper_x[,stepper_y]
+
+right after the last move that steps those steppers before the interval. For each named stepper
+this module switches the enable pin off after the last step of the moves queued before the line
+and on again before the first step of the next move that makes the stepper active. Nothing is
+flushed and nothing dwells: the print's planned time is unchanged. No move is split, and no "on"
+line is needed.
+
+The protocol (the solver, the emitter and the verifier of gatesopt follow it exactly)
+--------------------------------------------------------------------------------------
+
+Times are Klipper print times in seconds. For one GATESOPT_GATE line and one named stepper S:
+
+* Moves are judged where Klipper plans them: every move that enters the toolhead's look-ahead
+  queue (``toolhead.lookahead.add_move``), after every G-code move transform (bed mesh, skew
+  correction) and after every speed limit. A move *activates* S when its direction ratio is
+  nonzero on an axis S is active on (``MCU_stepper.is_active_axis``): the same test itersolve's
+  ``check_active`` applies before it generates steps (klippy/chelper/itersolve.c). Extrude-only
+  moves never activate a kinematic stepper.
+* ``t_end``: the print time at which the moves queued before the line end (a look-ahead callback,
+  ``toolhead.register_lookahead_callback``).
+* ``t_next``: the planned start of the next move that activates S (a timing callback on that
+  move: its end time minus its planned duration).
+* ``pre``/``post``: S's step generation window (``itersolve_get_gen_steps_pre_active`` /
+  ``_post_active`` of its stepper kinematics: input shaper smoothing). Read when the line is
+  processed and again when each pin time is computed; the larger value is used.
+* ``off_delay = post + end_late + CLOCK_SLACK_S``
+  ``on_lead = pre + start_ahead + STEP_EARLY_S + CLOCK_SLACK_S``
+* The pin goes off at ``t_off = t_end + off_delay`` and on at ``t_on = t_next - on_lead``.
+* ``gap`` = the sum of ``min_move_t`` (a lower bound of the planned duration: distance over the
+  move's speed limit) of the moves queued after the line and before the activating move,
+  extrude-only moves included. Dwells, heater waits and other time are not counted.
+  ``min_sched`` is the MCU's ``min_schedule_time()`` (0.100 s): Klipper's floor between two
+  events of one pin (the next event is sent only after the previous one ran).
+* S is switched off for the interval only if all of these hold, else it stays on and the
+  interval is counted as skipped:
+
+  - gating is enabled for S (``SET_GATESOPT_GATING``), Klipper has S enabled, and S is not
+    already switched off by an earlier line;
+  - rule A (off time): ``gap >= off_delay + on_lead + max(min_off_time, min_sched)``;
+  - rule B (spacing from this module's previous "on" of S): ``since_on + off_delay >=
+    min_sched``, where ``since_on = on_lead_prev + (sum of min_move_t of the moves from the
+    activating move that ended the previous gated interval of S up to the line)``; there is
+    no rule B before the first gated interval or after Klipper itself enabled S;
+  - ``off_delay <= MAX_OFF_DELAY_S`` (Klipper's M84/SET_STEPPER_ENABLE dwell 0.1 s after the
+    last move; an off must come before any of Klipper's own pin changes);
+  - real time: ``t_off >= estimated_print_time + min_sched`` and ``t_off >= (time of the previous
+    change of this pin) + min_sched`` when the off is scheduled (in Klipper's batch mode,
+    ``klippy.py -o``, the estimated print time is always 0, so only the second part applies).
+
+* The off is scheduled as soon as both ``t_end`` is known and rule A is proven (the gap only
+  grows as moves arrive), the on when the activating move leaves the look-ahead. The on always
+  comes after the off (rule A) and never before ``t_off + min_sched``.
+
+What it refuses: at start-up (config error) a listed stepper that is not a kinematic stepper of
+the toolhead, a stepper with no enable pin (TMC "virtual enable") or with a shared enable pin; at
+the command (G-code error) an unknown or ungateable name and malformed parameters.
+
+Klipper's bookkeeping: the pin is switched through the stepper's ``StepperEnablePin``
+(``set_disable``/``set_enable``, reference counted); Klipper's ``EnableTracking`` keeps saying
+"enabled" while a stepper is gated, and its state callbacks (TMC register re-init, ``wait_moves``)
+are not called. If Klipper disables a gated stepper (M84, M18, SET_STEPPER_ENABLE, a restart) the
+pin simply stays off: Klipper's own ``set_disable`` then finds the count already at zero and sends
+nothing (the count reads -1 until Klipper next enables the stepper, when this module sets it back
+to 0 first; nothing reads it in between). Homing and probing, FORCE_MOVE and STEPPER_BUZZ, and
+``SET_GATESOPT_GATING ENABLE=0`` switch every gated stepper on first (and dwell until it is on).
+A safety net (``MCU_stepper.add_active_callback``) enables at once, and logs loudly, a gated
+stepper that becomes active by a path this module did not see.
+
+Python 2.7 and 3 syntax, like the rest of klippy.
+"""
+import logging
+
+# A pin time is an MCU clock (print time times frequency, truncated); a step time is rounded to a
+# clock. One microsecond covers both at any MCU clock of 2 MHz or more.
+CLOCK_SLACK_S = 0.000001
+# stepcompress may send a step up to MAX_STEPCOMPRESS_ERROR (klippy/stepper.py: 25 us) before
+# its computed time (klippy/chelper/stepcompress.c, minmax_point); never after it.
+STEP_EARLY_S = 0.000025
+# Klipper's own disable (stepper_enable.set_motors_enable) dwells DISABLE_STALL_TIME (0.1 s) after
+# the last move before it changes a pin; an off later than that could come after it.
+MAX_OFF_DELAY_S = 0.050
+DEFAULT_STEPPERS = "stepper_x, stepper_y"
+# Skips of one reason written to klippy.log before the rest are only counted
+LOG_SKIPS_PER_REASON = 20
+
+SKIP_REASONS = ("short", "spacing", "late", "margins", "repeated", "disabled", "motor_off")
+
+
+######################################################################
+# Pure helpers (no Klipper objects)
+######################################################################
+
+def off_delay_s(post_active_s, end_late_s):
+    """Seconds from t_end (end of the moves before the line) to the pin's off."""
+    return post_active_s + end_late_s + CLOCK_SLACK_S
+
+def on_lead_s(pre_active_s, start_ahead_s):
+    """Seconds from the pin's on to t_next (nominal start of the activating move)."""
+    return pre_active_s + start_ahead_s + STEP_EARLY_S + CLOCK_SLACK_S
+
+def required_gap_s(pre_active_s, post_active_s, start_ahead_s, end_late_s,
+                   min_off_s, min_sched_s):
+    """Rule A: the least sum of min_move_t that proves an interval may be gated."""
+    return (off_delay_s(post_active_s, end_late_s)
+            + on_lead_s(pre_active_s, start_ahead_s) + max(min_off_s, min_sched_s))
+
+def gate_times(t_end, t_next, pre_active_s, post_active_s, start_ahead_s,
+               end_late_s):
+    """(t_off, t_on) of one gated interval."""
+    return (t_end + off_delay_s(post_active_s, end_late_s),
+            t_next - on_lead_s(pre_active_s, start_ahead_s))
+
+def move_activates(axes_r, axes):
+    """True when a move with direction ratios axes_r steps a stepper active on
+    axes (indices 0..2), as itersolve's check_active decides."""
+    for i in axes:
+        if axes_r[i] != 0.:
+            return True
+    return False
+
+def parse_stepper_list(text):
+    """'stepper_x, stepper_y' -> ['stepper_x', 'stepper_y']; ValueError when an
+    entry is empty."""
+    names = [n.strip() for n in text.split(',')]
+    if not names or any(not n for n in names):
+        raise ValueError("expected a comma separated list of stepper names,"
+                         " got '%s'" % (text,))
+    out = []
+    for n in names:
+        if n not in out:
+            out.append(n)
+    return out
+
+def enable_refusal(name, kinematic_names, tracking):
+    """Why a stepper cannot be gated (a message), or None."""
+    if name not in kinematic_names:
+        return ("'%s' is not a kinematic stepper of the toolhead (kinematic"
+                " steppers: %s)" % (name, ", ".join(sorted(kinematic_names))))
+    pin = tracking.enable
+    if getattr(pin, 'mcu_enable', None) is None:
+        return ("'%s' has no enable_pin (a TMC driver would use 'virtual"
+                " enable' over UART/SPI, which cannot switch at an exact print"
+                " time)" % (name,))
+    if not tracking.has_dedicated_enable():
+        return ("'%s' shares its enable_pin with another stepper; switching"
+                " it would switch both" % (name,))
+    return None
+
+
+######################################################################
+# Gating state machine (fed by Klipper objects or by test fakes)
+######################################################################
+
+class _Interval:
+    """One GATESOPT_GATE line for one stepper."""
+    def __init__(self, pre_s, post_s):
+        self.gap_s = 0.
+        self.pre_s = pre_s
+        self.post_s = post_s
+        self.t_end = None
+        self.t_off = self.t_on = None
+        self.state = "open"   # open | pending | off | done | skipped | cancelled
+        self.closed = False   # the activating move was seen
+
+class _Gate:
+    """Gating state of one stepper."""
+    def __init__(self, name, stepper, tracking):
+        self.name = name
+        self.stepper = stepper
+        self.tracking = tracking
+        self.pin = tracking.enable
+        self.axes = ()
+        self.enabled = True
+        self.open = None          # interval collecting moves (not yet closed)
+        self.live = []            # intervals whose off is not sent yet
+        self.off_iv = None        # interval whose off was sent and on not yet
+        self.pin_off = False      # this module holds the pin off (count 0)
+        self.owe_count = False    # Klipper disabled while gated: count is -1
+        self.last_event_pt = None
+        self.anchor_cum_s = None  # rule B: cum_s at the last activating move
+        self.anchor_lead_s = 0.   # rule B: on_lead of that on
+        self.safety_armed = False
+        self.gated = 0
+        self.off_time_s = 0.
+        self.late_enables = 0
+        self.forced_on = 0
+        self.skipped = dict((r, 0) for r in SKIP_REASONS)
+
+class GatingCore:
+    """Decisions and pin scheduling. Collaborators are duck-typed like Klipper's:
+
+    toolhead: register_lookahead_callback(cb), get_last_move_time(), dwell(s)
+    gates: {name: (MCU_stepper, EnableTracking)} of the gateable steppers
+    margins(stepper) -> (pre_active_s, post_active_s)
+    est_print_time(pin) -> the MCU's estimated print time now
+    min_sched_s: the MCU's min_schedule_time()
+    """
+    def __init__(self, toolhead, gates, margins, est_print_time, min_sched_s,
+                 start_ahead_s, end_late_s, min_off_s, respond=None):
+        self.toolhead = toolhead
+        self.margins = margins
+        self.est_print_time = est_print_time
+        self.min_sched_s = min_sched_s
+        self.start_ahead_s = start_ahead_s
+        self.end_late_s = end_late_s
+        self.min_off_s = min_off_s
+        self.respond = respond
+        self.gates = {}
+        self.order = []
+        for name, (stepper, tracking) in gates.items():
+            g = _Gate(name, stepper, tracking)
+            g.axes = tuple(i for i, a in enumerate("xyz")
+                           if stepper.is_active_axis(a))
+            self.gates[name] = g
+            self.order.append(name)
+            tracking.register_state_callback(
+                (lambda pt, en, g=g: self._klipper_state(g, pt, en)))
+        self.order.sort()
+        self.collecting = []      # gates with an open interval
+        self.cum_s = 0.           # sum of min_move_t of every move seen
+        self.safety_enables = 0
+        self.logged = dict((r, 0) for r in SKIP_REASONS)
+    # Margins
+    def _margins(self, g, iv=None):
+        pre, post = self.margins(g.stepper)
+        if iv is not None:
+            pre, post = max(pre, iv.pre_s), max(post, iv.post_s)
+        return pre, post
+    def _skip(self, g, iv, reason, detail=""):
+        if iv is not None:
+            iv.state = "skipped"
+        g.skipped[reason] += 1
+        n = self.logged[reason] = self.logged[reason] + 1
+        if n <= LOG_SKIPS_PER_REASON:
+            logging.info("gatesopt_gating: %s stays on (%s%s)%s", g.name,
+                         reason, detail and ": " + detail,
+                         n == LOG_SKIPS_PER_REASON
+                         and "; further '%s' skips only counted" % reason or "")
+    # Pin changes (the only places that touch the pin)
+    def _pin_off(self, g, print_time):
+        assert not g.pin_off
+        g.pin.set_disable(print_time)
+        g.pin_off = True
+        g.last_event_pt = print_time
+        if not g.safety_armed:
+            g.safety_armed = True
+            g.stepper.add_active_callback(
+                (lambda pt, g=g: self._became_active(g, pt)))
+    def _pin_on(self, g, print_time):
+        assert g.pin_off
+        g.pin.set_enable(print_time)
+        g.pin_off = False
+        g.last_event_pt = print_time
+    def _earliest_event(self, g):
+        """Earliest print time a new change of g's pin may be scheduled."""
+        t = self.est_print_time(g.pin) + self.min_sched_s
+        if g.last_event_pt is not None:
+            t = max(t, g.last_event_pt + self.min_sched_s)
+        return t
+    # G-code line
+    def command_gate(self, names):
+        for name in names:
+            g = self.gates[name]
+            self._settle_count(g)
+            if not g.enabled:
+                self._skip(g, None, "disabled")
+                continue
+            if not g.tracking.is_motor_enabled():
+                self._skip(g, None, "motor_off")
+                continue
+            if g.open is not None:
+                # No activating move since the last line: it covers this
+                # interval already
+                self._skip(g, None, "repeated")
+                continue
+            pre, post = self._margins(g)
+            iv = _Interval(pre, post)
+            g.open = iv
+            g.live = [v for v in g.live if v.state in ("open", "pending")]
+            g.live.append(iv)
+            self.collecting.append(g)
+            delay = off_delay_s(post, self.end_late_s)
+            if delay > MAX_OFF_DELAY_S:
+                self._skip(g, iv, "margins", "post_active + end_late = %.4f s"
+                           % (delay,))
+            elif (g.anchor_cum_s is not None
+                  and (self.cum_s - g.anchor_cum_s + g.anchor_lead_s + delay
+                       < self.min_sched_s)):
+                self._skip(g, iv, "spacing", "%.4f s after the last on"
+                           % (self.cum_s - g.anchor_cum_s + g.anchor_lead_s
+                              + delay,))
+            self.toolhead.register_lookahead_callback(
+                (lambda pt, g=g, iv=iv: self._t_end(g, iv, pt)))
+    def _proven(self, g, iv):
+        pre, post = self._margins(g, iv)
+        return iv.gap_s >= required_gap_s(pre, post, self.start_ahead_s,
+                                          self.end_late_s, self.min_off_s,
+                                          self.min_sched_s)
+    # Moves (every move entering the look-ahead queue)
+    def note_move(self, move):
+        dt = move.min_move_t
+        if self.collecting:
+            still = []
+            for g in self.collecting:
+                iv = g.open
+                if iv is None:
+                    continue
+                if move_activates(move.axes_r, g.axes):
+                    self._close(g, iv, move)
+                    continue
+                iv.gap_s += dt
+                if iv.state == "open" and iv.t_end is not None:
+                    self._try_off(g, iv)
+                still.append(g)
+            self.collecting = still
+        self.cum_s += dt
+    def _close(self, g, iv, move):
+        g.open = None
+        iv.closed = True
+        if iv.state == "open":
+            if not self._proven(g, iv):
+                self._skip(g, iv, "short", "%.4f s of moves" % (iv.gap_s,))
+                return
+            # Proven, t_end not known yet: the off goes out at t_end
+            iv.state = "pending"
+        if iv.state not in ("pending", "off"):
+            return
+        pre, post = self._margins(g, iv)
+        g.anchor_cum_s = self.cum_s
+        g.anchor_lead_s = on_lead_s(pre, self.start_ahead_s)
+        self.toolhead.register_lookahead_callback(
+            (lambda pt, g=g, iv=iv, m=move: self._t_next(g, iv, m, pt)))
+    def _t_end(self, g, iv, print_time):
+        iv.t_end = print_time
+        if iv.state == "open" or iv.state == "pending":
+            self._try_off(g, iv)
+    def _try_off(self, g, iv):
+        if not self._proven(g, iv):
+            if iv.state == "pending":
+                # proven at the activating move, no longer with a wider
+                # window read since: the interval is final, and too short
+                self._skip(g, iv, "short", "%.4f s of moves" % (iv.gap_s,))
+            return
+        if not g.tracking.is_motor_enabled():
+            self._skip(g, iv, "motor_off")
+            return
+        pre, post = self._margins(g, iv)
+        t_off = iv.t_end + off_delay_s(post, self.end_late_s)
+        earliest = self._earliest_event(g)
+        if g.pin_off or t_off < earliest:
+            self._skip(g, iv, "late", "off at %.6f, earliest %.6f"
+                       % (t_off, earliest))
+            return
+        iv.t_off = t_off
+        iv.state = "off"
+        g.off_iv = iv
+        g.gated += 1
+        self._pin_off(g, t_off)
+    def _t_next(self, g, iv, move, move_end_pt):
+        if iv.state != "off":
+            return
+        t_next = move_end_pt - (move.accel_t + move.cruise_t + move.decel_t)
+        pre, post = self._margins(g, iv)
+        t_on = t_next - on_lead_s(pre, self.start_ahead_s)
+        earliest = self._earliest_event(g)
+        if t_on < earliest:
+            # Cannot happen while rule A holds and Klipper keeps its step
+            # generation ahead of the MCU; the pin must come on regardless
+            g.late_enables += 1
+            logging.error("gatesopt_gating: %s on at %.6f instead of %.6f"
+                          " (first step at %.6f)", g.name, earliest, t_on,
+                          t_next - pre)
+            t_on = earliest
+        self._finish(g, iv, t_on)
+        g.off_time_s += t_on - iv.t_off
+    def _finish(self, g, iv, t_on):
+        iv.t_on = t_on
+        iv.state = "done"
+        if g.off_iv is iv:
+            g.off_iv = None
+        self._pin_on(g, t_on)
+    # Safety net: the stepper is about to step (itersolve_check_active)
+    def _became_active(self, g, active_pt):
+        g.safety_armed = False
+        iv = g.off_iv
+        if not g.pin_off or iv is None:
+            return
+        if active_pt < iv.t_end:
+            # A move queued before the line: its steps end before t_off
+            g.safety_armed = True
+            g.stepper.add_active_callback(
+                (lambda pt, g=g: self._became_active(g, pt)))
+            return
+        pre, post = self._margins(g, iv)
+        t_on = max(active_pt - on_lead_s(pre, self.start_ahead_s),
+                   self._earliest_event(g))
+        self.safety_enables += 1
+        msg = ("gatesopt_gating: %s became active at %.6f while switched off"
+               " (off at %.6f) by a move this module did not see; enabled at"
+               " %.6f" % (g.name, active_pt, iv.t_off, t_on))
+        logging.error(msg)
+        if self.respond is not None:
+            self.respond("!! " + msg)
+        self._cancel_open(g)
+        iv.closed = True
+        g.anchor_cum_s = None
+        self._finish(g, iv, t_on)
+    # Klipper's own enable/disable of a stepper (EnableTracking state callback)
+    def _klipper_state(self, g, print_time, is_enable):
+        if is_enable:
+            self._settle_count(g)
+            g.last_event_pt = print_time
+            g.anchor_cum_s = None
+            return
+        self._cancel_open(g)
+        if g.off_iv is not None:
+            g.off_iv.state = "cancelled"
+            g.off_iv = None
+        if g.pin_off:
+            # The pin is off (or goes off at t_off, before print_time):
+            # Klipper's set_disable will find the count at 0 and send nothing
+            g.pin_off = False
+            g.owe_count = True
+        else:
+            g.last_event_pt = print_time
+    def _settle_count(self, g):
+        if g.owe_count:
+            g.owe_count = False
+            if g.pin.enable_count < 0:
+                g.pin.enable_count += 1
+    def _cancel_open(self, g):
+        """Cancel every interval of g whose off is not sent yet."""
+        for iv in g.live:
+            if iv.state in ("open", "pending"):
+                iv.state = "cancelled"
+        g.live = []
+        if g.open is not None:
+            g.open = None
+            if g in self.collecting:
+                self.collecting.remove(g)
+    # Everything on now (homing, probing, FORCE_MOVE, SET_GATESOPT_GATING)
+    def force_on(self, names=None):
+        """Cancel open intervals and switch every gated stepper among names on,
+        dwelling until they are on with start-ahead. Returns the count."""
+        names = self.order if names is None else names
+        for name in names:
+            # An off not sent yet will never be sent
+            self._cancel_open(self.gates[name])
+        if not any(self.gates[n].pin_off for n in names):
+            return 0
+        # Flushing the look-ahead first sends the "on" of every gated interval
+        # whose activating move is already queued, at its own time
+        start_pt = self.toolhead.get_last_move_time()
+        last_on = start_pt
+        lead = 0.
+        count = 0
+        for name in names:
+            g = self.gates[name]
+            if not g.pin_off:
+                continue
+            t_on = max(start_pt, self._earliest_event(g))
+            pre, post = self._margins(g, g.off_iv)
+            lead = max(lead, on_lead_s(pre, self.start_ahead_s))
+            iv = g.off_iv
+            if iv is not None:
+                g.off_time_s += t_on - iv.t_off
+                self._finish(g, iv, t_on)
+            else:
+                self._pin_on(g, t_on)
+            g.forced_on += 1
+            # rule B counts from a move; this on is tied to none: from now
+            # on only its real time spacing is checked
+            g.anchor_cum_s = None
+            count += 1
+            last_on = max(last_on, t_on)
+        if count:
+            self.toolhead.dwell(last_on - start_pt + lead)
+        return count
+    def motor_off_done(self):
+        """After Klipper's motor_off: nothing may stay gated or pending."""
+        for name in self.order:
+            g = self.gates[name]
+            self._cancel_open(g)
+            self._settle_count(g)
+            if g.pin_off:
+                logging.error("gatesopt_gating: %s still switched off after"
+                              " motor_off", g.name)
+    def status(self):
+        steppers = {}
+        for name in self.order:
+            g = self.gates[name]
+            steppers[name] = {
+                'enabled': g.enabled, 'gated_now': g.pin_off,
+                'intervals_gated': g.gated, 'off_time_s': round(g.off_time_s, 6),
+                'skipped': dict(g.skipped), 'late_enables': g.late_enables,
+                'forced_on': g.forced_on}
+        total = lambda key: sum(s[key] for s in steppers.values())
+        return {
+            'steppers': steppers,
+            'intervals_gated': total('intervals_gated'),
+            'skipped_short': sum(s['skipped']['short']
+                                 for s in steppers.values()),
+            'skipped_other': sum(sum(s['skipped'].values())
+                                 - s['skipped']['short']
+                                 for s in steppers.values()),
+            'late_safety_enables': self.safety_enables,
+            'late_enables': total('late_enables')}
+
+
+######################################################################
+# Klipper glue: config, commands, events
+######################################################################
+
+class GatesoptGating:
+    def __init__(self, config):
+        self.printer = printer = config.get_printer()
+        self.reactor = printer.get_reactor()
+        try:
+            self.names = parse_stepper_list(
+                config.get('steppers', DEFAULT_STEPPERS))
+        except ValueError as e:
+            raise config.error("[%s] steppers: %s" % (config.get_name(), e))
+        self.start_ahead_s = config.getfloat('start_ahead', 0.0018, minval=0.,
+                                             maxval=0.05)
+        self.end_late_s = config.getfloat('end_late', 0.0010, minval=0.,
+                                          maxval=0.05)
+        self.min_off_s = config.getfloat('min_off_time', 0., minval=0.,
+                                         maxval=3600.)
+        self.section = config.get_name()
+        self.toolhead = None
+        self.core = None
+        self.gcode = printer.lookup_object('gcode')
+        printer.register_event_handler("klippy:connect", self._handle_connect)
+        printer.register_event_handler("homing:home_rails_begin",
+                                       self._handle_home_rails_begin)
+        printer.register_event_handler("homing:homing_move_begin",
+                                       self._handle_homing_move_begin)
+        printer.register_event_handler("stepper_enable:motor_off",
+                                       self._handle_motor_off)
+        self.gcode.register_command("GATESOPT_GATE", self.cmd_GATESOPT_GATE,
+                                    desc=self.cmd_GATESOPT_GATE_help)
+        self.gcode.register_command("SET_GATESOPT_GATING",
+                                    self.cmd_SET_GATESOPT_GATING,
+                                    desc=self.cmd_SET_GATESOPT_GATING_help)
+        self.gcode.register_command("GATESOPT_GATING_STATUS",
+                                    self.cmd_GATESOPT_GATING_STATUS,
+                                    desc=self.cmd_GATESOPT_GATING_STATUS_help)
+    def _handle_connect(self):
+        # The toolhead is created after every config section, and an enable
+        # pin is known to be shared only once every stepper is: check here
+        self.toolhead = self.printer.lookup_object('toolhead')
+        kin_steppers = dict((s.get_name(), s) for s in
+                            self.toolhead.get_kinematics().get_steppers())
+        stepper_enable = self.printer.lookup_object('stepper_enable')
+        gates = {}
+        for name in self.names:
+            tracking = None
+            if name in kin_steppers:
+                tracking = stepper_enable.lookup_enable(name)
+            why = enable_refusal(name, kin_steppers, tracking)
+            if why is not None:
+                raise self.printer.config_error("[%s] %s"
+                                                % (self.section, why))
+            gates[name] = (kin_steppers[name], tracking)
+        lookahead = getattr(self.toolhead, 'lookahead', None)
+        if lookahead is None or not hasattr(lookahead, 'add_move'):
+            raise self.printer.config_error(
+                "[%s] this Klipper has no toolhead.lookahead.add_move (written"
+                " for Klipper 2025 and later)" % (self.section,))
+        mcu = gates[self.names[0]][1].enable.mcu_enable.get_mcu()
+        reactor = self.reactor
+        def est_print_time(pin):
+            return pin.mcu_enable.get_mcu().estimated_print_time(
+                reactor.monotonic())
+        self.core = GatingCore(
+            self.toolhead, gates, stepper_margins, est_print_time,
+            mcu.min_schedule_time(), self.start_ahead_s, self.end_late_s,
+            self.min_off_s, respond=self.gcode.respond_raw)
+        # Every move Klipper plans passes here, after all transforms and
+        # speed limits (toolhead.move and drip moves)
+        orig_add_move = lookahead.add_move
+        core = self.core
+        def add_move(move):
+            res = orig_add_move(move)
+            core.note_move(move)
+            return res
+        lookahead.add_move = add_move
+        # FORCE_MOVE / STEPPER_BUZZ step a stepper outside the toolhead
+        force_move = self.printer.lookup_object('force_move', None)
+        orig_manual_move = getattr(force_move, 'manual_move', None)
+        if orig_manual_move is not None:
+            def manual_move(stepper, *args, **kw):
+                if stepper.get_name() in core.gates:
+                    core.force_on([stepper.get_name()])
+                return orig_manual_move(stepper, *args, **kw)
+            force_move.manual_move = manual_move
+    # Events
+    def _handle_home_rails_begin(self, homing_state, rails):
+        self.core.force_on()
+    def _handle_homing_move_begin(self, hmove):
+        if getattr(hmove, 'toolhead', self.toolhead) is self.toolhead:
+            # A drip move ends when an endstop triggers: its time proves
+            # nothing, and its steppers must be on
+            self.core.force_on()
+    def _handle_motor_off(self):
+        self.core.motor_off_done()
+    # Commands
+    cmd_GATESOPT_GATE_help = ("Switch the named steppers off after their last"
+                              " step, on before their next (gatesopt)")
+    def cmd_GATESOPT_GATE(self, gcmd):
+        try:
+            names = parse_stepper_list(gcmd.get('STEPPERS'))
+        except ValueError as e:
+            raise gcmd.error("GATESOPT_GATE: %s" % (e,))
+        unknown = [n for n in names if n not in self.core.gates]
+        if unknown:
+            raise gcmd.error("GATESOPT_GATE: cannot gate %s (gateable: %s)"
+                             % (", ".join(unknown),
+                                ", ".join(self.core.order)))
+        self.core.command_gate(names)
+    cmd_SET_GATESOPT_GATING_help = "Turn gatesopt gating on or off per stepper"
+    def cmd_SET_GATESOPT_GATING(self, gcmd):
+        enable = gcmd.get_int('ENABLE', minval=0, maxval=1)
+        name = gcmd.get('STEPPER', None)
+        if name is None:
+            names = list(self.core.order)
+        elif name in self.core.gates:
+            names = [name]
+        else:
+            raise gcmd.error("SET_GATESOPT_GATING: unknown stepper '%s'"
+                             " (gateable: %s)"
+                             % (name, ", ".join(self.core.order)))
+        for n in names:
+            self.core.gates[n].enabled = bool(enable)
+        if not enable:
+            self.core.force_on(names)
+        gcmd.respond_info("gatesopt gating %s for %s"
+                          % (enable and "enabled" or "disabled",
+                             ", ".join(names)))
+    cmd_GATESOPT_GATING_STATUS_help = "Report gatesopt gating counts"
+    def cmd_GATESOPT_GATING_STATUS(self, gcmd):
+        st = self.core.status()
+        lines = []
+        for name in self.core.order:
+            s = st['steppers'][name]
+            skipped = " ".join("%s %d" % (r, s['skipped'][r])
+                               for r in SKIP_REASONS if s['skipped'][r])
+            lines.append("%s: %s; gated %d; off %.3f s; skipped %s;"
+                         " late enables %d; forced on %d"
+                         % (name, s['enabled'] and "enabled" or "disabled",
+                            s['intervals_gated'], s['off_time_s'],
+                            skipped or "none", s['late_enables'],
+                            s['forced_on']))
+        lines.append("late safety enables: %d" % (st['late_safety_enables'],))
+        gcmd.respond_info("\n".join(lines))
+    def get_status(self, eventtime):
+        if self.core is None:
+            return {}
+        return self.core.status()
+
+def stepper_margins(stepper):
+    """(pre_active_s, post_active_s) of a stepper's current kinematics."""
+    import chelper
+    ffi_main, ffi_lib = chelper.get_ffi()
+    sk = stepper.get_stepper_kinematics()
+    return (ffi_lib.itersolve_get_gen_steps_pre_active(sk),
+            ffi_lib.itersolve_get_gen_steps_post_active(sk))
+
+def load_config(config):
+    return GatesoptGating(config)
