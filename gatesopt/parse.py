@@ -26,12 +26,13 @@ DEFAULT_FEED_MM_S = 25.0    # F1500: what Marlin-based slicers assume before the
 #: what the scanner knows, as the arrays it reads: the slicers' comment markers
 #: (``slicers.LAYER_MARKERS`` written on comment lines, ``Z_MARKERS``, ``FEATURE_MARKERS``) and the
 #: extended commands that switch motors (``firmware.EXTENDED_MOTOR_COMMANDS``)
-SCAN_TABLES = (*_scan.pack_comment_markers(slicers.LAYER_MARKERS, slicers.LAYER_KINDS, slicers.Z_MARKERS,
-                                           slicers.FEATURE_MARKERS),
-               *_scan.pack_motor_commands(EXTENDED_MOTOR_COMMANDS, AXES))
+SCAN_TABLES = (
+    *_scan.pack_comment_markers([m for m in slicers.LAYER_MARKERS if m.where == slicers.COMMENT_LINE],
+                                slicers.LAYER_KINDS, slicers.Z_MARKERS, slicers.FEATURE_MARKERS),
+    *_scan.pack_motor_commands(EXTENDED_MOTOR_COMMANDS, AXES))
 #: layer markers written as a comment after the G-code of a line (``slicers.TRAILING``), each with
-#: its kind (1-based, ``slicers.LAYER_KINDS``): found here with ``bytes.find``, a search over the
-#: whole text far faster than looking into every G-code line's comment in the scanner
+#: its kind (1-based, ``slicers.LAYER_KINDS``): found here, by ``bytes.find`` over the whole text
+#: (the scanner reads the markers of comment lines only, not the comments of G-code lines)
 TRAILING_MARKERS = tuple((m.text, slicers.LAYER_KINDS.index(m.slicer) + 1)
                          for m in slicers.LAYER_MARKERS if m.where == slicers.TRAILING)
 
