@@ -9,6 +9,13 @@ that into a message.
 Modal semantics follow Marlin 2.x (gcode.h ``set_relative_mode`` clears the E mode bits, so
 G90/G91 switch E too), or Klipper's gcode_move.py when ``klipper`` is set (G90/G91 leave the
 M82/M83 E mode alone).
+
+What the slicers and firmware write (layer markers, Z and feature comments, extended motor
+commands) is not in here: it comes as packed tables (``pack_comment_markers``,
+``pack_motor_commands``) from the modules that own it. The kernel and its helpers stay in this
+one file, past the house's ~600 lines: numba's on-disk cache of ``scan`` is keyed on this file's
+source alone and is not invalidated when a jitted helper in another file changes (numba's "Notes
+on Caching": cache invalidation does not see changes in other files).
 """
 from __future__ import annotations
 
@@ -40,53 +47,98 @@ LT = 19
 # axes a move may carry that the model has not got: rotary A B C, secondary linear U V W (Mach3 and
 # machinekit flavours write the extruder as A). Flagged per line (parse.py), never modelled
 FOREIGN_AXES = (0, 1, 2, 20, 21, 22)
+AXIS_LETTERS = (LX, LY, LZ, LE)     # the model's axes X Y Z E, in the order of ``program.AXES``
 
 EXT = 64        # '@': line starts with an extended (Klipper-style) command word
 POW10 = 10.0 ** np.arange(40)
-SET_STEPPER_ENABLE = np.frombuffer(b"SET_STEPPER_ENABLE", dtype=np.uint8)
-STEPPER_ = np.frombuffer(b"STEPPER=STEPPER_", dtype=np.uint8)
-ENABLE_ = np.frombuffer(b"ENABLE=", dtype=np.uint8)
 
-# Comment markers the slicers write (layers, Z, feature types). Found here, in the same pass, so the
-# Python side never scans the text again. Marker code bits: 0-2 layer marker kind (see LAYER_KINDS,
-# 1-based, in priority order), 8 = the line carries a Z, 16 = the line names a feature type.
-LAYER_KINDS = ("prusaslicer", "bambu", "cura", "simplify3d", "slic3r", "kisslicer", "comment")
-MK_Z = 8
-MK_FEATURE = 16
-P_LAYER_CHANGE = np.frombuffer(b";LAYER_CHANGE", dtype=np.uint8)      # PrusaSlicer, SuperSlicer, Orca
-P_CHANGE_LAYER = np.frombuffer(b"; CHANGE_LAYER", dtype=np.uint8)     # Bambu Studio
-P_LAYER_COLON = np.frombuffer(b";LAYER:", dtype=np.uint8)             # Cura, ideaMaker
-P_S3D = np.frombuffer(b"; layer ", dtype=np.uint8)                    # Simplify3D: '; layer 3, Z = 0.6'
-P_S3D_Z = np.frombuffer(b", Z = ", dtype=np.uint8)
-P_SLIC3R = np.frombuffer(b"; move to next layer (", dtype=np.uint8)   # Slic3r 1.x verbose
-P_KISS = np.frombuffer(b"; BEGIN_LAYER_OBJECT", dtype=np.uint8)       # KISSlicer: '... z=0.3'
-P_KISS_Z = np.frombuffer(b" z=", dtype=np.uint8)
-P_AYER = np.frombuffer(b"AYER", dtype=np.uint8)                        # ';layer 3' etc., any case
-P_Z = np.frombuffer(b"Z:", dtype=np.uint8)                            # ';Z:0.2'
-P_Z_HEIGHT = np.frombuffer(b"Z_HEIGHT:", dtype=np.uint8)              # '; Z_HEIGHT: 0.2'
-P_TYPE = np.frombuffer(b"TYPE:", dtype=np.uint8)                      # ';TYPE:Perimeter'
-P_FEATURE = np.frombuffer(b"FEATURE:", dtype=np.uint8)                # '; FEATURE: Outer wall'
-P_FEATURE_LC = np.frombuffer(b"feature ", dtype=np.uint8)             # '; feature inner perimeter'
+
+# ------------------------------------------------------------------------------------------------
+# the knowledge tables the kernel reads, packed into arrays
+#
+# The tables themselves are plain Python in the modules that own the knowledge
+# (``slicers.LAYER_MARKERS`` / ``Z_MARKERS`` / ``FEATURE_MARKERS``, ``firmware.EXTENDED_MOTOR_COMMANDS``);
+# ``parse`` packs them once and passes them to ``scan`` as arguments. Arguments, not globals: numba
+# freezes a global array into the compiled kernel and its on-disk cache is keyed on this file
+# only, so a row added to ``slicers.py`` would not reach a cached kernel.
+
+#: columns of a packed comment-marker row (``pack_comment_markers``); text spans index ``text``
+(M_ROLE, M_KIND, M_AT_SEMICOLON, M_FOLD, M_FOLLOW, M_TEXT_A, M_TEXT_B, M_SEP_A, M_SEP_B,
+ M_ZAFTER_A, M_ZAFTER_B) = range(11)
+ROLE_LAYER, ROLE_Z, ROLE_FEATURE = 0, 1, 2
+FOLLOW_CODES = {"": 0, "digit": 1, "signed": 2}
+
+
+def _append_text(blob: bytearray, text: bytes) -> tuple[int, int]:
+    """Append ``text`` to ``blob``; its (start, end) in it."""
+    a = len(blob)
+    blob += text
+    return a, len(blob)
+
+
+def pack_comment_markers(layer_markers, layer_kinds, z_markers, feature_markers):
+    """(rows int64 [n, 11], text uint8) for ``scan``: the layer markers written on comment lines
+    (``slicers.LayerMarker``s, each with its 1-based kind: its slicer's place in ``layer_kinds``),
+    then the Z markers, then the feature markers (``slicers``). The scanner takes the first
+    matching row of each role on a line."""
+    blob = bytearray()
+    rows = []
+    for m in layer_markers:
+        text = m.text.upper() if m.fold_case else m.text
+        at_semicolon = text.startswith(b";")
+        ta, tb = _append_text(blob, text)
+        sa, sb = _append_text(blob, m.sep)
+        za, zb = _append_text(blob, m.z_after)
+        rows.append((ROLE_LAYER, layer_kinds.index(m.slicer) + 1, at_semicolon, m.fold_case,
+                     FOLLOW_CODES[m.follow], ta, tb, sa, sb, za, zb))
+    for role, texts in ((ROLE_Z, z_markers), (ROLE_FEATURE, feature_markers)):
+        for t in texts:
+            ta, tb = _append_text(blob, t)
+            rows.append((role, 0, False, False, 0, ta, tb, tb, tb, tb, tb))
+    return np.array(rows, np.int64).reshape(-1, 11), np.frombuffer(bytes(blob) or b"\0", np.uint8).copy()
+
+
+#: columns of a packed extended motor command (``pack_motor_commands``) and of one of its names
+C_WORD_A, C_WORD_B, C_MOTOR_A, C_MOTOR_B, C_ENABLE_A, C_ENABLE_B = range(6)
+N_COMMAND, N_NAME_A, N_NAME_B, N_AXIS = range(4)
+
+
+def pack_motor_commands(commands, axes):
+    """(commands int64 [n, 6], names int64 [m, 4], text uint8) for ``scan``: each
+    ``firmware.ExtendedMotorCommand``'s words in upper case, each motor name with its command's
+    index and its motor's index in ``axes``."""
+    blob = bytearray()
+    cmds, names = [], []
+    for c, cmd in enumerate(commands):
+        cmds.append(_append_text(blob, cmd.word.upper().encode())
+                    + _append_text(blob, cmd.motor_param.upper().encode())
+                    + _append_text(blob, cmd.enable_param.upper().encode()))
+        for name, motor in cmd.motors:
+            names.append((c,) + _append_text(blob, name.upper().encode()) + (axes.index(motor),))
+    return (np.array(cmds, np.int64).reshape(-1, 6), np.array(names, np.int64).reshape(-1, 4),
+            np.frombuffer(bytes(blob) or b"\0", np.uint8).copy())
 
 
 @njit(cache=True)
-def _match(buf, i, end, pat):
-    """buf[i:i+len(pat)] equals pat exactly."""
-    n = pat.shape[0]
+def _match(buf, i, end, text, a, b, fold):
+    """buf[i:end] starts with text[a:b] (``fold``: buf upper-cased first; text is upper case)."""
+    n = b - a
     if i + n > end:
         return False
     for k in range(n):
-        if buf[i + k] != pat[k]:
+        c = buf[i + k]
+        if fold:
+            c = _upper(c)
+        if c != text[a + k]:
             return False
     return True
 
 
 @njit(cache=True)
-def _find(buf, i, end, pat):
-    """First position >= i of pat in buf[:end], or -1."""
-    n = pat.shape[0]
-    for j in range(i, end - n + 1):
-        if _match(buf, j, end, pat):
+def _find(buf, i, end, text, a, b):
+    """First position >= i of text[a:b] in buf[:end], or -1."""
+    for j in range(i, end - (b - a) + 1):
+        if _match(buf, j, end, text, a, b, False):
             return j
     return -1
 
@@ -136,82 +188,83 @@ def _number_at(buf, i, end):
 
 
 @njit(cache=True)
-def _comment_marker(buf, i, b):
-    """Markers on a comment line starting at i (buf[i] == ';'). Returns (code, z, name_a, name_b)."""
-    code = 0
+def _follows(buf, k, b, text, sa, sb, follow):
+    """What a layer marker needs after its text at k: one byte of text[sa:sb] (then spaces), then
+    ``follow`` (0 nothing, 1 a digit, 2 a digit or '-')."""
+    if sb > sa:
+        if k >= b:
+            return False
+        hit = False
+        for t in range(sa, sb):
+            if buf[k] == text[t]:
+                hit = True
+        if not hit:
+            return False
+        k += 1
+        while k < b and buf[k] == 32:
+            k += 1
+    if follow == 0:
+        return True
+    if k >= b:
+        return False
+    return (48 <= buf[k] <= 57) or (follow == 2 and buf[k] == 45)
+
+
+@njit(cache=True)
+def _comment_marker(buf, i, b, rows, text):
+    """Markers on a comment line starting at i (buf[i] == ';'), from the packed table ``rows`` /
+    ``text`` (``pack_comment_markers``). Returns (layer kind or 0, z, name_a, name_b): the first
+    matching row of each role counts; the name span is the feature name, blanks trimmed."""
+    kind = 0
     z = np.nan
     na = -1
     nb = -1
-    if _match(buf, i, b, P_LAYER_CHANGE):
-        code = 1
-    elif _match(buf, i, b, P_CHANGE_LAYER):
-        code = 2
-    elif _match(buf, i, b, P_LAYER_COLON) and i + 7 < b and (buf[i + 7] == 45 or 48 <= buf[i + 7] <= 57):
-        code = 3
-    elif _match(buf, i, b, P_S3D) and i + 8 < b and 48 <= buf[i + 8] <= 57:
-        code = 4
-        j = _find(buf, i + 8, b, P_S3D_Z)
-        if j >= 0:
-            z = _number_at(buf, j + P_S3D_Z.shape[0], b)
-    elif _match(buf, i, b, P_SLIC3R):
-        code = 5
-    elif _match(buf, i, b, P_KISS):
-        code = 6
-        j = _find(buf, i + P_KISS.shape[0], b, P_KISS_Z)
-        if j >= 0:
-            z = _number_at(buf, j + P_KISS_Z.shape[0], b)
     j = i + 1
     while j < b and (buf[j] == 32 or buf[j] == 9):
         j += 1
-    if code == 0 and j + 5 < b and _upper(buf[j]) == 76 and _match_upper(buf, j + 1, b, P_AYER) \
-            and (buf[j + 5] == 32 or buf[j + 5] == 95 or buf[j + 5] == 58):
-        k = j + 6
-        while k < b and buf[k] == 32:
-            k += 1
-        if k < b and 48 <= buf[k] <= 57:
-            code = 7
-    if _match(buf, j, b, P_Z):
-        z = _number_at(buf, j + 2, b)
-    elif _match(buf, j, b, P_Z_HEIGHT):
-        z = _number_at(buf, j + P_Z_HEIGHT.shape[0], b)
-    if not np.isnan(z):
-        code |= MK_Z
-    if _match(buf, j, b, P_TYPE):
-        na = j + P_TYPE.shape[0]
-    elif _match(buf, j, b, P_FEATURE):
-        na = j + P_FEATURE.shape[0]
-    elif _match(buf, j, b, P_FEATURE_LC):
-        na = j + P_FEATURE_LC.shape[0]
+    layer_done = False
+    z_done = False
+    for r in range(rows.shape[0]):
+        role = rows[r, M_ROLE]
+        ta = rows[r, M_TEXT_A]
+        tb = rows[r, M_TEXT_B]
+        if role == ROLE_LAYER:
+            at = i if rows[r, M_AT_SEMICOLON] else j
+            if layer_done or not _match(buf, at, b, text, ta, tb, rows[r, M_FOLD] != 0):
+                continue
+            if not _follows(buf, at + tb - ta, b, text, rows[r, M_SEP_A], rows[r, M_SEP_B], rows[r, M_FOLLOW]):
+                continue
+            kind = rows[r, M_KIND]
+            layer_done = True
+            za = rows[r, M_ZAFTER_A]
+            zb = rows[r, M_ZAFTER_B]
+            if zb > za:
+                f = _find(buf, at + tb - ta, b, text, za, zb)
+                if f >= 0:
+                    z = _number_at(buf, f + zb - za, b)
+        elif role == ROLE_Z:
+            if not z_done and _match(buf, j, b, text, ta, tb, False):
+                z = _number_at(buf, j + tb - ta, b)
+                z_done = True
+        elif na < 0 and _match(buf, j, b, text, ta, tb, False):
+            na = j + tb - ta
     if na >= 0:
         while na < b and (buf[na] == 32 or buf[na] == 9):
             na += 1
         nb = b
         while nb > na and (buf[nb - 1] == 32 or buf[nb - 1] == 9):
             nb -= 1
-        code |= MK_FEATURE
-    return code, z, na, nb
+    return kind, z, na, nb
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _is_letter(c):
     return (65 <= c <= 90) or (97 <= c <= 122)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _upper(c):
     return c - 32 if 97 <= c <= 122 else c
-
-
-@njit(cache=True)
-def _match_upper(buf, i, end, pat):
-    """buf[i:i+len(pat)] equals pat, case-insensitively."""
-    n = pat.shape[0]
-    if i + n > end:
-        return False
-    for k in range(n):
-        if _upper(buf[i + k]) != pat[k]:
-            return False
-    return True
 
 
 @njit(cache=True)
@@ -341,52 +394,249 @@ def line_starts(buf):
 
 
 @njit(cache=True)
-def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, default_feed_mm_s, state):
+def _step_arrays(n_lines):
+    """The kernel's output arrays, untrimmed (one step row at most per line; the caller slices the
+    step arrays to the steps written): step rows, then per line letter, number, flags."""
+    # one position buffer: row 0 is the start position, row i+1 the end of step i, so that
+    # start_mm = s_pos[:-1] and end_mm = s_pos[1:] are two views of the same memory
+    return (np.empty(n_lines, np.int64), np.empty(n_lines, np.int8), np.empty((n_lines + 1, 4), np.float64),
+            np.empty(n_lines, np.float64), np.empty(n_lines, np.float64), np.empty(n_lines, np.float64),
+            np.empty(n_lines, np.float32), np.empty(n_lines, np.float32), np.empty(n_lines, np.float32),
+            np.empty((n_lines, 2), np.float64), np.zeros(n_lines, np.bool_), np.empty((n_lines, 4), np.float64),
+            np.empty(n_lines, np.bool_), np.empty(n_lines, np.bool_), np.empty(n_lines, np.bool_),
+            np.empty((n_lines, 4), np.bool_),
+            # per line: the first word's letter and number, and flags: bit 0 an unexpanded
+            # {placeholder} was dropped; bit 1 a G0-G3 line carries an axis the model has not got
+            # (A B C U V W); bit 2 an M106 / M107 set the part-cooling fan (FLAG_PART_FAN)
+            np.zeros(n_lines, np.uint8), np.full(n_lines, np.nan, np.float32), np.zeros(n_lines, np.uint8))
+
+
+@njit(cache=True)
+def _grow_markers(mk_line, mk_kind, mk_z, mk_span, n_mk):
+    """The comment-marker arrays (line, layer kind, Z, feature-name span) at twice the size."""
+    cap = 2 * n_mk
+    t1 = np.empty(cap, np.int64)
+    t1[:n_mk] = mk_line
+    t2 = np.empty(cap, np.int16)
+    t2[:n_mk] = mk_kind
+    t3 = np.empty(cap, np.float64)
+    t3[:n_mk] = mk_z
+    t4 = np.empty((cap, 2), np.int64)
+    t4[:n_mk] = mk_span
+    return t1, t2, t3, t4
+
+
+@njit(cache=True)
+def _extended_motor(buf, fpos, b, en, commands, names, text):
+    """An extended command line at fpos from the packed table (``pack_motor_commands``): if it
+    switches a motor, set ``en`` and return K_MOTOR; else -1 (the line is no step)."""
+    for c in range(commands.shape[0]):
+        wa = commands[c, C_WORD_A]
+        wb = commands[c, C_WORD_B]
+        if not _match(buf, fpos, b, text, wa, wb, True):
+            continue
+        ma = commands[c, C_MOTOR_A]
+        mb = commands[c, C_MOTOR_B]
+        ea = commands[c, C_ENABLE_A]
+        eb = commands[c, C_ENABLE_B]
+        axis = -1
+        en_value = -1
+        for i in range(fpos + wb - wa, b):
+            if _match(buf, i, b, text, ma, mb, True):
+                for r in range(names.shape[0]):
+                    if names[r, N_COMMAND] == c and _match(buf, i + mb - ma, b, text, names[r, N_NAME_A],
+                                                           names[r, N_NAME_B], True):
+                        axis = names[r, N_AXIS]
+            if _match(buf, i, b, text, ea, eb, True) and i + eb - ea < b:
+                en_value = buf[i + eb - ea] - 48
+        if axis >= 0 and (en_value == 0 or en_value == 1):
+            en[axis] = en_value == 1
+            return K_MOTOR
+        return -1
+    return -1
+
+
+@njit(cache=True)
+def _arc(present, value, bad, pos, tgt, scale, ccw):
+    """(error, letter, centre x, centre y, length) of a G2/G3 arc from ``pos`` to ``tgt``: the
+    centre from I/J, else from R (Marlin G2_G3.cpp), the length along the helix."""
+    for k in (LI, LJ, LR):
+        if bad[k]:
+            return ERR_BAD_NUMBER, k, np.nan, np.nan, 0.0
+    dx = tgt[0] - pos[0]
+    dy = tgt[1] - pos[1]
+    if present[LI] or present[LJ]:
+        ii = value[LI] * scale if present[LI] and not np.isnan(value[LI]) else 0.0
+        jj = value[LJ] * scale if present[LJ] and not np.isnan(value[LJ]) else 0.0
+        cx = pos[0] + ii
+        cy = pos[1] + jj
+    elif present[LR] and not np.isnan(value[LR]):
+        r = value[LR] * scale
+        d = math.hypot(dx, dy)
+        if d == 0.0:
+            return ERR_ARC, LR, np.nan, np.nan, 0.0
+        h2 = r * r - 0.25 * d * d
+        if h2 < -1e-6 * max(1.0, r * r):
+            return ERR_ARC, LR, np.nan, np.nan, 0.0
+        h = math.sqrt(max(h2, 0.0))
+        # Marlin G2_G3.cpp: e = clockwise ^ (r < 0) ? -1 : 1
+        e = -1.0 if ((not ccw) != (r < 0)) else 1.0
+        sx = -dy / d
+        sy = dx / d
+        cx = 0.5 * (pos[0] + tgt[0]) + e * h * sx
+        cy = 0.5 * (pos[1] + tgt[1]) + e * h * sy
+    else:
+        return ERR_ARC, LI, np.nan, np.nan, 0.0
+    rad = math.hypot(pos[0] - cx, pos[1] - cy)
+    a0 = math.atan2(pos[1] - cy, pos[0] - cx)
+    a1 = math.atan2(tgt[1] - cy, tgt[0] - cx)
+    sweep = (a1 - a0) if ccw else (a0 - a1)
+    # same end point = full circle (Marlin: angular_travel == 0 -> 2*pi)
+    if sweep <= 1e-9:
+        sweep += 2.0 * math.pi
+    return OK, -1, cx, cy, math.hypot(rad * sweep, tgt[2] - pos[2])
+
+
+@njit(cache=True)
+def _dwell_s(present, value):
+    """G4's duration: P in ms, else S in s."""
+    if present[LP] and not np.isnan(value[LP]):
+        return max(value[LP], 0.0) / 1000.0
+    if present[LS] and not np.isnan(value[LS]):
+        return max(value[LS], 0.0)
+    return 0.0
+
+
+@njit(cache=True)
+def _home(present, pos, tgt, off, en):
+    """G28: the named axes (all of X Y Z without a name) to 0, their G92 offsets cleared, their
+    motors on; ``tgt`` is the end point."""
+    named = present[LX] or present[LY] or present[LZ]
+    for q in range(4):
+        tgt[q] = pos[q]
+    for q in range(3):
+        if (not named) or present[AXIS_LETTERS[q]]:
+            tgt[q] = 0.0
+            off[q] = 0.0
+            en[q] = True
+
+
+@njit(cache=True)
+def _set_offsets(present, value, bad, pos, off, scale):
+    """G92: the named axes' positions set (all to zero without a name, as Marlin); (error, letter)."""
+    anyg = False
+    for q in range(4):
+        k = AXIS_LETTERS[q]
+        if bad[k]:
+            return ERR_BAD_NUMBER, k
+        if present[k]:
+            v = 0.0 if np.isnan(value[k]) else value[k] * scale
+            off[q] = pos[q] - v
+            anyg = True
+    if not anyg:
+        for q in range(4):
+            off[q] = pos[q]
+    return OK, -1
+
+
+@njit(cache=True)
+def _heat(m, present, value, hot, bed, hot_reached, bed_reached, hot_rate, bed_rate):
+    """M104/M109/M140/M190: (hotend, bed, hotend reached, bed reached, kind or -1, duration). A
+    wait (M109, M190) heats from the last temperature waited for (paper.toml [time])."""
+    bed_cmd = m == 140.0 or m == 190.0
+    t = value[LS] if present[LS] else (value[LR] if present[LR] else np.nan)
+    if not np.isnan(t):
+        if bed_cmd:
+            bed = t
+        else:
+            hot = t
+    if m == 104.0 or m == 140.0:
+        return hot, bed, hot_reached, bed_reached, -1, 0.0
+    target = bed if bed_cmd else hot
+    reached = bed_reached if bed_cmd else hot_reached
+    dur = 0.0
+    if target > 0:
+        dur = abs(target - reached) / (bed_rate if bed_cmd else hot_rate)
+        if bed_cmd:
+            bed_reached = target
+        else:
+            hot_reached = target
+    return hot, bed, hot_reached, bed_reached, K_WAIT, dur
+
+
+@njit(cache=True)
+def _part_fan(m, present, value, fan):
+    """M106/M107: (fan 0-1, the line set the part-cooling fan). Only the part-cooling fan (no P,
+    or P0) counts."""
+    if present[LP] and not np.isnan(value[LP]) and value[LP] != 0.0:
+        return fan, False
+    if m == 107.0:
+        return 0.0, True
+    s = value[LS] if present[LS] and not np.isnan(value[LS]) else 255.0
+    return min(max(s / 255.0, 0.0), 1.0), True
+
+
+@njit(cache=True)
+def _motor_m(m, present, en):
+    """M17/M18/M84: the named motors (all without a name) on (M17) or off; K_MOTOR, or -1 for
+    ``M18 S<sec>`` / ``M84 S<sec>`` (an idle timeout, not a disable)."""
+    named = False
+    for q in range(4):
+        if present[AXIS_LETTERS[q]]:
+            named = True
+    if not named and (present[LS] or present[LT]):
+        return -1
+    for q in range(4):
+        if (not named) or present[AXIS_LETTERS[q]]:
+            en[q] = m == 17.0
+    return K_MOTOR
+
+
+@njit(cache=True)
+def _motor_s(number, present, en):
+    """The S-series (3DGates Table 3): ``S1 X`` on, ``S0 X`` off; K_MOTOR, or -1 without a motor."""
+    if not (number == 0.0 or number == 1.0):
+        return -1
+    named = False
+    for q in range(4):
+        if present[AXIS_LETTERS[q]]:
+            en[q] = number == 1.0
+            named = True
+    return K_MOTOR if named else -1
+
+
+@njit(cache=True)
+def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, default_feed_mm_s, state,
+         tables):
     """One pass over all lines. Returns (error, error_line, error_letter, n_steps, arrays, markers).
 
     ``state`` (float64, STATE_SIZE) is the modal state before the first line (see ``initial_state``)
     and is updated in place to the state after the last line, so a file can be scanned chunk by
-    chunk (``gatesopt.stream``) with the same result as in one piece.
+    chunk (``gatesopt.stream``) with the same result as in one piece. ``tables``: (marker rows,
+    marker text, motor commands, motor names, motor text), from ``pack_comment_markers`` and
+    ``pack_motor_commands``. ``markers``: per comment line with a marker its line, layer kind
+    (1-based, 0: none), Z (NaN: none) and feature-name span (-1: none).
+
+    A numba kernel, long on purpose: the modal state lives in local variables across the line
+    loop, and the hot path (G0/G1 lines, nearly every line of a print) is written out here with
+    every step row; what the other commands do is in the helpers above. Measured (CPU time of the
+    240 k G-code lines of prusa25_bunny_triangles15_lh01): the G0-G3 path written out 24.5 ms, as
+    four njit helpers 25.8 ms, the same with ``inline="always"`` 31 ms; on prusa25_xend_honey25_acp
+    one ``_move`` helper returning eight values took 34.6 ms against 26.2 ms before the split.
     """
+    mk_rows, mk_text, motor_cmds, motor_names, motor_text = tables
     n_lines = line_start.shape[0] - 1
-    nmax = n_lines
-    s_line = np.empty(nmax, np.int64)
-    s_kind = np.empty(nmax, np.int8)
-    # one position buffer: row 0 is the start position, row i+1 the end of step i, so that
-    # start_mm = s_pos[:-1] and end_mm = s_pos[1:] are two views of the same memory
-    s_pos = np.empty((nmax + 1, 4), np.float64)
-    s_feed = np.empty(nmax, np.float64)
-    s_len = np.empty(nmax, np.float64)
-    s_dur = np.empty(nmax, np.float64)
-    s_fan = np.empty(nmax, np.float32)
-    s_hot = np.empty(nmax, np.float32)
-    s_bed = np.empty(nmax, np.float32)
-    s_arc = np.empty((nmax, 2), np.float64)
-    s_ccw = np.zeros(nmax, np.bool_)
-    s_off = np.empty((nmax, 4), np.float64)
-    s_relxyz = np.empty(nmax, np.bool_)
-    s_rele = np.empty(nmax, np.bool_)
-    s_inch = np.empty(nmax, np.bool_)
-    s_en = np.empty((nmax, 4), np.bool_)
-    l_letter = np.zeros(n_lines, np.uint8)
-    l_number = np.full(n_lines, np.nan, np.float32)
-    l_flags = np.zeros(n_lines, np.uint8)      # bit 0: an unexpanded {placeholder} was dropped;
-    # bit 1: a G0-G3 line carries an axis the model has not got (A B C U V W); bit 2: an M106 /
-    # M107 set the part-cooling fan ``fan`` follows (FLAG_PART_FAN)
-    # comment markers (grown by doubling): line, code bits, Z, feature-name byte span
-    mk_cap = 1024
-    mk_line = np.empty(mk_cap, np.int64)
-    mk_code = np.empty(mk_cap, np.int8)
-    mk_z = np.empty(mk_cap, np.float64)
-    mk_span = np.empty((mk_cap, 2), np.int64)
+    arrs = _step_arrays(n_lines)
+    (s_line, s_kind, s_pos, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
+     s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags) = arrs
+    mk_line = np.empty(1024, np.int64)
+    mk_kind = np.empty(1024, np.int16)
+    mk_z = np.empty(1024, np.float64)
+    mk_span = np.empty((1024, 2), np.int64)
     n_mk = 0
-    no_markers = (np.empty(0, np.int64), np.empty(0, np.int8), np.empty(0, np.float64), np.empty((0, 2), np.int64))
+    no_markers = (np.empty(0, np.int64), np.empty(0, np.int16), np.empty(0, np.float64), np.empty((0, 2), np.int64))
     placeholder = np.zeros(1, np.bool_)
     touched = np.zeros(27, np.int64)
-
-    # untrimmed: the caller slices the step arrays to [:n]
-    arrs = (s_line, s_kind, s_pos, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
-            s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags)
     present = np.zeros(26, np.bool_)
     value = np.full(26, np.nan)
     bad = np.zeros(26, np.bool_)
@@ -404,36 +654,22 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
     hot_reached = state[19]
     bed_reached = state[20]
     s_pos[0, :] = pos
-    axis_letter = np.array([LX, LY, LZ, LE])
     n = 0
     for ln in range(n_lines):
         a = line_start[ln]
         b = line_start[ln + 1]
-        # strip the line ending
-        while b > a and (buf[b - 1] == 10 or buf[b - 1] == 13):
+        while b > a and (buf[b - 1] == 10 or buf[b - 1] == 13):      # strip the line ending
             b -= 1
         c0 = a
         while c0 < b and (buf[c0] == 32 or buf[c0] == 9):
             c0 += 1
         if c0 < b and buf[c0] == 59:
-            code, zc, na, nb = _comment_marker(buf, c0, b)
-            if code != 0:
-                if n_mk == mk_cap:
-                    mk_cap *= 2
-                    t1 = np.empty(mk_cap, np.int64)
-                    t1[:n_mk] = mk_line[:n_mk]
-                    mk_line = t1
-                    t2 = np.empty(mk_cap, np.int8)
-                    t2[:n_mk] = mk_code[:n_mk]
-                    mk_code = t2
-                    t3 = np.empty(mk_cap, np.float64)
-                    t3[:n_mk] = mk_z[:n_mk]
-                    mk_z = t3
-                    t4 = np.empty((mk_cap, 2), np.int64)
-                    t4[:n_mk] = mk_span[:n_mk]
-                    mk_span = t4
+            kind, zc, na, nb = _comment_marker(buf, c0, b, mk_rows, mk_text)
+            if kind != 0 or not np.isnan(zc) or na >= 0:
+                if n_mk == mk_line.shape[0]:
+                    mk_line, mk_kind, mk_z, mk_span = _grow_markers(mk_line, mk_kind, mk_z, mk_span, n_mk)
                 mk_line[n_mk] = ln
-                mk_code[n_mk] = code
+                mk_kind[n_mk] = kind
                 mk_z[n_mk] = zc
                 mk_span[n_mk, 0] = na
                 mk_span[n_mk, 1] = nb
@@ -454,30 +690,7 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
         cy = np.nan
         ccw = False
         if letter == EXT:
-            # Klipper extended commands: only SET_STEPPER_ENABLE matters to the model
-            if _match_upper(buf, fpos, b, SET_STEPPER_ENABLE):
-                i = fpos + SET_STEPPER_ENABLE.shape[0]
-                axis = -1
-                en_value = -1
-                while i < b:
-                    if _match_upper(buf, i, b, STEPPER_) and i + STEPPER_.shape[0] < b:
-                        ch = _upper(buf[i + STEPPER_.shape[0]])
-                        if ch == 88:
-                            axis = 0
-                        elif ch == 89:
-                            axis = 1
-                        elif ch == 90:
-                            axis = 2
-                        elif ch == 69:
-                            axis = 3
-                    if _match_upper(buf, i, b, ENABLE_) and i + ENABLE_.shape[0] < b:
-                        en_value = buf[i + ENABLE_.shape[0]] - 48
-                    i += 1
-                if axis >= 0 and (en_value == 0 or en_value == 1):
-                    en[axis] = en_value == 1
-                    kind = K_MOTOR
-            if kind < 0:
-                continue
+            kind = _extended_motor(buf, fpos, b, en, motor_cmds, motor_names, motor_text)
         elif letter == 71:  # G
             g = number
             if lenient:
@@ -485,10 +698,9 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 # we would not; a G command we cannot read the way the firmware does is corrupt
                 return ERR_BAD_CHAR, ln, -1, n, arrs, no_markers
             if g == 0.0 or g == 1.0 or g == 2.0 or g == 3.0:
-                arc = g >= 2.0
                 any_axis = False
                 for q in range(4):
-                    k = axis_letter[q]
+                    k = AXIS_LETTERS[q]
                     if bad[k]:
                         return ERR_BAD_NUMBER, ln, k, n, arrs, no_markers
                     if present[k]:
@@ -506,10 +718,11 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 for k in FOREIGN_AXES:
                     if present[k]:
                         l_flags[ln] |= 2
+                arc = g >= 2.0
                 if not any_axis and not arc:
                     continue
                 for q in range(4):
-                    k = axis_letter[q]
+                    k = AXIS_LETTERS[q]
                     limit = ABSURD_E_MM if q == 3 else ABSURD_MM
                     if present[k]:
                         v = value[k] * scale
@@ -521,47 +734,17 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                         tgt[q] = pos[q]
                     if abs(tgt[q]) > limit:
                         return ERR_ABSURD, ln, k, n, arrs, no_markers
-                dx = tgt[0] - pos[0]
-                dy = tgt[1] - pos[1]
-                dz = tgt[2] - pos[2]
-                de = tgt[3] - pos[3]
                 if arc:
                     ccw = g == 3.0
-                    for k in (LI, LJ, LR):
-                        if bad[k]:
-                            return ERR_BAD_NUMBER, ln, k, n, arrs, no_markers
-                    if present[LI] or present[LJ]:
-                        ii = value[LI] * scale if present[LI] and not np.isnan(value[LI]) else 0.0
-                        jj = value[LJ] * scale if present[LJ] and not np.isnan(value[LJ]) else 0.0
-                        cx = pos[0] + ii
-                        cy = pos[1] + jj
-                    elif present[LR] and not np.isnan(value[LR]):
-                        r = value[LR] * scale
-                        d = math.hypot(dx, dy)
-                        if d == 0.0:
-                            return ERR_ARC, ln, LR, n, arrs, no_markers
-                        h2 = r * r - 0.25 * d * d
-                        if h2 < -1e-6 * max(1.0, r * r):
-                            return ERR_ARC, ln, LR, n, arrs, no_markers
-                        h = math.sqrt(max(h2, 0.0))
-                        # Marlin G2_G3.cpp: e = clockwise ^ (r < 0) ? -1 : 1
-                        e = -1.0 if ((not ccw) != (r < 0)) else 1.0
-                        sx = -dy / d
-                        sy = dx / d
-                        cx = 0.5 * (pos[0] + tgt[0]) + e * h * sx
-                        cy = 0.5 * (pos[1] + tgt[1]) + e * h * sy
-                    else:
-                        return ERR_ARC, ln, LI, n, arrs, no_markers
-                    rad = math.hypot(pos[0] - cx, pos[1] - cy)
-                    a0 = math.atan2(pos[1] - cy, pos[0] - cx)
-                    a1 = math.atan2(tgt[1] - cy, tgt[0] - cx)
-                    sweep = (a1 - a0) if ccw else (a0 - a1)
-                    # same end point = full circle (Marlin: angular_travel == 0 -> 2*pi)
-                    if sweep <= 1e-9:
-                        sweep += 2.0 * math.pi
-                    length = math.hypot(rad * sweep, dz)
+                    err, err_k, cx, cy, length = _arc(present, value, bad, pos, tgt, scale, ccw)
+                    if err != OK:
+                        return err, ln, err_k, n, arrs, no_markers
                     kind = K_ARC
                 else:
+                    dx = tgt[0] - pos[0]
+                    dy = tgt[1] - pos[1]
+                    dz = tgt[2] - pos[2]
+                    de = tgt[3] - pos[3]
                     length = math.sqrt(dx * dx + dy * dy + dz * dz)
                     moved_xy = dx != 0.0 or dy != 0.0
                     if de < 0.0:
@@ -571,125 +754,41 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                     else:
                         kind = K_TRAVEL if (moved_xy or dz == 0.0) else K_Z_ONLY
                 if length == 0.0:
-                    length = abs(de)
+                    length = abs(tgt[3] - pos[3])
                 dur = length / feed
             elif g == 4.0:
-                if present[LP] and not np.isnan(value[LP]):
-                    dur = max(value[LP], 0.0) / 1000.0
-                elif present[LS] and not np.isnan(value[LS]):
-                    dur = max(value[LS], 0.0)
+                dur = _dwell_s(present, value)
                 kind = K_DWELL
             elif g == 28.0:
-                kind = K_HOME
+                _home(present, pos, tgt, off, en)
                 dur = home_s
-                named = present[LX] or present[LY] or present[LZ]
-                for q in range(4):
-                    tgt[q] = pos[q]
-                for q in range(3):
-                    if (not named) or present[axis_letter[q]]:
-                        tgt[q] = 0.0
-                        off[q] = 0.0
-                        en[q] = True
-            elif g == 90.0:
-                rel_xyz = False
-                if not klipper:
-                    rel_e = False
-                continue
-            elif g == 91.0:
-                rel_xyz = True
-                if not klipper:
-                    rel_e = True
-                continue
-            elif g == 20.0:
-                inch = True
-                continue
-            elif g == 21.0:
-                inch = False
-                continue
+                kind = K_HOME
+            elif g == 90.0 or g == 91.0:
+                rel_xyz = g == 91.0
+                if not klipper:     # Marlin: G90/G91 switch E too; Klipper leaves M82/M83 alone
+                    rel_e = rel_xyz
+            elif g == 20.0 or g == 21.0:
+                inch = g == 20.0
             elif g == 92.0:
-                anyg = False
-                for q in range(4):
-                    k = axis_letter[q]
-                    if bad[k]:
-                        return ERR_BAD_NUMBER, ln, k, n, arrs, no_markers
-                    if present[k]:
-                        v = 0.0 if np.isnan(value[k]) else value[k] * scale
-                        off[q] = pos[q] - v
-                        anyg = True
-                if not anyg:  # G92 alone: all axes to zero (Marlin)
-                    for q in range(4):
-                        off[q] = pos[q]
-                continue
-            else:
-                continue
+                err, err_k = _set_offsets(present, value, bad, pos, off, scale)
+                if err != OK:
+                    return err, ln, err_k, n, arrs, no_markers
         elif letter == 77:  # M
             m = number
-            if m == 82.0:
-                rel_e = False
-                continue
-            elif m == 83.0:
-                rel_e = True
-                continue
+            if m == 82.0 or m == 83.0:
+                rel_e = m == 83.0
             elif m == 104.0 or m == 109.0 or m == 140.0 or m == 190.0:
-                bed_cmd = m == 140.0 or m == 190.0
-                t = value[LS] if present[LS] else (value[LR] if present[LR] else np.nan)
-                if not np.isnan(t):
-                    if bed_cmd:
-                        bed = t
-                    else:
-                        hot = t
-                if m == 104.0 or m == 140.0:
-                    continue
-                # M109 / M190 wait: heat from the last temperature waited for (paper.toml [time])
-                target = bed if bed_cmd else hot
-                reached = bed_reached if bed_cmd else hot_reached
-                if target > 0:
-                    dur = abs(target - reached) / (bed_rate if bed_cmd else hot_rate)
-                    if bed_cmd:
-                        bed_reached = target
-                    else:
-                        hot_reached = target
-                kind = K_WAIT
-            elif m == 106.0:
-                # only the part-cooling fan (no P, or P0) counts
-                if present[LP] and not np.isnan(value[LP]) and value[LP] != 0.0:
-                    continue
-                s = value[LS] if present[LS] and not np.isnan(value[LS]) else 255.0
-                fan = min(max(s / 255.0, 0.0), 1.0)
-                l_flags[ln] |= FLAG_PART_FAN
-                continue
-            elif m == 107.0:
-                if present[LP] and not np.isnan(value[LP]) and value[LP] != 0.0:
-                    continue
-                fan = 0.0
-                l_flags[ln] |= FLAG_PART_FAN
-                continue
+                hot, bed, hot_reached, bed_reached, kind, dur = _heat(
+                    m, present, value, hot, bed, hot_reached, bed_reached, hot_rate, bed_rate)
+            elif m == 106.0 or m == 107.0:
+                fan, part = _part_fan(m, present, value, fan)
+                if part:
+                    l_flags[ln] |= FLAG_PART_FAN
             elif m == 17.0 or m == 18.0 or m == 84.0:
-                named = False
-                for q in range(4):
-                    if present[axis_letter[q]]:
-                        named = True
-                if not named and (present[LS] or present[LT]):
-                    continue  # M18 S<sec> / M84 S<sec>: idle timeout, not a disable
-                for q in range(4):
-                    if (not named) or present[axis_letter[q]]:
-                        en[q] = m == 17.0
-                kind = K_MOTOR
-            else:
-                continue
-        elif letter == 83:  # S-series (3DGates Table 3): S1 X = on, S0 X = off
-            if number == 0.0 or number == 1.0:
-                named = False
-                for q in range(4):
-                    if present[axis_letter[q]]:
-                        en[q] = number == 1.0
-                        named = True
-                if not named:
-                    continue
-                kind = K_MOTOR
-            else:
-                continue
-        else:
+                kind = _motor_m(m, present, en)
+        elif letter == 83:  # S-series
+            kind = _motor_s(number, present, en)
+        if kind < 0:        # no step: a mode, an offset, a fan, a line the model ignores
             continue
         if kind == K_DWELL or kind == K_WAIT or kind == K_MOTOR:
             for q in range(4):          # rows that take time without moving
@@ -721,7 +820,14 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
             s_en[n, q] = en[q]
             pos[q] = tgt[q]
         n += 1
-    markers = (mk_line[:n_mk].copy(), mk_code[:n_mk].copy(), mk_z[:n_mk].copy(), mk_span[:n_mk].copy())
+    _save_state(state, pos, off, en, rel_xyz, rel_e, inch, feed, fan, hot, bed, hot_reached, bed_reached)
+    markers = (mk_line[:n_mk].copy(), mk_kind[:n_mk].copy(), mk_z[:n_mk].copy(), mk_span[:n_mk].copy())
+    return OK, -1, -1, n, arrs, markers
+
+
+@njit(cache=True)
+def _save_state(state, pos, off, en, rel_xyz, rel_e, inch, feed, fan, hot, bed, hot_reached, bed_reached):
+    """The modal state after the last line, into ``state`` (the layout of ``initial_state``)."""
     state[0:4] = pos
     state[4:8] = off
     for q in range(4):
@@ -735,4 +841,3 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
     state[18] = bed
     state[19] = hot_reached
     state[20] = bed_reached
-    return OK, -1, -1, n, arrs, markers

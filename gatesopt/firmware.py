@@ -68,6 +68,32 @@ KLIPPER_STALL_S = 0.22
 KLIPPER_STEPPER = {"X": "stepper_x", "Y": "stepper_y", "Z": "stepper_z", "E": "extruder"}
 
 
+@dataclass(frozen=True)
+class ExtendedMotorCommand:
+    """An extended (Klipper-style) command that switches one motor on or off, as the parser's
+    scanner reads it (``gatesopt._scan``, packed by ``_scan.pack_motor_commands``): the line
+    starts with ``word``; ``motor_param`` followed by one of ``motors``' names (a prefix of the
+    value, any case) names the motor; ``enable_param`` followed by 0 or 1 says off or on. The last
+    motor named and the last enable value on the line count; a line without both is no motor line.
+    """
+
+    word: str                   # e.g. "SET_STEPPER_ENABLE"
+    motor_param: str            # e.g. "STEPPER="
+    motors: tuple               # ((name, motor letter), ...), e.g. (("STEPPER_X", "X"), ...)
+    enable_param: str           # e.g. "ENABLE="
+
+
+#: the extended commands the parser reads as motor lines (``Kind.MOTOR`` rows, the motor enables
+#: they set). Klipper's ``SET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=0`` (klippy/extras/
+#: stepper_enable.py ``cmd_SET_STEPPER_ENABLE``); a dialect that writes its own command adds a row
+#: here. (The scanner reads one ``STEPPER=`` name per line and ``stepper_<letter>`` names;
+#: ``parse_motor_line`` below also reads ``STEPPERS=a,b`` and ``extruder``.)
+EXTENDED_MOTOR_COMMANDS = (
+    ExtendedMotorCommand("SET_STEPPER_ENABLE", "STEPPER=",
+                         tuple((f"STEPPER_{m}", m) for m in AXES), "ENABLE="),
+)
+
+
 class FirmwareError(GatesoptError, ValueError):
     """A gating request the chosen firmware cannot carry out safely."""
 

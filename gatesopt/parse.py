@@ -14,13 +14,27 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _scan
+from . import _scan, slicers
 from .errors import GcodeError
-from .program import Kind, Program
+from .firmware import EXTENDED_MOTOR_COMMANDS
+from .program import AXES, Kind, Program
 
 GZIP_MAGIC = b"\x1f\x8b"
 BGCODE_MAGIC = b"GCDE"      # PrusaSlicer 2.7+ binary G-code
 DEFAULT_FEED_MM_S = 25.0    # F1500: what Marlin-based slicers assume before the first F word
+
+#: what the scanner knows, as the arrays it reads: the slicers' comment markers
+#: (``slicers.LAYER_MARKERS`` written on comment lines, ``Z_MARKERS``, ``FEATURE_MARKERS``) and the
+#: extended commands that switch motors (``firmware.EXTENDED_MOTOR_COMMANDS``)
+SCAN_TABLES = (
+    *_scan.pack_comment_markers([m for m in slicers.LAYER_MARKERS if m.where == slicers.COMMENT_LINE],
+                                slicers.LAYER_KINDS, slicers.Z_MARKERS, slicers.FEATURE_MARKERS),
+    *_scan.pack_motor_commands(EXTENDED_MOTOR_COMMANDS, AXES))
+#: layer markers written as a comment after the G-code of a line (``slicers.TRAILING``), each with
+#: its kind (1-based, ``slicers.LAYER_KINDS``): found here, by ``bytes.find`` over the whole text
+#: (the scanner reads the markers of comment lines only, not the comments of G-code lines)
+TRAILING_MARKERS = tuple((m.text, slicers.LAYER_KINDS.index(m.slicer) + 1)
+                         for m in slicers.LAYER_MARKERS if m.where == slicers.TRAILING)
 
 _ERR_TEXT = {
     _scan.ERR_BAD_NUMBER: "bad number for {L}",
@@ -92,20 +106,13 @@ def _line_starts(arr: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------------------------------------------
 # layers and features
-#: layer markers written as a trailing comment on the layer change move (the scanner reads
-#: markers on comment lines only): Slic3r 1.x with verbose G-code, ``G1 Z0.350 F7800.000 ; move to
-#: next layer (0)``. Without them its start G-code's purge line became "layer 0" of the print
-_TRAILING_MARKERS = ((b"; move to next layer (", _scan.LAYER_KINDS.index("slic3r") + 1),)
-
-
 def _trailing_layer_markers(data: bytes, line_start: np.ndarray, markers):
-    """``markers`` with the layer markers of ``_TRAILING_MARKERS`` on G-code lines added (line
+    """``markers`` with the layer markers of ``TRAILING_MARKERS`` on G-code lines added (line
     order kept)."""
-    mk_line, mk_code, mk_z, mk_span = markers
+    mk_line, mk_kind, mk_z, mk_span = markers
     add_line, add_code = [], []
-    for pattern, code in _TRAILING_MARKERS:
-        kinds = mk_code & 7
-        if ((kinds > 0) & (kinds < code)).any():
+    for pattern, code in TRAILING_MARKERS:
+        if ((mk_kind > 0) & (mk_kind < code)).any():
             continue        # markers of a kind ahead of it are what ``_find_layers`` takes
         at = data.find(pattern)
         while at >= 0:
@@ -118,7 +125,7 @@ def _trailing_layer_markers(data: bytes, line_start: np.ndarray, markers):
         return markers
     line = np.concatenate((mk_line, np.asarray(add_line, mk_line.dtype)))
     order = np.argsort(line, kind="stable")
-    return (line[order], np.concatenate((mk_code, np.asarray(add_code, mk_code.dtype)))[order],
+    return (line[order], np.concatenate((mk_kind, np.asarray(add_code, mk_kind.dtype)))[order],
             np.concatenate((mk_z, np.full(len(add_line), np.nan)))[order],
             np.concatenate((mk_span, np.full((len(add_line), 2), -1, mk_span.dtype)))[order])
 
@@ -150,13 +157,12 @@ def _purge_layer(idx, layer_of_ext, start, end) -> int:
 def _find_layers(markers, step_line, kind, start, end):
     """Layer index per step, Z per layer, first line per layer, and the method used.
 
-    ``markers`` are the kernel's comment markers (line, code bits, Z, name span).
+    ``markers`` are the kernel's comment markers (line, layer kind, Z, name span).
     """
-    mk_line, mk_code, mk_z, _ = markers
+    mk_line, layer_kind, mk_z, _ = markers
     n_steps = len(step_line)
     extruding = (end[:, 3] > start[:, 3]) & ((kind == Kind.EXTRUDE) | (kind == Kind.ARC))
-    layer_kind = mk_code & 7
-    for k, name in enumerate(_scan.LAYER_KINDS, 1):        # each slicer's own markers, in priority
+    for k, name in enumerate(slicers.LAYER_KINDS, 1):      # each slicer's own markers, in priority
         sel = layer_kind == k
         if not sel.any():
             continue
@@ -166,7 +172,7 @@ def _find_layers(markers, step_line, kind, start, end):
         # Z of a layer: the first Z comment at or after its marker and before the next marker
         # (';Z:0.2' follows ';LAYER_CHANGE'), else the first extruding step's Z in it
         z = np.full(n_layers, np.nan)
-        has_z = (mk_code & _scan.MK_Z) != 0
+        has_z = ~np.isnan(mk_z)
         if has_z.any():
             zl = np.searchsorted(marker_line, mk_line[has_z], side="right") - 1
             ok = zl >= 0
@@ -215,8 +221,8 @@ def _find_layers(markers, step_line, kind, start, end):
 
 def _find_features(data: bytes, markers, step_line):
     """Feature type per step from ';TYPE:' / '; FEATURE:' / '; feature' comments."""
-    mk_line, mk_code, _, span = markers
-    sel = (mk_code & _scan.MK_FEATURE) != 0
+    mk_line, _, _, span = markers
+    sel = span[:, 0] >= 0
     if not sel.any():
         return np.full(len(step_line), -1, np.int16), ()
     names = [data[a:b].decode("utf-8", "replace") for a, b in span[sel]]
@@ -291,7 +297,7 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     state = _scan.initial_state(time.ambient_c, DEFAULT_FEED_MM_S) if state is None else state
     err, err_line, err_letter, n, arrs, markers = _scan.scan(
         buf, line_start, klipper, time.hotend_heat_c_per_s, time.bed_heat_c_per_s,
-        time.ambient_c, time.home_s, DEFAULT_FEED_MM_S, state)
+        time.ambient_c, time.home_s, DEFAULT_FEED_MM_S, state, SCAN_TABLES)
     if err != _scan.OK:
         text = data[line_start[err_line]:line_start[err_line + 1]].decode("utf-8", "replace")
         letter = chr(err_letter + 65) if err_letter >= 0 else "?"

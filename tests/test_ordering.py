@@ -502,7 +502,7 @@ def test_progress_is_called_after_every_group_with_the_proofs_so_far():
 
 def test_cli_progress_bar_shows_groups_and_proofs():
     import io
-    from gatesopt.cli.ordering import group_progress
+    from gatesopt.cli.progress import group_progress
     out = io.StringIO()
     with group_progress(True, stream=out, mininterval=0) as update:
         update(3, 10, 2)

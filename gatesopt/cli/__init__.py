@@ -1,40 +1,45 @@
 """The ``gatesopt`` command line: a thin layer over the library.
 
-One module per command group (as vpype_cli does); each exposes ``register(subparsers)`` that adds
-its commands with ``set_defaults(func=...)``. A command body parses options and makes library calls.
+One module per command (as vpype_cli does), each with ``NAME``, ``HELP``, ``DESCRIPTION``,
+``add_arguments(parser)`` and ``run(args)``; a command body parses options and makes library
+calls. What several commands share is in modules of its own, which import no command module:
+``files`` (reading G-code, ``-`` for standard input and output, never overwriting a file without
+``--force``, writing through a temporary file), ``options`` (the choices read from the library's
+registries, the gating options), ``progress`` and ``summary``.
 Errors the library raises on purpose (``GatesoptError``) become one line on stderr and exit code 2.
 """
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 
 from .. import _jit
 from ..errors import GatesoptError
+from . import batch, calibrate, compare, order, profile, report, solve, verify
 
-# command modules, in the order ``gatesopt --help`` lists them
-COMMAND_MODULES = ("profile", "gating", "ordering", "verify", "batch", "report", "calibrate")
+#: the commands, in the order ``gatesopt --help`` lists them
+COMMANDS = (profile, solve, compare, order, verify, batch, report, calibrate)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command; with ``command``, only that command's options are added (the
+    others are listed by name and help): their choices come from the library's registries, and a
+    command does not import the registries of the others."""
     parser = argparse.ArgumentParser(
         prog="gatesopt",
         description="Energy profiling, motor power gating and curve ordering for 3D-printer G-code.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
-        try:
-            mod = importlib.import_module(f".{name}", __name__)
-        except ModuleNotFoundError as exc:  # a command group not written yet
-            if exc.name and exc.name.endswith(f"cli.{name}"):
-                continue
-            raise
-        mod.register(sub)
+    for mod in COMMANDS:
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.DESCRIPTION)
+        p.set_defaults(func=mod.run)
+        if command is None or command == mod.NAME:
+            mod.add_arguments(p)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv[0] if argv and not argv[0].startswith("-") else "")
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)

@@ -1,22 +1,23 @@
 """``gatesopt batch``: many files through solve + verify, one row each, on a process pool or Dask."""
 from __future__ import annotations
 
-import os
 import sys
 
 from ..batch import BatchOptions, run_batch, summarize
-from ..errors import GatesoptError
+from .files import refuse_existing
+from .options import firmware_names
+
+NAME = "batch"
+HELP = "solve + verify many files, one result row each (CSV or JSON)"
+DESCRIPTION = ("Run every file (and every file in every folder) through ordering + gating + verify; "
+               "write one row per file. A failing file becomes an error row and never stops the others.")
 
 
-def register(sub) -> None:
-    p = sub.add_parser("batch", help="solve + verify many files, one result row each (CSV or JSON)",
-                       description="Run every file (and every file in every folder) through "
-                                   "ordering + gating + verify; write one row per file. A failing "
-                                   "file becomes an error row and never stops the others.")
+def add_arguments(p) -> None:
     p.add_argument("paths", nargs="+", help="G-code files or folders")
     p.add_argument("--formulation", default="dp",
                    help="gating formulation, or several separated by commas (greedy,dp,milp)")
-    p.add_argument("--firmware", default="3dgates", choices=("3dgates", "marlin", "klipper"))
+    p.add_argument("--firmware", default="3dgates", choices=firmware_names())
     p.add_argument("--motors", default="X,Y")
     p.add_argument("--rotate", default="auto")
     p.add_argument("--max-added-time-pct", type=float)
@@ -32,12 +33,10 @@ def register(sub) -> None:
     p.add_argument("--write-dir", help="write each verified output file into this folder")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out without --resume")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    if os.path.exists(args.out) and not (args.resume or args.force):
-        raise GatesoptError(f"{args.out}: exists; use --resume to continue it or --force to start over")
+    refuse_existing(args.out, args.resume or args.force, "use --resume to continue it or --force to start over")
     forms = tuple(f.strip() for f in args.formulation.split(",") if f.strip())
     opts = BatchOptions(formulation=forms[0], firmware=args.firmware,
                         motors=tuple(m.strip().upper() for m in args.motors.split(",")), rotate=args.rotate,

@@ -1,19 +1,21 @@
 """``gatesopt calibrate``: fit a component energy profile from a power-meter log of a print."""
 from __future__ import annotations
 
-import os
 import sys
 
 from ..calibrate import fit, read_power_log
-from ..errors import GatesoptError
 from ..parse import parse
+from ..planner import TIME_MODELS, durations
+from .files import refuse_existing, write_atomic
+
+NAME = "calibrate"
+HELP = "fit an energy profile to a power-meter log of a real print"
+DESCRIPTION = ("Align a power-meter log (CSV: time in s or ISO date-time, watts) with a print's "
+               "timeline and fit a component energy profile by least squares; writes a TOML profile "
+               "usable with --profile.")
 
 
-def register(sub) -> None:
-    p = sub.add_parser("calibrate", help="fit an energy profile to a power-meter log of a real print",
-                       description="Align a power-meter log (CSV: time in s or ISO date-time, watts) "
-                                   "with a print's timeline and fit a component energy profile by "
-                                   "least squares; writes a TOML profile usable with --profile.")
+def add_arguments(p) -> None:
     p.add_argument("--gcode", required=True, help="the G-code that was printed")
     p.add_argument("--power-log", required=True, help="CSV of (time, watts) samples")
     p.add_argument("-o", "--output", required=True, help="profile TOML to write")
@@ -21,22 +23,16 @@ def register(sub) -> None:
                    help="component profile to start from and to keep what the log cannot determine")
     p.add_argument("--offset-s", type=float, default=None,
                    help="where the print starts on the log's clock (default: found by correlation)")
-    p.add_argument("--time-model", choices=("paper", "planner"), default="planner")
+    p.add_argument("--time-model", choices=TIME_MODELS, default="planner")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    if os.path.exists(args.output) and not args.force:
-        raise GatesoptError(f"{args.output}: exists; use --force to overwrite")
+    refuse_existing(args.output, args.force, "use --force to overwrite")
     program = parse(args.gcode)
-    from .profile import step_durations
-    dur = step_durations(program, args.time_model)
+    dur = durations(program, model=args.time_model)
     cal = fit(program, read_power_log(args.power_log), prior=args.prior, duration_s=dur, offset_s=args.offset_s)
-    tmp = f"{args.output}.tmp-{os.getpid()}"
-    with open(tmp, "w") as f:
-        f.write(cal.profile_toml)
-    os.replace(tmp, args.output)
+    write_atomic(args.output, cal.profile_toml)
     print(f"aligned: print starts at {cal.offset_s:.1f} s on the log, log/model time ratio {cal.time_scale:.3f}")
     print(f"fit over {cal.n_samples} samples: mean abs error {100 * cal.rel_error:.1f} % of mean power, "
           f"energy error {100 * cal.energy_error:.2f} % (the 3DGates paper validated its model at 3.0 %)")

@@ -2,21 +2,26 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 
 from ..energy import SECTORS, load_profile, profile
-from ..parse import parse
+from ..errors import GatesoptError
+from ..planner import TIME_MODELS, comparable_total_s, durations, slicer_estimate_s
+from .files import check_new_file, read_program
+
+NAME = "profile"
+HELP = "energy and time of a G-code file (3DGates energy model)"
+DESCRIPTION = ("Profile the energy and time of a G-code file (plain or .gz) with the 3DGates "
+               "instruction-level energy model.")
 
 
-def register(sub) -> None:
-    p = sub.add_parser("profile", help="energy and time of a G-code file (3DGates energy model)",
-                       description="Profile the energy and time of a G-code file (plain or .gz) with "
-                                   "the 3DGates instruction-level energy model.")
+def add_arguments(p) -> None:
     p.add_argument("file", help="G-code file (.gcode or .gcode.gz), or - for standard input")
     p.add_argument("--profile", default="paper", metavar="NAME|TOML",
                    help="energy profile: a shipped name (paper, component_example) or a TOML file "
                         "(default: paper, the 3DGates tables)")
-    p.add_argument("--time-model", choices=("paper", "planner"), default="paper",
+    p.add_argument("--time-model", choices=TIME_MODELS, default="paper",
                    help="paper: T = L/F (3DGates Eq. 2); planner: acceleration and junction limits")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--per-layer", action="store_true", help="add a table by layer")
@@ -26,35 +31,18 @@ def register(sub) -> None:
     p.add_argument("--stream", action="store_true",
                    help="read the file chunk by chunk in bounded memory (automatic above 256 MB); "
                         "no --plot, no per-step data")
-    p.set_defaults(func=run)
 
 
 STREAM_ABOVE_BYTES = 256 << 20     # whole-file arrays take ~8x the file: stream big files
 
 
-def _read(path: str):
-    if path == "-":
-        return parse(sys.stdin.buffer.read(), source="<stdin>")
-    return parse(path)
-
-
-def step_durations(program, time_model: str):
-    """Per-step durations under the chosen time model (the planner lives in gatesopt.planner)."""
-    if time_model == "paper":
-        return program.duration_s
-    from ..planner import durations  # the planner-accurate model (issue 5)
-    return durations(program, model=time_model)
-
-
 def _wants_stream(args) -> bool:
-    import os
     if args.file == "-" or not os.path.isfile(args.file):
         return False            # the parser says what is wrong with a missing file
     return args.stream or os.path.getsize(args.file) > STREAM_ABOVE_BYTES
 
 
 def run_stream(args) -> int:
-    from ..errors import GatesoptError
     from ..stream import profile_stream
     if args.plot:
         raise GatesoptError("--plot needs the whole file in memory: drop --stream (or --plot)")
@@ -76,13 +64,12 @@ def run_stream(args) -> int:
 
 def run(args) -> int:
     if args.plot:
-        from .gating import check_new_file
         check_new_file(args.plot, [] if args.file == "-" else [args.file], args.force, png=True)
     if _wants_stream(args):
         return run_stream(args)
-    program = _read(args.file)
+    program = read_program(args.file)
     prof = load_profile(args.profile)
-    duration_s = step_durations(program, args.time_model)
+    duration_s = durations(program, model=args.time_model)
     report = profile(program, prof, duration_s=duration_s)
     for w in report.warnings:
         print(f"gatesopt: warning: {w}", file=sys.stderr)
@@ -92,7 +79,6 @@ def run(args) -> int:
     if args.json:
         d = report.to_dict(per_layer=args.per_layer)
         d["time_model"] = args.time_model
-        from ..planner import slicer_estimate_s
         d["slicer_estimate_s"] = slicer_estimate_s(program)
         json.dump(d, sys.stdout, indent=2)
         print()
@@ -109,7 +95,6 @@ def run(args) -> int:
 
 def _slicer_line(program, duration_s) -> str:
     """The slicer's own estimate beside ours (heat-up waits and homing left out: no slicer counts them)."""
-    from ..planner import comparable_total_s, slicer_estimate_s
     est = slicer_estimate_s(program)
     if est is None:
         return "slicer      no estimate in the file"

@@ -5,20 +5,21 @@ import json
 import sys
 
 from ..parse import parse
+from .options import firmware_names
+
+NAME = "verify"
+HELP = "check a rewritten file against its original"
+DESCRIPTION = ("Re-parse both files and check: extruded geometry per layer (after undoing a declared "
+               "rotation), E per layer, every move's end point (as written or rotated; a relative "
+               "move from the rotated print by the rotated delta), control commands in order, added "
+               "motor lines in the firmware's dialect, motor timing (start-ahead, end-late), and "
+               "energy/time against a claimed report. Exit 0 only if all hold.")
 
 
-def register(sub) -> None:
-    p = sub.add_parser("verify", help="check a rewritten file against its original",
-                       description="Re-parse both files and check: extruded geometry per layer "
-                                   "(after undoing a declared rotation), E per layer, every move's "
-                                   "end point (as written or rotated; a relative move from the "
-                                   "rotated print by the rotated delta), control "
-                                   "commands in order, added motor lines in the firmware's dialect, "
-                                   "motor timing (start-ahead, end-late), and "
-                                   "energy/time against a claimed report. Exit 0 only if all hold.")
+def add_arguments(p) -> None:
     p.add_argument("original", help="the original G-code")
     p.add_argument("output", help="the rewritten G-code")
-    p.add_argument("--firmware", choices=("auto", "3dgates", "marlin", "klipper", "reprap"), default="auto",
+    p.add_argument("--firmware", choices=("auto",) + firmware_names(), default="auto",
                    help="firmware the output is meant for (its motor-instruction dialect, the motors "
                         "it may gate, stall times, automatic re-enable); auto: the claimed report's, else "
                         "the dialect of the motor lines the rewrite added")
@@ -30,7 +31,6 @@ def register(sub) -> None:
     p.add_argument("--claimed", metavar="REPORT.json",
                    help="a `gatesopt solve --json` report: energy_after_j and time_after_s must match")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:

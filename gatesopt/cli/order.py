@@ -7,27 +7,26 @@ file without ``--force``.
 """
 from __future__ import annotations
 
-import contextlib
-import json
-import math
 import sys
 import time
 
 from ..errors import GatesoptError
 from ..parse import parse
-from .gating import (ORDER_FORMULATIONS, _check_paths, ordering_result_lines, check_distinct,
-                     check_new_file, write_atomic)
+from .files import check_distinct, check_new_file, check_output, write_atomic, write_json
+from .options import ordering_formulations, positive_s
+from .progress import default_workers, group_progress
+from .summary import ordering_result_lines
 
-FORMULATIONS = ORDER_FORMULATIONS
+NAME = "order"
+HELP = "re-order extrusion curves to cut travel (Fleming et al.)"
+DESCRIPTION = ("Re-order each layer's extrusion curves, each in either direction, to cut travel; the "
+               "output is verified before it is written.")
 
 
-def register(sub) -> None:
-    p = sub.add_parser("order", help="re-order extrusion curves to cut travel (Fleming et al.)",
-                       description="Re-order each layer's extrusion curves, each in either direction, "
-                                   "to cut travel; the output is verified before it is written.")
+def add_arguments(p) -> None:
     p.add_argument("file", help="input G-code (.gcode or .gcode.gz)")
     p.add_argument("-o", "--output", required=True, metavar="OUT.gcode", help="output file")
-    p.add_argument("--formulation", choices=FORMULATIONS, default="auto",
+    p.add_argument("--formulation", choices=ordering_formulations(), default="auto",
                    help="greedy (nearest neighbour + 2-opt/Or-opt), tsp (Fleming's closed tour cut "
                         "open), cpsat, milp (exact), auto (exact where small enough; default)")
     p.add_argument("--order-mode", choices=("safe", "free"), default="safe",
@@ -54,23 +53,16 @@ def register(sub) -> None:
                    help="the layer --plot draws (0-based, as in the JSON report; default: the layer "
                         "whose travel was cut the most)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
-    p.set_defaults(func=run)
-
-
-def default_workers() -> int:
-    import os
-    return 2 if (os.cpu_count() or 1) >= 2 else 1
 
 
 def run(args) -> int:
     started_s = time.perf_counter()     # a --budget counts from here: imports, parse, all of it
     from ..ordering import OrderingOptions
     from ..rewrite.order import order_program
-    if not (math.isfinite(args.time_limit) and args.time_limit > 0):
-        raise GatesoptError(f"--time-limit must be > 0 s, not {args.time_limit}")
-    if args.budget is not None and not (math.isfinite(args.budget) and args.budget > 0):
-        raise GatesoptError(f"--budget must be > 0 s, not {args.budget}")
-    _check_paths(args.file, args.output, args.force)
+    positive_s(args.time_limit, "--time-limit")
+    if args.budget is not None:
+        positive_s(args.budget, "--budget")
+    check_output(args.file, args.output, args.force)
     check_distinct({"-o": args.output, "--json": args.json, "--plot": args.plot})
     if args.json:
         check_new_file(args.json, [args.file], args.force)
@@ -97,48 +89,16 @@ def run(args) -> int:
         for f in result.findings[:10]:
             print(f"  {f}", file=sys.stderr)
         return 1
-    _check_paths(args.file, args.output, args.force)
+    check_output(args.file, args.output, args.force)
     write_atomic(args.output, result.text)
     s["output"] = args.output
     print(format_report(s))
     if args.json:
-        write_atomic(args.json, json.dumps(s, indent=2, default=float) + "\n")
+        write_json(args.json, s, default=float)
     if args.plot:
         from ..ordering.plot import plot_ordering
         print(f"plot          {plot_ordering(program, result.output, args.plot, layer=args.plot_layer)}")
     return 0
-
-
-@contextlib.contextmanager
-def group_progress(enabled: bool, stream=None, mininterval: float = 0.25,
-                   deadline_s: float | None = None):
-    """A progress bar over the ordering's groups on stderr (``progress`` for ``layers.solve``:
-    groups done, proven so far), or None when not ``enabled`` (not a terminal). With a budget,
-    ``deadline_s`` (a ``time.perf_counter()`` reading: when the budget ends) replaces tqdm's
-    estimate, which extrapolates the rate of the groups so far: under a budget the groups left
-    get what is left, whatever the rate."""
-    if not enabled:
-        yield None
-        return
-    from tqdm import tqdm
-    bar_format = (None if deadline_s is None
-                  else "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} [{elapsed}{postfix}]")
-    bar = tqdm(total=1, unit="group", desc="ordering", leave=False, dynamic_ncols=True,
-               file=stream or sys.stderr, mininterval=mininterval, bar_format=bar_format)
-
-    def update(done: int, total: int, proven: int) -> None:
-        if bar.total != total:
-            bar.total = total
-        post = f"proven {proven:,}"
-        if deadline_s is not None:
-            post += f", budget ends in {max(0.0, deadline_s - time.perf_counter()):.0f} s"
-        bar.set_postfix_str(post, refresh=False)
-        bar.update(done - bar.n)
-
-    try:
-        yield update
-    finally:
-        bar.close()
 
 
 def format_report(s: dict) -> str:

@@ -1,0 +1,139 @@
+"""``gatesopt compare``: every gating (or, with ``--ordering``, curve-ordering) formulation on the
+same files, side by side: one verified run each (nothing written), one table; the work is
+``gatesopt.compare``."""
+from __future__ import annotations
+
+import math
+
+from ..parse import parse
+from .files import check_distinct, check_new_file, write_json
+from .options import (add_gating_options, gating_formulations, gating_options, ordering_formulations,
+                      positive_s)
+from .progress import default_workers
+
+NAME = "compare"
+HELP = "all gating (or --ordering: curve ordering) formulations side by side"
+DESCRIPTION = ("Solve each file with every gating formulation (greedy always included) and print one "
+               "table; outputs are verified, not written. With --ordering: every curve-ordering "
+               "formulation instead, by travel.")
+
+
+def add_arguments(c) -> None:
+    c.add_argument("files", nargs="+", help="G-code files")
+    c.add_argument("--formulations", default=None, metavar="LIST",
+                   help="comma separated (default: all of the compared kind); greedy is always a row")
+    c.add_argument("--ordering", action="store_true",
+                   help="compare the curve ordering's formulations (greedy, tsp, cpsat, milp, auto) "
+                        "by travel instead of gating's by energy")
+    c.add_argument("--order-mode", choices=("safe", "free"), default="safe",
+                   help="with --ordering: as `order --order-mode` (default safe)")
+    c.add_argument("--move-seams", action="store_true",
+                   help="with --ordering: closed loops may start at another vertex")
+    c.add_argument("--order-budget", type=float, default=10.0, metavar="S",
+                   help="with --ordering: each formulation's run of a file, parse to verified output, "
+                        "in about S seconds (default 10, as `order --budget`)")
+    add_gating_options(c)
+    c.add_argument("--plot", metavar="OUT.png", help="bar chart of the saving per formulation")
+    c.add_argument("--json", metavar="OUT.json", help="write the rows as JSON")
+    c.add_argument("--force", action="store_true", help="overwrite an existing plot or JSON file")
+
+
+def run(args) -> int:
+    from ..compare import gating_rows, ordering_rows
+    known = ordering_formulations() if args.ordering else gating_formulations()
+    forms = [f.strip() for f in (args.formulations or ",".join(known)).split(",") if f.strip()]
+    check_distinct({"--plot": args.plot, "--json": args.json})
+    if args.ordering:
+        positive_s(args.order_budget, "--order-budget")
+    if args.plot:
+        check_new_file(args.plot, args.files, args.force, png=True)
+    if args.json:
+        check_new_file(args.json, args.files, args.force)
+    rows = []
+    if args.ordering:
+        from ..ordering import OrderingOptions
+        order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+        for path in args.files:
+            rows += ordering_rows(parse(path), order_options, forms, known, args.order_budget,
+                                  default_workers())
+        print(format_compare_order(rows))
+    else:
+        options = gating_options(args)
+        for path in args.files:
+            program = parse(path)
+            rows += gating_rows(program, options, forms, args.time_limit)
+        print(format_compare(rows))
+    if args.plot:
+        plot_compare(rows, args.plot, ordering=args.ordering)
+    if args.json:
+        write_json(args.json, rows)
+    bad = [r for r in rows if "verified" in r and not r["verified"]]
+    return 1 if bad else 0
+
+
+def format_compare(rows: list[dict]) -> str:
+    head = (f"{'file':28s} {'formulation':11s} {'saving %':>9s} {'instr':>7s} {'size +%':>8s} "
+            f"{'time +%':>8s} {'rot deg':>8s} {'status':>11s} {'gap':>9s} {'solve s':>8s} {'verified':>8s}")
+    out = [head, "-" * len(head)]
+    for r in rows:
+        if "saving_pct" not in r:
+            out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {'':>9s} {'':>7s} {'':>8s} {'':>8s} "
+                       f"{'':>8s} {r['status']:>11s}   {r.get('error', '')[:60]}")
+            continue
+        gap = "n/a" if r["gap"] is None else f"{100 * r['gap']:.3f}%"
+        out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {r['saving_pct']:9.2f} "
+                   f"{r['instruction_lines']:7d} {r['size_change_pct']:8.2f} {r['added_time_pct']:8.3f} "
+                   f"{r['rotation_deg']:8.3f} {r['status']:>11s} {gap:>9s} {r['solve_s']:8.3f} "
+                   f"{'yes' if r['verified'] else 'NO':>8s}")
+    return "\n".join(out)
+
+
+def format_compare_order(rows: list[dict]) -> str:
+    head = (f"{'file':28s} {'formulation':11s} {'travel mm':>11s} {'travel %':>9s} {'print s':>10s} "
+            f"{'optimal':>8s} {'feasible':>8s} {'fallback':>8s} {'worst gap':>9s} {'run s':>7s} {'verified':>8s}")
+    out = [head, "-" * len(head)]
+    for r in rows:
+        if "travel_after_mm" not in r:
+            out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {r['status']:>11s}   {r.get('error', '')[:60]}")
+            continue
+        gap = "n/a" if r["worst_gap"] is None else f"{100 * r['worst_gap']:.2f}%"
+        out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {r['travel_after_mm']:11,.1f} "
+                   f"{r['travel_change_pct']:9.2f} {r['print_time_after_s']:10,.1f} {r['groups_optimal']:8d} "
+                   f"{r['groups_feasible']:8d} {r['groups_fallback']:8d} {gap:>9s} {r['wall_s']:7.2f} "
+                   f"{'yes' if r['verified'] else 'NO':>8s}")
+    if rows and "travel_before_mm" in rows[0]:
+        out.append("travel % is against the slicer's order; groups: proven optimal / feasible at the "
+                   "limit / fallback (heuristic); worst gap to the group's lower bound")
+    return "\n".join(out)
+
+
+def plot_compare(rows: list[dict], path: str, ordering: bool = False) -> None:
+    """A bar chart of the rows: energy saving (or, ``ordering``, travel change) per formulation
+    and file."""
+    from ..plot import check_png_path, save_png
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    key, ylabel, title = (("travel_change_pct", "travel change % (vs the slicer's order)",
+                           "curve ordering: travel by formulation") if ordering else
+                          ("saving_pct", "energy saving %", "motor power gating: saving by formulation"))
+    files = list(dict.fromkeys(r["file"] for r in rows))
+    forms = list(dict.fromkeys(r["formulation"] for r in rows))
+    fig, ax = plt.subplots(figsize=(max(6, 1.2 * len(files) * len(forms) / 2), 4))
+    w = 0.8 / max(len(forms), 1)
+    for k, f in enumerate(forms):
+        ys = []
+        for fn in files:
+            r = next((r for r in rows if r["file"] == fn and r["formulation"] == f), None)
+            ys.append(r.get(key, math.nan) if r else math.nan)
+        ax.bar([i + k * w for i in range(len(files))], ys, width=w, label=f)
+    ax.set_xticks([i + w * (len(forms) - 1) / 2 for i in range(len(files))])
+    ax.set_xticklabels(files, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend()
+    fig.tight_layout()
+    try:
+        save_png(fig, check_png_path(path), dpi=120)
+    finally:
+        plt.close(fig)

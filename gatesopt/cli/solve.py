@@ -1,0 +1,170 @@
+"""``gatesopt solve``: motor power gating (3DGates), with the curve ordering before it.
+
+Option parsing and printing only; the work is ``gatesopt.rewrite.run`` (order -> build ->
+solve -> emit -> re-parse -> verify). Every output is verified before it is written; a file is
+written to a temporary name in the target folder and renamed, never over an existing file without
+``--force``, never over the input.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+from ..errors import GatesoptError
+from .files import (STDIO, check_distinct, check_new_file, check_output, read_program, refuse_existing,
+                    write_atomic, write_json, write_stdout)
+from .options import (add_gating_options, gating_formulations, gating_options, ordering_formulations,
+                      positive_s)
+from .progress import default_workers, group_progress
+from .summary import ordering_result_lines
+
+NAME = "solve"
+HELP = "insert motor power-gating instructions (and re-order curves)"
+DESCRIPTION = ("Write gated G-code: motors switched off while idle (3DGates), optionally rotated on "
+               "the bed; verified before it is written.")
+
+
+def add_arguments(p) -> None:
+    p.add_argument("file", help="input G-code (.gcode or .gcode.gz), or - for standard input")
+    p.add_argument("-o", "--output", metavar="OUT.gcode", help="output file, or - for standard output")
+    p.add_argument("--in-place", action="store_true",
+                   help="replace the input file (a slicer's post-processing step): written to a "
+                        "temporary file beside it, verified, then renamed over it keeping its "
+                        "permissions; on any failure the input is left untouched")
+    p.add_argument("--formulation", choices=gating_formulations(), default="dp",
+                   help="greedy (paper's Algorithm 1), dp (exact when separable), milp, cpsat")
+    add_gating_options(p)
+    p.add_argument("--json", metavar="REPORT.json", help="also write the report as JSON")
+    p.add_argument("--no-order", action="store_true", help="do not re-order curves")
+    p.add_argument("--order-mode", choices=("safe", "free"), default="safe",
+                   help="as `order --order-mode`: safe keeps the slicer's feature groups, walls and "
+                        "objects (default); free re-orders every curve of a layer")
+    p.add_argument("--move-seams", action="store_true",
+                   help="closed loops may start at another vertex (default: keep the seam)")
+    p.add_argument("--order-formulation", choices=ordering_formulations(), default=None,
+                   help="the curve ordering's formulation (default: the exact one named by "
+                        "--formulation: milp or cpsat; greedy for greedy; auto for dp)")
+    p.add_argument("--order-budget", type=float, default=10.0, metavar="S",
+                   help="finish the curve ordering (build, solve, emit) in about S seconds "
+                        "(default 10; the solve gets what an estimate of the emit leaves, as "
+                        "`order --budget`)")
+    p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+
+
+def order_formulation_of(gating_formulation: str) -> str:
+    """The curve ordering's formulation a gating formulation names ("--formulation milp means exact
+    for both", issue 4): the same name where the ordering has it (greedy, milp, cpsat), else auto
+    (dp is gating's alone)."""
+    return gating_formulation if gating_formulation in ordering_formulations() else "auto"
+
+
+def format_solve_report(s: dict) -> str:
+    def pct(a, b):
+        return 100.0 * (a / b - 1.0) if b else 0.0
+    lines = [
+        f"file          {s['source']}",
+        f"formulation   {s['formulation'] or '-'} ({s['firmware']} firmware)   status {s['status']}"
+        + (f"   bound {s['bound']:.3f} J" if s.get("bound") is not None else "")
+        + (f"   gap {100 * s['gap']:.4f} %" if s.get("gap") is not None else "   gap n/a"),
+        f"energy        {s['energy_before_j']:.1f} J -> {s['energy_after_j']:.1f} J"
+        f"   saving {s['saving_pct']:.2f} %",
+        f"time          {s['time_before_s']:.2f} s -> {s['time_after_s']:.2f} s"
+        f"   ({pct(s['time_after_s'], s['time_before_s']):+.3f} %, firmware stalls included)",
+        f"lines         +{s['lines_added']} ({s['instruction_lines']} instruction lines, {s['splits']} moves split)"
+        f"   file size {s['size_change_pct']:+.2f} %",
+        (f"rotation      {s['rotation_deg']:g} deg about ({s['center_xy'][0]:.3f}, {s['center_xy'][1]:.3f})"
+         f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um" if s["rotation_deg"]
+         else "rotation      none"),
+        "off time      " + ("  ".join(f"{m} {t:.2f} s" for m, t in s["off_time_s"].items()) or "-"),
+        f"solve         {s['solve_s']:.3f} s   (whole run {s['wall_s']:.2f} s)",
+    ]
+    o = s.get("ordering")
+    if o is not None:
+        lines.append(f"ordering      {o['formulation']}   mode {o['order_mode']}"
+                     + ("   seams may move" if o["move_seams"] else "   seams kept")
+                     + f"   solve {o['solve_s']:.2f} s")
+        lines += ordering_result_lines(o)
+    else:
+        lines.append("ordering      none: the slicer's order")
+    lines.append(f"verified      {'yes' if s['verified'] else 'NO'}")
+    for n in s.get("notes", []):
+        lines.append(f"note          {n}")
+    return "\n".join(lines)
+
+
+def _solve_paths(args) -> tuple[str, str]:
+    """(input, output) after checking the combination of FILE, -o and --in-place."""
+    if args.in_place:
+        if args.output not in (None, args.file):
+            raise GatesoptError("--in-place writes over the input: do not give -o as well")
+        if args.file == STDIO:
+            raise GatesoptError("--in-place needs a file, not standard input")
+        if not os.path.isfile(args.file):
+            raise GatesoptError(f"{args.file}: no such file")
+        return args.file, args.file
+    if not args.output:
+        raise GatesoptError("give an output file with -o OUT.gcode (or -o - for standard output), "
+                            "or --in-place to replace the input")
+    if args.output != STDIO:
+        if args.file == STDIO:
+            refuse_existing(args.output, args.force)
+        else:
+            check_output(args.file, args.output, args.force)
+    return args.file, args.output
+
+
+def run(args) -> int:
+    from ..rewrite import run as run_job
+    positive_s(args.order_budget, "--order-budget")
+    if args.no_gating and args.rotate not in ("auto", "none"):
+        raise GatesoptError(f"--rotate {args.rotate}: the rotation is chosen with the gating, "
+                            "which --no-gating turns off")
+    inp, out = _solve_paths(args)
+    if args.json:
+        # the report must not replace the input, the output or a file the user did not give up
+        check_distinct({"-o": None if args.in_place else out, "--json": args.json})
+        check_new_file(args.json, [inp] if inp != STDIO else [], args.force)
+    report_to = sys.stderr if out == STDIO else sys.stdout     # stdout carries the G-code
+    options = gating_options(args)
+    from ..ordering import OrderingOptions
+    order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+    # "--formulation milp means exact for both" (issue 4): the gating formulation names the
+    # ordering's unless --order-formulation does; dp is gating's alone (ordering: auto)
+    order_formulation = args.order_formulation or order_formulation_of(args.formulation)
+    program = read_program(inp)
+    # the ordering starts now: its budget ends order_budget seconds from here
+    with group_progress(sys.stderr.isatty() and not args.no_order,
+                        deadline_s=time.perf_counter() + args.order_budget) as progress:
+        result = run_job(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
+                         order=not args.no_order, gating=not args.no_gating,
+                         order_workers=default_workers(), order_budget_s=args.order_budget,
+                         order_progress=progress, order_options=order_options,
+                         order_formulation=order_formulation)
+    s = result.summary()
+    if not result.report.ok:
+        if out != STDIO:    # stderr keeps the one line a slicer shows
+            print(format_solve_report(s))
+        where = "the input is unchanged" if args.in_place else f"nothing written to {out}"
+        first = str(result.report.findings[0]) if result.report.findings else "see above"
+        from ..gating.rotation import own_xy_disable
+        own = own_xy_disable(program, 0, program.n_steps)
+        hint = "" if own is None else (
+            f"; the input switches an X/Y motor off itself ({program.source}:"
+            f"{int(program.line[own]) + 1}: already gated?): gate the slicer's original")
+        raise GatesoptError(f"the output failed verification ({first}); {where}{hint}")
+    if out == STDIO:
+        write_stdout(result.text)
+    elif args.in_place:
+        write_atomic(out, result.text, like=inp)
+    else:
+        check_output(inp, out, args.force)   # again: the solve may have taken a while
+        write_atomic(out, result.text)
+    s["output"] = out
+    print(format_solve_report(s), file=report_to)
+    if args.json:
+        write_json(args.json, s)
+    return 0
+
+
