@@ -116,7 +116,7 @@ def _solve_paths(args) -> tuple[str, str]:
 
 
 def run(args) -> int:
-    from ..rewrite import run as run_job
+    from ..rewrite.pipeline import run as run_job
     positive_s(args.order_budget, "--order-budget")
     if args.no_gating and args.rotate not in ("auto", "none"):
         raise GatesoptError(f"--rotate {args.rotate}: the rotation is chosen with the gating, "
