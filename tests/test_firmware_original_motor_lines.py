@@ -126,7 +126,7 @@ def test_original_motor_line_in_start_gcode_is_priced_alike(fw, line):
 
 @pytest.mark.parametrize("fw", PRESETS)
 def test_rotated_solve_with_original_m17_and_m84_verifies(fw):
-    _solve_and_check(make_gcode(start=("M17", "M84"), end=("M84",)), fw, rotate=30.0)
+    _solve_and_check(make_gcode(start=("M17", "M84"), end=("M84",)), fw, rotate=30.0, bed_size_mm=(220, 220))
 
 
 @pytest.mark.parametrize("fw", PRESETS)
