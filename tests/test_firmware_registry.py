@@ -55,8 +55,8 @@ def test_a_dialect_module_added_to_the_package_is_found_and_offered(tmp_path, mo
         DIALECT = Mine(name="grbl-test", off_word="MOTORS_OFF", on_word="MOTORS_ON", merge_motors=True,
                        stall_off_s=0.0, stall_on_s=0.0, reenable="exact", homing_kept=True,
                        allowed_motors=frozenset("XY"), executes=frozenset({"MOTORS_OFF", "MOTORS_ON"}),
-                       motor_commands=(ExtendedMotorCommand("MOTORS_OFF", "AXES=", (("X", "X"),), ""),
-                                       ExtendedMotorCommand("MOTORS_ON", "AXES=", (("X", "X"),), "")))
+                       motor_commands=(ExtendedMotorCommand("MOTORS_OFF", "AXES", (("X", "X"),)),
+                                       ExtendedMotorCommand("MOTORS_ON", "AXES", (("X", "X"),))))
         '''))
     before = dict(firmware.PRESETS)
     monkeypatch.setattr(firmware, "__path__", list(firmware.__path__) + [str(tmp_path)])

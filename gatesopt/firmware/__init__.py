@@ -50,17 +50,57 @@ from ..program import AXES, MOTION_KINDS, Kind, Program
 
 @dataclass(frozen=True)
 class ExtendedMotorCommand:
-    """An extended (Klipper-style) command that switches one motor on or off, as the parser's
-    scanner reads it (``gatesopt._scan``, packed by ``_scan.pack_motor_commands``): the line
-    starts with ``word``; ``motor_param`` followed by one of ``motors``' names (a prefix of the
-    value, any case) names the motor; ``enable_param`` followed by 0 or 1 says off or on. The last
-    motor named and the last enable value on the line count; a line without both is no motor line.
+    """An extended (Klipper-style) command that switches motors on or off, read the way Klipper
+    reads such a command (klippy/gcode.py ``_get_extended_params``: the first word is the command,
+    then ``KEY=VALUE`` parameters separated by blanks, keys in any case, the last of a key counts, a
+    word without ``=`` makes the line an error; ``;`` or ``#`` starts a comment). The parser's
+    scanner (``gatesopt._scan``, the table packed by ``_scan.pack_motor_commands``) and
+    ``parse_motor_line`` (``read``) both read it from this record, the same way:
+
+    - the line's first word is ``word`` (any case);
+    - ``motor_param`` names the motors: its value is one name of ``motors`` (``lists``: a comma
+      separated list of them), matched whole, in any case; names not in ``motors`` (a stepper the
+      model has no axis for, ``stepper_z1``) are passed over; no known name: no motor line;
+    - ``enable_param`` ("": the command has none) gives an integer, 0 off and anything else on
+      (Klipper's ``get_int``; not an integer: an error, no motor line); absent: ``default_enable``
+      (-1: without it the line is no motor line).
     """
 
     word: str                   # e.g. "SET_STEPPER_ENABLE"
-    motor_param: str            # e.g. "STEPPER="
-    motors: tuple               # ((name, motor letter), ...), e.g. (("STEPPER_X", "X"), ...)
-    enable_param: str           # e.g. "ENABLE="
+    motor_param: str            # e.g. "STEPPER"
+    motors: tuple               # ((name, motor letter), ...), e.g. (("stepper_x", "X"), ...)
+    enable_param: str = ""      # e.g. "ENABLE"; "" when the command has none
+    default_enable: int = -1    # 0 / 1 when ``enable_param`` is absent; -1: required
+    lists: bool = False         # ``motor_param`` takes a comma separated list of names
+
+    def read(self, words: list[str]) -> tuple[bool, tuple[str, ...]] | None:
+        """``(on, motors)`` of a line whose upper-case code words are ``words``
+        (``_text.code_words``), or None when it is not this command switching a known motor."""
+        if not words or words[0] != self.word.upper():
+            return None
+        names = {n.upper(): m for n, m in self.motors}
+        motors: tuple[str, ...] = ()
+        enable = self.default_enable
+        for w in words[1:]:
+            comment = "#" in w
+            w = w.split("#", 1)[0]
+            if w:
+                if "=" not in w:
+                    return None                 # Klipper: "Malformed command"
+                key, value = w.split("=", 1)
+                if key == self.motor_param.upper():
+                    got = {names[v] for v in (value.split(",") if self.lists else [value]) if v in names}
+                    motors = tuple(m for m in AXES if m in got)
+                elif self.enable_param and key == self.enable_param.upper():
+                    try:
+                        enable = 0 if int(value) == 0 else 1
+                    except ValueError:
+                        return None             # Klipper's get_int fails: an error
+            if comment:
+                break
+        if not motors or enable < 0:
+            return None
+        return enable == 1, motors
 
 
 @dataclass(frozen=True)
@@ -142,8 +182,11 @@ class Firmware:
     # -- reading ------------------------------------------------------------------------------------
     def read_extended(self, words: list[str]) -> tuple[bool, tuple[str, ...]] | None:
         """``(on, motors)`` of an extended command line of this dialect (``words``: the line's
-        upper-case code words, ``_text.code_words``), else None. Dialects without extended
-        commands read none."""
+        upper-case code words, ``_text.code_words``), else None: its ``motor_commands`` read as
+        the parser's scanner reads them (``ExtendedMotorCommand.read``)."""
+        for c in self.motor_commands:
+            if words and words[0] == c.word.upper():
+                return c.read(words)
         return None
 
     def reads(self, text: str) -> tuple[bool, tuple[str, ...]] | None:
@@ -291,7 +334,7 @@ def parse_motor_line(text: str) -> tuple[bool, tuple[str, ...]] | None:
         motors = tuple(m for m in AXES if m in letters) or AXES
         return on, motors
     for d in PRESETS.values():
-        if any(c.word == head for c in d.motor_commands):
+        if any(c.word.upper() == head for c in d.motor_commands):
             return d.read_extended(words)
     return None
 

@@ -7,8 +7,8 @@ again: ~0.2 s of dwell plus the flush, 0.22 s measured. Klipper has no ``M17``: 
 ``cmd_default`` answers 'Unknown command:"M17"' and goes on (no dwell, nothing switched). Re-enable
 is automatic: ``motor_disable`` re-registers ``add_active_callback(self.motor_enable)``, so the
 first step of that stepper turns it back on at the step's own print time. ``SET_STEPPER_ENABLE``
-takes one ``STEPPER=`` per command (a mux command on that parameter), so we write one line per
-stepper, each with its own stall. ``M18``/``M84`` go to ``motor_off()``, which disables *all*
+takes one ``STEPPER=`` per command (a mux command on that parameter, no list), so we write one line
+per stepper, each with its own stall. ``M18``/``M84`` go to ``motor_off()``, which disables *all*
 steppers and sends ``stepper_enable:motor_off`` (homing cleared): never emitted for Klipper.
 
 Planner rules: klippy/toolhead.py -- one ``max_accel`` for every move (M204 S sets it, else
@@ -46,9 +46,11 @@ PLANNER = PlannerRules(
                   min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0))
 
 #: Klipper's ``SET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=0`` (klippy/extras/stepper_enable.py
-#: ``cmd_SET_STEPPER_ENABLE``) as the parser's scanner reads it
-SET_STEPPER_ENABLE = ExtendedMotorCommand("SET_STEPPER_ENABLE", "STEPPER=",
-                                          tuple((f"STEPPER_{m}", m) for m in AXES), "ENABLE=")
+#: ``cmd_SET_STEPPER_ENABLE``: a mux command on one ``STEPPER``, ``ENABLE`` an integer, 1 when
+#: absent; Klipper 84104bb has no ``STEPPERS=`` list for it: such a line is an error there)
+SET_STEPPER_ENABLE = ExtendedMotorCommand("SET_STEPPER_ENABLE", "STEPPER",
+                                          tuple((STEPPER_NAMES[m], m) for m in AXES), "ENABLE",
+                                          default_enable=1)
 
 
 @dataclass(frozen=True)
@@ -57,20 +59,6 @@ class Klipper(Firmware):
 
     def _lines(self, word: str, motors, enable: int) -> list[str]:
         return [f"SET_STEPPER_ENABLE STEPPER={STEPPER_NAMES[m]} ENABLE={enable}" for m in motors]
-
-    def read_extended(self, words):
-        """``SET_STEPPER_ENABLE STEPPER=stepper_x[,..]|STEPPERS=.. ENABLE=0|1`` (ENABLE defaults
-        to 1)."""
-        if not words or words[0] != "SET_STEPPER_ENABLE":
-            return None
-        on, names = True, []
-        for w in words[1:]:
-            if w.startswith("ENABLE="):
-                on = w[7:] != "0"
-            elif w.startswith("STEPPER=") or w.startswith("STEPPERS="):
-                names += w.split("=", 1)[1].lower().split(",")
-        motors = tuple(m for m in AXES if STEPPER_NAMES[m] in names)
-        return (on, motors) if motors else None
 
 
 DIALECT = Klipper(
