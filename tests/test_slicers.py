@@ -78,10 +78,10 @@ def test_more_slicers_than_a_three_bit_field_held(monkeypatch):
 
 def test_extended_motor_commands_are_a_table(monkeypatch):
     """A dialect's own motor command is one more row; Klipper's keeps working beside it."""
-    gate = ExtendedMotorCommand("GATESOPT_GATE", "MOTOR=", (("X", "X"), ("Y", "Y")), "ON=")
+    gate = ExtendedMotorCommand("GATESOPT_TEST", "MOTOR", (("X", "X"), ("Y", "Y")), "ON")
     tables = parse_module.SCAN_TABLES[:2] + _scan.pack_motor_commands(EXTENDED_MOTOR_COMMANDS + (gate,), AXES)
-    text = ("G1 X1 Y1 F600\nGATESOPT_GATE MOTOR=Y ON=0\nSET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=0\n"
-            "gatesopt_gate motor=y on=1\nGATESOPT_GATE MOTOR=Q ON=0\nG1 X2\n")
+    text = ("G1 X1 Y1 F600\nGATESOPT_TEST MOTOR=Y ON=0\nSET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=0\n"
+            "gatesopt_test motor=y on=1\nGATESOPT_TEST MOTOR=Q ON=0\nG1 X2\n")
     before = parse_fn(text)
     assert before.kind.tolist() == [Kind.TRAVEL, Kind.MOTOR, Kind.TRAVEL]     # unknown to today's table
     monkeypatch.setattr(parse_module, "SCAN_TABLES", tables)

@@ -14,9 +14,9 @@ from ..errors import GatesoptError
 
 
 def firmware_names() -> tuple[str, ...]:
-    """The firmware presets (``gatesopt.firmware.PRESETS``)."""
-    from ..firmware import PRESETS
-    return tuple(PRESETS)
+    """The firmware dialects (``gatesopt.firmware.names``: one module each)."""
+    from ..firmware import names
+    return names()
 
 
 def gating_formulations() -> tuple[str, ...]:
