@@ -346,7 +346,7 @@ def min_move_time_s(program: Program, arc_segment_mm: float = ARC_SEGMENT_MM) ->
     """(n_steps,) a lower bound of the time each step takes in the firmware's planner that never
     exceeds Klipper's ``Move.min_move_t`` (klippy/toolhead.py: the move's distance over its speed,
     the speed after every limit) -- what a firmware that proves gating rules from its queued moves
-    sums (``firmware.Schedule``). formulations/gating.md §7 argues it:
+    sums (``firmware.Schedule``). formulations/gating.md §9 argues it:
 
     * a line move: L / F, L its XYZ length (``|dE|`` for an extrude-only move) and F the requested
       speed. Klipper's ``min_move_t`` is ``move_d / v`` with ``move_d`` the same length and ``v =

@@ -117,6 +117,10 @@ def _sections(path: Path, depth: int = 0) -> list[tuple[str, str]]:
         at = [ln.rstrip() for ln in lines].index(SAVE_CONFIG_MARKER)
         saved = [ln[len(SAVE_CONFIG_PREFIX):].lstrip(" ") if ln.startswith(SAVE_CONFIG_PREFIX) else ln
                  for ln in lines[at + 1:]]
+        # Klipper's AUTOSAVE_HEADER (klippy/configfile.py) is the marker, a "DO NOT EDIT" line and
+        # an empty "#*#": the block's data starts at its first section
+        first = next((i for i, ln in enumerate(saved) if ln.strip().startswith("[")), len(saved))
+        saved = saved[first:]
         lines = lines[:at]
     out: list[tuple[str, str]] = []
     chunk: list[str] = []

@@ -128,7 +128,7 @@ class Schedule:
     protocol is the example): the dialect writes one off line right after the last step of the
     motors it names before their idle intervals, the firmware switches each motor off and on again
     by itself, and keeps an interval on unless the rules below hold. ``gatesopt.gating`` plans with
-    these numbers (formulations/gating.md §7), ``gatesopt.verify`` derives the intervals from the
+    these numbers (formulations/gating.md §9), ``gatesopt.verify`` derives the intervals from the
     lines with them.
 
     Per motor m (X Y Z E order): off at ``t_end + end_late + off_delay_s[m]`` (``t_end``: the end

@@ -250,7 +250,7 @@ def _build_model(problem, kept_angles, keep_idle, neg_inter, use_inter) -> Coupl
 
 
 def _spacing_cliques(problem: GatingProblem, x_idle: np.ndarray) -> list:
-    """Rule B of a firmware schedule as cliques over the x variables (formulations/gating.md §7):
+    """Rule B of a firmware schedule as cliques over the x variables (formulations/gating.md §9):
     in a chain of one angle and motor, intervals p[j]..j (``chain_predecessors``) pairwise break
     the spacing, so at most one of them is off; only the maximal such sets are written."""
     o = problem.options

@@ -101,7 +101,7 @@ class GatingProblem:
     # a fixed cost of the print, whatever gating does; one stall piece each in ``Pieces``
     own_stall_row: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
     own_stall_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
-    # --- a firmware that times its own switches (``options.schedule``, formulations/gating.md §7) --
+    # --- a firmware that times its own switches (``options.schedule``, formulations/gating.md §9) --
     # the lower-bound clock (sum of ``planner.min_move_time_s``) at each idle interval's off line
     # (after its motor's last step) and at the start of the step that ends it; 0 without a schedule
     idle_lb_off_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
@@ -298,7 +298,7 @@ class _Timing:
 def _schedule_keep(o: GatingOptions, t: _Timing, m: int, prev, nxt) -> np.ndarray:
     """Idle intervals of motor ``m`` a firmware schedule may gate: one after a step of ``m`` (the
     line goes after it), rule A on the lower-bound clock, nothing between line and next step where
-    the firmware switches ``m`` itself (formulations/gating.md §7)."""
+    the firmware switches ``m`` itself (formulations/gating.md §9)."""
     n = len(t.dur)
     after = np.minimum(prev + 1, n)
     gap = t.lb_cum_s[np.minimum(nxt, n)] - t.lb_cum_s[after]
