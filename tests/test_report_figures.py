@@ -126,3 +126,18 @@ def test_the_sweep_is_at_the_angles_rotate_auto_tries(figures):
     assert [t.get_text() for t in ax.get_xticklabels()] == report._angle_labels(tried)
     assert any(a % 30 for a in tried)           # not the paper's fixed 30-degree steps
     assert f"chose {sweep.chosen_deg:.6g}" in ax.get_title()
+
+
+def test_a_saving_over_its_time_budget_is_marked(figures):
+    """greedy (the paper's Algorithm 1) takes no time budget: a row over it (status infeasible)
+    is hatched and said, not drawn as an equal of the rows that kept the budget."""
+    rows = rows_of(SURVEY_ROWS)
+    for r in rows:
+        if r["formulation"] == "greedy":
+            r.update(status="infeasible", added_time_pct=6.7)
+    ax = figures(rows)["Energy saving per file"].axes[0]
+    hatched = [p for p in ax.patches if p.get_hatch()]
+    assert len(hatched) == len(SURVEY_ROWS) // 2
+    assert sum("(over budget)" in t.get_text() for t in ax.texts) == len(SURVEY_ROWS) // 2
+    text = report.render_html(rows, [])
+    assert "6 verified rows broke their time budget" in text
