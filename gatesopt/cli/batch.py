@@ -7,7 +7,7 @@ import sys
 from ..batch import STDIN_FILE, BatchOptions, expand_paths, output_name, run_batch, summarize
 from ..errors import GatesoptError
 from .files import check_input, check_new_file, check_one_stdin, refuse_existing
-from .progress import wants_progress
+from .progress import pause_status, resume_status, wants_progress
 from .options import (BUDGET_NOT_GIVEN, add_firmware_options, budget_pct, gating_formulations, motor_list,
                       positive_s)
 
@@ -99,9 +99,15 @@ def run(args) -> int:
                         profile=args.profile, write_dir=args.write_dir, order_mode=args.order_mode,
                         order_budget_s=args.order_budget)
     stdin_data = sys.stdin.buffer.read() if STDIN_FILE in files else None
-    rows = run_batch(files, opts, out=args.out, jobs=args.jobs, resume=args.resume, dask=args.dask,
-                     progress=not args.quiet and wants_progress(), formulations=forms,
-                     stdin_data=stdin_data)
+    bar = not args.quiet and wants_progress()
+    if bar:
+        pause_status()          # the bar over the files is the progress line from here on
+    try:
+        rows = run_batch(files, opts, out=args.out, jobs=args.jobs, resume=args.resume, dask=args.dask,
+                         progress=bar, formulations=forms, stdin_data=stdin_data)
+    finally:
+        if bar:
+            resume_status()
     s = summarize(rows)
     for r in rows:
         for w in filter(None, str(r.get("warnings") or "").split(" | ")):
