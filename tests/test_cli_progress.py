@@ -97,3 +97,23 @@ def test_the_kernel_clock_is_the_clock_of_perf_counter_ns():
     b = _jit.now_ns()
     c = time.perf_counter_ns()
     assert a <= b <= c
+
+
+def test_a_second_run_compiles_nothing(tmp_path):
+    """Kernels are cached whole: a later process running the same commands (solve with milp and
+    order, which read the clock inside kernels) compiles nothing (the first may fill the cache)."""
+    import subprocess
+    code = (
+        "import sys\n"
+        "from gatesopt.cli import main\n"
+        "from gatesopt import _jit\n"
+        f"src, out = {str(SRC)!r}, {str(tmp_path)!r}\n"
+        "main(['solve', src, '-o', out + '/a.gcode', '--force', '--formulation', 'milp'])\n"
+        "main(['order', src, '-o', out + '/b.gcode', '--force', '--budget', '5'])\n"
+        "print('compile_s', _jit.compile_s())\n")
+    runs = []
+    for _ in range(2):
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        runs.append(float(done.stdout.split("compile_s")[-1]))
+    assert runs[1] == 0.0, runs

@@ -77,6 +77,14 @@ def wants_progress(stream=None) -> bool:
     return bool(getattr(stream, "isatty", lambda: False)())
 
 
+def wants_progress_on_terminal(stream) -> bool:
+    """``stream`` is a terminal (the status line is drawn there by itself, not by request)."""
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
 class Status:
     """One line on standard error saying what the command does and for how long, redrawn in
     place every ``STATUS_EVERY_S`` from ``STATUS_FIRST_S`` on (a thread) until the command ends;
@@ -93,6 +101,8 @@ class Status:
         self._drawn = False
         self._paused = False
         self.line_open = False          # the command's output stopped inside a line
+        # GATESOPT_PROGRESS=1 where nothing is a terminal: every stream counts as the screen
+        self.test_stream = not wants_progress_on_terminal(stream)
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gatesopt-status", daemon=True)
         self._thread.start()
@@ -165,8 +175,24 @@ class _Ending:
         self._stream = stream
         self._status = status
 
+    def _shares_the_screen(self) -> bool:
+        """Output to a pipe or a file cannot collide with the status line on the terminal."""
+        try:
+            return self._stream.isatty()
+        except (AttributeError, ValueError):
+            return False
+
+    @property
+    def buffer(self):
+        """The binary stream (G-code to ``-o -``): on the terminal, the status line ends first."""
+        if self._shares_the_screen():
+            with self._status._lock:
+                self._status.clear()
+                self._status.line_open = True
+        return self._stream.buffer
+
     def write(self, text):
-        if not text:
+        if not text or (not self._shares_the_screen() and not self._status.test_stream):
             return self._stream.write(text)
         with self._status._lock:
             self._status.clear()        # redrawn below it at the next tick
