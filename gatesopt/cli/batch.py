@@ -75,6 +75,9 @@ def run(args) -> int:
         raise GatesoptError(f"--jobs must be at least 1, not {args.jobs}")
     positive_s(args.order_budget, "--order-budget")
     positive_s(args.time_limit, "--time-limit")
+    if not args.out.lower().endswith((".csv", ".json")):
+        raise GatesoptError(f"--out {args.out}: a results file ends in .csv (rows appended as they "
+                            "finish) or .json")
     refuse_existing(args.out, args.resume or args.force, "use --resume to continue it or --force to start over")
     check_new_file(args.out, files, True)       # not an input, its folder exists
     if args.write_dir:
