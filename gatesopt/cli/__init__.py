@@ -5,7 +5,8 @@ One module per command (as vpype_cli does), each with ``NAME``, ``HELP``, ``DESC
 calls. What several commands share is in modules of its own, which import no command module:
 ``files`` (reading G-code, ``-`` for standard input and output, never overwriting a file without
 ``--force``, writing through a temporary file), ``options`` (the choices read from the library's
-registries, the gating options), ``progress`` and ``summary``.
+registries, the gating options), ``progress`` (a status line from a command's first second, the
+compile note the moment compiling starts, the ordering's bar) and ``summary``.
 Every failure is one line on stderr, ``gatesopt: error: ...``, and exit code 2: errors the
 library raises on purpose (``GatesoptError``), a bad option (argparse's usage text is left out:
 ``--help`` gives it), a file the system cannot read or write; anything else is a bug, said in one
