@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import math
 
-from ..parse import parse
-from .files import check_distinct, check_new_file, write_json
+from ..errors import GatesoptError
+from .files import check_distinct, check_input, check_new_file, check_one_stdin, read_program, write_json
 from .options import (add_gating_options, firmware_choice, gating_formulations, gating_options,
                       ordering_formulations, positive_s)
 from .progress import default_workers
@@ -19,7 +19,7 @@ DESCRIPTION = ("Solve each file with every gating formulation (greedy always inc
 
 
 def add_arguments(c) -> None:
-    c.add_argument("files", nargs="+", help="G-code files")
+    c.add_argument("files", nargs="+", help="G-code files (one of them may be - for standard input)")
     c.add_argument("--formulations", default=None, metavar="LIST",
                    help="comma separated (default: all of the compared kind); greedy is always a row")
     c.add_argument("--ordering", action="store_true",
@@ -42,6 +42,14 @@ def run(args) -> int:
     from ..compare import gating_rows, ordering_rows
     known = ordering_formulations() if args.ordering else gating_formulations()
     forms = [f.strip() for f in (args.formulations or ",".join(known)).split(",") if f.strip()]
+    unknown = [f for f in forms if f not in known]
+    if unknown or not forms:
+        kind = "curve ordering" if args.ordering else "gating"
+        raise GatesoptError(f"--formulations {args.formulations!r}: not a {kind} formulation: "
+                            f"{', '.join(unknown) or 'none given'} (choose from {', '.join(known)})")
+    check_one_stdin(args.files)
+    for path in args.files:
+        check_input(path)
     check_distinct({"--plot": args.plot, "--json": args.json})
     if args.ordering:
         positive_s(args.order_budget, "--order-budget")
@@ -54,13 +62,13 @@ def run(args) -> int:
         from ..ordering import OrderingOptions
         order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
         for path in args.files:
-            rows += ordering_rows(parse(path), order_options, forms, known, args.order_budget,
+            rows += ordering_rows(read_program(path), order_options, forms, known, args.order_budget,
                                   default_workers())
         print(format_compare_order(rows))
     else:
         fields = gating_options(args)
         for path in args.files:
-            program = parse(path)
+            program = read_program(path)
             choice = firmware_choice(args, program, **fields)   # per file: each names its printer
             print(f"{program.source}: firmware {choice.line}")
             if choice.options is None:
