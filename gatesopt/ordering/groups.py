@@ -10,14 +10,18 @@ does. Layers the layout keeps (the first, fatal lines, ...) are fixed in both mo
 """
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import numpy as np
 
+from ..limits import machine_limits
 from ..program import Kind, Program
 from ..slicers import FIXED_FEATURE
+from .cost import MoveTimes, TimePricer
 from .layout import Layout, layout
-from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
+from .problem import CLOSED_TOL_MM, COST_UNIT, OrderingOptions, OrderingProblem
+from .travel import TravelRule
 
 #: a curve without a feature comment whose end lies this close to its start is a clipped loop
 #: (a wall) in safe mode
@@ -116,20 +120,28 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
         prev_key = key
     gstart.append(n)
     origin = program.start_mm[s0[0], :2] if n else np.zeros(2)
-    feed = options.travel_feed_mm_s
-    if feed is None:
-        tr = (program.kind == Kind.TRAVEL) & (program.length_mm > 1.0)
-        feed = float(np.median(program.feed_mm_s[tr])) if tr.any() else 100.0
-    per_mm = {"distance": 1.0, "time": 1.0 / feed, "energy": options.travel_power_w / feed}[options.cost]
-    unit = {"distance": "mm", "time": "s", "energy": "J"}[options.cost]
     notes = list(lay.notes)
     for i, w in enumerate(lay.layer_why):
         if w and i > 0:
             notes.append(f"layer {i}: {w}")
-    return OrderingProblem(
+    problem = OrderingProblem(
         curve_start_xy=start_xy, curve_end_xy=end_xy, curve_closed=np.asarray(closed, bool),
         curve_layer=layer, points_xy=pts, curve_point_start=pstart,
         group_curve_start=np.asarray(gstart, np.int64), group_layer=np.asarray(glayer, np.int64),
         group_fixed=np.asarray(gfixed, bool), group_label=tuple(glabel), origin_xy=origin,
-        options=options, cost_per_mm=per_mm, cost_unit=unit,
-        curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), travel_feed_mm_s=feed, layout=lay)
+        options=options, cost_unit=COST_UNIT[options.objective],
+        curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), layout=lay)
+    if options.objective == "time":
+        problem = with_pricer(program, problem)
+    return problem
+
+
+def with_pricer(program: Program, problem: OrderingProblem) -> OrderingProblem:
+    """``problem`` with the time objective's link costs (``cost.TimePricer``): the rule the
+    emitter follows (``travel.TravelRule``, read from the file's own travels) and the planner's
+    limits for each move (``cost.MoveTimes``, ``limits.machine_limits``)."""
+    lay = problem.layout
+    rule = TravelRule.of(program, problem, lay)
+    move = MoveTimes.from_limits(machine_limits(program))
+    return dataclasses.replace(problem, cost_unit=COST_UNIT["time"],
+                               pricer=TimePricer(program, lay, problem, rule, move))
