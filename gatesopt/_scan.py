@@ -99,23 +99,25 @@ def pack_comment_markers(layer_markers, layer_kinds, z_markers, feature_markers)
 
 
 #: columns of a packed extended motor command (``pack_motor_commands``) and of one of its names
-C_WORD_A, C_WORD_B, C_MOTOR_A, C_MOTOR_B, C_ENABLE_A, C_ENABLE_B = range(6)
+(C_WORD_A, C_WORD_B, C_MOTOR_A, C_MOTOR_B, C_ENABLE_A, C_ENABLE_B, C_DEFAULT, C_LISTS) = range(8)
 N_COMMAND, N_NAME_A, N_NAME_B, N_AXIS = range(4)
 
 
 def pack_motor_commands(commands, axes):
-    """(commands int64 [n, 6], names int64 [m, 4], text uint8) for ``scan``: each
-    ``firmware.ExtendedMotorCommand``'s words in upper case, each motor name with its command's
-    index and its motor's index in ``axes``."""
+    """(commands int64 [n, 8], names int64 [m, 4], text uint8) for ``scan``: each
+    ``firmware.ExtendedMotorCommand``'s word and parameter names in upper case, its default enable
+    and list flag, each motor name (upper case) with its command's index and its motor's index in
+    ``axes``."""
     blob = bytearray()
     cmds, names = [], []
     for c, cmd in enumerate(commands):
         cmds.append(_append_text(blob, cmd.word.upper().encode())
                     + _append_text(blob, cmd.motor_param.upper().encode())
-                    + _append_text(blob, cmd.enable_param.upper().encode()))
+                    + _append_text(blob, cmd.enable_param.upper().encode())
+                    + (int(cmd.default_enable), int(bool(cmd.lists))))
         for name, motor in cmd.motors:
             names.append((c,) + _append_text(blob, name.upper().encode()) + (axes.index(motor),))
-    return (np.array(cmds, np.int64).reshape(-1, 6), np.array(names, np.int64).reshape(-1, 4),
+    return (np.array(cmds, np.int64).reshape(-1, 8), np.array(names, np.int64).reshape(-1, 4),
             np.frombuffer(bytes(blob) or b"\0", np.uint8).copy())
 
 
@@ -427,32 +429,88 @@ def _grow_markers(mk_line, mk_kind, mk_z, mk_span, n_mk):
 
 
 @njit(cache=True)
-def _extended_motor(buf, fpos, b, en, commands, names, text):
-    """An extended command line at fpos from the packed table (``pack_motor_commands``): if it
-    switches a motor, set ``en`` and return K_MOTOR; else -1 (the line is no step)."""
-    for c in range(commands.shape[0]):
-        wa = commands[c, C_WORD_A]
-        wb = commands[c, C_WORD_B]
-        if not _match(buf, fpos, b, text, wa, wb, True):
-            continue
-        ma = commands[c, C_MOTOR_A]
-        mb = commands[c, C_MOTOR_B]
-        ea = commands[c, C_ENABLE_A]
-        eb = commands[c, C_ENABLE_B]
-        axis = -1
-        en_value = -1
-        for i in range(fpos + wb - wa, b):
-            if _match(buf, i, b, text, ma, mb, True):
-                for r in range(names.shape[0]):
-                    if names[r, N_COMMAND] == c and _match(buf, i + mb - ma, b, text, names[r, N_NAME_A],
-                                                           names[r, N_NAME_B], True):
-                        axis = names[r, N_AXIS]
-            if _match(buf, i, b, text, ea, eb, True) and i + eb - ea < b:
-                en_value = buf[i + eb - ea] - 48
-        if axis >= 0 and (en_value == 0 or en_value == 1):
-            en[axis] = en_value == 1
-            return K_MOTOR
+def _token_end(buf, i, b):
+    """End of the blank-separated word at i (a blank, ';' or '#' ends it)."""
+    while i < b and buf[i] != 32 and buf[i] != 9 and buf[i] != 59 and buf[i] != 35:
+        i += 1
+    return i
+
+
+@njit(cache=True)
+def _is_text(buf, i, j, text, a, b):
+    """buf[i:j], upper-cased, is text[a:b] (upper case)."""
+    return j - i == b - a and _match(buf, i, j, text, a, b, True)
+
+
+@njit(cache=True)
+def _int_value(buf, i, j):
+    """The integer buf[i:j] (an optional sign, digits) as 0 / 1 (0 off, anything else on), or -1
+    when it is no integer (Klipper's ``get_int`` fails: the line is an error)."""
+    if i < j and (buf[i] == 43 or buf[i] == 45):
+        i += 1
+    if i >= j:
         return -1
+    nonzero = False
+    for k in range(i, j):
+        if not (48 <= buf[k] <= 57):
+            return -1
+        if buf[k] != 48:
+            nonzero = True
+    return 1 if nonzero else 0
+
+
+@njit(cache=True)
+def _extended_motor(buf, fpos, b, en, commands, names, text):
+    """An extended command line at fpos read through the packed table (``pack_motor_commands``,
+    the rules of ``firmware.ExtendedMotorCommand``): if it switches a known motor, set ``en`` and
+    return K_MOTOR; else -1 (the line is no step)."""
+    we = _token_end(buf, fpos, b)
+    for c in range(commands.shape[0]):
+        if not _is_text(buf, fpos, we, text, commands[c, C_WORD_A], commands[c, C_WORD_B]):
+            continue
+        mask = 0
+        en_value = commands[c, C_DEFAULT]
+        lists = commands[c, C_LISTS] != 0
+        i = we
+        while True:
+            while i < b and (buf[i] == 32 or buf[i] == 9):
+                i += 1
+            if i >= b or buf[i] == 59 or buf[i] == 35:
+                break
+            te = _token_end(buf, i, b)
+            eq = -1
+            for k in range(i, te):
+                if buf[k] == 61:
+                    eq = k
+                    break
+            if eq < 0:
+                return -1           # a word without '=': Klipper's "Malformed command"
+            if _is_text(buf, i, eq, text, commands[c, C_MOTOR_A], commands[c, C_MOTOR_B]):
+                mask = 0            # the last of a parameter counts
+                s = eq + 1
+                while s <= te:
+                    e = te
+                    if lists:
+                        e = s
+                        while e < te and buf[e] != 44:
+                            e += 1
+                    for r in range(names.shape[0]):
+                        if names[r, N_COMMAND] == c and _is_text(buf, s, e, text, names[r, N_NAME_A],
+                                                                 names[r, N_NAME_B]):
+                            mask |= 1 << names[r, N_AXIS]
+                    s = e + 1
+            elif (commands[c, C_ENABLE_B] > commands[c, C_ENABLE_A]
+                  and _is_text(buf, i, eq, text, commands[c, C_ENABLE_A], commands[c, C_ENABLE_B])):
+                en_value = _int_value(buf, eq + 1, te)
+                if en_value < 0:
+                    return -1
+            i = te
+        if mask == 0 or en_value < 0:
+            return -1
+        for q in range(4):
+            if mask >> q & 1:
+                en[q] = en_value == 1
+        return K_MOTOR
     return -1
 
 

@@ -28,7 +28,8 @@ COLUMNS = (
     "lines_before", "lines_after", "lines_added", "bytes_before", "bytes_after", "size_change_pct",
     "rotation_deg", "status", "gap", "objective_j", "bound", "ordered", "travel_before_mm",
     "travel_after_mm", "travel_reduction_pct", "max_curves_per_layer", "off_time_X_s", "off_time_Y_s",
-    "off_time_Z_s", "off_time_E_s", "max_snap_mm", "firmware", "findings", "output", "solve_s", "wall_s",
+    "off_time_Z_s", "off_time_E_s", "max_snap_mm", "firmware", "firmware_line", "rotation_line", "findings",
+    "output", "solve_s", "wall_s",
 )
 TIMING_COLUMNS = ("solve_s", "wall_s")
 
@@ -38,12 +39,14 @@ class BatchOptions:
     """What every file gets (plain values, so the options travel to worker processes)."""
 
     formulation: str = "dp"
-    firmware: str = "3dgates"
-    motors: tuple = ("X", "Y")
+    firmware: str = "auto"              # read from each file (``rewrite.printer.choose``), or a name
+    force_firmware: bool = False        # write ``firmware``'s lines whatever the file says
+    motors: tuple | None = None         # None: X, Y (what the firmware may gate of them)
     rotate: str = "auto"
+    bed_size_mm: tuple | None = None    # None: the bed each file names (no bed: not rotated)
     start_ahead_s: float = 1.8e-3
     end_late_s: float = 1.0e-3
-    max_added_time_pct: float | None = None
+    max_added_time_pct: object = "default"    # "default": 1 % for stock firmware; None: no budget
     max_added_lines_pct: float | None = None
     time_limit_s: float | None = 60.0
     order: bool = True
@@ -78,8 +81,8 @@ def _infill_pattern(program: Program) -> str:
 
 def process_file(path: str, options: BatchOptions) -> dict:
     """Solve + verify one file; a row of ``COLUMNS``. Never raises: errors become the ``error`` column."""
-    from .gating.options import GatingOptions
     from .rewrite.pipeline import run
+    from .rewrite.printer import DEFAULT, choose
     from .parse import parse
 
     t0 = time.perf_counter()
@@ -89,13 +92,15 @@ def process_file(path: str, options: BatchOptions) -> dict:
         program = parse(path)
         row.update(slicer=program.header.get("slicer", ""), flavor=program.header.get("flavor", ""),
                    infill_pattern=_infill_pattern(program), lines=program.n_lines, layers=program.n_layers)
-        gopts = GatingOptions.for_firmware(
-            options.firmware, motors=tuple(options.motors), rotate=options.rotate,
-            start_ahead_s=options.start_ahead_s, end_late_s=options.end_late_s,
-            max_added_time_pct=options.max_added_time_pct, max_added_lines_pct=options.max_added_lines_pct,
-            profile=options.profile)
-        res = run(program, gopts, formulation=options.formulation, time_limit_s=options.time_limit_s,
-                  order=options.order, gating=options.gating)
+        budget = options.max_added_time_pct
+        choice = choose(program, options.firmware, force=options.force_firmware,
+                        max_added_time_pct=DEFAULT if budget == "default" else budget,
+                        motors=None if options.motors is None else tuple(options.motors),
+                        rotate=options.rotate, start_ahead_s=options.start_ahead_s,
+                        end_late_s=options.end_late_s, max_added_lines_pct=options.max_added_lines_pct,
+                        profile=options.profile, bed_size_mm=options.bed_size_mm)
+        res = run(program, choice.options, formulation=options.formulation, time_limit_s=options.time_limit_s,
+                  order=options.order, gating=options.gating and choice.options is not None, choice=choice)
         s = res.summary()
         for k in COLUMNS:
             if k in s and not isinstance(s[k], (dict, list)):

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import firmware
 from .errors import GatesoptError
 from .program import MOTION_KINDS, Program
 
@@ -44,39 +45,15 @@ KEYS = (
 K = {k: i for i, k in enumerate(KEYS)}
 INF = float("inf")
 
-# Stock firmware configurations and known printer definitions. Sources:
-# - "marlin": Marlin 2.x Configuration.h defaults (DEFAULT_MAX_FEEDRATE {300,300,5,25},
-#   DEFAULT_MAX_ACCELERATION {3000,3000,100,10000}, DEFAULT_ACCELERATION / RETRACT / TRAVEL 3000,
-#   CLASSIC_JERK off -> JUNCTION_DEVIATION_MM 0.013, DEFAULT_EJERK 5).
-# - "klipper": toolhead.py defaults for what a printer.cfg must give (max_velocity / max_accel have
-#   no default there; we use a common 300 mm/s, 3000 mm/s^2), square_corner_velocity 5.0.
-# - "reprap": RepRapFirmware, an assumption (its compiled defaults were not checked): the
-#   M203 X6000 Y6000 Z300 E10000 (mm/min) example of its G-code documentation, M201 500,
-#   M566 900 mm/min (15 mm/s) jerk.
+# Stock firmware configurations (each dialect's ``PlannerRules.defaults``, ``gatesopt.firmware``:
+# "marlin", "klipper", "reprap") and known printer definitions. Sources of the printer rows:
 # - "creality_ender3" / "prusa_i3_mk3" / "cura_fdmprinter": Cura's machine definitions
 #   (Ultimaker/Cura resources/definitions creality_base.def.json, prusa_i3_mk3.def.json,
 #   fdmprinter.def.json: machine_max_feedrate_*, machine_max_acceleration_*, machine_acceleration,
 #   machine_max_jerk_xy/z/e), the limits Cura's own estimator runs with (fdmprinter's
 #   299792458000 mm/s "no limit" feedrates are written as inf).
 PRINTER_DEFAULTS: dict[str, dict[str, float]] = {
-    "marlin": dict(max_accel_x=3000, max_accel_y=3000, max_accel_z=100, max_accel_e=10000,
-                   max_feed_x=300, max_feed_y=300, max_feed_z=5, max_feed_e=25,
-                   jerk_x=10, jerk_y=10, jerk_z=0.3, jerk_e=5,
-                   accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
-                   junction_deviation=0.013, square_corner_velocity=np.nan, max_velocity=INF,
-                   min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
-    "klipper": dict(max_accel_x=INF, max_accel_y=INF, max_accel_z=100, max_accel_e=INF,
-                    max_feed_x=INF, max_feed_y=INF, max_feed_z=15, max_feed_e=INF,
-                    jerk_x=np.nan, jerk_y=np.nan, jerk_z=np.nan, jerk_e=np.nan,
-                    accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
-                    junction_deviation=np.nan, square_corner_velocity=5.0, max_velocity=300,
-                    min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
-    "reprap": dict(max_accel_x=500, max_accel_y=500, max_accel_z=20, max_accel_e=250,
-                   max_feed_x=100, max_feed_y=100, max_feed_z=5, max_feed_e=10000 / 60,
-                   jerk_x=15, jerk_y=15, jerk_z=0.3, jerk_e=5,
-                   accel_print=500, accel_travel=500, accel_retract=250, accel_to_decel=INF,
-                   junction_deviation=np.nan, square_corner_velocity=np.nan, max_velocity=INF,
-                   min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+    **{f: dict(firmware.planner_rules(f).defaults) for f in firmware.planner_families()},
     "creality_ender3": dict(max_accel_x=500, max_accel_y=500, max_accel_z=100, max_accel_e=5000,
                             max_feed_x=500, max_feed_y=500, max_feed_z=10, max_feed_e=50,
                             jerk_x=10, jerk_y=10, jerk_z=0.4, jerk_e=5,
@@ -104,8 +81,8 @@ PRINTER_DEFAULTS: dict[str, dict[str, float]] = {
 }
 # Which junction rule each default uses: Marlin 2 stock is junction deviation; the printer
 # definitions above (and Prusa / Creality firmware) use classic jerk.
-DEFAULT_JUNCTION = {"marlin": "deviation", "klipper": "scv", "reprap": "jerk", "cura_fdmprinter": "jerk",
-                    "creality_ender3": "jerk", "prusa_i3_mk3": "jerk"}
+DEFAULT_JUNCTION = {**{f: firmware.planner_rules(f).junction for f in firmware.planner_families()},
+                    "cura_fdmprinter": "jerk", "creality_ender3": "jerk", "prusa_i3_mk3": "jerk"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -309,18 +286,19 @@ def machine_limits(program: Program, profile: str | None = None) -> MachineLimit
     cmds = _limit_commands(program)
     has_klipper_cmd = any(m.group(1).upper() == b"SET_VELOCITY_LIMIT" for _, m in cmds)
     if "klipper" in flavor or has_klipper_cmd:
-        firmware = "klipper"
+        family = "klipper"
     elif "reprapfirmware" in flavor or flavor == "rrf":
         # RepRapFirmware (M203 in mm/min, M566 jerk). Slic3r's "reprap" flavor is RepRap/Sprinter,
         # i.e. Marlin-like firmware: planned as Marlin.
-        firmware = "reprap"
+        family = "reprap"
     else:
-        firmware = "marlin"
+        family = "marlin"
+    rules = firmware.planner_rules(family)
     source: dict[str, str] = {"firmware": f"flavor {flavor!r}" if flavor else "default (no flavor)"}
 
     # --- 3: defaults --------------------------------------------------------------------------
     if profile is None:
-        profile, why = _printer_profile(data, firmware)
+        profile, why = _printer_profile(data, family)
     else:
         why = "requested"
     if profile not in PRINTER_DEFAULTS:
@@ -330,9 +308,9 @@ def machine_limits(program: Program, profile: str | None = None) -> MachineLimit
         source[k] = f"default: {profile} ({why})"
     junction = DEFAULT_JUNCTION[profile]
     source["junction"] = f"default: {profile}"
-    if firmware == "klipper":
-        junction = "scv"
-        source["junction"] = "Klipper: square_corner_velocity"
+    if rules.junction_fixed:
+        junction = rules.junction
+        source["junction"] = rules.junction_note
 
     # --- 2: the slicer's config block ----------------------------------------------------------
     config = _config(data)
@@ -355,21 +333,21 @@ def machine_limits(program: Program, profile: str | None = None) -> MachineLimit
                 for name in ("accel_print", "accel_travel"):
                     v[K[name]] = x
                     source[name] = f"config: {_KISS_ACCEL}"
-        if firmware == "klipper" and "machine_max_jerk_x" in config:
+        if rules.jerk_is_scv and "machine_max_jerk_x" in config:
             # OrcaSlicer writes a Klipper printer's jerk as SET_VELOCITY_LIMIT SQUARE_CORNER_VELOCITY
             x = _first_number(config["machine_max_jerk_x"])
             if x:
                 v[K["square_corner_velocity"]] = x
                 source["square_corner_velocity"] = "config: machine_max_jerk_x (Klipper SCV)"
-        if firmware == "marlin" and any(k.startswith("machine_max_jerk") for k in config):
+        if rules.config_picks_junction and any(k.startswith("machine_max_jerk") for k in config):
             junction = "jerk"
             source["junction"] = "config: machine_max_jerk_* (classic jerk)"
-        if firmware == "marlin" and "machine_max_junction_deviation" in config:
+        if rules.config_picks_junction and "machine_max_junction_deviation" in config:
             x = _first_number(config["machine_max_junction_deviation"])
             if x and x > 0:
                 junction = "deviation"
                 source["junction"] = "config: machine_max_junction_deviation"
-    if firmware == "klipper":
+    if rules.one_accel:
         # one acceleration for every move on Klipper (toolhead.py max_accel)
         v[K["accel_travel"]] = v[K["accel_retract"]] = v[K["accel_print"]]
     # the config block's machine maxima also cap what later M204 / SET_VELOCITY_LIMIT lines ask
@@ -382,7 +360,7 @@ def machine_limits(program: Program, profile: str | None = None) -> MachineLimit
     motion = np.isin(program.kind, np.asarray(MOTION_KINDS, dtype=program.kind.dtype))
     first_motion_line = int(program.line[motion][0]) if motion.any() else program.n_lines
     legacy_m204 = flavor in ("marlin", "marlinlegacy", "marlin_legacy")
-    mm_min = firmware == "reprap"
+    mm_min = rules.feed_per_min
     changes: list[tuple[int, str, float]] = []
     jd_from_line = False
     for line, m in cmds:
@@ -409,7 +387,7 @@ def machine_limits(program: Program, profile: str | None = None) -> MachineLimit
             elif cmd == b"M566":
                 sets += [(f"jerk_{a.lower()}", w[a.encode()] / 60) for a in "XYZE" if a.encode() in w]
             elif cmd == b"M204":
-                if firmware == "klipper":
+                if rules.m204 == "klipper":
                     # Klipper's M204: S sets max_accel; else min(P, T)
                     acc = w.get(b"S", min(w.get(b"P", INF), w.get(b"T", INF)))
                     if acc < INF:
@@ -453,9 +431,9 @@ def machine_limits(program: Program, profile: str | None = None) -> MachineLimit
                 source[key] = f"line {line + 1}: {text}"
             else:
                 changes.append((line, key, x))
-    if jd_from_line and firmware == "marlin":
+    if jd_from_line and rules.config_picks_junction:
         junction = "deviation"
         source["junction"] = "M205 J (junction deviation)"
     if junction == "jerk" and np.isnan(v[K["jerk_x"]]):
         junction = "deviation"
-    return _from_vector(v, firmware, junction, source, changes, profile)
+    return _from_vector(v, family, junction, source, changes, profile)

@@ -57,15 +57,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _planner_kernel as _k
+from . import firmware as fwmod
 from ._text import code_words
 from .errors import GatesoptError
 from .limits import MachineLimits, machine_limits
 from .program import E, MOTION_KINDS, Kind, Program, X, Y, Z
 
 TIME_MODELS = ("paper", "planner")
-# Klipper SET_STEPPER_ENABLE: toolhead.dwell(DISABLE_STALL_TIME = 0.100 s) before and after the pin
-# change (klippy/extras/stepper_enable.py), on top of the look-ahead flush (a full stop)
-KLIPPER_ENABLE_DWELL_S = 2 * 0.100
 ARC_SEGMENT_MM = _k.ARC_SEGMENT_MM
 
 
@@ -167,8 +165,9 @@ class Plan:
         Marlin ``M18``/``M84`` with axes call ``planner.synchronize()``: the queue drains, the head
         decelerates to rest and accelerates again; the cost is the re-planned time with the stop
         minus the time without it. Klipper ``SET_STEPPER_ENABLE`` flushes the look-ahead the same
-        way and dwells 2 x 0.1 s on top (``KLIPPER_ENABLE_DWELL_S``). ``firmware``: "marlin",
-        "reprap", "klipper", or "3dgates" (the paper's patch: no stall, 0); default: the file's.
+        way and dwells 2 x 0.1 s on top (the dialect's ``PlannerRules.disable_dwell_s``).
+        ``firmware``: a dialect of ``gatesopt.firmware`` ("marlin", "reprap", "klipper", or
+        "3dgates": the paper's patch, no stop, 0); default: the file's.
 
         ``step`` may be a move (the stop is added before it; 0 if the head is at rest there anyway)
         or a step that itself drains the queue, such as a motor instruction already in the file
@@ -178,9 +177,9 @@ class Plan:
         own safe speed and the next start at its own, which can beat the speed they share at a
         junction; a stop is not credited with that.
         """
-        fw = firmware or self.limits.firmware
+        fw = fwmod.get(firmware or self.limits.firmware)
         steps = np.atleast_1d(np.asarray(step, dtype=np.int64))
-        if fw == "3dgates":
+        if not fw.drains_on_disable:
             out = np.zeros(len(steps))
         else:
             moves = self.step_move[steps].copy()
@@ -207,8 +206,8 @@ class Plan:
             out = _k.stop_costs(moves, self.length_mm[ms], self.accel_mm_s2[ms], self.nominal_mm_s[ms],
                                 self._vj, self._vj_free, self._safe, self._stop_before,
                                 self.entry_mm_s[ms], self.exit_mm_s[ms])
-            if fw == "klipper":
-                out = out + KLIPPER_ENABLE_DWELL_S
+            if fw.planner is not None and fw.planner.disable_dwell_s:
+                out = out + fw.planner.disable_dwell_s
         return out if np.ndim(step) else float(out[0])
 
 
@@ -246,25 +245,21 @@ def _arc_tangents(program: Program, steps: np.ndarray, L: np.ndarray):
     return out[0], out[1], phi
 
 
-# motor instructions that do not drain the queue: the 3DGates patch's S0/S1 switch a pin at an
-# exact time (ASPLOS'17 Sec. 4.1), Marlin's M17 enables at once without planner.synchronize()
-_NO_DRAIN_WORDS = (b"S0", b"S1", b"M17")
-
-
 def drains_queue(program: Program) -> np.ndarray:
     """(n_steps,) bool: steps that bring the motion queue to rest before the next move.
 
     Dwells (G4: Marlin ``dwell()`` synchronizes first), heat waits and homing always do. A motor
     instruction does if the firmware drains for it: Marlin ``M18``/``M84`` (``planner.synchronize()``),
     Klipper ``SET_STEPPER_ENABLE`` (a look-ahead flush); the paper's ``S0``/``S1`` and Marlin's
-    ``M17`` do not.
+    ``M17`` do not (the dialects' ``no_drain_words``, ``gatesopt.firmware.no_drain_words``).
     """
+    no_drain = fwmod.no_drain_words()
     kind = program.kind
     out = np.isin(kind, np.asarray((Kind.DWELL, Kind.WAIT, Kind.HOME), dtype=kind.dtype))
     for r in np.flatnonzero(kind == Kind.MOTOR).tolist():
         i = int(program.line[r])
         words = code_words(program.data[program.line_start[i]:program.line_start[i + 1]])
-        out[r] = not (words and words[0] in _NO_DRAIN_WORDS)
+        out[r] = not (words and words[0] in no_drain)
     return out
 
 
@@ -308,7 +303,8 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
         raise GatesoptError(f"{program.source}: no finite positive speed for some moves; "
                             f"check the feedrates and machine limits (profile {limits.profile})")
 
-    if limits.junction == "scv" and m:
+    rules = fwmod.planner_rules(limits.firmware, None)
+    if m and (rules.smoothed_lookahead if rules is not None else limits.junction == "scv"):
         # Klipper's smoothed look-ahead, where the file sets ACCEL_TO_DECEL below ACCEL
         a_smooth = np.minimum(table[regime, _k.C_ACCEL_TO_DECEL], acc)
         if np.any(a_smooth < acc):

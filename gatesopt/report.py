@@ -200,11 +200,15 @@ def rotation_sweep(path, angles=tuple(range(0, 360, 30)), formulation: str = "dp
     from .gating.problem import build
     from .gating.solve import solve
     from .parse import parse
+    from .slicers import read_bed
     program = parse(path)
     out, refused = [], []
     for a in angles:
         try:
-            sol = solve(build(program, GatingOptions(rotate=float(a))), formulation)
+            # the model's what-if at each angle (nothing is printed): a file that names no bed is
+            # swept unchecked; one that does has the angles that do not fit refused
+            bed_known = read_bed(program.data) is not None
+            sol = solve(build(program, GatingOptions(rotate=float(a), check_bed=bed_known)), formulation)
         except GatesoptError as e:
             refused.append(str(e))      # e.g. the rotated print does not fit the bed
             continue

@@ -27,7 +27,7 @@ def _option(command: str, flag: str):
 @pytest.mark.parametrize("command", ["solve", "compare", "batch"])
 def test_every_firmware_preset_is_a_choice(command):
     """`--firmware reprap` was refused by solve, compare and batch while verify offered it."""
-    assert tuple(_option(command, "--firmware").choices) == tuple(firmware.PRESETS)
+    assert tuple(_option(command, "--firmware").choices) == ("auto",) + tuple(firmware.PRESETS)
     assert tuple(_option("verify", "--firmware").choices) == ("auto",) + tuple(firmware.PRESETS)
 
 
@@ -50,9 +50,14 @@ def test_ordering_choices_are_the_registry_without_the_small_group_dp():
 def test_solve_with_reprap_says_which_motors_it_cannot_gate(capsys):
     from conftest import PROJECT_INSTANCES
     src = str(PROJECT_INSTANCES / "square_lines.gcode")
-    assert gatesopt.cli.main(["solve", src, "-o", "-", "--firmware", "reprap", "--no-order"]) == 2
+    assert gatesopt.cli.main(["solve", src, "-o", "-", "--firmware", "reprap", "--no-order",
+                              "--motors", "X,Y"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot gate motor(s) X,Y" in err[0]
+    # without --motors it gates what RepRapFirmware may gate, and says why
+    assert gatesopt.cli.main(["solve", src, "-o", "-", "--firmware", "reprap", "--no-order"]) == 0
+    report = capsys.readouterr().err
+    assert "gates E only (RepRapFirmware's M18 marks X/Y/Z not homed" in report
 
 
 def test_no_command_module_imports_another():

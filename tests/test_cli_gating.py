@@ -31,7 +31,7 @@ def test_solve_writes_verified_output_and_json(square, tmp_path, capsys):
     out = tmp_path / "out.gcode"
     rj = tmp_path / "r.json"
     rc = main(["solve", str(square), "-o", str(out), "--formulation", "dp", "--rotate", "none",
-               "--no-order", "--json", str(rj)])
+               "--no-order", "--json", str(rj), "--firmware", "3dgates"])
     assert rc == 0
     text = out.read_text()
     assert "S0 " in text and "S1 " in text

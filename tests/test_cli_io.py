@@ -29,8 +29,8 @@ def test_in_place_replaces_verified_and_keeps_permissions(tmp_path):
     assert main(["solve", "--in-place", "--rotate", "none", "--no-order", str(p)]) == 0
     assert stat.S_IMODE(p.stat().st_mode) == 0o640
     out = parse(p)
-    assert "S0" in out.to_gcode()
-    assert verify(parse(SRC), out).ok
+    assert "M18" in out.to_gcode()          # the file's flavor (marlin2): Marlin's lines
+    assert verify(parse(SRC), out, firmware="marlin").ok
     assert sorted(x.name for x in tmp_path.iterdir()) == ["print.gcode"]     # no temp file left
 
 
@@ -38,7 +38,7 @@ def test_in_place_keeps_gzip(tmp_path):
     p = _copy(tmp_path, "print.gcode.gz", gz=True)
     assert main(["solve", "--in-place", "--rotate", "none", "--no-order", str(p)]) == 0
     assert p.read_bytes()[:2] == b"\x1f\x8b"
-    assert verify(parse(SRC), parse(p)).ok
+    assert verify(parse(SRC), parse(p), firmware="marlin").ok
 
 
 def test_in_place_failure_leaves_the_original_untouched(tmp_path, capsys):
@@ -113,7 +113,7 @@ def test_pipes_stdin_to_stdout_messages_on_stderr():
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith(text.splitlines()[0])          # G-code on stdout, nothing else
     assert "verified      yes" in r.stderr
-    assert verify(parse(text), parse(r.stdout)).ok
+    assert verify(parse(text), parse(r.stdout), firmware="marlin").ok
 
 
 def test_determinism_same_input_same_bytes(tmp_path):

@@ -81,8 +81,8 @@ def test_each_firmware_stalls_only_on_motor_lines_it_carries_out():
     text = make_gcode(start=("M17", "SET_STEPPER_ENABLE STEPPER=stepper_z ENABLE=0",
                              "SET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=1", "M84 X", "S1 X Y"),
                       end=("M84",))
-    k = fwmod.KLIPPER_STALL_S
-    m = fwmod.MARLIN_STOP_S
+    k = fwmod.get("klipper").stall_off_s
+    m = fwmod.get("marlin").stall_off_s
     want = {
         # Klipper: M17 is an unknown command (no dwell); SET_STEPPER_ENABLE both ways and M18/M84
         # (stepper_enable.py motor_off) dwell; S-series unknown
@@ -126,7 +126,7 @@ def test_original_motor_line_in_start_gcode_is_priced_alike(fw, line):
 
 @pytest.mark.parametrize("fw", PRESETS)
 def test_rotated_solve_with_original_m17_and_m84_verifies(fw):
-    _solve_and_check(make_gcode(start=("M17", "M84"), end=("M84",)), fw, rotate=30.0)
+    _solve_and_check(make_gcode(start=("M17", "M84"), end=("M84",)), fw, rotate=30.0, bed_size_mm=(220, 220))
 
 
 @pytest.mark.parametrize("fw", PRESETS)

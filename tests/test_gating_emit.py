@@ -228,7 +228,7 @@ def test_gating_costs_and_stalls():
     # (an unknown command, skipped: no dwell), Marlin no SET_STEPPER_ENABLE
     np.testing.assert_allclose(k[motor], [0.22, 0.22, 0.0, 0.0])
     m = firmware.stall_durations(p, "marlin")
-    np.testing.assert_allclose(m[motor], [0.0, firmware.MARLIN_STOP_S, 0.0, 0.0])
+    np.testing.assert_allclose(m[motor], [0.0, firmware.get("marlin").stall_off_s, 0.0, 0.0])
     assert firmware.stall_durations(p, "3dgates").sum() == 0.0
     assert firmware.stall_durations(p, "marlin", planner=lambda prog, r: 0.5)[motor[1]] == 0.5
 

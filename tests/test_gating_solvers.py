@@ -200,7 +200,7 @@ def test_shared_enable_pin_matches_brute_force(opts):
 def test_budgets_with_rotation_match_brute_force():
     # milp prunes rotations by a knapsack bound under budgets: the optimum must survive
     p = small_problem(rotate="auto", max_angles=2, stall_off_s=0.02, max_added_lines_pct=50.0,
-                      max_added_time_pct=1.0)
+                      max_added_time_pct=1.0, check_bed=False)
     assert p.n_angles > 1
     best = brute_force(p)
     for f in ("milp", "cpsat"):
@@ -265,7 +265,7 @@ def test_rotated_square_candidates_contain_the_optimum():
     assert best.max_snap_mm <= 1e-3
     # no fixed angle of a fine sweep does better
     for deg in np.arange(0.0, 90.0, 2.5):
-        fixed = solve(from_moves(s, e, d, GatingOptions(rotate=float(deg))), "dp")
+        fixed = solve(from_moves(s, e, d, GatingOptions(rotate=float(deg)), bed_size_mm=(200, 200)), "dp")
         assert best.energy_j <= fixed.energy_j + 1e-9
     # the unrotated square has no single-axis move: only the retractions can be gated
     none = solve(from_moves(s, e, d, GatingOptions(rotate="none")), "dp")

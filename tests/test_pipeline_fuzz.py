@@ -99,7 +99,7 @@ def programs(draw):
 def test_every_formulation_gives_a_verified_output(formulation, text, firmware, rotate, order):
     program = parse(text)
     budget = {"max_added_time_pct": 5.0} if firmware != "3dgates" and formulation in ("milp", "cpsat") else {}
-    opts = GatingOptions.for_firmware(firmware, rotate=rotate, num_workers=1, **budget)
+    opts = GatingOptions.for_firmware(firmware, rotate=rotate, num_workers=1, bed_size_mm=(250, 250), **budget)
     res = run(program, opts, formulation=formulation, time_limit_s=10.0, order=order)
     assert res.report.ok, [str(f) for f in res.report.findings[:3]]
     assert res.report.energy_j <= res.report.energy_before_j + 1e-6 or firmware != "3dgates"
@@ -135,7 +135,7 @@ def test_mutated_real_files_give_a_clear_error_or_a_verified_output(tmp_path, ca
         code = main(["solve", str(src), "-o", str(out), "--rotate", "none", "--time-limit", "10"])
         err = capsys.readouterr().err.strip()
         if code == 0:
-            assert verify(parse(src), parse(out)).ok, name
+            assert verify(parse(src), parse(out), firmware="marlin").ok, name     # the file's flavor
         else:
             assert code in (1, 2), name
             assert err.splitlines()[0].startswith("gatesopt: error:"), (name, err)

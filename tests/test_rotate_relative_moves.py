@@ -22,6 +22,7 @@ from gatesopt import verify as verify_mod
 from gatesopt.verify import verify
 
 ROT_ON, ROT_OFF = ";>rotated", ";<rotated"     # the lines in between are the rotated print
+BED = (400.0, 400.0)        # a rotation needs a bed the rotated print fits (issue 37)
 
 # Cura-like: a G91 block in the start G-code (before the print: stays where the slicer put it),
 # two layers with an arc, and Cura's end G-code (G91 wipe, an X-only move and a relative arc).
@@ -130,7 +131,7 @@ def _expected_ends(p, deg, center, rotated):
 
 def _rotate_only(p, deg):
     """Rotation alone, with the pipeline's rotated rows and centre: one output move per move."""
-    prob = build(p, GatingOptions(rotate=deg))
+    prob = build(p, GatingOptions(rotate=deg, bed_size_mm=BED))
     assert float(prob.angles_deg[0]) == pytest.approx(deg % 360)
     center = tuple(float(v) for v in prob.center_mm)
     r = render(p, [], rotation_deg=deg, center_mm=center, rotate_rows=(prob.rotate_lo, prob.rotate_hi))
@@ -219,7 +220,7 @@ def test_print_in_g91_keeps_its_rotated_geometry(deg):
 def test_pipeline_output_verifies_positions(deg, name):
     text = CURA_LIKE if name == "cura" else _g91_print(20)
     p = gatesopt.parse(text)
-    res = run(p, GatingOptions(rotate=deg), order=False)
+    res = run(p, GatingOptions(rotate=deg, bed_size_mm=BED), order=False)
     assert res.report.ok, [str(f) for f in res.report.findings]
     assert "positions" in res.report.checks
     assert res.text.startswith(f"; gatesopt: rotate_deg={deg} ")
@@ -304,10 +305,10 @@ def test_a_gated_file_is_not_rotated_again():
     why; a fixed angle is refused with the file and line of the first such line."""
     from gatesopt.errors import GatesoptError
     p = gatesopt.parse(CURA_LIKE)
-    gated = run(p, GatingOptions(rotate=30), order=False)
+    gated = run(p, GatingOptions(rotate=30, bed_size_mm=BED), order=False)
     assert gated.report.ok and gated.solution.instructions().time_s.size
-    again = run(gated.output, GatingOptions(rotate="auto"), order=False)
+    again = run(gated.output, GatingOptions(rotate="auto", bed_size_mm=BED), order=False)
     assert again.report.ok and again.report.rotate_deg == 0.0
     assert any("rotation kept at 0 deg" in n and "already gated" in n for n in again.notes)
     with pytest.raises(GatesoptError, match=r"\(output\):\d+: the file switches an X/Y motor off"):
-        run(gated.output, GatingOptions(rotate=90), order=False)
+        run(gated.output, GatingOptions(rotate=90, bed_size_mm=BED), order=False)

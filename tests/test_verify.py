@@ -191,7 +191,7 @@ def test_a_rotated_piece_ending_on_an_unrelated_vertex_still_verifies():
     from gatesopt.gating import GatingOptions
     from gatesopt.verify.geometry import _near
     p = gatesopt.parse(ROTATED_SPLIT)
-    res = run(p, GatingOptions(rotate=45.0), formulation="dp", order=False)
+    res = run(p, GatingOptions(rotate=45.0, bed_size_mm=(300, 300)), formulation="dp", order=False)
     assert res.report.ok, [str(f) for f in res.report.findings]
     # the coincidence the test is about: a row of the output ends on an original vertex as written
     out = res.output
@@ -227,7 +227,8 @@ G1 X100 Y105 F7800
 G1 X100 Y100 E4.8
 """)
     out = tmp_path / "out.gcode"
-    assert main(["solve", str(src), "-o", str(out), "--firmware", "marlin", "--rotate", "45"]) == 0
+    assert main(["solve", str(src), "-o", str(out), "--firmware", "marlin", "--rotate", "45",
+                 "--bed", "200x200", "--max-added-time-pct", "none"]) == 0
     q = gatesopt.parse(str(out))
     assert read_rotation(q)[0] == 45.0
     assert not (q.kind == gatesopt.Kind.MOTOR).any()

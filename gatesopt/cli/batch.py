@@ -5,7 +5,7 @@ import sys
 
 from ..batch import BatchOptions, run_batch, summarize
 from .files import refuse_existing
-from .options import firmware_names
+from .options import BUDGET_NOT_GIVEN, add_firmware_options, budget_pct, motor_list
 
 NAME = "batch"
 HELP = "solve + verify many files, one result row each (CSV or JSON)"
@@ -17,10 +17,12 @@ def add_arguments(p) -> None:
     p.add_argument("paths", nargs="+", help="G-code files or folders")
     p.add_argument("--formulation", default="dp",
                    help="gating formulation, or several separated by commas (greedy,dp,milp)")
-    p.add_argument("--firmware", default="3dgates", choices=firmware_names())
-    p.add_argument("--motors", default="X,Y")
+    add_firmware_options(p)
+    p.add_argument("--motors", default=None)
     p.add_argument("--rotate", default="auto")
-    p.add_argument("--max-added-time-pct", type=float)
+    p.add_argument("--bed", default=None, metavar="WxD",
+                   help="bed size in mm for every file (default: the bed each file names; none: no rotation)")
+    p.add_argument("--max-added-time-pct", type=budget_pct, default=BUDGET_NOT_GIVEN, metavar="P|none")
     p.add_argument("--max-added-lines-pct", type=float)
     p.add_argument("--time-limit", type=float, default=60.0, help="seconds per solve")
     p.add_argument("--no-order", action="store_true")
@@ -38,9 +40,17 @@ def add_arguments(p) -> None:
 def run(args) -> int:
     refuse_existing(args.out, args.resume or args.force, "use --resume to continue it or --force to start over")
     forms = tuple(f.strip() for f in args.formulation.split(",") if f.strip())
-    opts = BatchOptions(formulation=forms[0], firmware=args.firmware,
-                        motors=tuple(m.strip().upper() for m in args.motors.split(",")), rotate=args.rotate,
-                        max_added_time_pct=args.max_added_time_pct, max_added_lines_pct=args.max_added_lines_pct,
+    bed = None
+    if args.bed:
+        from ..errors import GatesoptError
+        try:
+            bed = tuple(float(v) for v in args.bed.lower().split("x"))
+        except ValueError:
+            raise GatesoptError(f"--bed must look like 220x220, not {args.bed!r}") from None
+    opts = BatchOptions(formulation=forms[0], firmware=args.force_firmware or args.firmware,
+                        force_firmware=args.force_firmware is not None, bed_size_mm=bed,
+                        motors=None if args.motors is None else motor_list(args.motors), rotate=args.rotate,
+                        max_added_time_pct="default" if args.max_added_time_pct is BUDGET_NOT_GIVEN else args.max_added_time_pct, max_added_lines_pct=args.max_added_lines_pct,
                         time_limit_s=args.time_limit, order=not args.no_order, gating=not args.no_gating,
                         profile=args.profile, write_dir=args.write_dir)
     rows = run_batch(args.paths, opts, out=args.out, jobs=args.jobs, resume=args.resume, dask=args.dask,

@@ -7,8 +7,8 @@ import math
 
 from ..parse import parse
 from .files import check_distinct, check_new_file, write_json
-from .options import (add_gating_options, gating_formulations, gating_options, ordering_formulations,
-                      positive_s)
+from .options import (add_gating_options, firmware_choice, gating_formulations, gating_options,
+                      ordering_formulations, positive_s)
 from .progress import default_workers
 
 NAME = "compare"
@@ -61,10 +61,14 @@ def run(args) -> int:
                                   default_workers())
         print(format_compare_order(rows))
     else:
-        options = gating_options(args)
+        fields = gating_options(args)
         for path in args.files:
             program = parse(path)
-            rows += gating_rows(program, options, forms, args.time_limit)
+            choice = firmware_choice(args, program, **fields)   # per file: each names its printer
+            print(f"{program.source}: firmware {choice.line}")
+            if choice.options is None:
+                continue
+            rows += gating_rows(program, choice.options, forms, args.time_limit)
         print(format_compare(rows))
     if args.plot:
         plot_compare(rows, args.plot, ordering=args.ordering)

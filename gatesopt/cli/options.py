@@ -14,9 +14,9 @@ from ..errors import GatesoptError
 
 
 def firmware_names() -> tuple[str, ...]:
-    """The firmware presets (``gatesopt.firmware.PRESETS``)."""
-    from ..firmware import PRESETS
-    return tuple(PRESETS)
+    """The firmware dialects (``gatesopt.firmware.names``: one module each)."""
+    from ..firmware import names
+    return names()
 
 
 def gating_formulations() -> tuple[str, ...]:
@@ -39,12 +39,45 @@ def positive_s(value: float, flag: str) -> None:
         raise GatesoptError(f"{flag} must be > 0 s, not {value}")
 
 
+def budget_pct(text: str):
+    """``--max-added-time-pct``: a number, or "none" for no budget."""
+    import argparse
+    if str(text).strip().lower() == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a number or none, not {text!r}") from None
+
+
+class _NotGiven:
+    def __repr__(self) -> str:
+        return "the firmware's default"
+
+
+#: ``--max-added-time-pct`` not given: the firmware's default (``rewrite.printer.choose``); not a
+#: string, which argparse would pass through ``budget_pct``
+BUDGET_NOT_GIVEN = _NotGiven()
+
+
+def add_firmware_options(p) -> None:
+    """``--firmware`` (auto: read from the file) and ``--force-firmware`` (``solve``, ``compare``,
+    ``batch``)."""
+    p.add_argument("--firmware", choices=("auto",) + firmware_names(), default="auto",
+                   help="the printer's firmware, whose motor on/off lines gating writes (default auto: "
+                        "read from the file's flavor setting, printer model and Klipper commands, and "
+                        "said; marlin when the file names none). 3dgates (the paper's S0/S1) only by name")
+    p.add_argument("--force-firmware", choices=firmware_names(), default=None, metavar="NAME",
+                   help="write NAME's lines even where the file is for another firmware (refused "
+                        "without it: marlin's M18 on a Klipper file stops the print)")
+
+
 def add_gating_options(p) -> None:
     """The options of a gating run (``solve``, ``compare``)."""
-    p.add_argument("--firmware", choices=firmware_names(), default="3dgates",
-                   help="instruction dialect and cost model (default: 3dgates, the paper's S0/S1)")
-    p.add_argument("--motors", default="X,Y", metavar="X,Y",
-                   help="motors to gate, comma separated (default X,Y; Z and E opt-in)")
+    add_firmware_options(p)
+    p.add_argument("--motors", default=None, metavar="X,Y",
+                   help="motors to gate, comma separated (default X,Y, or what the firmware may gate "
+                        "of them; Z and E opt-in)")
     p.add_argument("--rotate", default="auto", metavar="auto|none|DEG",
                    help="rotate the model on the bed: auto (best angle), none, or degrees ccw "
                         "(a print of objects one at a time is never rotated)")
@@ -52,8 +85,10 @@ def add_gating_options(p) -> None:
                    help="switch a motor on at least this long before it steps (default 1.8, paper)")
     p.add_argument("--end-late-ms", type=float, default=1.0,
                    help="keep a motor on at least this long after it steps (default 1.0, paper)")
-    p.add_argument("--max-added-time-pct", type=float, default=None, metavar="P",
-                   help="budget: firmware stalls may add at most P %% to the print time")
+    p.add_argument("--max-added-time-pct", type=budget_pct, default=BUDGET_NOT_GIVEN, metavar="P|none",
+                   help="budget: firmware stalls may add at most P %% to the print time (default: 1 for "
+                        "firmware whose motor lines stall the print, Marlin, Klipper, RepRapFirmware; "
+                        "none for the paper's); none: no budget")
     p.add_argument("--max-added-lines-pct", type=float, default=None, metavar="P",
                    help="budget: at most P %% more lines")
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
@@ -63,13 +98,35 @@ def add_gating_options(p) -> None:
     p.add_argument("--threads", type=int, default=2, metavar="N",
                    help="solver threads (default 2); 1 makes every run byte-identical (seeds are fixed)")
     p.add_argument("--bed", default=None, metavar="WxD",
-                   help="bed size in mm for the rotation check (default: from the file's header)")
+                   help="bed size in mm, from 0,0: a rotation must fit it (default: the bed the file "
+                        "names; Cura files name none, and without a bed the print is not rotated)")
+    p.add_argument("--bed-margin", type=float, default=None, metavar="MM",
+                   help="a rotated print keeps this far from the bed's edges (default 5, or what the "
+                        "slicer's own placement kept where that is less)")
 
 
-def gating_options(args):
-    """``gatesopt.gating.GatingOptions`` from the options of ``add_gating_options``."""
-    from ..gating.options import GatingOptions
-    motors = tuple(m.strip().upper() for m in args.motors.split(",") if m.strip())
+def firmware_choice(args, program, **gating):
+    """``rewrite.printer.choose`` for ``program`` from ``--firmware``/``--force-firmware``,
+    ``--max-added-time-pct`` and ``--motors`` (given or not), with ``gating`` (GatingOptions fields)."""
+    from ..rewrite.printer import DEFAULT, choose
+    budget = getattr(args, "max_added_time_pct", BUDGET_NOT_GIVEN)
+    motors = None if args.motors is None else motor_list(args.motors)
+    forced = getattr(args, "force_firmware", None)
+    return choose(program, forced or args.firmware, force=forced is not None,
+                  max_added_time_pct=DEFAULT if budget is BUDGET_NOT_GIVEN else budget,
+                  motors=motors, **gating)
+
+
+def motor_list(text: str) -> tuple:
+    motors = tuple(m.strip().upper() for m in text.split(",") if m.strip())
+    if not motors:
+        raise GatesoptError("--motors names no motor")
+    return motors
+
+
+def gating_options(args) -> dict:
+    """The ``GatingOptions`` fields of ``add_gating_options`` other than the firmware, the time
+    budget and the motors (``firmware_choice`` decides those per file)."""
     rotate = args.rotate
     if rotate not in ("auto", "none"):
         try:
@@ -91,8 +148,8 @@ def gating_options(args):
             bed = (w, d)
         except ValueError:
             raise GatesoptError(f"--bed must look like 220x220, not {args.bed!r}") from None
-    return GatingOptions.for_firmware(
-        args.firmware, motors=motors, rotate=rotate, start_ahead_s=args.start_ahead_ms / 1e3,
-        end_late_s=args.end_late_ms / 1e3, max_added_time_pct=args.max_added_time_pct,
-        max_added_lines_pct=args.max_added_lines_pct, profile=args.profile, bed_size_mm=bed,
-        num_workers=args.threads)
+    if args.bed_margin is not None and not (math.isfinite(args.bed_margin) and args.bed_margin >= 0):
+        raise GatesoptError(f"--bed-margin must be >= 0 mm, not {args.bed_margin}")
+    return dict(rotate=rotate, start_ahead_s=args.start_ahead_ms / 1e3, end_late_s=args.end_late_ms / 1e3,
+                max_added_lines_pct=args.max_added_lines_pct, profile=args.profile, bed_size_mm=bed,
+                bed_margin_mm=args.bed_margin, num_workers=args.threads)

@@ -14,8 +14,8 @@ import time
 from ..errors import GatesoptError
 from .files import (STDIO, check_distinct, check_new_file, check_output, read_program, refuse_existing,
                     write_atomic, write_json, write_stdout)
-from .options import (add_gating_options, gating_formulations, gating_options, ordering_formulations,
-                      positive_s)
+from .options import (add_gating_options, firmware_choice, gating_formulations, gating_options,
+                      ordering_formulations, positive_s)
 from .progress import default_workers, group_progress
 from .summary import ordering_result_lines
 
@@ -65,9 +65,11 @@ def order_formulation_of(gating_formulation: str) -> str:
 def format_solve_report(s: dict) -> str:
     def pct(a, b):
         return 100.0 * (a / b - 1.0) if b else 0.0
+    at = f" at the {s['rotation_deg']:g} deg rotation chosen" if s["rotation_deg"] else ""
     lines = [
         f"file          {s['source']}",
-        f"formulation   {s['formulation'] or '-'} ({s['firmware']} firmware)   status {s['status']}"
+        f"firmware      {s.get('firmware_line') or s['firmware']}",
+        f"formulation   {s['formulation'] or '-'} ({s['firmware']} firmware)   status {s['status']}{at}"
         + (f"   bound {s['bound']:.3f} J" if s.get("bound") is not None else "")
         + (f"   gap {100 * s['gap']:.4f} %" if s.get("gap") is not None else "   gap n/a"),
         f"energy        {s['energy_before_j']:.1f} J -> {s['energy_after_j']:.1f} J"
@@ -76,9 +78,8 @@ def format_solve_report(s: dict) -> str:
         f"   ({pct(s['time_after_s'], s['time_before_s']):+.3f} %, firmware stalls included)",
         f"lines         +{s['lines_added']} ({s['instruction_lines']} instruction lines, {s['splits']} moves split)"
         f"   file size {s['size_change_pct']:+.2f} %",
-        (f"rotation      {s['rotation_deg']:g} deg about ({s['center_xy'][0]:.3f}, {s['center_xy'][1]:.3f})"
-         f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um" if s["rotation_deg"]
-         else "rotation      none"),
+        f"rotation      {s.get('rotation_line') or 'none'}"
+        + (f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um" if s["rotation_deg"] else ""),
         "off time      " + ("  ".join(f"{m} {t:.2f} s" for m, t in s["off_time_s"].items()) or "-"),
         f"solve         {s['solve_s']:.3f} s   (whole run {s['wall_s']:.2f} s)",
     ]
@@ -129,7 +130,7 @@ def run(args) -> int:
         check_distinct({"-o": None if args.in_place else out, "--json": args.json})
         check_new_file(args.json, [inp] if inp != STDIO else [], args.force)
     report_to = sys.stderr if out == STDIO else sys.stdout     # stdout carries the G-code
-    options = gating_options(args)
+    fields = gating_options(args)
     from ..ordering import OrderingOptions
     order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams,
                                     objective=args.objective)
@@ -137,11 +138,14 @@ def run(args) -> int:
     # ordering's unless --order-formulation does; dp is gating's alone (ordering: auto)
     order_formulation = args.order_formulation or order_formulation_of(args.formulation)
     program = read_program(inp)
+    # the firmware the file's printer runs, its budget, and the line that says so (issue 37)
+    choice = firmware_choice(args, program, **fields)
+    gating = not args.no_gating and choice.options is not None
     # the ordering starts now: its budget ends order_budget seconds from here
     with group_progress(sys.stderr.isatty() and not args.no_order,
                         deadline_s=time.perf_counter() + args.order_budget) as progress:
-        result = run_job(program, options, formulation=args.formulation, time_limit_s=args.time_limit,
-                         order=not args.no_order, gating=not args.no_gating,
+        result = run_job(program, choice.options, formulation=args.formulation, time_limit_s=args.time_limit,
+                         order=not args.no_order, gating=gating, choice=choice,
                          order_workers=default_workers(), order_budget_s=args.order_budget,
                          order_progress=progress, order_options=order_options,
                          order_formulation=order_formulation)

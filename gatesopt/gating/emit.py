@@ -27,7 +27,10 @@ What the text looks like:
   largest such correction. A relative move (G91) that starts in the rotated print says where to go
   *from there*: its XY delta is rotated (no translation) and it stays in the rotated frame
   (``rotated_run_end``), and its delta is written from the position the text before it reached,
-  so rounding does not add up over a run of relative moves.
+  so rounding does not add up over a run of relative moves. The slicer's statements of where
+  the print lies (Cura's ``;MINX:`` ... ``;MAXY:``, ideaMaker's ``;Bounding Box:``, Klipper's
+  ``EXCLUDE_OBJECT_DEFINE`` outlines, ``slicers.BOUNDS_FORMATS``) are rewritten for the rotated
+  print (``header_bounds``).
 
 Without rotation the text is written by a compiled pass over the lines (``emit_plain``,
 ``_emit_kernel``); the per-line ``emit_line.LineRewriter`` is the reference it must equal byte for
@@ -44,6 +47,7 @@ import re
 import numpy as np
 
 from .. import firmware as fwmod
+from .. import slicers
 from ..program import AXES, Kind, Program
 from .emit_line import (DECIMALS_INCH, DECIMALS_MM, DECIMALS_SPLIT_INCH, DECIMALS_SPLIT_MM, SNAP_MM,
                         SPLITTABLE, EmitError, EmitResult, LineRewriter, fmt_number, rotate_xy)
@@ -101,11 +105,13 @@ def render(program: Program, placed, *, firmware="3dgates", rotation_deg: float 
     before, cuts, moved, instr = _place_lines(program, fw, placed)
     rewrite = _rows_to_rewrite(program, em, cuts) if rotated else set(cuts)
     header = []
+    bounds = {}
     if rotated:
         header.append(ROTATE_HEADER.format(deg=fmt_number(float(rotation_deg), 9),
                                            cx=fmt_number(float(center_mm[0]), 6),
                                            cy=fmt_number(float(center_mm[1]), 6)))
-    out, added, splits = _write_lines(program, em, before, cuts, rewrite, header)
+        bounds = header_bounds(program, float(rotation_deg), center_mm)
+    out, added, splits = _write_lines(program, em, before, cuts, rewrite, header, bounds)
     return EmitResult("".join(out), added, instr, splits, moved, em.max_snap, float(rotation_deg),
                       (float(center_mm[0]), float(center_mm[1])), _notes(em, moved))
 
@@ -176,10 +182,22 @@ def _rows_to_rewrite(program: Program, em: LineRewriter, cuts: dict) -> set:
     return rewrite
 
 
+def header_bounds(program: Program, deg: float, center_mm) -> dict[int, str]:
+    """{line: new text} of the slicer's bounds lines of ``program`` (``slicers.BOUNDS_FORMATS``)
+    for the print rotated by ``deg`` about ``center_mm``: boxes become the box of the rotated
+    extrusions (of the print's layers), outlines turn with it."""
+    ext = np.flatnonzero(program.extruding & (program.layer >= 0))
+    pts = np.concatenate((program.start_mm[ext, :2], program.end_mm[ext, :2]))
+    return slicers.rotated_bounds(program.data, program.line_start,
+                                  lambda p: rotate_xy(np.asarray(p, float), deg, center_mm), pts)
+
+
 def _write_lines(program: Program, em: LineRewriter, before: dict, cuts: dict, rewrite: set,
-                 header: list) -> tuple[list, int, int]:
+                 header: list, replace: dict | None = None) -> tuple[list, int, int]:
     """(output text pieces, lines added, steps split): every line in order, the rows in
-    ``rewrite`` through ``em.rewrite``, the others byte for byte."""
+    ``rewrite`` through ``em.rewrite``, the lines in ``replace`` (line -> text) as given there,
+    the others byte for byte."""
+    replace = replace or {}
     n = program.n_steps
     nl = program.line_ending
     row_of_line = {int(program.line[r]): r for r in range(n)}
@@ -194,6 +212,9 @@ def _write_lines(program: Program, em: LineRewriter, before: dict, cuts: dict, r
         if li == program.n_lines:
             break
         r = row_of_line.get(li)
+        if r is None and li in replace:
+            out.append(replace[li])
+            continue
         if r is None or r not in rewrite:
             out.append(program.line_text(li))
             if r is not None:
@@ -254,13 +275,22 @@ def render_switches(program: Program, switches, **kw) -> EmitResult:
 
 def emit_result(program: Program, solution, firmware=None) -> EmitResult:
     """Emit with the full report (lines added, splits, snaps). ``firmware`` defaults to the one
-    the solution's options name."""
+    the solution's options name.
+
+    A solution at a rotation other than 0 is refused: its switch times were placed on the
+    unrotated moves, and rotated moves snapped to one axis run a little longer or shorter, so a
+    switch may land inside end-late or start-ahead of a rotated step ("motor Y steps while off").
+    ``gatesopt.rewrite.run`` does the whole job: rotates, parses the rotated print and solves it
+    again, then emits that."""
     fw = firmware or getattr(solution.problem.options, "firmware", "3dgates")
     prob = solution.problem
     rotated = float(solution.rotation_deg) % 360.0 != 0.0
-    placed = solution_placed(solution) if rotated else solution_arrays(solution)
-    return render(program, placed, firmware=fw, rotation_deg=solution.rotation_deg,
-                  center_mm=tuple(float(v) for v in solution.center_mm),
+    if rotated:
+        raise EmitError(f"{program.source}: this solution rotates the print by {solution.rotation_deg:g} deg: "
+                        "its switches were timed on the unrotated moves; use gatesopt.rewrite.run(program, "
+                        "options), which rotates, solves the rotated print again and emits that (or build "
+                        "with rotate='none')")
+    return render(program, solution_arrays(solution), firmware=fw, rotation_deg=0.0,
                   rotate_rows=(prob.rotate_lo, prob.rotate_hi), snap=solution_snap(solution))
 
 

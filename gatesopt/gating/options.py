@@ -34,7 +34,12 @@ class GatingOptions:
     rotate: str | float = "auto"        # "auto" | "none" | degrees (counter-clockwise)
     max_angles: int = 16                # cap on rotation candidates under "auto" (plus 0/30/60)
     snap_mm: float = 1e-3               # other-axis displacement below this -> single-axis move
-    bed_size_mm: tuple[float, float] | None = None   # None: program.header["bed_size_mm"], else no check
+    bed_size_mm: tuple[float, float] | None = None   # None: the bed the file names (rotation.bed_of);
+                                        # no bed known: no rotation (issue 37)
+    bed_margin_mm: float | None = None  # a rotated print's least distance to the bed's edges (None:
+                                        # rotation.BED_MARGIN_MM, or less where the slicer kept less)
+    check_bed: bool = True              # False: rotations are not checked against a bed (a model
+                                        # experiment, e.g. ``report.rotation_sweep``: nothing printed)
     profile: str = "paper"              # energy profile name or TOML path
     firmware: str = "3dgates"           # label only (the numbers below are what the solver uses)
     stall_off_s: float = 0.0            # stall per off line (whole printer keeps drawing power)
@@ -60,7 +65,7 @@ class GatingOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise GatingOptionsError(f"{name} must be a finite number >= 0, not {v!r}")
-        for name in ("max_added_time_pct", "max_added_lines_pct"):
+        for name in ("max_added_time_pct", "max_added_lines_pct", "bed_margin_mm"):
             v = getattr(self, name)
             if v is not None and not (math.isfinite(v) and v >= 0):
                 raise GatingOptionsError(f"{name} must be >= 0 or None, not {v!r}")

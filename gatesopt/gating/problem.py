@@ -92,6 +92,8 @@ class GatingProblem:
     time_before_s: float = 0.0     # total_s + own_stall_s.sum()
     header: dict = field(default_factory=dict, repr=False)
     notes: tuple[str, ...] = ()    # what the user should know about the choices made (rotation)
+    rotation_plan: object = field(default=None, repr=False)   # rotation.RotationPlan: the bed, the
+                                   # margin and why the candidates are what they are
     # --- the file's own motor lines (start G-code M17, a mid-print M84 ...) -----------------------
     # their firmware stalls (``gatesopt.firmware.stall_durations``, as the verifier prices them):
     # a fixed cost of the print, whatever gating does; one stall piece each in ``Pieces``
@@ -371,7 +373,8 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
     center = rotation_center(program, lo, hi)
     gated = o.motor_index
     asym = (X in gated) != (Y in gated) or not np.array_equal(rate[:, X], rate[:, Y])
-    angles, notes = rotation_candidates(program, o, lo, hi, center, asym, dur, steps0, arc)
+    plan = rotation_candidates(program, o, lo, hi, center, asym, dur, steps0, arc)
+    angles, notes = list(plan.angles_deg), list(plan.notes)
     angles_arr = np.array(angles)
     table = _angle_table(program, o, angles, lo, hi, center, dur, rate, steps0, arc)
     idle, has_idle = _built_idle_intervals(o, angles_arr, table, start_s, dur, rates, stall_w)
@@ -391,4 +394,4 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
         angle_built=ro(has_idle),
         **{k: ro(v) for k, v in idle.items()},
         energy_before_j=energy_before, time_before_s=T + float(own_s.sum()), header=dict(program.header),
-        notes=tuple(notes), own_stall_row=ro(own_row.astype(np.int64)), own_stall_s=ro(own_s))
+        notes=tuple(notes), rotation_plan=plan, own_stall_row=ro(own_row.astype(np.int64)), own_stall_s=ro(own_s))

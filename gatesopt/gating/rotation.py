@@ -3,18 +3,40 @@ centre, the candidate angles and the policy that keeps 0 deg (a print of objects
 file that gates its own motors, a bed the rotated print does not fit).
 
 3DGates (Chen et al., ASPLOS'17) Section 4.3 turns the model in 30 deg steps (Algorithm 1 lines
-6-8, ``greedy_angle``); ``candidate_angles`` adds the angles that make the print's moves single-axis.
+6-8, ``greedy_angle``); ``candidate_angles`` adds the angles that make the print's moves single-axis,
+exactly (45 deg, and the slicer's infill angle where its rounded coordinates scatter the moves'
+directions around it).
+
+A rotation moves the print on the bed, so it needs the bed (issue 37): from ``--bed WxD``
+(``GatingOptions.bed_size_mm``) or the file (``slicers.read_bed``: PrusaSlicer's ``bed_shape``,
+Orca's ``printable_area``, ...). Without one the print stays where the slicer put it. With one,
+a rotated print must keep ``BED_MARGIN_MM`` from the bed's edges, or as much as the slicer's own
+placement kept where that is less (``RotationPlan``).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import firmware as fw_mod
+from .. import slicers
 from ..errors import InfeasibleError
 from ..program import Kind, Program, X, Y
 from . import _kernels as _k
+
+#: a rotated print keeps at least this far (mm) from the bed's edges -- a bed clip, a wipe past
+#: the part's edge -- or as far as the slicer's own placement kept, where that is less (the
+#: slicer's placement shows what its printer profile allows); ``GatingOptions.bed_margin_mm``
+#: sets it instead
+BED_MARGIN_MM = 5.0
+#: the exact angles always among the candidates (mod 90): the paper's 30-degree steps and 45
+BASE_ANGLES_DEG = (0.0, 30.0, 45.0, 60.0)
+#: a candidate this close (deg) to a whole degree is tried at the whole degree too: slicers write
+#: lines at their infill angle (45, 60, ...) and round the coordinates, which scatters the moves'
+#: directions by up to ~1e-3 deg around it
+WHOLE_DEGREE_DEG = 0.05
 
 def rotation_matrix(deg: float) -> np.ndarray:
     """Counter-clockwise rotation; exact for multiples of 90 degrees."""
@@ -63,25 +85,17 @@ def greedy_angle(angles_deg, straight_moves) -> int:
     return int(steps30[np.argmax(np.asarray(straight_moves)[steps30])])
 
 
-def bed_fits(start_mm, end_mm, lo, hi, center, deg, bed) -> bool:
-    """Every rotated end point of rows [lo, hi) lies on the ``bed`` (W, H) mm; no bed: True."""
-    if bed is None or hi <= lo or deg % 360.0 == 0.0:
-        return True         # the slicer's own placement is taken as valid
-    pts = rotate_points(end_mm[lo:hi, :2], center, deg)
-    tol = 1e-6
-    return bool(pts.min() >= -tol and pts[:, 0].max() <= bed[0] + tol and pts[:, 1].max() <= bed[1] + tol)
-
-
 def candidate_angles(start_mm, end_mm, duration_s, steps0, arc, lo, hi, center, opts, asym):
     """Rotation candidates (degrees in [0, 90), or [0, 180) when X and Y are not symmetric).
 
     An XY move of direction theta runs on one axis after rotating by (-theta mod 90); energy is
     piecewise constant in the angle and can only improve where a move becomes single-axis, so the
     optimum (snap tolerance 0, no bed limit) is one of these angles. We keep the ``max_angles`` with
-    the most single-axis time, plus 0, 30, 60 (the paper's 30-degree sweep modulo 90).
+    the most single-axis time (each cluster's whole degree too, where it scatters around one),
+    plus ``BASE_ANGLES_DEG`` (the paper's 30-degree sweep modulo 90, and 45).
     See formulations/gating.md "Rotation".
     """
-    base = [0.0, 30.0, 60.0]
+    base = list(BASE_ANGLES_DEG)
     rows = np.arange(lo, hi)
     d = end_mm[rows, :2] - start_mm[rows, :2]
     L = np.hypot(d[:, 0], d[:, 1])
@@ -108,6 +122,15 @@ def candidate_angles(start_mm, end_mm, duration_s, steps0, arc, lo, hi, center, 
             t = np.radians(deg)
             return _k.single_axis_time(dx, dy, wc, math.cos(t), math.sin(t), float(opts.snap_mm))
         scores = np.array([single_time(r) for r in reps])
+        # the whole degree a cluster of directions scatters around (the slicer's infill angle)
+        # stands for the cluster where it makes at least as much time single-axis
+        whole = np.round(reps)
+        for i in np.flatnonzero((np.abs(reps - whole) <= WHOLE_DEGREE_DEG) & (reps != whole)):
+            sw = single_time(whole[i])
+            if sw >= scores[i]:
+                reps[i], scores[i] = whole[i], sw
+        reps, first_rep = np.unique(reps, return_index=True)
+        scores = scores[first_rep]
         best = reps[np.argsort(-scores, kind="stable")][: opts.max_angles]
         cands += [float(b) for b in best]
     out = []
@@ -223,13 +246,114 @@ def rotation_center(program: Program, lo: int, hi: int) -> np.ndarray:
     return (pts.min(axis=0) + pts.max(axis=0)) / 2.0
 
 
-def bed_size_mm(program: Program, options) -> tuple[float, float] | None:
-    """The bed a rotated print must fit: ``options.bed_size_mm``, else the file's header, else None
-    (no bed check)."""
-    bed = options.bed_size_mm
+# -- the bed -----------------------------------------------------------------------------------------
+def bed_of(program: Program, options) -> slicers.Bed | None:
+    """The bed a rotated print must stay on: ``options.bed_size_mm`` (``--bed WxD``, from 0, 0),
+    else the one the file names (``slicers.read_bed``), else ``program.header["bed_size_mm"]``
+    (``gating.from_moves``), else None."""
+    if options.bed_size_mm is not None:
+        w, d = options.bed_size_mm
+        return slicers.rectangle_bed(0.0, 0.0, w, d, "--bed")
+    bed = slicers.read_bed(program.data) if len(program.data) else None
     if bed is None and program.header.get("bed_size_mm") is not None:
-        bed = tuple(float(v) for v in program.header["bed_size_mm"])
+        w, d = (float(v) for v in program.header["bed_size_mm"])
+        x0, y0 = (float(v) for v in program.header.get("bed_min_mm", (0.0, 0.0)))
+        bed = slicers.rectangle_bed(x0, y0, x0 + w, y0 + d, "header")
     return bed
+
+
+def _edges(polygon) -> tuple[np.ndarray, np.ndarray]:
+    """(m, 2) outward unit normals and (m,) offsets of the convex hull of ``polygon``: a point p
+    is inside iff n . p <= c on every edge, and c - n . p is its distance to that edge. (Beds are
+    rectangles and circles; a non-convex custom bed is taken as its hull.)"""
+    pts = np.asarray(polygon, float)
+    try:
+        from scipy.spatial import ConvexHull
+        pts = pts[ConvexHull(pts).vertices]          # counter-clockwise
+    except Exception:                               # degenerate: keep the polygon as given
+        area = np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1])
+        if area < 0:
+            pts = pts[::-1]
+    d = np.roll(pts, -1, axis=0) - pts
+    n = np.column_stack((d[:, 1], -d[:, 0]))        # right of a ccw edge: outward
+    L = np.hypot(n[:, 0], n[:, 1])
+    keep = L > 0
+    n = n[keep] / L[keep, None]
+    return n, np.einsum("ij,ij->i", n, pts[keep])
+
+
+@dataclass(frozen=True, eq=False)
+class PrintOutline:
+    """What of rows [lo, hi) can reach the bed's edge: the convex hull of their end points (the
+    farthest point in any direction is one of them) and the arcs, whose bulge lies between."""
+
+    hull_mm: np.ndarray         # (k, 2)
+    arc_start_mm: np.ndarray    # (a, 2)
+    arc_end_mm: np.ndarray
+    arc_center_mm: np.ndarray
+    arc_ccw: np.ndarray         # (a,) bool
+
+
+def print_outline(program: Program, lo: int, hi: int) -> PrintOutline:
+    pts = np.asarray(program.end_mm[lo:hi, :2], float)
+    if len(pts) >= 3:
+        try:
+            from scipy.spatial import ConvexHull
+            pts = pts[ConvexHull(pts).vertices]
+        except Exception:                           # collinear or too few: every point
+            pass
+    arcs = np.flatnonzero(program.kind[lo:hi] == Kind.ARC) + lo
+    arcs = arcs[arcs > lo]                          # the first row's start is not rotated
+    return PrintOutline(pts, np.asarray(program.start_mm[arcs, :2], float),
+                        np.asarray(program.end_mm[arcs, :2], float),
+                        np.asarray(program.arc_center_mm[arcs], float), np.asarray(program.arc_ccw[arcs], bool))
+
+
+def clearance_mm(outline: PrintOutline, bed: slicers.Bed, center, deg: float) -> float:
+    """The least distance from the print rotated by ``deg`` about ``center`` to the bed's edges
+    (negative: that far outside it). An arc reaches out to ``centre + r n`` in the direction n of
+    an edge where that lies within its sweep, else as far as its end points."""
+    n, c = _edges(bed.polygon_mm)
+    if not len(n):
+        return math.inf
+    pts = rotate_points(outline.hull_mm, center, deg) if len(outline.hull_mm) else np.zeros((0, 2))
+    reach = (pts @ n.T).max(axis=0) if len(pts) else np.full(len(n), -math.inf)
+    if len(outline.arc_center_mm):
+        s = rotate_points(outline.arc_start_mm, center, deg)
+        e = rotate_points(outline.arc_end_mm, center, deg)
+        cc = rotate_points(outline.arc_center_mm, center, deg)
+        r = np.hypot(*(s - cc).T)
+        a0 = np.arctan2(*(s - cc).T[::-1])
+        a1 = np.arctan2(*(e - cc).T[::-1])
+        two_pi = 2.0 * math.pi
+        sweep = np.where(outline.arc_ccw, np.mod(a1 - a0, two_pi), np.mod(a0 - a1, two_pi))
+        sweep = np.where(sweep <= 1e-12, two_pi, sweep)          # start == end: a full circle
+        for k in range(len(n)):
+            phi = math.atan2(n[k, 1], n[k, 0])
+            off = np.where(outline.arc_ccw, np.mod(phi - a0, two_pi), np.mod(a0 - phi, two_pi))
+            ends = np.maximum(s @ n[k], e @ n[k])
+            far = np.where(off <= sweep, cc @ n[k] + r, ends)
+            reach[k] = max(reach[k], float(far.max()))
+    return float((c - reach).min())
+
+
+@dataclass(frozen=True)
+class RotationPlan:
+    """The rotation candidates of a file and what decided them (``rotation_candidates``)."""
+
+    angles_deg: tuple           # candidates that fit the bed (0 always, the slicer's placement)
+    how: str                    # "auto" | "fixed" | "none"
+    why_none: str = ""          # why the print stays at 0 deg whatever the solver says ("" if it may turn)
+    bed: slicers.Bed | None = None
+    margin_mm: float = math.nan         # kept from the bed's edges by a rotated print
+    slicer_clearance_mm: float = math.nan   # what the slicer's own placement kept
+    notes: tuple = ()
+
+    def clearance_words(self, clearance: float) -> str:
+        """e.g. "fits the 250 x 210 mm bed (bed_shape, line 24627) with 5 mm margin (12.3 mm to
+        the nearest edge; the slicer kept 48.1 mm)"."""
+        return (f"fits the {self.bed.describe()} with {self.margin_mm:.3g} mm margin ({clearance:.1f} mm "
+                f"to the nearest edge; the slicer's placement kept {self.slicer_clearance_mm:.1f} mm)")
 
 
 def _kept_unrotated(program: Program, options, lo: int, hi: int, notes: list) -> bool:
@@ -262,35 +386,62 @@ def _kept_unrotated(program: Program, options, lo: int, hi: int, notes: list) ->
 
 
 def rotation_candidates(program: Program, options, lo: int, hi: int, center, asym: bool,
-                        duration_s, steps0, arc) -> tuple[list[float], list[str]]:
-    """(angles that fit the bed, notes): the candidates of ``options.rotate`` ("none": 0; a number:
-    that angle; "auto": ``candidate_angles``) for rows [lo, hi) about ``center``. Under "auto" a
-    candidate that does not fit the bed is replaced by itself + 180 deg (and +-90 deg when X and Y
-    are symmetric, ``asym`` False) if that fits, else dropped. Raises ``InfeasibleError`` when no
-    angle fits (an explicit one) or the policy forbids an explicit angle (``_kept_unrotated``)."""
+                        duration_s, steps0, arc) -> RotationPlan:
+    """The rotation candidates of ``options.rotate`` for rows [lo, hi) about ``center``: "none":
+    0; a number: that angle; "auto": ``candidate_angles``, each only where the rotated print fits
+    the bed (``bed_of``) with the margin (a candidate that does not fit is replaced by itself +
+    180 deg, and +-90 deg when X and Y are symmetric, ``asym`` False, if that fits). No bed: 0 only
+    under "auto" (an angle is refused). Raises ``InfeasibleError`` for an angle that the policy
+    forbids (``_kept_unrotated``) or that does not fit."""
     o = options
     gated = o.motor_index
     notes: list[str] = []
     kept = _kept_unrotated(program, o, lo, hi, notes)
-    if o.rotate == "none" or hi <= lo or not (X in gated or Y in gated) or kept:
-        cands = [0.0]
-    elif o.rotate == "auto":
-        cands = candidate_angles(program.start_mm, program.end_mm, duration_s, steps0, arc, lo, hi,
-                                 center, o, asym)
-    else:
-        cands = [float(o.rotate) % 360.0]
-    bed = bed_size_mm(program, o)
+    if o.rotate == "none":
+        return RotationPlan((0.0,), "none", "--rotate none", notes=tuple(notes))
+    how = "auto" if o.rotate == "auto" else "fixed"
+    fixed = None if how == "auto" else float(o.rotate) % 360.0
+    if hi <= lo or not (X in gated or Y in gated):
+        return RotationPlan((0.0,), how, "no X/Y motor gated" if hi > lo else "nothing printed", notes=tuple(notes))
+    if kept:
+        return RotationPlan((0.0,), how, notes[-1] if notes else "kept as the slicer placed it", notes=tuple(notes))
+    if fixed == 0.0:
+        return RotationPlan((0.0,), how, f"--rotate {o.rotate}", notes=tuple(notes))
+    if not o.check_bed:         # a model experiment: every candidate, no bed
+        angles = (fixed,) if fixed is not None else tuple(candidate_angles(
+            program.start_mm, program.end_mm, duration_s, steps0, arc, lo, hi, center, o, asym))
+        return RotationPlan(angles, how, notes=tuple(notes) + ("rotation not checked against a bed (check_bed=False)",))
+    bed = bed_of(program, o)
+    if bed is None:
+        if fixed is not None:
+            raise InfeasibleError(f"{program.source}: --rotate {float(o.rotate):g}: the bed size is unknown (the "
+                                  "file names none): give --bed WxD so the rotated print can be checked against it")
+        return RotationPlan((0.0,), how, "bed size unknown: --bed WxD to allow it", notes=tuple(notes))
+    outline = print_outline(program, lo, hi)
+    c0 = clearance_mm(outline, bed, center, 0.0)
+    if c0 < -1e-6:
+        msg = (f"the print reaches {-c0:.1f} mm past the edge of the {bed.describe()}: not the bed it "
+               "was sliced for? (--bed WxD)")
+        if fixed is not None:
+            raise InfeasibleError(f"{program.source}: --rotate {fixed:g}: {msg}")
+        return RotationPlan((0.0,), how, msg, bed, notes=tuple(notes))
+    margin = float(o.bed_margin_mm) if o.bed_margin_mm is not None else min(BED_MARGIN_MM, c0)
+    plan = dict(bed=bed, margin_mm=margin, slicer_clearance_mm=c0, notes=tuple(notes))
+    if fixed is not None:
+        c = clearance_mm(outline, bed, center, fixed)
+        if c < margin - 1e-6:
+            raise InfeasibleError(
+                f"{program.source}: the print rotated by {fixed:g} deg about ({center[0]:.3f}, {center[1]:.3f}) "
+                f"does not fit the {bed.describe()} with {margin:.3g} mm margin ({c:.1f} mm to its edge)")
+        return RotationPlan((fixed,), how, **plan)
     angles = []
-    for c in cands:
+    for cand in candidate_angles(program.start_mm, program.end_mm, duration_s, steps0, arc, lo, hi,
+                                 center, o, asym):
         # a quarter turn more keeps the single-axis structure (swapping X and Y): try those if the
         # angle itself does not fit the bed
-        tries = [c] if o.rotate != "auto" else [c, c + 180.0] + ([] if asym else [c + 90.0, c + 270.0])
-        for t in tries:
+        for t in [cand, cand + 180.0] + ([] if asym else [cand + 90.0, cand + 270.0]):
             t = t % 360.0
-            if bed_fits(program.start_mm, program.end_mm, lo, hi, center, t, bed):
+            if t == 0.0 or clearance_mm(outline, bed, center, t) >= margin - 1e-6:
                 angles.append(t)
                 break
-    if not angles:
-        raise InfeasibleError(f"{program.source}: the print rotated by {cands[0]:g} deg about "
-                              f"({center[0]:.3f}, {center[1]:.3f}) does not fit the {bed[0]:g} x {bed[1]:g} mm bed")
-    return angles, notes
+    return RotationPlan(tuple(angles), how, **plan)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from ..gating.emit import EmitResult, emit_result, render
 from ..gating.options import GatingOptions
 from ..gating.problem import build
+from ..gating.rotation import clearance_mm, print_outline
 from ..gating.solution import GatingSolution
 from ..gating.solve import solve
 from ..ordering.problem import OrderingOptions
@@ -24,6 +25,7 @@ from ..program import Program
 from ..solvers import Status
 from ..verify import VerifyReport, check_ordering, check_positions, energy_of, verify
 from .order import kept_slower_note, order_summary, reorder
+from .printer import FirmwareChoice, choose
 
 #: the keys of the ordering's report that ``gatesopt solve --json`` carries (issue 4: "--json as
 #: for gating, keys travel_before_mm, travel_after_mm added"); the rest of that report is under
@@ -48,6 +50,8 @@ class RunResult:
     wall_s: float
     order_problem: object = None        # the OrderingProblem, when curves were ordered
     order_summary: dict | None = None   # the ordering's report (``rewrite.order.order_summary``)
+    choice: FirmwareChoice | None = None    # the firmware chosen for the file (``printer.choose``)
+    rotation: dict | None = None        # how the rotation was chosen (``rotation_report``)
 
     def summary(self) -> dict:
         """The report keys of ``gatesopt solve --json`` (issue 3)."""
@@ -75,6 +79,10 @@ class RunResult:
             "off_time_s": s.off_time_s() if s else {},
             "message": s.message if s else "",
             "notes": list(self.notes), "wall_s": self.wall_s,
+            "firmware_line": self.choice.line if self.choice else f"{r.firmware} (given)",
+            "firmware_choice": self.choice.summary() if self.choice else None,
+            "rotation_line": (self.rotation or {}).get("line", "none"),
+            "rotation": self.rotation,
         }
         if self.order_summary is not None:
             o = self.order_summary
@@ -133,6 +141,7 @@ def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes
     notes += list(problem.notes)
     sol = _solve_interruptible(problem, formulation, time_limit_s, notes)
     deg = sol.rotation_deg
+    rotation = rotation_report(base, problem, deg, sol.formulation)
     max_snap = 0.0
     if deg % 360.0 != 0.0:
         rot = render(base, [], firmware=o.firmware, rotation_deg=deg,
@@ -146,7 +155,49 @@ def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes
     em = emit_result(base, sol, firmware=o.firmware)
     em = dataclasses.replace(em, max_snap_mm=max(em.max_snap_mm, max_snap), rotation_deg=deg)
     notes += list(em.notes)
-    return base, sol, em
+    return base, sol, em, rotation
+
+
+def _angle_list(angles) -> str:
+    base = [a for a in angles if float(a) in (0.0, 30.0, 45.0, 60.0)]
+    rest = len(angles) - len(base)
+    words = ", ".join(f"{a:g}" for a in base)
+    return words + (f" deg and {rest} of the print's line directions" if rest else " deg")
+
+
+def rotation_report(program: Program, problem, deg: float, formulation: str) -> dict:
+    """How the rotation of a solve was chosen and what it was checked against, with the one line
+    that says so: the angle (or why none), among which candidates, by what, on which bed."""
+    plan = problem.rotation_plan
+    angles = [float(a) for a in problem.angles_deg]
+    d = {"deg": float(deg), "how": getattr(plan, "how", "auto"), "candidates_deg": angles,
+         "chosen_by": formulation, "why_none": getattr(plan, "why_none", ""),
+         "bed": plan.bed.describe() if plan is not None and plan.bed is not None else None,
+         "margin_mm": getattr(plan, "margin_mm", None), "clearance_mm": None}
+    if plan is None:
+        d["line"] = f"{deg:g} deg" if deg % 360.0 else "none"
+        return d
+    if plan.why_none:
+        d["line"] = f"none ({plan.why_none})"
+        return d
+    if plan.how == "auto":
+        chosen = (f"the best of {len(angles)} candidate angles ({_angle_list(angles)}) by {formulation}'s "
+                  f"energy")
+    else:
+        chosen = f"--rotate {deg:g}"
+    bed_words = f", on the {plan.bed.describe()}" if plan.bed is not None else " (no bed check)"
+    if deg % 360.0 == 0.0:
+        d["line"] = f"none: 0 deg is {chosen}{bed_words}"
+        return d
+    cx, cy = (float(v) for v in problem.center_mm)
+    if plan.bed is None:
+        d["line"] = f"{deg:g} deg about ({cx:.3f}, {cy:.3f}), {chosen}; not checked against a bed (check_bed=False)"
+        return d
+    c = clearance_mm(print_outline(program, problem.rotate_lo, problem.rotate_hi), plan.bed,
+                     problem.center_mm, deg)
+    d["clearance_mm"] = c
+    d["line"] = f"{deg:g} deg about ({cx:.3f}, {cy:.3f}), {chosen}; {plan.clearance_words(c)}"
+    return d
 
 
 def _verify_run(program: Program, ordered_base: Program, out: Program, o: GatingOptions,
@@ -172,13 +223,21 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         time_limit_s: float | None = None, order: bool = True, gating: bool = True,
         order_time_limit_s: float = 2.0, order_workers: int = 1,
         order_budget_s: float | None = None, order_progress=None, order_options=None,
-        order_formulation: str = "auto") -> RunResult:
-    """Rewrite ``program``: optional curve ordering, then power gating; verify the result.
+        order_formulation: str = "auto", choice: FirmwareChoice | None = None) -> RunResult:
+    """Rewrite ``program`` as ``gatesopt solve`` does: optional curve ordering, then power gating
+    (a chosen rotation applied, the rotated print parsed and solved again); verify the result.
+    ``options``: the gating options; None: what fits the file's printer (``printer.choose``:
+    the firmware the file names, a time budget for stock firmware, rotation only on a known bed),
+    or ``choice.options`` where a ``choice`` is given (``printer.choose``, as the CLI makes it).
     ``order_options``: an ``ordering.OrderingOptions`` (mode, seams; default safe, seams kept);
     ``order_formulation``: the ordering's formulation (``auto``, ``milp``, ``cpsat``, ``greedy``,
     ``tsp``); ``order_progress``: called after each ordering group (``ordering.layers.solve``)."""
     program.check_rewritable()
     t0 = time.perf_counter()
+    if options is None:
+        choice = choice if choice is not None else choose(program)
+        options = choice.options
+        gating = gating and options is not None
     o = options or GatingOptions()
     notes = []
     base, ordered, order_problem, summarize = program, False, None, None
@@ -189,9 +248,9 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         if note:
             notes.append(note)
     ordered_base = base
-    sol = em = None
+    sol = em = rotation = None
     if gating:
-        base, sol, em = _gate(base, o, formulation, time_limit_s, notes, program.source)
+        base, sol, em, rotation = _gate(base, o, formulation, time_limit_s, notes, program.source)
         text = em.text
     else:
         text = base.to_gcode()
@@ -203,7 +262,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         order_report = summarize(extra if sol is not None else rep.findings)
     return RunResult(program, base, sol, em, text, out, rep, ordered, tuple(notes),
                      time.perf_counter() - t0, order_problem=order_problem,
-                     order_summary=order_report)
+                     order_summary=order_report, choice=choice, rotation=rotation)
 
 
 def energy_time(program: Program, firmware: str = "3dgates", profile: str = "paper"):

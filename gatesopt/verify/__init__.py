@@ -16,7 +16,9 @@ read the two Programs (``gatesopt.parse`` of the original and of the output) and
    unchanged and in order (only motor instructions and the rotation header may be added); for
    re-ordered output the heater and tool commands (and fans other than the part-cooling fan)
    keep their order, and each layer extrudes as much filament at each part-fan duty as before
-   (the re-ordering re-issues M106 / M107 where a curve needs it).
+   (the re-ordering re-issues M106 / M107 where a curve needs it). A rotated output's slicer
+   bounds lines (``;MINX:``, ``EXCLUDE_OBJECT_DEFINE`` outlines) are checked by ``bounds``: they
+   must state the rotated print's bounds.
 4. ``timing``: no motor steps while a motor instruction holds it off (on firmware that needs an
    explicit enable), each explicit enable comes at least ``start_ahead_s`` before the motor's next
    step, and no disable comes within ``end_late_s`` of the motor's last step (3DGates Sec. 4.4,
@@ -60,6 +62,7 @@ from dataclasses import dataclass, field
 from .. import firmware as fwmod
 from ..headers import HEADER_LINES, ORDER_PREFIX, ROTATE_PREFIX
 from ..program import Program
+from .bounds import bounds_line_numbers, check_bounds
 from .commands import CONTROL_COMMANDS, check_commands, fan_duty_s
 from .energy import CLAIM_REL_TOL, check_claim, claimed_energy_time, energy_of
 from .extrusion import E_REL_TOL, check_extrusion
@@ -76,7 +79,7 @@ from .timing import TIME_TOL_S, check_timing
 
 __all__ = ["verify", "VerifyReport", "Finding", "read_rotation", "energy_of", "check_geometry",
            "check_extrusion", "check_positions", "check_commands", "check_timing", "check_firmware",
-           "check_ordering", "check_barriers", "firmware_problem", "detect_firmware", "fan_duty_s",
+           "check_ordering", "check_barriers", "check_bounds", "firmware_problem", "detect_firmware", "fan_duty_s",
            "GEOMETRY_TOL_MM", "SHORT_MM", "PARTITION_MAX_PIECES", "E_REL_TOL", "TIME_TOL_S",
            "CLAIM_REL_TOL", "CONTROL_COMMANDS", "ROTATE_PREFIX", "ORDER_PREFIX"]
 
@@ -155,8 +158,15 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     else:
         findings += check_positions(original, output, tol_mm=geometry_tol_mm)
         checks.append("positions")
-    findings += check_commands(original, output, reordered=reordered)
+    exempt = ((), ())
+    if deg % 360.0 != 0.0:
+        # the slicer's bounds lines describe the rotated print: rewritten, checked on their own
+        exempt = (bounds_line_numbers(original), bounds_line_numbers(output))
+    findings += check_commands(original, output, reordered=reordered, exempt=exempt)
     checks.append("commands")
+    if deg % 360.0 != 0.0:
+        findings += check_bounds(original, output, deg, (cx, cy))
+        checks.append("bounds")
     # the firmware's own dialect first: timing read with the wrong firmware's rules means little
     findings += check_firmware(output, firmware=fw, original=original)
     checks.append("firmware")

@@ -56,11 +56,13 @@ def _check_fan_duty(original: Program, output: Program, max_findings: int) -> li
 
 
 def check_commands(original: Program, output: Program, *, reordered: bool = False,
-                   fan_duty: bool = True, max_findings: int = 5) -> list[Finding]:
+                   fan_duty: bool = True, max_findings: int = 5, exempt=((), ())) -> list[Finding]:
     """Control commands (heaters, tools, fans, ...) in the same order. ``reordered``: the part
     fan's lines may move and repeat; what counts is the filament each layer extrudes under each
     fan duty (``_check_fan_duty``), unless ``fan_duty`` is False (a caller that checks the fan
-    move by move, ``gatesopt.verify.ordering.check``, would otherwise report one fault twice)."""
+    move by move, ``gatesopt.verify.ordering.check``, would otherwise report one fault twice).
+    ``exempt``: (original lines, output lines) a rotation rewrote and another check compares (the
+    slicer's bounds lines, ``verify.bounds``)."""
     out: list[Finding] = []
     if reordered:
         def seq(p):
@@ -91,9 +93,11 @@ def check_commands(original: Program, output: Program, *, reordered: bool = Fals
         return out
     a = _non_motion_lines(original)
     b = _non_motion_lines(output)
+    a = a[~np.isin(a, np.asarray(exempt[0], np.int64))]
     inverse, texts = _text.distinct_lines(output, b)
     inserted = np.array([fwmod.parse_motor_line(t) is not None or t.startswith(ROTATE_PREFIX)
                          for t in texts], bool)[inverse]
+    inserted |= np.isin(b, np.asarray(exempt[1], np.int64))
     buf_a, buf_b = np.frombuffer(original.data, np.uint8), np.frombuffer(output.data, np.uint8)
     i = j = 0
     while i < len(a) and len(out) < max_findings:

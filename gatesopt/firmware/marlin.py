@@ -1,0 +1,50 @@
+"""The ``marlin`` dialect: Marlin 2.x.
+
+``Marlin/src/gcode/control/M17_M18_M84.cpp`` (read at MarlinFirmware/Marlin@008dcb7):
+``GcodeSuite::M18_M84()`` with axis words calls ``planner.synchronize()`` -- it waits until the
+motion queue is empty, i.e. the head decelerates to a full stop -- and then
+``stepper.disable_axis(X_AXIS)``. ``GcodeSuite::M17()`` calls ``stepper.enable_axis`` at once,
+without draining, so it takes effect when the command is *parsed*, up to a queue of moves
+(``BLOCK_BUFFER_SIZE``, 16 by default) before the moves around it run. A move with X steps
+re-enables X by itself when the planner queues it. Disabling marks the axis position untrusted;
+moves are refused only with ``NO_MOTION_BEFORE_HOMING`` + ``HOME_AFTER_DEACTIVATE``.
+
+The stall of a disable is a full stop. Under the paper's time model (T = L / F, no acceleration)
+a full stop has no meaning; ``MARLIN_STOP_S`` stands for it: decelerating from v to 0 and
+accelerating back costs v/(2a) + v/(2a) = v/a over moving at v throughout, at a typical print
+speed of 50 mm/s and Marlin's common printing acceleration of 1000 mm/s^2 0.05 s (an assumption,
+stated once; ``stall_durations(..., planner=...)`` replaces it with the planner's stop where the
+caller has one).
+
+Planner rules (``gatesopt.limits``, ``gatesopt.planner``): Marlin 2.x Configuration.h defaults
+(DEFAULT_MAX_FEEDRATE {300,300,5,25}, DEFAULT_MAX_ACCELERATION {3000,3000,100,10000},
+DEFAULT_ACCELERATION / RETRACT / TRAVEL 3000, CLASSIC_JERK off -> JUNCTION_DEVIATION_MM 0.013,
+DEFAULT_EJERK 5); a slicer's jerk or junction-deviation settings say which junction rule runs.
+"""
+from __future__ import annotations
+
+import math
+
+from ..program import AXES
+from . import Firmware, PlannerRules
+
+MARLIN_STOP_S = 0.05
+MARLIN_ACCEL_MM_S2 = 1000.0
+INF = math.inf
+
+PLANNER = PlannerRules(
+    family="marlin", junction="deviation", config_picks_junction=True,
+    defaults=dict(max_accel_x=3000, max_accel_y=3000, max_accel_z=100, max_accel_e=10000,
+                  max_feed_x=300, max_feed_y=300, max_feed_z=5, max_feed_e=25,
+                  jerk_x=10, jerk_y=10, jerk_z=0.3, jerk_e=5,
+                  accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
+                  junction_deviation=0.013, square_corner_velocity=math.nan, max_velocity=INF,
+                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0))
+
+DIALECT = Firmware(
+    name="marlin", off_word="M18", on_word="M17", merge_motors=True, stall_off_s=MARLIN_STOP_S,
+    stall_on_s=0.0, reenable="early-by-queue", homing_kept=True, allowed_motors=frozenset(AXES),
+    executes=frozenset({"M17", "M18", "M84"}),
+    description="Marlin 2.x: M18 drains the queue (full stop), M17 enables at parse time",
+    rank=1, detect_words=("M17", "M18"), detect_rank=20,
+    no_drain_words=frozenset({"M17"}), stall_is_stop=True, planner=PLANNER)

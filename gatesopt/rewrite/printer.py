@@ -1,0 +1,153 @@
+"""Defaults that fit the file's printer (issue 37): which firmware dialect gating writes, the time
+budget a stock firmware gets, and the one line that says so.
+
+``choose(program, "auto")`` reads the file (``gatesopt.slicers.read_printer``: a Klipper command,
+a printer model, the slicer's flavor setting) and picks the dialect that printer's firmware runs:
+
+- Marlin -> ``marlin`` (``M18 X Y`` / ``M17 X Y``), Klipper -> ``klipper``
+  (``SET_STEPPER_ENABLE``), RepRapFirmware -> ``reprap`` (E only: its ``M18 X`` unhomes X);
+- a firmware gatesopt has no dialect for (Bambu Lab's, whose ``M17 X`` sets motor currents;
+  Repetier, Smoothieware, Makerbot, Ultimaker's Griffin) -> no gating, said so;
+- nothing in the file -> ``marlin``, the most common stock firmware, said so with the choices.
+
+The paper's ``S0``/``S1`` (``3dgates``) are written only when asked for by name: stock firmware
+skips them as unknown commands. A dialect whose off line is ``M18`` is refused for a file made for
+Klipper (klippy/extras/stepper_enable.py ``cmd_M18`` -> ``motor_off`` turns every stepper off and
+``clear_homing_state("xyz")``: the next move fails "Must home axis first" and the print stops) or
+for RepRapFirmware (``M18 X`` marks X not homed, the next X move is refused), unless forced by
+name (``force=True``: ``--force-firmware NAME``).
+
+A firmware whose motor lines stall the print (Marlin's queue drain, Klipper's dwells; ``stall_off_s``
+or ``stall_on_s`` of its preset) gets ``STOCK_BUDGET_PCT`` of added print time as a budget unless
+one is given: without it ``--firmware klipper`` added 0.3-11.9 % print time on fresh slices.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .. import firmware as fwmod
+from .. import slicers
+from ..gating.options import GatingOptions
+
+#: the dialect written for each firmware family a file names (``slicers.FAMILIES``)
+DIALECT_OF_FAMILY = {"marlin": "marlin", "klipper": "klipper", "reprapfirmware": "reprap"}
+#: the dialect assumed when the file names no firmware: the most common stock firmware
+ASSUMED_DIALECT = "marlin"
+#: the print time a stock firmware's stalls may add by default, in % (``--max-added-time-pct``)
+STOCK_BUDGET_PCT = 1.0
+#: off-line words that stop a print on Klipper and on RepRapFirmware (see the module text)
+_M18_WORDS = ("M18", "M84")
+#: families whose firmware stops the print on an ``M18`` line
+_M18_STOPS = {"klipper": "Klipper's M18 turns every motor off and clears homing, which stops the print",
+              "reprapfirmware": "RepRapFirmware's M18 unhomes the axis and refuses its next move"}
+
+
+class _Default:
+    """The ``max_added_time_pct`` a caller did not give (None is "no budget", given)."""
+
+    def __repr__(self) -> str:
+        return "DEFAULT"
+
+
+DEFAULT = _Default()
+
+
+@dataclass(frozen=True)
+class FirmwareChoice:
+    """What gating writes for a file, and why (``choose``)."""
+
+    firmware: str | None        # the dialect written (``gatesopt.firmware`` name); None: not gated
+    requested: str              # "auto" or the name asked for
+    max_added_time_pct: float | None
+    budget_is_default: bool     # the budget is the stock-firmware default, not the caller's
+    motors: tuple
+    facts: slicers.PrinterFacts
+    line: str                   # the one line that says it (``gatesopt solve``'s "firmware" line)
+    options: GatingOptions | None = None
+
+    def summary(self) -> dict:
+        ev = self.facts.firmware
+        return {"firmware": self.firmware, "requested": self.requested,
+                "read": None if ev is None else {"family": ev.family, "kind": ev.kind, "line": ev.line,
+                                                 "text": ev.text},
+                "max_added_time_pct": self.max_added_time_pct, "budget_is_default": self.budget_is_default,
+                "motors": list(self.motors), "line": self.line}
+
+
+def _stalls(name: str) -> bool:
+    fw = fwmod.get(name)
+    return fw.stall_off_s > 0 or fw.stall_on_s > 0
+
+
+def _dialect_words(name: str) -> str:
+    fw = fwmod.get(name)
+    on = f"/{fw.on_word}" if fw.on_word else ""
+    return f"{fw.off_word}{on} lines"
+
+
+def _auto(facts: slicers.PrinterFacts) -> tuple[str | None, str]:
+    """(dialect, what was read) for ``--firmware auto``."""
+    ev = facts.firmware
+    if ev is None:
+        names = "|".join(n for n in fwmod.PRESETS)
+        return ASSUMED_DIALECT, (f"{ASSUMED_DIALECT} assumed: the file names no firmware (no flavor "
+                                 f"setting, printer model or Klipper command); choose with --firmware {names}")
+    name = DIALECT_OF_FAMILY.get(ev.family)
+    if name is None:
+        return None, (f"none: {ev.why} ({ev.kind} {ev.where()}) has no motor on/off line gatesopt "
+                      "knows to be safe, so nothing is gated (--force-firmware NAME to gate anyway)")
+    return name, f"{name}: read {ev.kind} {ev.where()}, {ev.why}"
+
+
+def choose(program, requested: str = "auto", *, force: bool = False, max_added_time_pct=DEFAULT,
+           motors: tuple | None = None, **gating) -> FirmwareChoice:
+    """The dialect, budget and motors gating uses for ``program`` (a ``Program``, or a file's
+    bytes), and the line that says so. ``requested``: "auto" or a ``gatesopt.firmware`` name;
+    ``force``: write that dialect whatever the file says; ``max_added_time_pct``: DEFAULT (a
+    stall-free dialect: none; a stock firmware: ``STOCK_BUDGET_PCT``), None (no budget) or a
+    number; ``motors``: None for the default (X, Y; what the dialect may gate of them) or the
+    motors asked for; ``gating``: other ``GatingOptions`` fields (rotate, profile, bed_size_mm,
+    ...). Raises ``firmware.FirmwareError`` (one line) for a dialect that would stop the file's
+    printer."""
+    data = program if isinstance(program, (bytes, bytearray)) else program.data
+    source = "<text>" if isinstance(program, (bytes, bytearray)) else program.source
+    facts = slicers.read_printer(bytes(data))
+    ev = facts.firmware
+    if requested == "auto":
+        name, said = _auto(facts)
+    else:
+        name = fwmod.get(requested).name
+        said = f"{name} (--{'force-' if force else ''}firmware {name})"
+        fw = fwmod.get(name)
+        if ev is not None and ev.family in _M18_STOPS and fw.off_word in _M18_WORDS and not force:
+            raise fwmod.FirmwareError(
+                f"{source}:{ev.line}: the file is for {ev.family} ({ev.text!r}); {_M18_STOPS[ev.family]}: "
+                f"use --firmware {DIALECT_OF_FAMILY[ev.family]} (or auto), or --force-firmware {name} "
+                f"if it goes to a {name} printer")
+        if name == "3dgates":
+            said += ": carried out only by the paper's patched firmware (stock firmware skips them)"
+        elif ev is not None and ev.family and DIALECT_OF_FAMILY.get(ev.family) != name:
+            said += f"; the file says {ev.family or ev.why} ({ev.kind} {ev.where()})"
+    if name is None:
+        return FirmwareChoice(None, requested, None, False, (), facts, said)
+    fw = fwmod.get(name)
+    if motors is None:
+        motors = tuple(m for m in ("X", "Y") if m in fw.allowed_motors) or tuple(
+            m for m in ("X", "Y", "Z", "E") if m in fw.allowed_motors)
+        if motors != ("X", "Y"):
+            said += f"; gates {','.join(motors)} only ({fw.refused_note or 'the firmware allows no other'})"
+    default_budget = max_added_time_pct is DEFAULT
+    if default_budget:
+        max_added_time_pct = STOCK_BUDGET_PCT if _stalls(name) else None
+    budget_words = ("no time budget" if max_added_time_pct is None
+                    else f"stalls add at most {max_added_time_pct:g} % print time")
+    if default_budget and max_added_time_pct is not None:
+        budget_words += " (the default for stock firmware; --max-added-time-pct P or none to change)"
+    said += f"; {_dialect_words(name)}, {budget_words}"
+    if name == "klipper" and "klipper-gating" in fwmod.PRESETS:
+        said += ("; with gatesopt's Klipper module installed (integrations/klipper), --firmware "
+                 "klipper-gating switches motors without stalls")
+    opts = GatingOptions.for_firmware(name, motors=tuple(motors), max_added_time_pct=max_added_time_pct,
+                                      **gating)
+    return FirmwareChoice(name, requested, max_added_time_pct, default_budget and max_added_time_pct is not None,
+                          tuple(opts.motors), facts, said, opts)

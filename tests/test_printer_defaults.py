@@ -1,0 +1,241 @@
+"""Defaults that fit the file's printer (issue 37): the firmware is read from the file (slicer
+flavor settings, printer models, Klipper commands; ``gatesopt.slicers``) and said in one line; the
+paper's S0/S1 only by name; stock firmware gets a time budget; M18 is never written for a Klipper
+file unless forced by name."""
+from __future__ import annotations
+
+import csv
+import json
+import re
+
+import pytest
+
+import gatesopt
+from gatesopt import firmware, slicers
+from gatesopt.cli import main
+from gatesopt.rewrite import printer
+
+from conftest import SHARED_INSTANCES, read_bytes, shared_params
+
+FRESH = SHARED_INSTANCES.parent.parent / "fresh"
+
+
+def square(header: str = "", start: str = "", layers: int = 3) -> str:
+    """A 40 mm square with lines across it, ``header`` on top and ``start`` as start G-code."""
+    out = [header, "G21", "G90", "M82", "M104 S200", "G28", start, "G92 E0"]
+    e = 0.0
+    for k in range(layers):
+        out += [";LAYER:%d" % k, f"G1 Z{0.2 * (k + 1):.1f} F600", "G1 X80 Y80 F6000"]
+        for i in range(8):
+            y = 80 + 5 * i
+            e += 1.3
+            out += [f"G1 X120 Y{y} E{e:.4f} F1800", f"G1 X120 Y{y + 2.5} F6000"]
+            e += 1.3
+            out += [f"G1 X80 Y{y + 2.5} E{e:.4f} F1800", f"G1 X80 Y{y + 5} F6000"]
+    out += ["M104 S0", "M84 X Y E"]
+    return "\n".join(line for line in out if line) + "\n"
+
+
+# -- the table ------------------------------------------------------------------------------------
+EXPECTED_FAMILY = {";FLAVOR:Marlin": "marlin", "; gcode_flavor = marlin2": "marlin",
+                   ";Firmware: RepRapFirmware": "reprapfirmware",
+                   ";   firmwareTypeOverride,RepRap (Marlin/Repetier/Sprinter)": "marlin",
+                   "; firmware_type = 1": ""}
+
+
+@pytest.mark.parametrize("row", slicers.FLAVOR_SETTINGS, ids=lambda r: r.slicer)
+def test_every_flavor_setting_row_reads_its_example(row):
+    ev = slicers.flavor_evidence(("; something\n" + row.example + "\n").encode())
+    assert ev is not None and ev.line == 2 and ev.text == row.example.strip()
+    assert ev.family == EXPECTED_FAMILY[row.example]
+
+
+@pytest.mark.parametrize("value, family", [("Marlin", "marlin"), ("Marlin(Volumetric)", "marlin"),
+                                           ("RepRap", "reprapfirmware"), ("Griffin", "other"),
+                                           ("UltiGCode", "other")])
+def test_cura_flavours(value, family):
+    assert slicers.flavor_evidence(f";FLAVOR:{value}\n".encode()).family == family
+
+
+@pytest.mark.parametrize("value, family", [("marlin", "marlin"), ("marlin2", "marlin"), ("klipper", "klipper"),
+                                           ("reprapfirmware", "reprapfirmware"), ("reprap", "marlin"),
+                                           ("smoothie", "other"), ("repetier", "other")])
+def test_prusaslicer_flavours(value, family):
+    # 'reprap' is Slic3r's "RepRap (Marlin/Sprinter)"; RepRapFirmware is 'reprapfirmware'
+    assert slicers.flavor_evidence(f"; gcode_flavor = {value}\n".encode()).family == family
+
+
+def test_a_klipper_command_wins_over_a_marlin_flavor_and_says_its_line():
+    text = square(";FLAVOR:Marlin", start="START_PRINT EXTRUDER_TEMP=200 BED_TEMP=60")
+    facts = slicers.read_printer(text.encode())
+    assert facts.firmware.family == "klipper" and facts.firmware.kind == "Klipper command"
+    assert facts.firmware.line == text.splitlines().index("START_PRINT EXTRUDER_TEMP=200 BED_TEMP=60") + 1
+    assert facts.flavor == "Marlin"
+    # a Klipper command only as a comment, or a word without an underscore, is no evidence
+    for start in ("; START_PRINT", "PAUSE", "M486 S1", "G1X10Y10"):
+        assert slicers.read_printer(square(";FLAVOR:Marlin", start=start).encode()).firmware.family == "marlin"
+
+
+def test_a_printer_model_that_runs_klipper():
+    data = b"; gcode_flavor = marlin\n; printer_model = Voron_v2_250\n"
+    assert slicers.read_printer(data).firmware.family == "klipper"
+    assert slicers.read_printer(b"; printer_model = Bambu Lab X1 Carbon\n").firmware.family == "bambu"
+    assert slicers.read_printer(b";TARGET_MACHINE.NAME:Creality K1 Max\n").firmware.family == "klipper"
+
+
+#: where the file says more than the manifest's flavor column: ideaMaker's printer setting
+#: ';Firmware: RepRapFirmware' (line 18), which the column (filled from PrusaSlicer/Cura headers) left out
+MANIFEST_MISSES = {"real_ideamaker514.gcode.gz": "RepRapFirmware"}
+
+
+def _manifest_flavor(row: dict) -> str:
+    f = MANIFEST_MISSES.get(row["file"], row["flavor"])
+    return f.split("_fw")[1] if f.startswith("kisslicer_fw") else f   # KISSlicer: firmware_type = 1
+
+
+@pytest.mark.parametrize("path", shared_params())
+def test_every_corpus_file_flavor_is_the_manifest_s(path):
+    from conftest import manifest
+    row = manifest()[path.name]
+    facts = slicers.read_printer(read_bytes(path))
+    assert facts.flavor == _manifest_flavor(row)
+    choice = printer.choose(read_bytes(path))
+    # the paper's S0/S1 never by default; a Klipper file never gets M18
+    assert choice.firmware != "3dgates"
+    if facts.firmware and facts.firmware.family == "klipper":
+        assert choice.firmware == "klipper"
+    if row["flavor"] in ("klipper",):
+        assert facts.firmware.family == "klipper"
+
+
+#: what each fresh slice's printer runs: the job's printer profile (bench/fresh_slices.py)
+FRESH_DIALECT = {"cura_ender3": "marlin", "cura_mk3": "marlin", "prusa_mk3s": "marlin", "slic3r": "marlin",
+                 "prusa_klipper": "klipper"}
+
+
+def _fresh_rows():
+    if not (FRESH / "manifest.tsv").exists():
+        return [pytest.param(None, marks=pytest.mark.skip(reason=f"no fresh slices at {FRESH}"))]
+    with open(FRESH / "manifest.tsv", newline="") as f:
+        return [pytest.param(r, id=r["file"]) for r in csv.DictReader(f, delimiter="\t")]
+
+
+@pytest.mark.parametrize("row", _fresh_rows())
+def test_every_fresh_file_gets_its_printer_s_dialect(row):
+    data = (FRESH / row["file"]).read_bytes()
+    facts = slicers.read_printer(data)
+    settings = row["settings"]
+    if "machine_gcode_flavor=RepRap (Marlin/Sprinter)" in settings:
+        assert facts.flavor == "Marlin"                       # CuraEngine's name for it
+    elif m := re.search(r"flavor (\w+)", settings):
+        assert facts.flavor == m.group(1)
+    else:
+        assert facts.flavor == "reprap"                       # Slic3r's default, RepRap (Marlin/Sprinter)
+    job = next(j for j in FRESH_DIALECT if row["file"].endswith(f"__{j}.gcode") or f"__{j}_" in row["file"])
+    choice = printer.choose(data)
+    assert choice.firmware == FRESH_DIALECT[job]
+    assert choice.max_added_time_pct == printer.STOCK_BUDGET_PCT and choice.budget_is_default
+    assert f"(line {facts.firmware.line})" in choice.line
+
+
+# -- the choice -----------------------------------------------------------------------------------
+def test_a_marlin_flavor_gets_marlin_lines_and_a_budget_said_in_one_line():
+    c = printer.choose(gatesopt.parse(square(";FLAVOR:Marlin")))
+    assert c.firmware == "marlin" and c.max_added_time_pct == 1.0 and c.options.max_added_time_pct == 1.0
+    assert "\n" not in c.line
+    assert c.line.startswith("marlin: read flavor setting ';FLAVOR:Marlin' (line 1)")
+    assert "at most 1 % print time" in c.line
+
+
+def test_nothing_known_says_what_was_assumed_and_how_to_choose():
+    c = printer.choose(gatesopt.parse(square()))
+    assert c.firmware == "marlin"
+    assert c.line.startswith("marlin assumed: the file names no firmware") and "--firmware" in c.line
+
+
+def test_the_paper_s_lines_only_by_name():
+    c = printer.choose(gatesopt.parse(square(";FLAVOR:Marlin")), "3dgates")
+    assert c.firmware == "3dgates" and c.max_added_time_pct is None       # no stall: no budget
+    assert "only by the paper's patched firmware" in c.line
+
+
+def test_m18_for_a_klipper_file_is_refused_unless_forced_by_name():
+    prog = gatesopt.parse(square(";FLAVOR:Marlin", start="START_PRINT"))
+    assert printer.choose(prog).firmware == "klipper"
+    with pytest.raises(firmware.FirmwareError, match=r"<text>:\d+: the file is for klipper .*stops the print"):
+        printer.choose(prog, "marlin")
+    assert printer.choose(prog, "marlin", force=True).firmware == "marlin"
+
+
+def test_reprapfirmware_gates_e_only_and_unknown_firmware_is_not_gated():
+    c = printer.choose(gatesopt.parse(square(";FLAVOR:RepRap")))
+    assert c.firmware == "reprap" and c.motors == ("E",) and "gates E only" in c.line
+    bambu = printer.choose(gatesopt.parse(square("; printer_model = Bambu Lab P1S")))
+    assert bambu.firmware is None and bambu.options is None and "nothing is gated" in bambu.line
+
+
+def test_an_explicit_budget_or_none_replaces_the_default():
+    prog = gatesopt.parse(square(";FLAVOR:Marlin"))
+    assert printer.choose(prog, max_added_time_pct=None).options.max_added_time_pct is None
+    assert printer.choose(prog, max_added_time_pct=3.0).max_added_time_pct == 3.0
+
+
+# -- the command line -----------------------------------------------------------------------------
+def test_solve_of_a_marlin_file_writes_m18_and_says_so(tmp_path, capsys):
+    src = tmp_path / "part.gcode"
+    src.write_text(square(";FLAVOR:Marlin"))
+    out = tmp_path / "out.gcode"
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--json", str(tmp_path / "r.json")]) == 0
+    text = out.read_text()
+    assert "M18 " in text and not re.search(r"(?m)^S[01] ", text)
+    printed = capsys.readouterr().out
+    assert "firmware      marlin: read flavor setting ';FLAVOR:Marlin' (line 1)" in printed
+    d = json.loads((tmp_path / "r.json").read_text())
+    assert d["firmware"] == "marlin" and d["firmware_choice"]["max_added_time_pct"] == 1.0
+    assert d["added_time_pct"] <= 1.0 + 1e-6
+    assert main(["verify", str(src), str(out)]) == 0
+
+
+def test_klipper_without_a_budget_gets_one(tmp_path, capsys):
+    src = tmp_path / "part.gcode"
+    src.write_text(square(";FLAVOR:Marlin", layers=6))
+    out = tmp_path / "out.gcode"
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--firmware", "klipper",
+                 "--json", str(tmp_path / "r.json")]) == 0
+    d = json.loads((tmp_path / "r.json").read_text())
+    assert d["added_time_pct"] <= 1.0 + 1e-6 and d["firmware_choice"]["budget_is_default"]
+    assert "the file says marlin" in capsys.readouterr().out
+    # lifted by name: more stalls, more saving
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--firmware", "klipper", "--force",
+                 "--max-added-time-pct", "none", "--json", str(tmp_path / "r2.json"), "--force"]) == 0
+    d2 = json.loads((tmp_path / "r2.json").read_text())
+    assert d2["added_time_pct"] > 1.0 and d2["saving_pct"] >= d["saving_pct"]
+
+
+def test_solve_refuses_marlin_lines_for_a_klipper_file_in_one_line(tmp_path, capsys):
+    src = tmp_path / "part.gcode"
+    src.write_text(square("; gcode_flavor = klipper"))
+    out = tmp_path / "out.gcode"
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--firmware", "marlin"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "stops the print" in err[0] and "--force-firmware marlin" in err[0]
+    assert not out.exists()
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--force-firmware", "marlin"]) == 0
+    assert "M18 " in out.read_text()
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--force"]) == 0
+    assert "SET_STEPPER_ENABLE" in out.read_text() and "M18 X" not in out.read_text()
+
+
+def test_batch_and_compare_read_each_file_s_firmware(tmp_path, capsys):
+    a, b = tmp_path / "a.gcode", tmp_path / "b.gcode"
+    a.write_text(square(";FLAVOR:Marlin"))
+    b.write_text(square("; gcode_flavor = klipper"))
+    assert main(["batch", str(a), str(b), "--out", str(tmp_path / "r.json"), "--no-order", "--quiet"]) == 0
+    rows = json.loads((tmp_path / "r.json").read_text())
+    rows = rows["rows"] if isinstance(rows, dict) else rows
+    assert sorted((r["file"].rsplit("/", 1)[1], r["firmware"]) for r in rows) == [("a.gcode", "marlin"),
+                                                                                   ("b.gcode", "klipper")]
+    assert all("stalls add at most 1 %" in r["firmware_line"] for r in rows)
+    capsys.readouterr()
+    assert main(["compare", str(a), "--formulations", "dp"]) == 0
+    assert "firmware marlin: read flavor setting" in capsys.readouterr().out
