@@ -24,12 +24,22 @@ def ordering_result_lines(s: dict) -> list[str]:
         f"   retractions {s['retractions_before']:,} -> {s['retractions_after']:,}",
         f"curves        {s['curves']:,} in {s['groups']:,} groups; {s['groups_reordered']:,} re-orderable "
         f"(largest {s['largest_group']} curves)",
+    ] + _block_lines(s) + [
         f"groups        optimal {s['groups_optimal']:,}   feasible at limit {s['groups_feasible']:,}"
         f"   fallback {s['groups_fallback']:,}   worst gap {100 * s['worst_gap']:.2f} %",
         f"layers        optimal {s['layers_optimal']:,}   feasible at limit {s['layers_feasible']:,}"
         f"   fallback {s['layers_fallback']:,}   order kept {s['layers_kept']:,}"
         + (f" ({s['layers_kept_slower']:,} of them: slower re-ordered)" if s.get("layers_kept_slower") else ""),
     ] + _kept_lines(s)
+
+
+def _block_lines(s: dict) -> list[str]:
+    """Safe mode's islands re-ordered as blocks (``ordering/blocks.py``), when a layer had some."""
+    if not s.get("block_segments"):
+        return []
+    return [f"islands       {s['block_islands']:,} islands in {s['block_segments']:,} runs of >= 3; "
+            f"re-ordered as blocks in {s['block_segments_moved']:,} runs ({s['block_layers_moved']:,} "
+            f"layers); block order proven optimal in {s['block_orders_optimal']:,}"]
 
 
 def _kept_lines(s: dict) -> list[str]:

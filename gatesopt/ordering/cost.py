@@ -315,10 +315,11 @@ class TimePricer:
             dry = ~self.rule.walls.crosses_many(lay_i, from_xy[sel], to_xy[sel])
             out[sel[dry]] = no_retract[sel[dry]]
 
-    def anchor_link(self, problem: OrderingProblem, a: Anchor, b: Anchor) -> float:
+    def anchor_link(self, a: Anchor, b: Anchor) -> float:
+        """Cost (ms) of the travel from anchor ``a`` into anchor ``b`` (program curves)."""
         return float(self.links_ms(a.curve, a.changed, a.xy, b.curve, b.changed, b.xy))
 
-    def order_cost(self, problem: OrderingProblem, order, changed, entry_xy, exit_xy) -> float:
+    def order_cost(self, order, changed, entry_xy, exit_xy) -> float:
         """Cost (ms) of the travels between consecutive curves of ``order`` (the file's prefix,
         before its first curve, and its end, after the last, are copied whatever the order)."""
         if len(order) < 2:
@@ -327,8 +328,9 @@ class TimePricer:
                                    entry_xy[1:]).sum())
 
     # -- a group's costs --------------------------------------------------------------------------
-    def group_costs(self, problem: OrderingProblem, grp: Group, curves, start: Anchor,
-                    end: Anchor | None) -> LinkCosts:
+    def group_costs(self, curves, grp: Group, start: Anchor, end: Anchor | None) -> LinkCosts:
+        """The link costs of ``grp`` whose local curves are program curves ``curves`` (start and
+        end anchors in program curves too)."""
         gc = np.asarray(curves, np.int64)[grp.cand_curve]
         changed = np.asarray(grp.cand_reversed, bool) | (np.asarray(grp.cand_seam) != 0)
         s = self.links_ms(start.curve, start.changed, start.xy, gc, changed, grp.cand_entry_xy)

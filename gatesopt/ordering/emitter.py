@@ -48,6 +48,7 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     feedrate, state lines, feature, E up to ``MEMO_E_TOL_MM``) gets the text it got before; E
     words differ from a fresh emit by at most that tolerance, where rounding tips a last digit."""
     program.check_rewritable()
+    problem = problem.program_problem       # (a solution is in the program's curve numbering)
     lay = problem.layout if problem.layout is not None else layout(program)
     p = program
     n = len(lay.curve_s0)

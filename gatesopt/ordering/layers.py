@@ -102,13 +102,20 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             seam[c] = int(grp.cand_seam[k])
         sols.append(gs)
     order_out = np.asarray(order_out, np.int64)
+    if problem.curve_source is not None:
+        # a problem whose curves were permuted (safe mode's blocks): the solution in the
+        # program's numbering, as emit and the time guard read it
+        src = problem.curve_source
+        order_out = src[order_out]
+        reversed_[src], seam[src] = reversed_.copy(), seam.copy()
+    base = problem.program_problem
     ident = np.arange(n)
     no = np.zeros(n, bool)
-    return OrderingSolution(order_out, reversed_, seam, tuple(sols), problem.original_travel_mm(),
-                            model_travel_mm(problem, order_out, reversed_, seam),
+    return OrderingSolution(order_out, reversed_, seam, tuple(sols), base.original_travel_mm(),
+                            model_travel_mm(base, order_out, reversed_, seam),
                             time.perf_counter() - t0, formulation,
-                            cost_before=problem.order_cost(ident, no, np.zeros(n, np.int64)),
-                            cost_after=problem.order_cost(order_out, reversed_, seam),
+                            cost_before=base.order_cost(ident, no, np.zeros(n, np.int64)),
+                            cost_after=base.order_cost(order_out, reversed_, seam),
                             cost_unit=problem.cost_unit)
 
 

@@ -348,6 +348,27 @@ class OrderingProblem:
     layout: object = None           # layout.Layout for Program-built problems (used by emit)
     #: the time objective's link costs (``cost.TimePricer``); None: Euclidean travel (mm)
     pricer: object = None
+    #: a problem whose curves are the program's in another order (safe mode's blocks,
+    #: ``blocks.py``): ``curve_source[i]`` is problem curve i's curve in ``base``, the problem in
+    #: the program's order. Solutions (``layers.solve``) are in ``base``'s numbering; emit and
+    #: the time guard work on ``base``. None: this problem is in the program's order
+    curve_source: np.ndarray | None = None
+    base: "OrderingProblem | None" = None
+    #: safe mode's block pass (``blocks.order_blocks``): segments with three islands or more,
+    #: their blocks, segments whose islands moved, block orders proven optimal, seconds
+    block_report: dict = field(default_factory=dict)
+
+    @property
+    def program_problem(self) -> "OrderingProblem":
+        """The problem in the program's curve order (itself unless the curves were permuted)."""
+        return self if self.base is None else self.base
+
+    def source_curves(self, curves) -> np.ndarray:
+        """The program-order curves of problem curves ``curves`` (-1 stays -1)."""
+        curves = np.asarray(curves, np.int64)
+        if self.curve_source is None:
+            return curves
+        return np.where(curves >= 0, self.curve_source[np.maximum(curves, 0)], -1)
 
     @property
     def n_curves(self) -> int:
@@ -401,7 +422,14 @@ class OrderingProblem:
                     None if end_xy is None else np.asarray(end_xy, float).copy())
         if self.pricer is None:
             return grp
-        return dataclasses.replace(grp, costs=self.pricer.group_costs(self, grp, curves, start, end))
+        return dataclasses.replace(grp, costs=self.pricer.group_costs(
+            self.source_curves(curves), grp, self._source_anchor(start), self._source_anchor(end)))
+
+    def _source_anchor(self, a: "Anchor | None") -> "Anchor | None":
+        """An anchor with its curve in the program's numbering (the pricer's)."""
+        if a is None or self.curve_source is None or a.curve < 0:
+            return a
+        return Anchor(a.xy, int(self.curve_source[a.curve]), a.changed)
 
     def cand_anchor(self, g: int, grp: Group, k: int) -> Anchor:
         """Candidate k of group g (built by ``group``) as an Anchor at its entry (the end of a
@@ -423,7 +451,7 @@ class OrderingProblem:
         b.curve at b.xy) in the objective's unit."""
         if self.pricer is None:
             return float(np.hypot(*(np.asarray(b.xy) - np.asarray(a.xy))))
-        return float(self.pricer.anchor_link(self, a, b))
+        return float(self.pricer.anchor_link(self._source_anchor(a), self._source_anchor(b)))
 
     def order_cost(self, order, reversed_, seam) -> float:
         """Cost of a whole solution (every curve from the end of the one before, the first from
@@ -434,7 +462,7 @@ class OrderingProblem:
         if self.pricer is None:
             return path_travel_mm(self.origin_xy, a, b)
         changed = (np.asarray(reversed_, bool) | (np.asarray(seam) != 0))[order]
-        return float(self.pricer.order_cost(self, order, changed, a, b))
+        return float(self.pricer.order_cost(self.source_curves(order), changed, a, b))
 
     def entry_exit_xy(self, order, reversed_, seam):
         """(entry, exit) points of the curves ``order`` printed as ``reversed_`` / ``seam`` say."""
@@ -460,6 +488,17 @@ class OrderingProblem:
     def original_travel_mm(self) -> float:
         """Travel of the slicer's own order under the same Euclidean model."""
         return path_travel_mm(self.origin_xy, self.curve_start_xy, self.curve_end_xy)
+
+
+def group_starts(boundary: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """(G + 1,) first curve of each group and the curve count: a group is a run of curves with
+    one ``key`` and no ``boundary`` (the gap before a curve) inside it."""
+    n = len(key)
+    new = np.asarray(boundary, bool).copy()
+    if n:
+        new[0] = True
+        new[1:] |= key[1:] != key[:-1]
+    return np.concatenate((np.flatnonzero(new), [n])).astype(np.int64)
 
 
 def path_travel_mm(origin_xy, entry_xy, exit_xy) -> float:

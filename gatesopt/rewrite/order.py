@@ -71,6 +71,7 @@ def keep_layers(problem: OrderingProblem, solution: OrderingSolution, layers) ->
     """``solution`` with the curves of ``layers`` back in the slicer's order and direction.
     A layer's curves are one contiguous block of the print order, and curve numbers grow with
     the layer, so sorting the positions they hold restores each block."""
+    problem = problem.program_problem
     order = solution.curve_order.copy()
     at = np.isin(problem.curve_layer[order], np.asarray(layers, np.int64))
     order[at] = np.sort(order[at])
@@ -251,6 +252,8 @@ def _solve_counts(problem: OrderingProblem, solution: OrderingSolution, slower_l
     # group of >= 2 curves (the counts above leave one-curve groups out; their choice is exact:
     # both ways compared). Fixed groups keep the slicer's direction, so this adds only those
     decided_layers.update(np.unique(problem.curve_layer[turned]).tolist())
+    # and a layer whose islands moved as blocks (safe mode, ordering/blocks.py)
+    decided_layers.update(np.unique(problem.curve_layer[moved]).tolist())
     for row in layers:
         if row["layer"] in decided_layers:
             lay_counts[row["status"] if row["status"] in lay_counts else "fallback"] += 1
@@ -328,6 +331,13 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         "largest_group": int(max((sizes[g] for g, _ in decided), default=0)),
         "groups_optimal": counts["optimal"], "groups_feasible": counts["feasible"],
         "groups_fallback": counts["fallback"],
+        # safe mode's blocks (ordering/blocks.py): segments of >= 3 islands, how many moved, how
+        # many block orders were proven optimal (the slicer's order kept counts if it was proven)
+        "block_segments": int(problem.block_report.get("segments", 0)),
+        "block_islands": int(problem.block_report.get("blocks", 0)),
+        "block_segments_moved": int(problem.block_report.get("segments_moved", 0)),
+        "block_layers_moved": int(problem.block_report.get("layers_moved", 0)),
+        "block_orders_optimal": int(problem.block_report.get("proven", 0)),
         "layers_optimal": lay_counts["optimal"], "layers_feasible": lay_counts["feasible"],
         "layers_fallback": lay_counts["fallback"], "layers_kept": lay_counts["kept"],
         "layers_kept_slower": int(len(slower_layers)),
