@@ -90,7 +90,9 @@ def test_model_cost_is_the_emitted_travels_time(variant, seed, mode):
     order) equals the time of the emitted file's travels between curves under the same model,
     and the output verifies."""
     prog = gatesopt.parse(slicer_gcode(seed, **VARIANTS[variant]))
-    prob = build(prog, OrderingOptions(mode=mode))
+    # copied gaps priced move by move, as gap_times_ms measures every gap (the default prices them
+    # at the planner's time: test_copied_gaps_cost_the_planners_time)
+    prob = build(prog, OrderingOptions(mode=mode, copied_gaps="moves"))
     assert prob.cost_unit == "ms" and prob.pricer is not None
     move = prob.pricer.move
     assert prob.pricer.copy_ms[1:].sum() == pytest.approx(gap_times_ms(prog, move).sum(), rel=1e-9)
@@ -102,6 +104,26 @@ def test_model_cost_is_the_emitted_travels_time(variant, seed, mode):
     assert sol.cost_after == pytest.approx(measured.sum(), rel=1e-6, abs=1e-3)
     assert sol.cost_after <= sol.cost_before + 1e-6
     assert check(prog, out) == []
+
+
+@pytest.mark.parametrize("variant", [0, 1, 4])
+def test_copied_gaps_cost_the_planners_time(variant):
+    """By default the slicer's own gaps cost what the planner says they take in the input; the
+    slicer's whole order then costs exactly the planner's time of its gaps, and less than the
+    move-by-move price where gaps have several moves (a retraction, a hop: junctions the planner
+    joins)."""
+    from gatesopt.planner import plan
+    prog = gatesopt.parse(slicer_gcode(1, **VARIANTS[variant]))
+    prob = build(prog, OrderingOptions(mode="free"))
+    moves = build(prog, OrderingOptions(mode="free", copied_gaps="moves"))
+    lay = prob.layout
+    d = plan(prog).duration_s
+    gaps = sum(d[a:b].sum() for a, b in zip(lay.curve_s1[:-1].tolist(), lay.curve_s0[1:].tolist()))
+    assert prob.pricer.copy_ms[1:].sum() == pytest.approx(1000.0 * gaps, rel=1e-9)
+    assert prob.pricer.copy_ms.sum() < moves.pricer.copy_ms.sum()
+    n = prob.n_curves
+    ident, no = np.arange(n), np.zeros(n, bool)
+    assert prob.order_cost(ident, no, np.zeros(n, np.int64)) == pytest.approx(1000.0 * gaps, rel=1e-9)
 
 
 def test_combing_file_is_read_as_combing():

@@ -251,7 +251,9 @@ class TimePricer:
     copied). ``rule``: when a rebuilt travel retracts (shared with the emitter)."""
 
     def __init__(self, program: Program, lay: Layout, problem: OrderingProblem, rule: TravelRule,
-                 move: MoveTimes):
+                 move: MoveTimes, step_s: np.ndarray | None = None):
+        """``step_s``: per step of ``program``, the time a copied gap's steps take (the
+        planner's, ``OrderingOptions.copied_gaps``); None: each move priced by ``move``."""
         self.rule, self.move = rule, move
         style = rule.style
         self.style_vec = np.array([style.retract_feed_mm_s, style.unretract_feed_mm_s,
@@ -275,7 +277,8 @@ class TimePricer:
             steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())]) \
                 if len(a) else np.zeros(0, np.int64)
             owner = np.repeat(np.arange(1, n), b - a)
-            copy = np.bincount(owner, weights=move.steps_s(program, steps), minlength=n)
+            t = move.steps_s(program, steps) if step_s is None else np.asarray(step_s)[steps]
+            copy = np.bincount(owner, weights=t, minlength=n)
         self.copy_ms = copy * MS_PER_S
 
     # -- links ----------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..limits import machine_limits
 from ..program import Kind, Program
+from ..planner import plan
 from ..slicers import FIXED_FEATURE
 from .cost import MoveTimes, TimePricer
 from .layout import Layout, layout
@@ -150,5 +151,6 @@ def with_pricer(program: Program, problem: OrderingProblem) -> OrderingProblem:
     lay = problem.layout
     rule = TravelRule.of(program, problem, lay)
     move = MoveTimes.from_limits(machine_limits(program))
+    step_s = plan(program).duration_s if problem.options.copied_gaps == "planner" else None
     return dataclasses.replace(problem, cost_unit=COST_UNIT["time"],
-                               pricer=TimePricer(program, lay, problem, rule, move))
+                               pricer=TimePricer(program, lay, problem, rule, move, step_s))
