@@ -400,3 +400,16 @@ def test_the_modules_start_ahead_in_printer_cfg_is_what_solve_and_verify_use(tmp
     # a command-line value that disagrees with the module's is refused
     assert main(["solve", str(src), "-o", str(tmp_path / "o2.gcode"), "--firmware", "klipper-gating",
                  "--printer-config", str(cfg), "--start-ahead-ms", "3"]) != 0
+
+
+def test_the_verifier_reads_repeated_and_early_lines_as_the_module_does():
+    """A second line for X before X steps again is the module's "repeated" (the first covers the
+    stretch); a line before homing is "motor_off" (Klipper has not enabled Y yet)."""
+    prog = parse(GCODE.encode(), source="tiny.gcode")
+    text = GCODE.replace("G1 X40 E3 F1200\n", "G1 X40 E3 F1200\nGATESOPT_GATE STEPPERS=stepper_x\n"
+                                              "GATESOPT_GATE STEPPERS=stepper_x\n")
+    text = text.replace("G28\n", "GATESOPT_GATE STEPPERS=stepper_y\nG28\n")
+    out = parse(text.encode(), source="hand.gcode")
+    got = [(s.motor, s.gated, s.reason) for s in
+           scheduled_lines(out, firmware="klipper-gating", start_ahead_s=1.8e-3, end_late_s=1e-3, original=prog)]
+    assert got == [(1, False, "motor_off"), (0, True, ""), (0, False, "repeated")]
