@@ -35,6 +35,8 @@ def add_arguments(p) -> None:
                         "free: re-order every curve of a layer, as the paper does")
     p.add_argument("--move-seams", action="store_true",
                    help="closed loops may start at another vertex (default: keep the seam)")
+    p.add_argument("--objective", choices=("time", "travel"), default="time",
+                   help="what the curve ordering minimises: time (default), the travels' print time as emitted, retractions, z-hops and the slicer's own copied travels included; travel, their length (Fleming et al.)")
     p.add_argument("--time-limit", type=float, default=2.0, metavar="S",
                    help="time limit per group for the exact formulations (default 2 s)")
     p.add_argument("--budget", type=float, default=None, metavar="S",
@@ -76,7 +78,8 @@ def run(args) -> int:
     if args.plot_layer is not None and not 0 <= args.plot_layer < program.n_layers:
         raise GatesoptError(f"{args.file}: --plot-layer {args.plot_layer}: layers are 0 to "
                             f"{program.n_layers - 1}")
-    options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+    options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams,
+                                    objective=args.objective)
     deadline_s = None if args.budget is None else started_s + args.budget
     with group_progress(wants_progress(), deadline_s=deadline_s, after="verifying") as progress:
         result = order_program(program, options, formulation=args.formulation,

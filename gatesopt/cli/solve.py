@@ -42,6 +42,8 @@ def add_arguments(p) -> None:
                         "objects (default); free re-orders every curve of a layer")
     p.add_argument("--move-seams", action="store_true",
                    help="closed loops may start at another vertex (default: keep the seam)")
+    p.add_argument("--objective", choices=("time", "travel"), default="time",
+                   help="what the curve ordering minimises: time (default), the travels' print time as emitted, retractions, z-hops and the slicer's own copied travels included; travel, their length (Fleming et al.)")
     p.add_argument("--order-formulation", choices=ordering_formulations(), default=None,
                    help="the curve ordering's formulation (default: the exact one named by "
                         "--formulation: milp or cpsat; greedy for greedy; auto for dp)")
@@ -126,7 +128,8 @@ def run(args) -> int:
     report_to = sys.stderr if out == STDIO else sys.stdout     # stdout carries the G-code
     fields = gating_options(args)
     from ..ordering import OrderingOptions
-    order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+    order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams,
+                                    objective=args.objective)
     # "--formulation milp means exact for both" (issue 4): the gating formulation names the
     # ordering's unless --order-formulation does; dp is gating's alone (ordering: auto)
     order_formulation = args.order_formulation or order_formulation_of(args.formulation)

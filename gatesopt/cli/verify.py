@@ -6,7 +6,7 @@ import sys
 
 from ..errors import GatesoptError
 from .files import check_input, check_one_stdin, read_bytes, read_program
-from .options import firmware_names
+from .options import add_printer_config_option, firmware_names, printer_config
 
 NAME = "verify"
 HELP = "check a rewritten file against its original"
@@ -34,6 +34,7 @@ def add_arguments(p) -> None:
     p.add_argument("--claimed", metavar="REPORT.json",
                    help="a `gatesopt solve --json` report: energy_after_j and time_after_s must match")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    add_printer_config_option(p)
 
 
 def run(args) -> int:
@@ -50,7 +51,7 @@ def run(args) -> int:
         firmware = (claimed or {}).get("firmware") or detect_firmware(original, output)
     rep = verify(original, output, firmware=firmware, start_ahead_s=args.start_ahead_ms / 1e3,
                  end_late_s=args.end_late_ms / 1e3, claimed=claimed, profile=args.profile,
-                 reordered=True if args.reordered else None)
+                 reordered=True if args.reordered else None, printer=printer_config(args))
     if args.json:
         json.dump(rep.to_dict(), sys.stdout, indent=2)
         print()
