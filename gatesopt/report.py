@@ -249,13 +249,13 @@ def render_html(rows, figures, title="gatesopt results") -> str:
                      f"<img class='figure' alt='{html.escape(name)}' src='data:image/png;base64,{b64}'>"
                      f"<figcaption>{html.escape(caption)}</figcaption></figure>")
     parts.append("<h2>Rows</h2><table><tr><th>file</th><th>formulation</th><th>saving %</th><th>size +%</th>"
-                 "<th>time +%</th><th>status</th><th>gap</th><th>travel −%</th><th>verified / error</th></tr>")
+                 "<th>print time +% (planner)</th><th>status</th><th>gap</th><th>travel −%</th><th>verified / error</th></tr>")
     for r in rows:
         def f(k, d=1):
             v = _num(r.get(k))
             return "" if math.isnan(v) else f"{v:.{d}f}"
         parts.append(f"<tr><td>{html.escape(Path(str(r.get('file'))).name)}</td><td>{html.escape(str(r.get('formulation')))}</td>"
-                     f"<td>{f('saving_pct')}</td><td>{f('size_change_pct', 2)}</td><td>{f('added_time_pct', 2)}</td>"
+                     f"<td>{f('saving_pct')}</td><td>{f('size_change_pct', 2)}</td><td>{f('print_time_change_pct', 2)}</td>"
                      f"<td>{html.escape(str(r.get('status', '')))}</td><td>{f('gap', 4)}</td>"
                      f"<td>{f('travel_reduction_pct')}</td>"
                      f"<td>{'yes' if r in ok else html.escape(str(r.get('error') or r.get('findings') or 'no'))}</td></tr>")

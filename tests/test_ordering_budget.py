@@ -239,7 +239,7 @@ def test_helper_process_gives_the_same_answer_as_one_process(monkeypatch):
     assert len(calls) < len(helper.groups_to_solve(prob)), "the helper answered no group"
     np.testing.assert_array_equal(one.curve_order, two.curve_order)
     np.testing.assert_array_equal(one.curve_reversed, two.curve_reversed)
-    assert one.travel_after_mm == pytest.approx(two.travel_after_mm)
+    assert one.model_travel_after_mm == pytest.approx(two.model_travel_after_mm)
 
 
 def test_a_helper_that_dies_leaves_the_main_process_to_finish(monkeypatch):
@@ -332,7 +332,7 @@ def test_helper_solves_the_chain_from_the_back(monkeypatch):
         grp = prob.group(prob.n_groups - 1, start)
         assert last.objective_mm == pytest.approx(grp.path_cost_mm(last.order))
         assert last.bound_mm <= dp.solve(grp).objective_mm + 1e-6
-    assert two.travel_after_mm <= two.travel_before_mm + 1e-9
+    assert two.model_travel_after_mm <= two.model_travel_before_mm + 1e-9
 
 
 def test_a_budget_is_for_the_whole_run_and_the_solve_gets_what_the_rest_leaves():

@@ -142,7 +142,7 @@ def test_a_budgeted_cpsat_solve_mixes_proofs_and_fallbacks_soundly():
     prob = from_polylines([big] + small, options=OrderingOptions(mode="free"))
     sol = solve(prob, "cpsat", time_limit_s=5.0, budget_s=1.0)
     assert sorted(sol.curve_order.tolist()) == list(range(prob.n_curves))
-    assert sol.travel_after_mm <= sol.travel_before_mm + 1e-9
+    assert sol.model_travel_after_mm <= sol.model_travel_before_mm + 1e-9
     for gs in sol.groups:
         assert gs.status in ("optimal", "feasible", "fallback")
         assert gs.bound_mm <= gs.objective_mm + 1e-9
@@ -153,4 +153,4 @@ def test_cpsat_with_a_budget_gives_a_verified_file():
     res = order_program(prog, OrderingOptions(mode="free"), formulation="cpsat", budget_s=3.0)
     assert res.ok
     assert res.summary["groups_optimal"] >= 1
-    assert res.solution.travel_after_mm <= res.solution.travel_before_mm + 1e-9
+    assert res.solution.model_travel_after_mm <= res.solution.model_travel_before_mm + 1e-9

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 from .. import _jit
 from ..errors import GatesoptError
-from . import batch, calibrate, compare, order, profile, report, solve, verify
+from . import batch, calibrate, clock, compare, order, profile, report, solve, verify
 
 #: the commands, in the order ``gatesopt --help`` lists them
 COMMANDS = (profile, solve, compare, order, verify, batch, report, calibrate)
@@ -38,12 +39,16 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # a command run from the shell counts its time from the process's start (``clock``); one
+    # called in-process (tests, scripts) from here
+    started_s = clock.started_s() if argv is None else time.perf_counter()
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv and not argv[0].startswith("-") else "")
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return 2
+    args.started_s = started_s
     compiled_before_s = _jit.compile_s()
     try:
         return int(args.func(args) or 0)

@@ -6,6 +6,7 @@ import sys
 from ..batch import BatchOptions, run_batch, summarize
 from .files import refuse_existing
 from .options import BUDGET_NOT_GIVEN, add_firmware_options, budget_pct, motor_list
+from .progress import default_workers
 
 NAME = "batch"
 HELP = "solve + verify many files, one result row each (CSV or JSON)"
@@ -52,7 +53,9 @@ def run(args) -> int:
                         motors=None if args.motors is None else motor_list(args.motors), rotate=args.rotate,
                         max_added_time_pct="default" if args.max_added_time_pct is BUDGET_NOT_GIVEN else args.max_added_time_pct, max_added_lines_pct=args.max_added_lines_pct,
                         time_limit_s=args.time_limit, order=not args.no_order, gating=not args.no_gating,
-                        profile=args.profile, write_dir=args.write_dir)
+                        profile=args.profile, write_dir=args.write_dir,
+                        # one file at a time: its ordering may use both cores, as `solve` does
+                        order_workers=default_workers() if args.jobs <= 1 and not args.dask else 1)
     rows = run_batch(args.paths, opts, out=args.out, jobs=args.jobs, resume=args.resume, dask=args.dask,
                      progress=not args.quiet and sys.stderr.isatty(), formulations=forms)
     s = summarize(rows)
