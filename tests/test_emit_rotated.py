@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 import gatesopt
-from gatesopt.gating.emit import _default_snap, _rows_to_rewrite, _write_lines
+from gatesopt.gating.emit import _default_snap, _rows_to_rewrite, _write_lines, header_bounds
 from gatesopt.gating.emit_line import LineRewriter
 from gatesopt.gating.emit_rotated import write_rotated
 from gatesopt.gating.rotation import rotated_rows, rotation_center
@@ -27,10 +27,11 @@ def both(program, deg):
         em.snap = _default_snap(em, program)
         rewrite = _rows_to_rewrite(program, em, {})
         header = ["; gatesopt: rotate_deg=x"]
+        bounds = header_bounds(program, deg, center)    # the slicer's bounds lines, turned too
         if writer is write_rotated:
-            pieces, added, splits = writer(program, em, rewrite, header)
+            pieces, added, splits = writer(program, em, rewrite, header, bounds)
         else:
-            pieces, added, splits = writer(program, em, {}, {}, rewrite, header)
+            pieces, added, splits = writer(program, em, {}, {}, rewrite, header, bounds)
         out.append(("".join(pieces), added, splits, em))
     return out
 

@@ -2,11 +2,11 @@
 so; the gap a formulation reports is its stopping rule and its status; the time limit bounds
 every gating solve of a run together; the solve time reported is all of it.
 
-Ctrl-C is a real SIGINT sent to this process by a timer thread. The bounds on how soon a solver
-returns after it ("within N s") are generous on purpose: HiGHS and CP-SAT look at the stop request
-every few milliseconds (measured: 0.54 s after a signal sent at 0.5 s, both), but the machine these
-tests run on may be shared and loaded; what the bound rules out is running on to the time limit
-(60 s here), which is what happened before (a Ctrl-C at 25 s took effect at 59 s).
+Ctrl-C is a real SIGINT sent to this process by a timer thread. No assertion here is timed: a
+solver that stopped on the request says so (HiGHS's own status "interrupted", ``Stopped``), which
+it cannot do had it run on to its time limit (60 s here; before, a Ctrl-C at 25 s took effect at
+59 s). How soon it stops is measured, not asserted (docs/BENCHMARKS.md, "Ctrl-C": HiGHS and CP-SAT
+look at the request every few milliseconds).
 """
 from __future__ import annotations
 
@@ -28,8 +28,6 @@ from gatesopt.solvers import Stopped, request_stop, stop_requested, stop_scope
 
 from conftest import PROJECT_INSTANCES
 
-#: a solver asked to stop returns within this many seconds (module docstring)
-STOP_WITHIN_S = 5.0
 LONG_LIMIT_S = 60.0
 
 
@@ -83,10 +81,8 @@ def test_highs_stops_on_ctrl_c_and_says_so():
     from gatesopt._native import run_highs
     h = market_split_highs()
     ctrl_c_after(0.3)
-    t = time.perf_counter()
     run = run_highs(h)          # its own stop scope: the first Ctrl-C is a stop request
-    took = time.perf_counter() - t
-    assert took < STOP_WITHIN_S, took
+    # HiGHS's status is its interrupt's, not its 60 s time limit's
     assert run.stopped == Stopped.INTERRUPTED
     assert h.getModelStatus() == highspy.HighsModelStatus.kInterrupt
     assert not stop_requested()     # the scope is over: the next solve runs
@@ -100,11 +96,10 @@ def test_cpsat_stops_on_ctrl_c_and_says_so():
     solver.parameters.max_time_in_seconds = LONG_LIMIT_S
     solver.parameters.catch_sigint_signal = False
     ctrl_c_after(0.3)
-    t = time.perf_counter()
     with stop_scope():
         st, why = run_native(lambda: solver.solve(mdl), solver.stop_search)
         assert stop_requested()
-    assert time.perf_counter() - t < STOP_WITHIN_S
+    # INTERRUPTED: stop_search was called while the search still ran (before its 60 s limit)
     assert why == Stopped.INTERRUPTED and st in (cp.FEASIBLE, cp.OPTIMAL, cp.UNKNOWN)
 
 
@@ -112,11 +107,14 @@ def test_a_second_ctrl_c_raises():
     ctrl_c_after(0.2)
     ctrl_c_after(0.6)
     t = time.perf_counter()
+    asked = []
     with pytest.raises(KeyboardInterrupt):
         with stop_scope():
             while time.perf_counter() - t < LONG_LIMIT_S:
+                if stop_requested() and not asked:
+                    asked.append(True)      # the first Ctrl-C only asked
                 time.sleep(0.01)
-    assert 0.5 < time.perf_counter() - t < STOP_WITHIN_S
+    assert asked
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler     # handler restored
 
 
@@ -141,9 +139,7 @@ def test_ctrl_c_during_the_gating_solve_gives_its_answer_and_says_so(monkeypatch
     program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
     opts = GatingOptions.for_firmware("marlin", max_added_time_pct=1.0)
     ctrl_c_after(0.5)
-    t = time.perf_counter()
     res = pipeline.run(program, opts, formulation="milp", order=False, time_limit_s=LONG_LIMIT_S)
-    assert time.perf_counter() - t < STOP_WITHIN_S + 10.0       # + the rest of the run
     assert res.report.ok
     s = res.summary()
     # milp, asked to stop during its (long) search, answered with what it had, and said so

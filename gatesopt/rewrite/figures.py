@@ -24,6 +24,7 @@ from .. import firmware as fwmod
 from ..ordering.travel_stats import travel_stats
 from ..planner import durations
 from ..program import Program
+from .printer import choose
 
 #: the model of the print time the reports give, and how they say it
 PRINT_TIME_MODEL = "planner"
@@ -57,10 +58,23 @@ def pct(after: float, before: float) -> float:
     return 100.0 * (after / before - 1.0) if before else 0.0
 
 
-def figures(before: Program, after: Program, firmware: str = "3dgates") -> dict:
+def file_firmware(program: Program) -> str:
+    """The dialect the file's own printer runs (``printer.choose``, "auto": what ``solve`` would
+    write for it), "3dgates" where gatesopt writes nothing for it: the firmware a file's print
+    time is figured under when no gating chose one (``order``, ``solve --no-gating``), so that
+    every command gives one print time for one file."""
+    try:
+        return choose(program).firmware or "3dgates"
+    except fwmod.FirmwareError:
+        return "3dgates"
+
+
+def figures(before: Program, after: Program, firmware: str | None = None) -> dict:
     """The report keys of both files: ``print_time_before_s`` / ``_after_s`` / ``_change_pct``
     with ``print_time_model``, and ``travel_before_mm`` / ``_after_mm`` / ``_change_pct``,
-    ``travels_*``, ``retractions_*``."""
+    ``travels_*``, ``retractions_*``. ``firmware``: the dialect the output's motor lines are in
+    (None: the file's own, ``file_firmware``)."""
+    firmware = firmware or file_firmware(before)
     tb, ta = print_time_s(before, firmware), print_time_s(after, firmware)
     mb, ma = travel(before), travel(after)
     return {

@@ -372,7 +372,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         out = parse(text, source=(program.source + " (output)"))
         rep, extra = _verify_run(program, ordered_base, out, o, sol, ordered)
     with times.stage("report_s"):
-        figs = figures(program, out, o.firmware)
+        figs = figures(program, out, o.firmware if sol is not None else None)
         order_report = None
         if summarize is not None:
             # without gating ``verify`` above ran the ordering checks itself: its findings are theirs
