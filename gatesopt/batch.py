@@ -81,7 +81,7 @@ def process_file(path: str, options: BatchOptions) -> dict:
     from .rewrite.printer import DEFAULT, choose
     from .parse import parse
 
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     row = {c: "" for c in COLUMNS}
     row.update(file=str(path), formulation=options.formulation, verified=False)
     try:
@@ -101,7 +101,7 @@ def process_file(path: str, options: BatchOptions) -> dict:
         res = run(program, choice.options, formulation=options.formulation, time_limit_s=options.time_limit_s,
                   order=options.order, gating=options.gating and choice.options is not None, choice=choice,
                   budget_s=options.budget_s, order_options=OrderingOptions(mode=options.order_mode),
-                  started_s=t0, order_workers=options.order_workers,
+                  started_s=t0, cpu_started_s=cpu0, order_workers=options.order_workers,
                   order_formulation=options.formulation if options.formulation in ("greedy", "milp", "cpsat")
                   else "auto")
         s = res.summary()

@@ -42,6 +42,9 @@ def main(argv: list[str] | None = None) -> int:
     # a command run from the shell counts its time from the process's start (``clock``); one
     # called in-process (tests, scripts) from here
     started_s = clock.started_s() if argv is None else time.perf_counter()
+    # and its CPU seconds from the same moment (``time.process_time`` counts from the process's
+    # start): their ratio is how much of the machine the run gets (``rewrite.budget``)
+    cpu_started_s = 0.0 if argv is None else time.process_time()
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv and not argv[0].startswith("-") else "")
     args = parser.parse_args(argv)
@@ -49,6 +52,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return 2
     args.started_s = started_s
+    args.cpu_started_s = cpu_started_s
     compiled_before_s = _jit.compile_s()
     try:
         return int(args.func(args) or 0)

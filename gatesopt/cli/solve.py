@@ -82,10 +82,10 @@ def format_solve_report(s: dict) -> str:
         figure_lines(s)[0],
     ]
     if s.get("max_added_time_pct") is not None:
-        lines.append(f"time budget   firmware stalls add {s['added_time_pct']:+.3f} % to the paper "
-                     f"time T = L/F (at most {s['max_added_time_pct']:g} %)")
+        lines.append(f"time budget   paper time T = L/F {s['added_time_pct']:+.3f} % (re-ordering and gating "
+                     f"together; the firmware's stalls may add at most {s['max_added_time_pct']:g} %)")
     lines += [
-        f"lines         +{s['lines_added']} ({s['instruction_lines']} instruction lines, {s['splits']} moves split)"
+        f"lines         {s['lines_added']:+d} ({s['instruction_lines']} instruction lines, {s['splits']} moves split)"
         f"   file size {s['size_change_pct']:+.2f} %",
         f"rotation      {s.get('rotation_line') or 'none'}"
         + (f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um" if s["rotation_deg"] else ""),
@@ -160,7 +160,8 @@ def run(args) -> int:
                          order=not args.no_order, gating=gating, choice=choice,
                          order_workers=default_workers(), budget_s=args.budget,
                          order_progress=progress, order_options=order_options,
-                         order_formulation=order_formulation, started_s=started_s)
+                         order_formulation=order_formulation, started_s=started_s,
+                         cpu_started_s=getattr(args, "cpu_started_s", None))
     s = result.summary()
     s["max_added_time_pct"] = None if choice.options is None else choice.options.max_added_time_pct
     if not result.report.ok:

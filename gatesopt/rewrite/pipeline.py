@@ -37,7 +37,7 @@ from ..parse import parse
 from ..program import Program
 from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
 from ..verify import VerifyReport, check_ordering, check_positions, energy_of, verify
-from .budget import ordering_budget_s
+from .budget import no_time_note, ordering_budget_s, slowdown_factor
 from .figures import figures
 from .order import kept_slower_note, order_summary, reorder
 from .printer import FirmwareChoice, choose
@@ -71,6 +71,7 @@ class RunResult:
     times: dict = field(default_factory=dict)   # seconds per stage (``Stages``)
     stopped: str = ""                   # "interrupted (Ctrl-C)" when a stop was requested
     figures: dict = field(default_factory=dict)  # print time and travel (``rewrite.figures``)
+    slowdown: float = 1.0               # wall / CPU seconds before the ordering (``budget.slowdown_factor``)
 
     @property
     def solve_s(self) -> float:
@@ -112,6 +113,7 @@ class RunResult:
             "off_time_s": s.off_time_s() if s else {},
             "message": s.message if s else "",
             "notes": list(self.notes), "wall_s": self.wall_s, "times": dict(self.times),
+            "slowdown": self.slowdown,
             "firmware_line": self.choice.line if self.choice else f"{r.firmware} (given)",
             "firmware_choice": self.choice.summary() if self.choice else None,
             "rotation_line": (self.rotation or {}).get("line", "none"),
@@ -323,7 +325,8 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         order_time_limit_s: float = 2.0, order_workers: int = 1,
         order_budget_s: float | None = None, order_progress=None, order_options=None,
         order_formulation: str = "auto", choice: FirmwareChoice | None = None,
-        budget_s: float | None = None, started_s: float | None = None) -> RunResult:
+        budget_s: float | None = None, started_s: float | None = None,
+        cpu_started_s: float | None = None) -> RunResult:
     """Rewrite ``program`` as ``gatesopt solve`` does: optional curve ordering, then power gating
     (a chosen rotation applied, the rotated print parsed and solved again); verify the result.
     ``options``: the gating options; None: what fits the file's printer (``printer.choose``:
@@ -334,7 +337,9 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     ``tsp``); ``order_progress``: called after each ordering group (``ordering.layers.solve``).
     ``time_limit_s``: the gating solves together (module docstring); ``budget_s``: the whole
     run from ``started_s`` (a ``time.perf_counter()`` reading, default now), the ordering's solve
-    getting what the rest leaves; ``order_budget_s``: the ordering stage alone (build, solve,
+    getting what the rest leaves (estimated at the rates of the machine as loaded: the wall / CPU
+    seconds since ``started_s`` and ``cpu_started_s``, a ``time.process_time()`` reading taken
+    with it, ``budget.slowdown_factor``); ``order_budget_s``: the ordering stage alone (build, solve,
     emit), if given instead."""
     program.check_rewritable()
     t0 = time.perf_counter() if started_s is None else started_s
@@ -346,13 +351,21 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     notes = []
     times = Stages()
     times.add("read_s", time.perf_counter() - t0)
+    slow = 1.0
     with stop_scope():
         base, ordered, order_problem, summarize = program, False, None, None
+        ob = order_budget_s
+        if order and budget_s is not None:
+            slow = slowdown_factor(t0, cpu_started_s)
+            ob = ordering_budget_s(budget_s, program, o, formulation, gating,
+                                   time.perf_counter() - t0, time_limit_s, slow)
+            if ob <= 0.0:
+                # the rest alone is estimated to take the whole budget: the slicer's order (a
+                # re-ordering costs its build, a pass over every group and its emit even at no
+                # time to search: seconds on a large file), said so
+                order = False
+                notes.append(no_time_note(budget_s, time.perf_counter() - t0, slow))
         if order:
-            ob = order_budget_s
-            if budget_s is not None:
-                ob = ordering_budget_s(budget_s, program, o, formulation, gating,
-                                       time.perf_counter() - t0, time_limit_s)
             with times.stage("ordering_s"):
                 base, ordered, note, order_problem, summarize, order_solve_s = _order_curves(
                     program, order_time_limit_s, order_workers, ob, order_progress,
@@ -380,7 +393,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     return RunResult(program, base, sol, em, text, out, rep, ordered, tuple(notes),
                      time.perf_counter() - t0, order_problem=order_problem,
                      order_summary=order_report, choice=choice, rotation=rotation, times=times.s,
-                     stopped=stopped, figures=figs)
+                     stopped=stopped, figures=figs, slowdown=slow)
 
 
 def energy_time(program: Program, firmware: str = "3dgates", profile: str = "paper"):
