@@ -131,8 +131,10 @@ def report(out: Path) -> str:
           + (" (" + ", ".join(f"{r['file']} {r['wall_s']:.1f} s at load {r['load_before']:.1f}" for r in over) + ")"
              if over else "")
           + f"; load average {min(loads):.1f} to {max(loads):.1f} (median {_median(loads):.1f}); "
-          f"{len(quiet)} files measured at load <= 2.5, their wall max "
-          f"{max((r['wall_s'] for r in quiet), default=float('nan')):.2f} s.", "",
+          + (f"{len(quiet)} files measured at load <= 2.5, their wall max {max(r['wall_s'] for r in quiet):.2f} s."
+             if quiet else "no file measured at load <= 2.5 (the machine was never quiet).")
+          + f" CPU seconds: median {_median([r.get('cpu_s', 0) for r in rows]):.2f}, max "
+          f"{max(r.get('cpu_s', 0) for r in rows):.2f}.", "",
           "| file | lines | wall s | ratio | CPU s | load | slow x | read | ordering (solve) | gating (solve) | rotate | verify | report | saving % | rot deg | print time % | travel % |",
           "|---|---:|---:|---:|---:|---:|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:

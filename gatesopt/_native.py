@@ -12,7 +12,7 @@ import os
 import sys
 import threading
 
-from .solvers import Stopped, native_call, request_stop, stop_requested, stop_scope
+from .solvers import Stopped, in_stop_scope, native_call, request_stop, stop_requested, stop_scope
 
 _lock = threading.Lock()
 try:
@@ -124,10 +124,15 @@ def run_highs(h, deadline: float | None = None, start=None, stop_when=None) -> H
                 e.interrupt()
     h.cbSimplexInterrupt.subscribe(interrupt)
     h.cbMipInterrupt.subscribe(mip_interrupt)
+    # outside a caller's stop_scope a Ctrl-C is Python's KeyboardInterrupt, as anywhere: raised
+    # once HiGHS has stopped (its own scope only keeps it from raising inside HiGHS)
+    raise_after = not in_stop_scope()
     try:
         with stop_scope(), native_call(), native_stdout_to_stderr():   # HiGHS may printf
             h.run()
     finally:
         h.cbSimplexInterrupt.unsubscribe(interrupt)
         h.cbMipInterrupt.unsubscribe(mip_interrupt)
+    if raise_after and run.stopped == Stopped.INTERRUPTED:
+        raise KeyboardInterrupt
     return run

@@ -144,6 +144,11 @@ def stop_requested() -> bool:
     return _state.requested.is_set()
 
 
+def in_stop_scope() -> bool:
+    """True inside a ``stop_scope`` (where the first Ctrl-C asks solvers to stop instead of raising)."""
+    return _state.depth > 0
+
+
 def request_stop() -> None:
     """Ask every solver of the current ``stop_scope`` to stop and answer with what it has."""
     _state.requested.set()
@@ -227,16 +232,23 @@ def run_native(fn, stop, deadline_s=None):
     why = Stopped.NO
     with native_call():
         t.start()
-        while t.is_alive():
-            t.join(POLL_S)
-            if why == Stopped.NO and t.is_alive():
-                at = deadline_s() if callable(deadline_s) else deadline_s
-                if stop_requested():
-                    why = Stopped.INTERRUPTED
-                elif at is not None and time.perf_counter() >= at:
-                    why = Stopped.TIME_LIMIT
-                if why != Stopped.NO:
-                    stop()
+        try:
+            while t.is_alive():
+                t.join(POLL_S)
+                if why == Stopped.NO and t.is_alive():
+                    at = deadline_s() if callable(deadline_s) else deadline_s
+                    if stop_requested():
+                        why = Stopped.INTERRUPTED
+                    elif at is not None and time.perf_counter() >= at:
+                        why = Stopped.TIME_LIMIT
+                    if why != Stopped.NO:
+                        stop()
+        except BaseException:
+            # Ctrl-C outside a stop_scope (a KeyboardInterrupt here): the search must not run on
+            # in its thread to its time limit
+            stop()
+            t.join()
+            raise
     if "error" in box:
         raise box["error"]
     return box.get("value"), why

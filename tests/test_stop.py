@@ -81,11 +81,34 @@ def test_highs_stops_on_ctrl_c_and_says_so():
     from gatesopt._native import run_highs
     h = market_split_highs()
     ctrl_c_after(0.3)
-    run = run_highs(h)          # its own stop scope: the first Ctrl-C is a stop request
+    with stop_scope():          # a run's scope: the first Ctrl-C is a stop request
+        run = run_highs(h)
     # HiGHS's status is its interrupt's, not its 60 s time limit's
     assert run.stopped == Stopped.INTERRUPTED
     assert h.getModelStatus() == highspy.HighsModelStatus.kInterrupt
     assert not stop_requested()     # the scope is over: the next solve runs
+
+
+def test_outside_a_run_ctrl_c_stops_the_solver_and_raises():
+    """Without a run's stop scope (a library call from a script, `gatesopt order`) Ctrl-C is
+    Python's KeyboardInterrupt, raised once the solver has stopped: before, HiGHS's own scope
+    swallowed it (the ordering went on to its next group), and CP-SAT ran on in its thread."""
+    import highspy
+    from ortools.sat.python import cp_model as cp
+    from gatesopt._native import run_highs
+    from gatesopt.solvers import run_native
+    h = market_split_highs()
+    ctrl_c_after(0.3)
+    with pytest.raises(KeyboardInterrupt):
+        run_highs(h)
+    assert h.getModelStatus() == highspy.HighsModelStatus.kInterrupt     # not its time limit
+    solver = cp.CpSolver()
+    solver.parameters.max_time_in_seconds = LONG_LIMIT_S
+    solver.parameters.catch_sigint_signal = False
+    ctrl_c_after(0.3)
+    with pytest.raises(KeyboardInterrupt):
+        run_native(lambda: solver.solve(market_split_cpsat()), solver.stop_search)
+    assert not [t for t in threading.enumerate() if t.name == "gatesopt-native" and t.is_alive()]  # joined
 
 
 def test_cpsat_stops_on_ctrl_c_and_says_so():
