@@ -11,7 +11,7 @@ import numpy as np
 from ..energy import SECTORS, load_profile, profile
 from ..errors import GatesoptError
 from ..planner import TIME_MODELS, comparable_total_s, durations, slicer_estimate_s
-from .files import check_new_file, read_program
+from .files import check_input, check_new_file, print_warnings, read_program
 
 NAME = "profile"
 HELP = "energy and time of a G-code file (3DGates energy model)"
@@ -46,8 +46,11 @@ STREAM_ABOVE_BYTES = 256 << 20     # whole-file arrays take ~8x the file: stream
 
 
 def _wants_stream(args) -> bool:
-    if args.file == "-" or not os.path.isfile(args.file):
-        return False            # the parser says what is wrong with a missing file
+    check_input(args.file)
+    if args.file == "-":
+        if args.stream:
+            raise GatesoptError("--stream reads a file chunk by chunk: give a file, not -")
+        return False
     return args.stream or os.path.getsize(args.file) > STREAM_ABOVE_BYTES
 
 
@@ -57,8 +60,7 @@ def run_stream(args) -> int:
         raise GatesoptError("--plot needs the whole file in memory: drop --stream (or --plot)")
     report = profile_stream(args.file, args.profile, time_model=args.time_model,
                             energy_time_model=args.energy_time_model)
-    for w in report.warnings:
-        print(f"gatesopt: warning: {w}", file=sys.stderr)
+    print_warnings(report.warnings)
     if args.json:
         json.dump(_json(report, args), sys.stdout, indent=2)
         print()
@@ -98,11 +100,9 @@ def run(args) -> int:
         check_new_file(args.plot, [] if args.file == "-" else [args.file], args.force, png=True)
     if _wants_stream(args):
         return run_stream(args)
-    program = read_program(args.file)
+    program = read_program(args.file)       # its warnings on stderr
     prof = load_profile(args.profile)
     report, duration_s = time_and_energy(program, prof, args.time_model, args.energy_time_model)
-    for w in report.warnings:
-        print(f"gatesopt: warning: {w}", file=sys.stderr)
     if args.plot:
         from ..plot import plot_profile
         plot_profile(report, args.plot)
