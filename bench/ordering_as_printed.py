@@ -118,9 +118,9 @@ def _pct(a, b) -> str:
 
 def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], dict]:
     lines = [f"| file | print s before | auto after | greedy after | travel auto | travel greedy | "
-             f"kept slower / re-orderable layers | optimal reverted | groups optimal | "
+             f"kept slower / re-orderable layers | optimal reverted | groups optimal | worst gap | "
              f"islands moved (runs, layers) | free-mode print | run s | verified |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     tally = {"files": 0, "not_faster_than_before": [], "slower_than_greedy": [], "kept": 0,
              "reorderable": 0, "reverted": 0, "optimal": 0, "groups": 0, "unverified": [],
              "errors": [], "block_files": 0, "block_moved_files": 0}
@@ -132,7 +132,7 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
             continue
         if "error" in a:
             tally["errors"].append(name)
-            lines.append(f"| {name} | error: {a['error'][:80]} |" + " |" * 11)
+            lines.append(f"| {name} | error: {a['error'][:80]} |" + " |" * 12)
             continue
         tally["files"] += 1
         b, after = a["print_time_before_s"], a["print_time_after_s"]
@@ -163,7 +163,7 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
             f"{a['travel_change_pct']:+.1f} % | "
             + (f"{g['travel_change_pct']:+.1f} %" if gafter is not None else "-") + " | "
             f"{a['layers_kept_slower']} / {a['layers_reorderable']} | {a['optimal_reverted']} | "
-            f"{n_opt} / {n_groups} | {islands} | {free} | {a['run_s']:.1f} | "
+            f"{n_opt} / {n_groups} | {100 * a['worst_gap']:.2f} % | {islands} | {free} | {a['run_s']:.1f} | "
             f"{'yes' if a['verified'] else 'NO'}"
             + ("" if not g or g.get("verified", True) else " (greedy: NO)") + " |")
     return lines, tally

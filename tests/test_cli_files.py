@@ -268,10 +268,3 @@ def test_batch_takes_the_ordering_options_of_solve(tmp_path, capsys, monkeypatch
     rc, _, err = run_cli(["batch", SRC, "--out", out, "--order-mode", "sideways"], capsys, monkeypatch)
     assert rc == 2 and "--order-mode" in one_error_line(err)
 
-
-def test_compare_refuses_an_unknown_formulation_before_any_work(capsys, monkeypatch):
-    for argv in (["compare", SRC, "--formulations", "nope"],
-                 ["compare", SRC, "--ordering", "--formulations", "greedy,dp"]):
-        rc, out, err = run_cli(argv, capsys, monkeypatch)
-        assert rc == 2 and out == ""
-        assert "not a" in one_error_line(err) and "choose from" in err

@@ -269,7 +269,9 @@ def _solve_counts(problem: OrderingProblem, solution: OrderingSolution, slower_l
             if lay is not None and row["layer"] < len(lay.layer_why) and lay.layer_keep[row["layer"]]:
                 why = lay.layer_why[row["layer"]]
             row["kept_why"] = why or KEPT_NOTHING
-    lay_counts["reorderable"] = len({int(problem.group_layer[g]) for g, _ in decided})
+    # layers with a group of >= 2 curves to decide, or whose islands moved as blocks
+    lay_counts["reorderable"] = len({int(problem.group_layer[g]) for g, _ in decided}
+                                    | set(np.unique(problem.curve_layer[moved]).tolist()))
     return layers, counts, lay_counts, decided
 
 
