@@ -94,9 +94,9 @@ def run(args) -> None:
                 if "error" in row:
                     print(f"{path.name} {mode} {form}: ERROR {row['error']}", flush=True)
                     continue
-                print(f"{path.name} {mode} {form}: print {row['print_time_planner_before_s']:.1f} -> "
-                      f"{row['print_time_planner_after_s']:.1f} s "
-                      f"({row['print_time_planner_change_pct']:+.2f} %), travel "
+                print(f"{path.name} {mode} {form}: print {row['print_time_before_s']:.1f} -> "
+                      f"{row['print_time_after_s']:.1f} s "
+                      f"({row['print_time_change_pct']:+.2f} %), travel "
                       f"{row['travel_change_pct']:+.1f} %, kept slower "
                       f"{row['layers_kept_slower']}/{row['layers_reorderable']}, optimal "
                       f"{row['groups_optimal']}/{row['groups_reordered']}, blocks moved "
@@ -108,6 +108,10 @@ def _load(path: Path) -> dict:
     rows = {}
     for line in path.read_text().splitlines():
         r = json.loads(line)
+        for old in ("before_s", "after_s", "change_pct"):
+            # rows written before the report's keys were renamed (one print-time figure: G3)
+            if f"print_time_planner_{old}" in r:
+                r[f"print_time_{old}"] = r.pop(f"print_time_planner_{old}")
         rows[(r["folder"], r["file"], r["order_mode"], r["formulation"])] = r  # the last run wins
     return rows
 
@@ -144,8 +148,8 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
             lines.append(f"| {name} | error: {a['error'][:80]} |" + " |" * 12)
             continue
         tally["files"] += 1
-        b, after = a["print_time_planner_before_s"], a["print_time_planner_after_s"]
-        gafter = g["print_time_planner_after_s"] if g and "error" not in g else None
+        b, after = a["print_time_before_s"], a["print_time_after_s"]
+        gafter = g["print_time_after_s"] if g and "error" not in g else None
         if after > b + TIME_TOL_S:
             tally["not_faster_than_before"].append(name)
         if gafter is not None and after > gafter + TIME_TOL_S:
@@ -164,7 +168,7 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
         n_opt = a["groups_optimal"] + a.get("block_orders_optimal", 0)
         islands = (f"{a['block_segments_moved']}/{a['block_segments']}, {a['block_layers_moved']}"
                    if a.get("block_segments") else "-")
-        free = (f"{fr['print_time_planner_after_s']:,.1f} ({_pct(fr['print_time_planner_after_s'], b)})"
+        free = (f"{fr['print_time_after_s']:,.1f} ({_pct(fr['print_time_after_s'], b)})"
                 if mode == "safe" and fr and "error" not in fr else "")
         lines.append(
             f"| {name} | {b:,.1f} | {after:,.1f} ({_pct(after, b)}) | "

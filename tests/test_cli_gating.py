@@ -36,8 +36,9 @@ def test_solve_writes_verified_output_and_json(square, tmp_path, capsys):
     text = out.read_text()
     assert "S0 " in text and "S1 " in text
     d = json.loads(rj.read_text())
-    for k in ("energy_before_j", "energy_after_j", "time_before_s", "time_after_s", "lines_added",
-              "rotation_deg", "formulation", "status", "gap", "solve_s"):
+    for k in ("energy_before_j", "energy_after_j", "print_time_before_s", "print_time_after_s",
+              "paper_time_before_s", "paper_time_after_s", "lines_added", "rotation_deg",
+              "formulation", "status", "gap", "solve_s", "travel_before_mm", "times"):
         assert k in d
     assert d["energy_after_j"] < d["energy_before_j"] and d["formulation"] == "dp"
     assert d["lines_added"] == len(text.splitlines()) - len(SQUARE.splitlines())
@@ -217,11 +218,14 @@ def test_solve_reports_the_ordering_and_takes_its_mode(tmp_path, capsys):
     # the exact ordering proves every group here; it is never worse than greedy
     assert got["free", False]["groups_fallback"] == got["free", False]["groups_feasible"] == 0
     assert got["free", False]["travel_after_mm"] <= got["free", True]["travel_after_mm"] + 1e-6
-    # --no-order: no ordering keys, and the report says the slicer's order was kept
+    # --no-order: no ordering keys, the travel of the file unchanged, and the report says the
+    # slicer's order was kept
     out = tmp_path / "no.gcode"
     rj = tmp_path / "no.json"
     assert main(["solve", str(src), "-o", str(out), "--rotate", "none", "--no-order", "--json", str(rj)]) == 0
-    assert "travel_before_mm" not in json.loads(rj.read_text())
+    d = json.loads(rj.read_text())
+    assert "groups_optimal" not in d and "ordering" not in d
+    assert d["travel_after_mm"] == pytest.approx(d["travel_before_mm"], abs=1e-6)
     assert "ordering      none" in capsys.readouterr().out
 
 

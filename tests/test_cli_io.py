@@ -82,8 +82,8 @@ def test_option_combinations_are_refused(tmp_path, capsys):
     msgs = capsys.readouterr().err
     assert "--in-place" in msgs and "must not be the input" in msgs and "--force" in msgs
     assert "--rotate 45" in msgs and "--no-gating" in msgs
-    assert main(["solve", str(p), "-o", str(tmp_path / "r.gcode"), "--order-budget", "0"]) == 2
-    assert "--order-budget" in capsys.readouterr().err
+    assert main(["solve", str(p), "-o", str(tmp_path / "r.gcode"), "--budget", "0"]) == 2
+    assert "--budget" in capsys.readouterr().err
 
 
 def test_solve_gives_the_ordering_a_budget(tmp_path, monkeypatch):

@@ -18,11 +18,10 @@ clock, so a group gets the same path on every machine; ``deadline`` is only a sa
 """
 from __future__ import annotations
 
-import time
-
 import numba
 import numpy as np
 
+from .._jit import now_ns
 from .greedy import (IMPROVE_EPS, clusters, improve, keep_smallest, matrices,
                      nearest_neighbour, orient_dp, path_cost)
 from .problem import Group
@@ -260,11 +259,9 @@ def _ils(seq, cc, cand_start, cand_list, flip, D, ds, de, near_out, near_in, kic
     for it in range(kicks):
         if best_cost <= target:
             break
-        if deadline_ns > 0 and (it & 15) == 0:
-            with numba.objmode(now="int64"):
-                now = time.perf_counter_ns()
-            if now > deadline_ns:
-                break
+        # the clock without numba.objmode, which is compiled again in every process (_jit)
+        if deadline_ns > 0 and (it & 15) == 0 and now_ns() > deadline_ns:
+            break
         # kick: A B C D -> A C' B' D
         lb = np.random.randint(1, min(max_seg, n - 1) + 1)
         lc = np.random.randint(1, min(max_seg, n - lb) + 1)
