@@ -150,6 +150,13 @@ class Firmware:
     no_drain_words: frozenset = frozenset()   # motor words it carries out without draining the queue
     stall_is_stop: bool = False   # the disable stall is a full stop (priced by the planner when given)
     drains_on_disable: bool = True  # a disable brings the head to rest (``planner.Plan.stop_cost_s``)
+    start_lead_s: float = 0.0     # counted on top of the start-ahead: the firmware steps this much
+                                  # before a move's nominal start (Klipper's input shaper)
+    note: str = ""                # what gating in this dialect cannot honour (said with the choice)
+    splits_extrude_only: bool = True  # a gating line may split an extrude-only move (a retraction);
+                                  # False: it goes before (on) or after (off) the whole move
+                                  # (``gating.timeline.whole_steps``: what the firmware does with a
+                                  # split one is a stop (Klipper) or not known (Marlin))
     planner: PlannerRules | None = field(default=None, repr=False)   # None: the file's own rules
 
     # -- text -------------------------------------------------------------------------------------

@@ -46,6 +46,8 @@ class GatingOptions:
     stall_on_s: float = 0.0             # stall per on line
     on_line: bool = True                # re-enable needs a line (False: automatic at the first step)
     merge_lines: bool = True            # instructions of several motors at one moment share a line
+    split_extrude_only: bool = True     # a line may split an extrude-only move (False: it goes before
+                                        # / after the whole move, ``timeline.whole_steps``)
     max_added_time_pct: float | None = None    # budget on stall time, % of the print time
     max_added_lines_pct: float | None = None   # budget on added lines, % of the file's lines
     num_workers: int = 2                # CP-SAT workers
@@ -122,11 +124,15 @@ class GatingOptions:
 
     @classmethod
     def for_firmware(cls, firmware: str = "3dgates", **changes) -> "GatingOptions":
-        """Options with the stall/line numbers of a ``gatesopt.firmware`` preset."""
+        """Options with the stall/line numbers of a ``gatesopt.firmware`` preset; its
+        ``start_lead_s`` (steps before a move's nominal start) is added to the start-ahead."""
         c = fw_mod.gating_costs(firmware)
         kw = dict(firmware=c.firmware, stall_off_s=c.stall_off_s, stall_on_s=c.stall_on_s,
                   on_line=c.on_lines_per_gate > 0, merge_lines=c.off_lines_merged)
         kw.update(changes)
+        fw = fw_mod.get(firmware)
+        kw.setdefault("split_extrude_only", fw.splits_extrude_only)
+        kw["start_ahead_s"] = kw.get("start_ahead_s", cls.start_ahead_s) + fw.start_lead_s
         opts = cls(**kw)
         fw_mod.get(firmware).check_motors(opts.motors)
         return opts

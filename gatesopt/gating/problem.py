@@ -35,6 +35,7 @@ from ..program import Kind, Program, X, Y
 from . import _kernels as _k
 from .options import GatingOptions
 from .rotation import greedy_angle, rotated_rows, rotation_candidates, rotation_center, steps_at
+from .timeline import whole_steps
 
 
 @dataclass(frozen=True, eq=False)
@@ -244,7 +245,7 @@ def _stall_program(program: Program) -> Program:
                            arc_center_mm=np.full((n, 2), np.nan))
 
 
-def _idle_table(o: GatingOptions, start_s, dur, group_rate_w: dict, stall_w, steps_list, angles_idx):
+def _idle_table(o: GatingOptions, start_s, dur, group_rate_w: dict, stall_w, steps_list, angles_idx, whole):
     """Idle-interval table for all (angle, enable group) pairs. ``steps_list[k]``: (n,4) step mask
     of angle ``angles_idx[k]``.
 
@@ -262,7 +263,7 @@ def _idle_table(o: GatingOptions, start_s, dur, group_rate_w: dict, stall_w, ste
             per_event = 1 if o.merge_lines else len(grp)     # one line per motor unless merged
             out = _k.idle_intervals(start_s, np.ascontiguousarray(st), rates[m], cums[m], stall_w,
                                     float(sa_eff), float(o.end_late_s), bool(o.on_line),
-                                    float(o.stall_off_s), float(o.stall_on_s), per_event)
+                                    float(o.stall_off_s), float(o.stall_on_s), per_event, whole)
             parts.append((k, m, out))
     names = ("idle_start_s", "idle_end_s", "idle_off_row", "idle_on_row", "idle_prev_row",
              "idle_next_row", "idle_saving_j", "idle_lines", "idle_stall_s", "idle_stall_j")
@@ -305,7 +306,7 @@ def _angle_table(program: Program, o: GatingOptions, angles, lo, hi, center, dur
 
 
 def _built_idle_intervals(o: GatingOptions, angles_deg, table: _AngleTable, start_s, dur,
-                          rates: _Rates, stall_w) -> tuple[dict, np.ndarray]:
+                          rates: _Rates, stall_w, whole) -> tuple[dict, np.ndarray]:
     """(idle-interval arrays of the angles built, (K,) bool built), angles pruned by their bound.
 
     Upper bound on what gating can save at each angle: every motor off whenever it does not step
@@ -326,7 +327,7 @@ def _built_idle_intervals(o: GatingOptions, angles_deg, table: _AngleTable, star
     for k in order:
         if prunable and k != g_angle and ub[k] < best - tol:
             continue
-        gk = _idle_table(o, start_s, dur, rates.group_rate_w, stall_w, [table.steps[k]], [k])
+        gk = _idle_table(o, start_s, dur, rates.group_rate_w, stall_w, [table.steps[k]], [k], whole)
         net = gk["idle_saving_j"] - gk["idle_stall_j"]
         best = max(best, float(net[net > 0].sum()))
         built.append(k)
@@ -377,7 +378,9 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
     angles, notes = list(plan.angles_deg), list(plan.notes)
     angles_arr = np.array(angles)
     table = _angle_table(program, o, angles, lo, hi, center, dur, rate, steps0, arc)
-    idle, has_idle = _built_idle_intervals(o, angles_arr, table, start_s, dur, rates, stall_w)
+    # steps no line may split (not moves; extrude-only moves unless the dialect splits them)
+    whole = np.ascontiguousarray(whole_steps(steps0, program.kind, o.split_extrude_only))
+    idle, has_idle = _built_idle_intervals(o, angles_arr, table, start_s, dur, rates, stall_w, whole)
     energy_before = float(step_energy_j(dur, coeffs, enable0).sum()
                           + step_energy_j(own_s, stall_coeffs.take(own_row), enable0[own_row]).sum())
     ro = readonly

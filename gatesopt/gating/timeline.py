@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..program import MOTION_KINDS, Kind
+
 TIME_EPS_S = 1e-12          # a boundary closer than this to a step boundary is on it (no split)
 
 
@@ -28,6 +30,26 @@ def is_split(start_s, row, t):
     r = np.minimum(row, n - 1) if n else row
     inside = (start_s[r] + TIME_EPS_S < t) & (t < start_s[np.minimum(r + 1, n)] - TIME_EPS_S)
     return inside & (row < n)
+
+
+def whole_steps(steps_motor, kind, split_extrude_only: bool = True) -> np.ndarray:
+    """(n,) bool: steps no instruction may split, so that a moment inside one is placed at its
+    safe side (an off at its end, an on at its start: the motor only stays on longer, which
+    start-ahead and end-late always allow) by the model and the emitter alike:
+
+    - a step that is not a move (a dwell, a heat-up wait, homing): its G-code cannot be cut;
+    - an extrude-only move (E steps, X Y Z do not), unless ``split_extrude_only``: Klipper plans
+      each on its own, from rest to rest (klippy/toolhead.py ``Move.calc_junction``: no junction
+      speed to or from a move that is not kinematic), so a retraction cut in two to place a line
+      costs a stop more (+12.5 ms measured, docs/RESULTS.md); on Marlin an ``M18`` between its
+      halves drains the queue inside the retraction. A dialect says whether its lines may split
+      one (``firmware.Firmware.splits_extrude_only``)."""
+    sm = np.asarray(steps_motor, bool)
+    kind = np.asarray(kind)
+    out = ~np.isin(kind, MOTION_KINDS)
+    if not split_extrude_only:
+        out |= sm[:, 3] & ~sm[:, :3].any(axis=1) & (kind != Kind.ARC)
+    return out
 
 
 def integral(cum, start_s, rate, t, row):
