@@ -122,6 +122,10 @@ class PlannerRules:
     disable_dwell_s: float = 0.0  # dwelled on top of the queue drain of each disable line
 
 
+#: ``Firmware.split_moves``: every move may be split; all but extrude-only moves; none
+SPLIT_MOVES = ("all", "kinematic", "none")
+
+
 class FirmwareError(GatesoptError, ValueError):
     """A gating request the chosen firmware cannot carry out safely."""
 
@@ -153,10 +157,10 @@ class Firmware:
     start_lead_s: float = 0.0     # counted on top of the start-ahead: the firmware steps this much
                                   # before a move's nominal start (Klipper's input shaper)
     note: str = ""                # what gating in this dialect cannot honour (said with the choice)
-    splits_extrude_only: bool = True  # a gating line may split an extrude-only move (a retraction);
-                                  # False: it goes before (on) or after (off) the whole move
-                                  # (``gating.timeline.whole_steps``: what the firmware does with a
-                                  # split one is a stop (Klipper) or not known (Marlin))
+    split_moves: str = "all"      # which moves a gating line may split: "all", "kinematic" (not an
+                                  # extrude-only move), "none"; a line that falls inside another
+                                  # goes before (on) or after (off) the whole move
+                                  # (``gating.timeline.whole_steps``, ``SPLIT_MOVES``)
     planner: PlannerRules | None = field(default=None, repr=False)   # None: the file's own rules
 
     # -- text -------------------------------------------------------------------------------------

@@ -21,6 +21,15 @@ asked for (``start_lead_s``): the motor is on before the first shaped step of an
 shapers at 20 Hz or more. The pin goes on at the end of the moves before the line (the flush), so
 the moves between line and step are the start-ahead; the flush's stop only delays them.
 
+A flush brings the head to rest at the line: inside a move from its cruising speed (v / a, 50 ms
+at 150 mm/s and 3000 mm/s^2), between two moves from their junction speed, which is 0 next to a
+retraction (an extrude-only move starts and ends at rest, ``Move.calc_junction``). The price here
+is one stop at 50 mm/s; the real one depends on the speed where the line stands (measured per
+line in docs/RESULTS.md). No line of this dialect splits an extrude-only move (``split_moves``
+"kinematic": Klipper plans each half from rest to rest); splitting no move at all ("none") was
+tried and gated next to nothing: most idle intervals worth a 0.22 s stall lie inside one long
+single-axis move.
+
 What it cannot honour (``note``): an end-late below Klipper's 0.1 s dwell (the pin goes off 0.1 s
 after the moves before the line end, whatever end-late asked), and with an input shaper each flush
 costs ``2 * (pre-active - 1 ms)`` more than priced (+26.6 ms per line at mzv 30 Hz).
@@ -98,7 +107,7 @@ DIALECT = Klipper(
     homing_kept=True, allowed_motors=frozenset(AXES),
     executes=frozenset({"SET_STEPPER_ENABLE", "M18", "M84"}),
     description="Klipper: SET_STEPPER_ENABLE per stepper, ~0.22 s stall off, ~0.02 s on",
-    start_lead_s=SHAPER_LEAD_S, splits_extrude_only=False,
+    start_lead_s=SHAPER_LEAD_S, split_moves="kinematic",
     note=(f"klipper: each motor switched on {SHAPER_LEAD_S * 1e3:g} ms more than the start-ahead "
           "before its next move (an input shaper's steps start before the move); each "
           "SET_STEPPER_ENABLE stops the print head (ENABLE=0 also dwells 2 x 0.1 s, so a motor "

@@ -125,7 +125,7 @@ def _place_lines(program: Program, fw, placed):
     cuts: dict[int, list] = {}
     moved = instr = 0
     inside: dict[int, list[Placed]] = {}     # unsplittable row -> instructions that fall inside it
-    whole = whole_steps(program.steps_motor(), program.kind, fw.splits_extrude_only)
+    whole = whole_steps(program.steps_motor(), program.kind, fw.split_moves)
     for pl in sorted(placed, key=lambda q: q.time_s):
         r = int(pl.row)
         if r < n and pl.fraction is not None and 0.0 < pl.fraction < 1.0 and whole[r]:

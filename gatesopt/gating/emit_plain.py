@@ -46,7 +46,7 @@ def render_plain(program: Program, fw, placed: PlacedArrays, rotation_deg: float
     r0 = np.minimum(row, n - 1)
     line_r = program.line[r0]
     strictly_inside = split & (frac > 0.0) & (frac < 1.0)
-    whole = whole_steps(program.steps_motor(), program.kind, fw.splits_extrude_only)
+    whole = whole_steps(program.steps_motor(), program.kind, fw.split_moves)
     unsplittable = in_prog & strictly_inside & whole[r0]
     live = ~unsplittable & (code_lines[code] > 0)
     cut = live & in_prog & split & ~(frac <= 0.0) & ~(frac >= 1.0)

@@ -46,8 +46,8 @@ class GatingOptions:
     stall_on_s: float = 0.0             # stall per on line
     on_line: bool = True                # re-enable needs a line (False: automatic at the first step)
     merge_lines: bool = True            # instructions of several motors at one moment share a line
-    split_extrude_only: bool = True     # a line may split an extrude-only move (False: it goes before
-                                        # / after the whole move, ``timeline.whole_steps``)
+    split_moves: str = "all"            # moves a line may split: "all" | "kinematic" (not extrude-only)
+                                        # | "none"; else it goes before / after the whole move
     max_added_time_pct: float | None = None    # budget on stall time, % of the print time
     max_added_lines_pct: float | None = None   # budget on added lines, % of the file's lines
     num_workers: int = 2                # CP-SAT workers
@@ -99,6 +99,9 @@ class GatingOptions:
             seen |= set(g)
             groups.append(g)
         object.__setattr__(self, "shared_enable", tuple(groups))
+        if self.split_moves not in fw_mod.SPLIT_MOVES:
+            raise GatingOptionsError(f"split_moves must be one of {', '.join(fw_mod.SPLIT_MOVES)}, "
+                                     f"not {self.split_moves!r}")
 
     @property
     def motor_index(self) -> tuple[int, ...]:
@@ -131,7 +134,7 @@ class GatingOptions:
                   on_line=c.on_lines_per_gate > 0, merge_lines=c.off_lines_merged)
         kw.update(changes)
         fw = fw_mod.get(firmware)
-        kw.setdefault("split_extrude_only", fw.splits_extrude_only)
+        kw.setdefault("split_moves", fw.split_moves)
         kw["start_ahead_s"] = kw.get("start_ahead_s", cls.start_ahead_s) + fw.start_lead_s
         opts = cls(**kw)
         fw_mod.get(firmware).check_motors(opts.motors)
