@@ -70,6 +70,24 @@ def add_firmware_options(p) -> None:
     p.add_argument("--force-firmware", choices=firmware_names(), default=None, metavar="NAME",
                    help="write NAME's lines even where the file is for another firmware (refused "
                         "without it: marlin's M18 on a Klipper file stops the print)")
+    add_printer_config_option(p)
+
+
+def add_printer_config_option(p) -> None:
+    """``--printer-config`` (``solve``, ``compare``, ``batch``, ``verify``)."""
+    p.add_argument("--printer-config", default=None, metavar="printer.cfg",
+                   help="the printer's Klipper config, read by --firmware klipper-gating: the input "
+                        "shaper (its step window widens each switch's margins) and the [gatesopt_gating] "
+                        "section (start_ahead, end_late, min_off_time, steppers)")
+
+
+def printer_config(args):
+    """The ``--printer-config`` file read (``gatesopt.printer_config``), or None."""
+    path = getattr(args, "printer_config", None)
+    if not path:
+        return None
+    from ..printer_config import read_printer_config
+    return read_printer_config(path)
 
 
 def add_gating_options(p) -> None:
@@ -112,6 +130,9 @@ def firmware_choice(args, program, **gating):
     budget = getattr(args, "max_added_time_pct", BUDGET_NOT_GIVEN)
     motors = None if args.motors is None else motor_list(args.motors)
     forced = getattr(args, "force_firmware", None)
+    printer = printer_config(args)
+    if printer is not None:
+        gating.setdefault("printer", printer)
     return choose(program, forced or args.firmware, force=forced is not None,
                   max_added_time_pct=DEFAULT if budget is BUDGET_NOT_GIVEN else budget,
                   motors=motors, **gating)

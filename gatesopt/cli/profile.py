@@ -8,7 +8,7 @@ import sys
 from ..energy import SECTORS, load_profile, profile
 from ..errors import GatesoptError
 from ..planner import TIME_MODELS, comparable_total_s, durations, slicer_estimate_s
-from .files import check_new_file, read_program
+from .files import check_input, check_new_file, print_warnings, read_program
 
 NAME = "profile"
 HELP = "energy and time of a G-code file (3DGates energy model)"
@@ -37,8 +37,11 @@ STREAM_ABOVE_BYTES = 256 << 20     # whole-file arrays take ~8x the file: stream
 
 
 def _wants_stream(args) -> bool:
-    if args.file == "-" or not os.path.isfile(args.file):
-        return False            # the parser says what is wrong with a missing file
+    check_input(args.file)
+    if args.file == "-":
+        if args.stream:
+            raise GatesoptError("--stream reads a file chunk by chunk: give a file, not -")
+        return False
     return args.stream or os.path.getsize(args.file) > STREAM_ABOVE_BYTES
 
 
@@ -47,8 +50,7 @@ def run_stream(args) -> int:
     if args.plot:
         raise GatesoptError("--plot needs the whole file in memory: drop --stream (or --plot)")
     report = profile_stream(args.file, args.profile, time_model=args.time_model)
-    for w in report.warnings:
-        print(f"gatesopt: warning: {w}", file=sys.stderr)
+    print_warnings(report.warnings)
     if args.json:
         d = report.to_dict(per_layer=args.per_layer)
         d["time_model"] = args.time_model
@@ -67,12 +69,10 @@ def run(args) -> int:
         check_new_file(args.plot, [] if args.file == "-" else [args.file], args.force, png=True)
     if _wants_stream(args):
         return run_stream(args)
-    program = read_program(args.file)
+    program = read_program(args.file)       # its warnings on stderr
     prof = load_profile(args.profile)
     duration_s = durations(program, model=args.time_model)
     report = profile(program, prof, duration_s=duration_s)
-    for w in report.warnings:
-        print(f"gatesopt: warning: {w}", file=sys.stderr)
     if args.plot:
         from ..plot import plot_profile
         plot_profile(report, args.plot)

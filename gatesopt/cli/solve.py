@@ -7,16 +7,15 @@ written to a temporary name in the target folder and renamed, never over an exis
 """
 from __future__ import annotations
 
-import os
 import sys
 import time
 
 from ..errors import GatesoptError
-from .files import (STDIO, check_distinct, check_new_file, check_output, read_program, refuse_existing,
+from .files import (STDIO, check_distinct, check_input, check_new_file, check_output, read_program,
                     write_atomic, write_json, write_stdout)
 from .options import (add_gating_options, firmware_choice, gating_formulations, gating_options,
                       ordering_formulations, positive_s)
-from .progress import default_workers, group_progress
+from .progress import default_workers, group_progress, wants_progress
 from .summary import ordering_result_lines
 
 NAME = "solve"
@@ -27,7 +26,8 @@ DESCRIPTION = ("Write gated G-code: motors switched off while idle (3DGates), op
 
 def add_arguments(p) -> None:
     p.add_argument("file", help="input G-code (.gcode or .gcode.gz), or - for standard input")
-    p.add_argument("-o", "--output", metavar="OUT.gcode", help="output file, or - for standard output")
+    p.add_argument("-o", "--output", metavar="OUT.gcode",
+                   help="output file (gzipped if its name ends in .gz), or - for standard output")
     p.add_argument("--in-place", action="store_true",
                    help="replace the input file (a slicer's post-processing step): written to a "
                         "temporary file beside it, verified, then renamed over it keeping its "
@@ -42,6 +42,8 @@ def add_arguments(p) -> None:
                         "objects (default); free re-orders every curve of a layer")
     p.add_argument("--move-seams", action="store_true",
                    help="closed loops may start at another vertex (default: keep the seam)")
+    p.add_argument("--objective", choices=("time", "travel"), default="time",
+                   help="what the curve ordering minimises: time (default), the travels' print time as emitted, retractions, z-hops and the slicer's own copied travels included; travel, their length (Fleming et al.)")
     p.add_argument("--order-formulation", choices=ordering_formulations(), default=None,
                    help="the curve ordering's formulation (default: the exact one named by "
                         "--formulation: milp or cpsat; greedy for greedy; auto for dp)")
@@ -97,22 +99,18 @@ def format_solve_report(s: dict) -> str:
 
 def _solve_paths(args) -> tuple[str, str]:
     """(input, output) after checking the combination of FILE, -o and --in-place."""
+    check_input(args.file)
     if args.in_place:
         if args.output not in (None, args.file):
             raise GatesoptError("--in-place writes over the input: do not give -o as well")
         if args.file == STDIO:
             raise GatesoptError("--in-place needs a file, not standard input")
-        if not os.path.isfile(args.file):
-            raise GatesoptError(f"{args.file}: no such file")
         return args.file, args.file
     if not args.output:
         raise GatesoptError("give an output file with -o OUT.gcode (or -o - for standard output), "
                             "or --in-place to replace the input")
     if args.output != STDIO:
-        if args.file == STDIO:
-            refuse_existing(args.output, args.force)
-        else:
-            check_output(args.file, args.output, args.force)
+        check_output(args.file, args.output, args.force)
     return args.file, args.output
 
 
@@ -130,7 +128,8 @@ def run(args) -> int:
     report_to = sys.stderr if out == STDIO else sys.stdout     # stdout carries the G-code
     fields = gating_options(args)
     from ..ordering import OrderingOptions
-    order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+    order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams,
+                                    objective=args.objective)
     # "--formulation milp means exact for both" (issue 4): the gating formulation names the
     # ordering's unless --order-formulation does; dp is gating's alone (ordering: auto)
     order_formulation = args.order_formulation or order_formulation_of(args.formulation)
@@ -139,7 +138,7 @@ def run(args) -> int:
     choice = firmware_choice(args, program, **fields)
     gating = not args.no_gating and choice.options is not None
     # the ordering starts now: its budget ends order_budget seconds from here
-    with group_progress(sys.stderr.isatty() and not args.no_order,
+    with group_progress(wants_progress() and not args.no_order, after="gating, verifying",
                         deadline_s=time.perf_counter() + args.order_budget) as progress:
         result = run_job(program, choice.options, formulation=args.formulation, time_limit_s=args.time_limit,
                          order=not args.no_order, gating=gating, choice=choice,

@@ -83,7 +83,8 @@ PLANNER = PlannerRules(
                   jerk_x=math.nan, jerk_y=math.nan, jerk_z=math.nan, jerk_e=math.nan,
                   accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
                   junction_deviation=math.nan, square_corner_velocity=5.0, max_velocity=300,
-                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0))
+                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0,
+                  min_cruise_ratio=0.0))
 
 #: Klipper's ``SET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=0`` (klippy/extras/stepper_enable.py
 #: ``cmd_SET_STEPPER_ENABLE``: a mux command on one ``STEPPER``, ``ENABLE`` an integer, 1 when

@@ -44,7 +44,8 @@ PLANNER = PlannerRules(
                   jerk_x=10, jerk_y=10, jerk_z=0.3, jerk_e=5,
                   accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
                   junction_deviation=0.013, square_corner_velocity=math.nan, max_velocity=INF,
-                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0))
+                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0,
+                  min_cruise_ratio=0.0))
 
 DIALECT = Firmware(
     name="marlin", off_word="M18", on_word="M17", merge_motors=True, stall_off_s=MARLIN_STOP_S,

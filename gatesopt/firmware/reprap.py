@@ -24,7 +24,8 @@ PLANNER = PlannerRules(
                   jerk_x=15, jerk_y=15, jerk_z=0.3, jerk_e=5,
                   accel_print=500, accel_travel=500, accel_retract=250, accel_to_decel=INF,
                   junction_deviation=math.nan, square_corner_velocity=math.nan, max_velocity=INF,
-                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0))
+                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0,
+                  min_cruise_ratio=0.0))
 
 DIALECT = Firmware(
     name="reprap", off_word="M18", on_word="M17", merge_motors=True, stall_off_s=MARLIN_STOP_S,

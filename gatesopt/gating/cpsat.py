@@ -90,6 +90,8 @@ def _cp_model(cp, model: CoupledModel) -> _CpModel:
     if ny > 1:
         for i, k in enumerate(model.x_angle.tolist()):
             m.AddImplication(x[i], y[k])
+    for mem in model.c_members:             # rule B of a firmware schedule
+        m.AddAtMostOne([x[j] for j in mem.tolist()])
     for i, mem in enumerate(model.z_members):
         for j in mem.tolist():
             m.AddImplication(x[j], z[i])

@@ -59,6 +59,11 @@ def _columns(model: CoupledModel):
         ix = np.arange(nx)
         add(r + ix, ox + ix, np.ones(nx)); add(r + ix, oy + model.x_angle, -np.ones(nx))
         rlo += [-math.inf] * nx; rhi += [0.0] * nx; r += nx
+    # rule B of a firmware schedule: at most one interval of each clique off
+    if model.c_members:
+        lens = np.array([len(c) for c in model.c_members])
+        add(r + np.repeat(np.arange(len(lens)), lens), ox + np.concatenate(model.c_members), np.ones(int(lens.sum())))
+        rlo += [-math.inf] * len(lens); rhi += [1.0] * len(lens); r += len(lens)
     # x[g] - z[e] <= 0 for members, same for w
     for off, members in ((oz, model.z_members), (ow, model.w_members)):
         if members:

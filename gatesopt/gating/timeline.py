@@ -64,3 +64,14 @@ def integral(cum, start_s, rate, t, row):
     r = np.minimum(row, n - 1)
     part = np.where(row < n, rate[r] * (t - start_s[r]), 0.0)
     return cum[row] + part
+
+
+def nearest_boundary(start_s, t):
+    """Index of the step boundary (``start_s`` entry) nearest to each moment ``t``: where a line
+    written between two steps stands (``firmware.Schedule``: the off line goes at the end of the
+    motor's last step, its off comes a known delay later)."""
+    n = len(start_s) - 1
+    r = np.clip(np.searchsorted(start_s, t), 0, n)
+    lower = np.maximum(r - 1, 0)
+    closer = np.abs(start_s[lower] - t) < np.abs(start_s[r] - t)
+    return np.where(closer, lower, r)

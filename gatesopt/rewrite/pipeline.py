@@ -205,7 +205,8 @@ def _verify_run(program: Program, ordered_base: Program, out: Program, o: Gating
     """(the report, the ordering checks' findings when gating ran on a re-ordered print)."""
     claimed = (sol.energy_j, sol.time_after_s) if sol is not None else None
     rep = verify(program, out, firmware=o.firmware, start_ahead_s=o.start_ahead_s,
-                 end_late_s=o.end_late_s, claimed=claimed, profile=o.profile, reordered=ordered)
+                 end_late_s=o.end_late_s, claimed=claimed, profile=o.profile, reordered=ordered,
+                 printer=o.printer)
     extra = ()
     if ordered and sol is not None:
         # the ordering's own checks, on the re-ordered print before gating split any move

@@ -75,6 +75,7 @@ from .ordering import check as check_ordering
 from .ordering import check_barriers
 from .positions import check_positions
 from .rotation import read_rotation, undone_tol
+from .schedule import check_schedule, scheduled_lines
 from .timing import TIME_TOL_S, check_timing
 
 __all__ = ["verify", "VerifyReport", "Finding", "read_rotation", "energy_of", "check_geometry",
@@ -127,7 +128,7 @@ def _has_line(program: Program, prefix: str, within: int = HEADER_LINES) -> bool
 def verify(original: Program, output: Program, *, firmware="3dgates", start_ahead_s: float = 1.8e-3,
            end_late_s: float = 1.0e-3, claimed=None, profile="paper", reordered: bool | None = None,
            claim_rel_tol: float = CLAIM_REL_TOL, geometry_tol_mm: float = GEOMETRY_TOL_MM,
-           time_tol_s: float = TIME_TOL_S) -> VerifyReport:
+           time_tol_s: float = TIME_TOL_S, printer=None) -> VerifyReport:
     """Run every check of ``output`` against ``original``; ``ok`` only if all hold.
 
     ``claimed``: what the solver reported (a GatingSolution, a dict with ``energy_after_j`` /
@@ -136,6 +137,8 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     header, or original lines that are not all kept in order); then only heater/tool commands
     (and other fans) must keep their order, the part-fan duty per layer its filament, and the
     ordering checks (``gatesopt.verify.ordering``) run too.
+    ``printer``: the printer's Klipper config (``gatesopt.printer_config``) for a firmware that
+    times its own switches (``Firmware.schedule``: the input shaper's window, the module's options).
     """
     fw = fwmod.get(firmware)
     segments = segment_pair(original, output, geometry_tol_mm)
@@ -170,9 +173,17 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     # the firmware's own dialect first: timing read with the wrong firmware's rules means little
     findings += check_firmware(output, firmware=fw, original=original)
     checks.append("firmware")
-    findings += check_timing(output, firmware=fw, start_ahead_s=start_ahead_s, end_late_s=end_late_s,
-                             original=original, tol_s=time_tol_s)
-    checks.append("timing")
+    scheduled = None
+    if fw.schedule(printer, start_ahead_s=start_ahead_s, end_late_s=end_late_s) is not None:
+        # the firmware switches by itself: its protocol says which motor is off when
+        scheduled = scheduled_lines(output, firmware=fw, start_ahead_s=start_ahead_s,
+                                    end_late_s=end_late_s, printer=printer, original=original)
+        findings += check_schedule(output, scheduled)
+        checks.append("timing(schedule)")
+    else:
+        findings += check_timing(output, firmware=fw, start_ahead_s=start_ahead_s, end_late_s=end_late_s,
+                                 original=original, tol_s=time_tol_s)
+        checks.append("timing")
     if reordered:
         bare = without_added_motor_lines(output, original)
         if deg % 360.0 == 0.0 and bare.n_lines == output.n_lines:
@@ -188,7 +199,8 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
                 original, bare,
                 snap_tol_mm=undone_tol(geometry_tol_mm, deg) if deg % 360.0 else 0.0))
             checks.append("ordering(barriers; moves: geometry)")
-    e_after, t_after, stall = energy_of(output, firmware=fw, profile=profile, original=original)
+    e_after, t_after, stall = energy_of(output, firmware=fw, profile=profile, original=original,
+                                        scheduled=scheduled)
     # the original's motor lines are all its own (a stall priced with the state they leave, as the
     # solver's ``energy_before_j`` does), not gating lines whose effect is undone
     e_before, t_before, _ = energy_of(original, firmware=fw, profile=profile, original=original)
