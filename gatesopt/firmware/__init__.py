@@ -457,7 +457,7 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     off_s = np.array([own.get(h, (fw.stall_off_s, fw.stall_on_s))[0] for h in heads], float)
     on_s = np.array([own.get(h, (fw.stall_off_s, fw.stall_on_s))[1] for h in heads], float)
     ok, on, off_s, on_s = ok[inverse], on[inverse], off_s[inverse], on_s[inverse]
-    # Klipper's ENABLE=1 dwells too, though we never write it
+    # an enable line stalls by its own price (Klipper's ENABLE=1: a look-ahead flush, no dwell)
     out[rows[ok]] = np.where(on[ok], on_s[ok], off_s[ok])
     if planner is not None and fw.stall_is_stop:
         for r in rows[ok & ~on]:
