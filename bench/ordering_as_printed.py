@@ -94,9 +94,9 @@ def run(args) -> None:
                 if "error" in row:
                     print(f"{path.name} {mode} {form}: ERROR {row['error']}", flush=True)
                     continue
-                print(f"{path.name} {mode} {form}: print {row['print_time_planner_before_s']:.1f} -> "
-                      f"{row['print_time_planner_after_s']:.1f} s "
-                      f"({row['print_time_planner_change_pct']:+.2f} %), travel "
+                print(f"{path.name} {mode} {form}: print {row['print_time_before_s']:.1f} -> "
+                      f"{row['print_time_after_s']:.1f} s "
+                      f"({row['print_time_change_pct']:+.2f} %), travel "
                       f"{row['travel_change_pct']:+.1f} %, kept slower "
                       f"{row['layers_kept_slower']}/{row['layers_reorderable']}, optimal "
                       f"{row['groups_optimal']}/{row['groups_reordered']}, blocks moved "
@@ -118,9 +118,9 @@ def _pct(a, b) -> str:
 
 def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], dict]:
     lines = [f"| file | print s before | auto after | greedy after | travel auto | travel greedy | "
-             f"kept slower / re-orderable layers | optimal reverted | groups optimal | "
+             f"kept slower / re-orderable layers | optimal reverted | groups optimal | worst gap | "
              f"islands moved (runs, layers) | free-mode print | run s | verified |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     tally = {"files": 0, "not_faster_than_before": [], "slower_than_greedy": [], "kept": 0,
              "reorderable": 0, "reverted": 0, "optimal": 0, "groups": 0, "unverified": [],
              "errors": [], "block_files": 0, "block_moved_files": 0}
@@ -132,11 +132,11 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
             continue
         if "error" in a:
             tally["errors"].append(name)
-            lines.append(f"| {name} | error: {a['error'][:80]} |" + " |" * 11)
+            lines.append(f"| {name} | error: {a['error'][:80]} |" + " |" * 12)
             continue
         tally["files"] += 1
-        b, after = a["print_time_planner_before_s"], a["print_time_planner_after_s"]
-        gafter = g["print_time_planner_after_s"] if g and "error" not in g else None
+        b, after = a["print_time_before_s"], a["print_time_after_s"]
+        gafter = g["print_time_after_s"] if g and "error" not in g else None
         if after > b + TIME_TOL_S:
             tally["not_faster_than_before"].append(name)
         if gafter is not None and after > gafter + TIME_TOL_S:
@@ -155,7 +155,7 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
         n_opt = a["groups_optimal"] + a.get("block_orders_optimal", 0)
         islands = (f"{a['block_segments_moved']}/{a['block_segments']}, {a['block_layers_moved']}"
                    if a.get("block_segments") else "-")
-        free = (f"{fr['print_time_planner_after_s']:,.1f} ({_pct(fr['print_time_planner_after_s'], b)})"
+        free = (f"{fr['print_time_after_s']:,.1f} ({_pct(fr['print_time_after_s'], b)})"
                 if mode == "safe" and fr and "error" not in fr else "")
         lines.append(
             f"| {name} | {b:,.1f} | {after:,.1f} ({_pct(after, b)}) | "
@@ -163,7 +163,7 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
             f"{a['travel_change_pct']:+.1f} % | "
             + (f"{g['travel_change_pct']:+.1f} %" if gafter is not None else "-") + " | "
             f"{a['layers_kept_slower']} / {a['layers_reorderable']} | {a['optimal_reverted']} | "
-            f"{n_opt} / {n_groups} | {islands} | {free} | {a['run_s']:.1f} | "
+            f"{n_opt} / {n_groups} | {100 * a['worst_gap']:.2f} % | {islands} | {free} | {a['run_s']:.1f} | "
             f"{'yes' if a['verified'] else 'NO'}"
             + ("" if not g or g.get("verified", True) else " (greedy: NO)") + " |")
     return lines, tally

@@ -20,17 +20,18 @@ from pathlib import Path
 import numpy as np
 
 from .errors import GatesoptError
-from .program import Kind, Program
+from .program import Program
 
 # columns of a result row, in CSV order; timing columns vary run to run (TIMING_COLUMNS)
 COLUMNS = (
     "file", "formulation", "verified", "error", "slicer", "flavor", "infill_pattern", "lines", "layers",
-    "energy_before_j", "energy_after_j", "saving_pct", "time_before_s", "time_after_s", "added_time_pct",
-    "lines_before", "lines_after", "lines_added", "bytes_before", "bytes_after", "size_change_pct",
-    "rotation_deg", "status", "gap", "objective_j", "bound", "ordered", "travel_before_mm",
-    "travel_after_mm", "travel_reduction_pct", "max_curves_per_layer", "off_time_X_s", "off_time_Y_s",
-    "off_time_Z_s", "off_time_E_s", "max_snap_mm", "firmware", "firmware_line", "rotation_line", "findings",
-    "warnings", "output", "solve_s", "wall_s",
+    "energy_before_j", "energy_after_j", "saving_pct", "print_time_before_s", "print_time_after_s",
+    "print_time_change_pct", "print_time_model", "paper_time_before_s", "paper_time_after_s",
+    "added_time_pct", "lines_before", "lines_after", "lines_added", "bytes_before", "bytes_after",
+    "size_change_pct", "rotation_deg", "status", "stopped", "gap", "objective_j", "bound", "ordered",
+    "travel_before_mm", "travel_after_mm", "travel_reduction_pct", "max_curves_per_layer",
+    "off_time_X_s", "off_time_Y_s", "off_time_Z_s", "off_time_E_s", "max_snap_mm", "firmware",
+    "firmware_line", "rotation_line", "findings", "warnings", "output", "solve_s", "wall_s",
 )
 TIMING_COLUMNS = ("solve_s", "wall_s")
 
@@ -50,20 +51,13 @@ class BatchOptions:
     max_added_time_pct: object = "default"    # "default": 1 % for stock firmware; None: no budget
     max_added_lines_pct: float | None = None
     time_limit_s: float | None = 60.0
+    budget_s: float | None = 10.0       # the whole run of a file, as `gatesopt solve --budget`
+    order_mode: str = "safe"            # the curve ordering's mode, as `gatesopt solve --order-mode`
+    order_workers: int = 1              # processes of the ordering (2: as `solve` on 2 cores)
     order: bool = True
     gating: bool = True
     profile: str = "paper"
     write_dir: str | None = None        # write each verified output here (never an unverified one)
-    order_mode: str = "safe"            # the curve ordering's mode (``ordering.OrderingOptions``)
-    order_budget_s: float | None = 10.0  # the curve ordering's budget per file, as ``solve --order-budget``
-
-
-def travel_mm(program: Program) -> float:
-    """XY length of all motion that deposits nothing (what curve ordering cuts)."""
-    moving = program.kind <= Kind.ARC
-    travel = moving & ~program.extruding
-    d = program.end_mm[travel, :2] - program.start_mm[travel, :2]
-    return float(np.hypot(d[:, 0], d[:, 1]).sum())
 
 
 def max_curves_per_layer(order_problem) -> int:
@@ -99,7 +93,7 @@ def process_file(path: str, options: BatchOptions, data: bytes | None = None) ->
     from .rewrite.printer import DEFAULT, choose
     from .parse import parse
 
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     row = {c: "" for c in COLUMNS}
     row.update(file=str(path), formulation=options.formulation, verified=False)
     try:
@@ -114,13 +108,15 @@ def process_file(path: str, options: BatchOptions, data: bytes | None = None) ->
                         rotate=options.rotate, start_ahead_s=options.start_ahead_s,
                         end_late_s=options.end_late_s, max_added_lines_pct=options.max_added_lines_pct,
                         profile=options.profile, bed_size_mm=options.bed_size_mm)
-        # the ordering's formulation is the one the gating formulation names, as in `solve`
-        # (milp, cpsat, greedy; auto for dp)
+        # as `gatesopt solve` runs a file: the same whole-run budget, ordering mode and formulation
+        # choice (the one the gating formulation names: milp, cpsat, greedy; auto for dp), so that
+        # a row's figures are the ones `solve` gives for that file
         form = ORDER_FORMULATIONS.get(options.formulation)
         order_formulation = options.formulation if form and "any_size" in form.capabilities else "auto"
         res = run(program, choice.options, formulation=options.formulation, time_limit_s=options.time_limit_s,
                   order=options.order, gating=options.gating and choice.options is not None, choice=choice,
-                  order_budget_s=options.order_budget_s, order_options=OrderingOptions(mode=options.order_mode),
+                  budget_s=options.budget_s, order_options=OrderingOptions(mode=options.order_mode),
+                  started_s=t0, cpu_started_s=cpu0, order_workers=options.order_workers,
                   order_formulation=order_formulation)
         s = res.summary()
         for k in COLUMNS:
@@ -132,9 +128,9 @@ def process_file(path: str, options: BatchOptions, data: bytes | None = None) ->
         row["verified"] = bool(s.get("verified"))
         if res.order_problem is not None:
             row["max_curves_per_layer"] = max_curves_per_layer(res.order_problem)
-        tb, ta = travel_mm(program), travel_mm(res.output)
-        row.update(travel_before_mm=tb, travel_after_mm=ta,
-                   travel_reduction_pct=100.0 * (1.0 - ta / tb) if tb > 0 else 0.0)
+        # travel as every report measures it (``rewrite.figures``: on the files, first layer on)
+        tb, ta = s["travel_before_mm"], s["travel_after_mm"]
+        row["travel_reduction_pct"] = 100.0 * (1.0 - ta / tb) if tb > 0 else 0.0
         if options.write_dir and row["verified"]:
             out = Path(options.write_dir) / output_name(path)
             out.parent.mkdir(parents=True, exist_ok=True)

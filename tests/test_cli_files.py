@@ -234,7 +234,7 @@ def test_fuzzed_command_lines_end_in_a_result_or_one_error_line(argv, tmp_path_f
     monkeypatch.chdir(tmp)
     argv = [_value(t, tmp) for t in argv]
     flags = {f for a in _actions(argv[0]) for f in a.option_strings}
-    for flag, quick in (("--order-budget", "1"), ("--time-limit", "2")):
+    for flag, quick in (("--order-budget", "1"), ("--budget", "1"), ("--time-limit", "2")):
         if flag in flags and flag not in argv:
             argv += [flag, quick]
     rc, out, err = run_cli(argv, capsys, monkeypatch, TINY.encode())
@@ -250,28 +250,21 @@ def test_fuzzed_command_lines_end_in_a_result_or_one_error_line(argv, tmp_path_f
 
 
 def test_batch_takes_the_ordering_options_of_solve(tmp_path, capsys, monkeypatch):
-    """``batch --order-mode free --order-budget S`` reaches every file's run, as in ``solve``."""
+    """``batch --order-mode free --budget S`` reaches every file's run, as in ``solve``."""
     import gatesopt.batch as batch_mod
     seen = []
     real = batch_mod.process_file
 
     def recording(path, options, data=None):
-        seen.append((options.order_mode, options.order_budget_s))
+        seen.append((options.order_mode, options.budget_s))
         return real(path, options, data)
 
     monkeypatch.setattr(batch_mod, "process_file", recording)
     out = tmp_path / "r.csv"
-    rc, _, err = run_cli(["batch", SRC, "--out", out, "--order-mode", "free", "--order-budget", "3"],
+    rc, _, err = run_cli(["batch", SRC, "--out", out, "--order-mode", "free", "--budget", "3"],
                          capsys, monkeypatch)
     assert rc == 0, err
     assert seen == [("free", 3.0)]
     rc, _, err = run_cli(["batch", SRC, "--out", out, "--order-mode", "sideways"], capsys, monkeypatch)
     assert rc == 2 and "--order-mode" in one_error_line(err)
 
-
-def test_compare_refuses_an_unknown_formulation_before_any_work(capsys, monkeypatch):
-    for argv in (["compare", SRC, "--formulations", "nope"],
-                 ["compare", SRC, "--ordering", "--formulations", "greedy,dp"]):
-        rc, out, err = run_cli(argv, capsys, monkeypatch)
-        assert rc == 2 and out == ""
-        assert "not a" in one_error_line(err) and "choose from" in err

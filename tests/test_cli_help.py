@@ -23,7 +23,8 @@ def options(name: str) -> dict[str, argparse.Action]:
     """The long option strings of command ``name`` (``-o`` as ``--output``), each to its action."""
     out = {}
     for a in command_parser(name)._actions:
-        if a.option_strings and not isinstance(a, argparse._HelpAction):
+        # a hidden alias kept for old scripts (help=SUPPRESS) is not part of the summary
+        if a.option_strings and not isinstance(a, argparse._HelpAction) and a.help != argparse.SUPPRESS:
             out[max(a.option_strings, key=len)] = a
     return out
 

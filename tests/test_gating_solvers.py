@@ -535,7 +535,8 @@ def test_a_stopped_solver_still_reports_the_share_bound(stars, monkeypatch):
     p = build(stars, GatingOptions.for_firmware("marlin"))
     exact = solve(p, "milp", time_limit_s=60)
     assert exact.status == "optimal"
-    monkeypatch.setattr(milp, "run_highs", lambda h, start=None: None)
+    from gatesopt._native import HighsRun
+    monkeypatch.setattr(milp, "run_highs", lambda h, start=None, **kw: HighsRun(False))
     sol = solve(p, "milp", time_limit_s=60)
     start = dp.solve(p)
     assert sol.status == "fallback" and sol.energy_j == pytest.approx(start.energy_j, rel=1e-12)

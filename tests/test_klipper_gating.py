@@ -30,7 +30,7 @@ from gatesopt.printer_config import PrinterConfigError, read_printer_config
 from gatesopt.rewrite.pipeline import run
 from gatesopt.shaper import shaper
 from gatesopt.verify import verify
-from gatesopt.verify.schedule import scheduled_lines
+from gatesopt.verify.schedule import scheduled_lines, timeline_s
 
 MODULE_PATH = REPO / "integrations" / "klipper" / "gatesopt_gating.py"
 EXACT = ("dp", "milp", "cpsat")
@@ -343,8 +343,8 @@ def test_klipper_with_the_module_gates_exactly_the_emitted_lines(shaped, tmp_pat
 
 
 def test_the_planner_time_model_plans_with_the_printer_configs_limits(tmp_path):
-    """``GatingOptions.time_model = "planner"`` (a general option; no dialect uses it yet): the
-    problem's timeline is ``planner.plan`` with Klipper's rules and the printer.cfg's limits."""
+    """``GatingOptions.time_model = "planner"`` (klipper-gating's): the problem's timeline is
+    ``planner.plan`` with Klipper's rules and the printer.cfg's limits, and the verifier's too."""
     from gatesopt.gating import build
     from gatesopt.limits import machine_limits
     from gatesopt.planner import plan
@@ -358,6 +358,7 @@ def test_the_planner_time_model_plans_with_the_printer_configs_limits(tmp_path):
         p = build(prog, o)
         want = plan(prog, machine_limits(prog, family="klipper", printer=printer)).duration_s.sum()
         assert p.total_s == pytest.approx(want, rel=1e-12)
+        assert timeline_s(prog, "klipper-gating", printer).sum() == pytest.approx(want, rel=1e-12)
         totals[accel] = p.total_s
     assert totals[500] > totals[3000] > prog.duration_s.sum()
 
@@ -379,3 +380,36 @@ def test_the_command_line_solves_and_verifies_for_a_printer_config(tmp_path, cap
     assert main(["solve", str(src), "-o", str(tmp_path / "o2.gcode"), "--firmware", "klipper-gating",
                  "--printer-config", str(cfg)]) != 0
     assert "max_accel" in capsys.readouterr().err
+
+
+def test_the_modules_start_ahead_in_printer_cfg_is_what_solve_and_verify_use(tmp_path):
+    from gatesopt.cli import main
+    src, out, rep, cfg = (tmp_path / n for n in ("in.gcode", "out.gcode", "rep.json", "printer.cfg"))
+    src.write_text(GCODE)
+    cfg.write_text(MZV30_CFG + "start_ahead: 0.004\nend_late: 0.002\n")
+    assert main(["solve", str(src), "-o", str(out), "--firmware", "klipper-gating", "--printer-config", str(cfg),
+                 "--no-order", "--rotate", "none", "--json", str(rep)]) == 0
+    import json
+    report = json.loads(rep.read_text())
+    printer = read_printer_config(cfg)
+    lines = scheduled_lines(parse(out.read_text().encode()), firmware="klipper-gating", start_ahead_s=0.004,
+                            end_late_s=0.002, printer=printer, original=parse(GCODE.encode()))
+    assert lines and all(s.gated for s in lines)
+    assert sum(s.on_s - s.off_s for s in lines) == pytest.approx(sum(report["off_time_s"].values()), abs=1e-9)
+    assert main(["verify", str(src), str(out), "--claimed", str(rep), "--printer-config", str(cfg)]) == 0
+    # a command-line value that disagrees with the module's is refused
+    assert main(["solve", str(src), "-o", str(tmp_path / "o2.gcode"), "--firmware", "klipper-gating",
+                 "--printer-config", str(cfg), "--start-ahead-ms", "3"]) != 0
+
+
+def test_the_verifier_reads_repeated_and_early_lines_as_the_module_does():
+    """A second line for X before X steps again is the module's "repeated" (the first covers the
+    stretch); a line before homing is "motor_off" (Klipper has not enabled Y yet)."""
+    prog = parse(GCODE.encode(), source="tiny.gcode")
+    text = GCODE.replace("G1 X40 E3 F1200\n", "G1 X40 E3 F1200\nGATESOPT_GATE STEPPERS=stepper_x\n"
+                                              "GATESOPT_GATE STEPPERS=stepper_x\n")
+    text = text.replace("G28\n", "GATESOPT_GATE STEPPERS=stepper_y\nG28\n")
+    out = parse(text.encode(), source="hand.gcode")
+    got = [(s.motor, s.gated, s.reason) for s in
+           scheduled_lines(out, firmware="klipper-gating", start_ahead_s=1.8e-3, end_late_s=1e-3, original=prog)]
+    assert got == [(1, False, "motor_off"), (0, True, ""), (0, False, "repeated")]

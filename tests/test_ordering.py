@@ -409,7 +409,9 @@ def test_a_layer_slower_re_ordered_keeps_the_slicers_order(monkeypatch):
     slower = np.flatnonzero(pipeline.layer_times_s(unguarded.output) > t_orig + 1e-6)
     assert guarded.summary["layers_kept_slower"] == len(slower)
     assert (pipeline.layer_times_s(guarded.output) <= t_orig + 1e-6).all()
-    assert guarded.summary["print_time_after_s"] <= unguarded.summary["print_time_after_s"] + 1e-9
+    # (the guard's own measure: the paper's layer times; the reports' print time is the planner's)
+    assert (pipeline.layer_times_s(guarded.output).sum()
+            <= pipeline.layer_times_s(unguarded.output).sum() + 1e-9)
     for L in slower:
         assert np.array_equal(_layer_xy(guarded.output, L), _layer_xy(prog, L))
     # one more layer made to look slower: it alone goes back as well
@@ -771,7 +773,9 @@ def test_a_layer_whose_only_change_is_a_turned_curve_is_not_reported_kept():
     layer as "order kept" (it did: only groups of >= 2 curves made a layer "decided")."""
     from gatesopt.rewrite import order as pipeline
     prog = _corpus_program("prusa25_star_rect15_m82.gcode.gz")
-    res = pipeline.order_program(prog, OrderingOptions(mode="safe"))
+    # copied gaps priced move by move: the layer's one curve is then turned (at the planner's
+    # price of the slicer's gaps the slicer's direction wins there)
+    res = pipeline.order_program(prog, OrderingOptions(mode="safe", copied_gaps="moves"))
     assert res.ok
     sol, prob = res.solution, res.problem
     sizes = np.diff(prob.group_curve_start)

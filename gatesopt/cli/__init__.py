@@ -17,12 +17,13 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 import traceback
 
 from .. import _jit
 from ..errors import GatesoptError
 from .progress import command_status
-from . import batch, calibrate, compare, order, profile, report, solve, verify
+from . import batch, calibrate, clock, compare, order, profile, report, solve, verify
 
 #: the commands, in the order ``gatesopt --help`` lists them
 COMMANDS = (profile, solve, compare, order, verify, batch, report, calibrate)
@@ -79,6 +80,12 @@ def _status_words(args) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # a command run from the shell counts its time from the process's start (``clock``); one
+    # called in-process (tests, scripts) from here
+    started_s = clock.started_s() if argv is None else time.perf_counter()
+    # and its CPU seconds from the same moment (``time.process_time`` counts from the process's
+    # start): their ratio is how much of the machine the run gets (``rewrite.budget``)
+    cpu_started_s = 0.0 if argv is None else time.process_time()
     argv = sys.argv[1:] if argv is None else list(argv)
     command = argv[0] if argv and argv[0] in {m.NAME for m in COMMANDS} else None
     try:
@@ -92,6 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return 2
+    args.started_s = started_s
+    args.cpu_started_s = cpu_started_s
     compiled_before_s = _jit.compile_s()
     noted: list = []
     try:

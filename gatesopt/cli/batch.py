@@ -7,7 +7,7 @@ import sys
 from ..batch import STDIN_FILE, BatchOptions, expand_paths, output_name, run_batch, summarize
 from ..errors import GatesoptError
 from .files import check_input, check_new_file, check_one_stdin, refuse_existing
-from .progress import pause_status, resume_status, wants_progress
+from .progress import default_workers, pause_status, resume_status, wants_progress
 from .options import (BUDGET_NOT_GIVEN, add_firmware_options, budget_pct, gating_formulations, motor_list,
                       positive_s)
 
@@ -44,9 +44,9 @@ def add_arguments(p) -> None:
     p.add_argument("--order-mode", choices=("safe", "free"), default="safe",
                    help="as `solve --order-mode`: safe keeps the slicer's feature groups, walls and "
                         "objects (default); free re-orders every curve of a layer")
-    p.add_argument("--order-budget", type=float, default=10.0, metavar="S",
-                   help="finish each file's curve ordering in about S seconds (default 10, as "
-                        "`solve --order-budget`)")
+    p.add_argument("--budget", type=float, default=10.0, metavar="S",
+                   help="finish each file's run in about S seconds (default 10, as `solve --budget`: "
+                        "the curve ordering gets what an estimate of the rest leaves)")
     p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
     p.add_argument("--profile", default="paper", metavar="NAME|TOML",
                    help="energy profile: shipped name or TOML file (default: paper)")
@@ -73,7 +73,7 @@ def run(args) -> int:
         raise GatesoptError(f"no G-code files in {', '.join(args.paths)}")
     if args.jobs < 1:
         raise GatesoptError(f"--jobs must be at least 1, not {args.jobs}")
-    positive_s(args.order_budget, "--order-budget")
+    positive_s(args.budget, "--budget")
     positive_s(args.time_limit, "--time-limit")
     if not args.out.lower().endswith((".csv", ".json")):
         raise GatesoptError(f"--out {args.out}: a results file ends in .csv (rows appended as they "
@@ -100,7 +100,9 @@ def run(args) -> int:
                         max_added_lines_pct=args.max_added_lines_pct,
                         time_limit_s=args.time_limit, order=not args.no_order, gating=not args.no_gating,
                         profile=args.profile, write_dir=args.write_dir, order_mode=args.order_mode,
-                        order_budget_s=args.order_budget)
+                        budget_s=args.budget,
+                        # one file at a time: its ordering may use both cores, as `solve` does
+                        order_workers=default_workers() if args.jobs <= 1 and not args.dask else 1)
     stdin_data = sys.stdin.buffer.read() if STDIN_FILE in files else None
     bar = not args.quiet and wants_progress()
     if bar:

@@ -60,6 +60,10 @@ class _NotGiven:
 BUDGET_NOT_GIVEN = _NotGiven()
 
 
+DEFAULT_START_AHEAD_MS = 1.8     # 3DGates Sec. 4.2
+DEFAULT_END_LATE_MS = 1.0
+
+
 def add_firmware_options(p) -> None:
     """``--firmware`` (auto: read from the file) and ``--force-firmware`` (``solve``, ``compare``,
     ``batch``)."""
@@ -99,9 +103,9 @@ def add_gating_options(p) -> None:
     p.add_argument("--rotate", default="auto", metavar="auto|none|DEG",
                    help="rotate the model on the bed: auto (best angle), none, or degrees ccw "
                         "(a print of objects one at a time is never rotated)")
-    p.add_argument("--start-ahead-ms", type=float, default=1.8,
+    p.add_argument("--start-ahead-ms", type=float, default=DEFAULT_START_AHEAD_MS,
                    help="switch a motor on at least this long before it steps (default 1.8, paper)")
-    p.add_argument("--end-late-ms", type=float, default=1.0,
+    p.add_argument("--end-late-ms", type=float, default=DEFAULT_END_LATE_MS,
                    help="keep a motor on at least this long after it steps (default 1.0, paper)")
     p.add_argument("--max-added-time-pct", type=budget_pct, default=BUDGET_NOT_GIVEN, metavar="P|none",
                    help="budget: firmware stalls may add at most P %% to the print time (default: 1 for "
@@ -133,6 +137,13 @@ def firmware_choice(args, program, **gating):
     printer = printer_config(args)
     if printer is not None:
         gating.setdefault("printer", printer)
+        if printer.gating is not None:
+            # the module's [gatesopt_gating] options win over the command line's defaults (a value
+            # given that disagrees with them is refused by ``GatingOptions.for_firmware``)
+            for key, default_s in (("start_ahead_s", DEFAULT_START_AHEAD_MS / 1e3),
+                                   ("end_late_s", DEFAULT_END_LATE_MS / 1e3)):
+                if gating.get(key) == default_s:
+                    gating[key] = None
     return choose(program, forced or args.firmware, force=forced is not None,
                   max_added_time_pct=DEFAULT if budget is BUDGET_NOT_GIVEN else budget,
                   motors=motors, **gating)

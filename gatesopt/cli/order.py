@@ -15,7 +15,7 @@ from .files import (STDIO, check_distinct, check_input, check_new_file, check_ou
                     write_atomic, write_json, write_stdout)
 from .options import ordering_formulations, positive_s
 from .progress import default_workers, group_progress, wants_progress
-from .summary import ordering_result_lines
+from .summary import figure_lines, ordering_result_lines
 
 NAME = "order"
 HELP = "re-order extrusion curves to cut travel (Fleming et al.)"
@@ -59,7 +59,8 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
-    started_s = time.perf_counter()     # a --budget counts from here: imports, parse, all of it
+    # a --budget counts from the command's start (``cli.clock``): imports, parse, all of it
+    started_s = getattr(args, "started_s", None) or time.perf_counter()
     from ..ordering import OrderingOptions
     from ..rewrite.order import order_program
     positive_s(args.time_limit, "--time-limit")
@@ -125,6 +126,7 @@ def format_report(s: dict) -> str:
         + f"   time limit {s['time_limit_s']:g} s per group"
         + (f", budget {s['budget_s']:g} s for the whole run" if s.get("budget_s") else "")
         + (f", {s['workers']} processes" if s.get("workers", 1) > 1 else ""),
+        *figure_lines(s),
         *ordering_result_lines(s),
         f"solve         {s['solve_s']:.2f} s"
         + (f" of the {s['solve_budget_s']:.2f} s the budget left it" if s.get("solve_budget_s") else "")

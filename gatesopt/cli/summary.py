@@ -2,26 +2,29 @@
 from __future__ import annotations
 
 
-def ordering_result_lines(s: dict) -> list[str]:
-    """The lines of a re-ordering's report (``rewrite.order.order_summary``) that say what it
-    did: travel, times, travels, curves, groups and layers (``order`` and ``solve`` print them)."""
-    def pct(a, b):
-        return f"{100.0 * (a / b - 1.0):+.1f} %" if b else "n/a"
-    lead = []
-    if s.get("print_time_planner_before_s") is not None:
-        lead.append(f"print time    {s['print_time_planner_before_s']:,.1f} s -> "
-                    f"{s['print_time_planner_after_s']:,.1f} s   "
-                    f"({pct(s['print_time_planner_after_s'], s['print_time_planner_before_s'])}; "
-                    f"planner model; objective: {s.get('objective', 'time')})")
-    return lead + [
+def _pct(a, b) -> str:
+    return f"{100.0 * (a / b - 1.0):+.1f} %" if b else "n/a"
+
+
+def figure_lines(s: dict) -> list[str]:
+    """The print time and travel of a run (``rewrite.figures``: one print time, the planner
+    model's; travel measured on the files): ``solve``, ``order`` and ``compare`` print them."""
+    return [
+        f"print time    {s['print_time_before_s']:,.1f} s -> {s['print_time_after_s']:,.1f} s"
+        f"   ({_pct(s['print_time_after_s'], s['print_time_before_s'])}; planner model: "
+        "acceleration, junction speeds, firmware stops"
+        + (f"; ordering objective: {s['objective']}" if s.get("objective") else "") + ")",
         f"travel        {s['travel_before_mm']:,.1f} mm -> {s['travel_after_mm']:,.1f} mm"
-        f"   ({pct(s['travel_after_mm'], s['travel_before_mm'])})",
-        f"travel time   {s['travel_time_before_s']:,.1f} s -> {s['travel_time_after_s']:,.1f} s"
-        f"   ({pct(s['travel_time_after_s'], s['travel_time_before_s'])})",
-        f"paper time    {s['print_time_before_s']:,.1f} s -> {s['print_time_after_s']:,.1f} s"
-        f"   ({pct(s['print_time_after_s'], s['print_time_before_s'])}; T = L/F, no acceleration)",
-        f"travels       {s['travels_before']:,} -> {s['travels_after']:,}"
+        f"   ({_pct(s['travel_after_mm'], s['travel_before_mm'])})"
+        f"   travels {s['travels_before']:,} -> {s['travels_after']:,}"
         f"   retractions {s['retractions_before']:,} -> {s['retractions_after']:,}",
+    ]
+
+
+def ordering_result_lines(s: dict) -> list[str]:
+    """The lines of a re-ordering's report (``rewrite.order.order_summary``) that say how it was
+    solved: curves, groups and layers (``order`` and ``solve`` print them)."""
+    return [
         f"curves        {s['curves']:,} in {s['groups']:,} groups; {s['groups_reordered']:,} re-orderable "
         f"(largest {s['largest_group']} curves)",
     ] + _block_lines(s) + [
@@ -54,3 +57,22 @@ def _kept_lines(s: dict) -> list[str]:
         head = ", ".join(str(x) for x in layers[:6]) + (", ..." if len(layers) > 6 else "")
         out.append(f"kept          {len(layers):,} layers ({head}): {reason}")
     return out
+
+
+def time_spent_line(s: dict) -> str:
+    """Where a ``solve`` run's time went (``RunResult.times``): the whole run, then each stage;
+    every solve counted (the ordering's, the rotation search and the solve again after it)."""
+    t = s.get("times", {})
+    parts = [f"read {t.get('read_s', 0.0):.2f}"]
+    if "ordering_s" in t:
+        parts.append(f"ordering {t['ordering_s']:.2f} (solve {t.get('ordering_solve_s', 0.0):.2f})")
+    if "gating_solve_s" in t:
+        g = t.get("gating_build_s", 0.0) + t.get("gating_solve_s", 0.0) + t.get("rotate_s", 0.0) + t.get("emit_s", 0.0)
+        solve = f"solve {t['gating_solve_s']:.2f}"
+        if "resolve_s" in t:
+            solve += (f": rotation search {t.get('rotation_search_s', 0.0):.2f}, rotating "
+                      f"{t.get('rotate_s', 0.0):.2f}, solve again {t['resolve_s']:.2f}")
+        parts.append(f"gating {g:.2f} ({solve})")
+    parts.append(f"verify {t.get('verify_s', 0.0):.2f}")
+    parts.append(f"report {t.get('report_s', 0.0):.2f}")
+    return f"time spent    {s['wall_s']:.2f} s: " + ", ".join(parts) + " s"

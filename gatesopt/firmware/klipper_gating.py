@@ -113,4 +113,4 @@ DIALECT = KlipperGating(
     motor_commands=(GATESOPT_GATE,), no_drain_words=frozenset({"GATESOPT_GATE"}),
     word_stalls=(("SET_STEPPER_ENABLE", KLIPPER_STALL_S, KLIPPER_STALL_S),
                  ("M18", KLIPPER_STALL_S, KLIPPER_STALL_S), ("M84", KLIPPER_STALL_S, KLIPPER_STALL_S)),
-    time_model="paper", planner=PLANNER)
+    time_model="planner", planner=PLANNER)

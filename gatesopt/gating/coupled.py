@@ -22,6 +22,14 @@ from .scoring import line_moments
 from .solution import GatingSolution
 from .timeline import TIME_EPS_S, integral, is_split, row_at
 
+#: the exact formulations (``milp``, ``cpsat``) stop when the gap they report, on the energy, is
+#: within ``mip_rel_gap``; from then on the search goes on for the line tie-break (fewest lines at
+#: that energy) for at most this long, or this share of the time it took to get there if that is
+#: longer: lines are a tie-break, never a reason to run to the time limit (HiGHS's own gap counts
+#: them: it ran to 60 s limits on budgeted Marlin files while the energy gap was 6e-6..4e-5)
+LINE_TIEBREAK_S = 0.5
+LINE_TIEBREAK_SHARE = 0.25
+
 
 @dataclass(frozen=True, eq=False)
 class CoupledModel:

@@ -52,6 +52,7 @@ from ..program import AXES, Kind, Program
 from .emit_line import (DECIMALS_INCH, DECIMALS_MM, DECIMALS_SPLIT_INCH, DECIMALS_SPLIT_MM, SNAP_MM,
                         SPLITTABLE, EmitError, EmitResult, LineRewriter, fmt_number, rotate_xy)
 from .emit_plain import render_plain
+from .emit_rotated import write_rotated
 from .placement import (SWITCH_EPS_S, Placed, PlacedArrays, Switch, place_switches, solution_arrays,
                         solution_placed, solution_snap)
 from .timeline import whole_steps
@@ -112,7 +113,12 @@ def render(program: Program, placed, *, firmware="3dgates", rotation_deg: float 
                                            cx=fmt_number(float(center_mm[0]), 6),
                                            cy=fmt_number(float(center_mm[1]), 6)))
         bounds = header_bounds(program, float(rotation_deg), center_mm)
-    out, added, splits = _write_lines(program, em, before, cuts, rewrite, header, bounds)
+    written = None
+    if rotated and not before and not cuts:     # the rotation alone: a compiled pass
+        written = write_rotated(program, em, rewrite, header, bounds)
+    if written is None:
+        written = _write_lines(program, em, before, cuts, rewrite, header, bounds)
+    out, added, splits = written
     return EmitResult("".join(out), added, instr, splits, moved, em.max_snap, float(rotation_deg),
                       (float(center_mm[0]), float(center_mm[1])), _notes(em, moved))
 

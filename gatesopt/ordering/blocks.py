@@ -217,6 +217,22 @@ def permuted(problem: OrderingProblem, perm: np.ndarray, cg: CurveGroups,
     gstart = group_starts(boundary, key)
     heads = perm[gstart[:-1]]
     layer = problem.curve_layer[perm]
+    # the problem in the program's order, grouped as the permuted one is: each permuted group is
+    # a run of consecutive program curves, so its first curve starts a group there too. The
+    # emitter and the pricer read group boundaries from it (a link entering a group from outside
+    # consumes the gap before the group's first curve: with the old groups, a group split across
+    # two islands had its boundary gap, a layer change, written twice: real_orca230_arcs)
+    heads_prog = perm[gstart[:-1]]
+    by = np.argsort(heads_prog, kind="stable")
+    bstart = np.concatenate((heads_prog[by], [n])).astype(np.int64)
+    if not np.array_equal(np.diff(bstart), np.diff(gstart)[by]):
+        raise AssertionError("blocks.permuted: a permuted group is not a run of program curves")
+    heads = bstart[:-1]
+    base = dataclasses.replace(
+        problem, group_curve_start=bstart, group_layer=problem.curve_layer[heads],
+        group_fixed=cg.fixed[heads], group_label=tuple(cg.labels[c] for c in heads.tolist()),
+        pricer=None)
+    heads = perm[gstart[:-1]]
     notes = problem.notes + (f"safe mode: islands re-ordered as blocks in "
                              f"{report['segments_moved']} of {report['segments']} segments",)
     return dataclasses.replace(
@@ -225,4 +241,5 @@ def permuted(problem: OrderingProblem, perm: np.ndarray, cg: CurveGroups,
         curve_point_start=new_pstart, group_curve_start=gstart, group_layer=layer[gstart[:-1]],
         group_fixed=cg.fixed[heads], group_label=tuple(cg.labels[c] for c in heads.tolist()),
         curve_step_start=problem.curve_step_start[perm], curve_step_stop=problem.curve_step_stop[perm],
-        notes=notes, curve_source=perm.astype(np.int64), base=problem, block_report=report)
+        notes=notes, curve_source=perm.astype(np.int64), base=base, block_report=report,
+        pricer=None)

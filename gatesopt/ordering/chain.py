@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from ..solvers import Status
+from ..solvers import Status, stop_requested
 from . import dp
 from .budget import exact_time_s
 from .problem import OPTIMAL_ABS_TOL, Anchor, GroupSolution, OrderingProblem
@@ -39,8 +39,8 @@ def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwar
     Anchor, end Anchor or None).)"""
     cache: dict = {}
     for g in range(problem.n_groups - 1):
-        if deadline is not None and time.perf_counter() > deadline:
-            return
+        if (deadline is not None and time.perf_counter() > deadline) or stop_requested():
+            return              # (Ctrl-C: every group has its answer; the options stay as they are)
         grp, opts, start, _ = plans[g]
         nxt, nxt_opts, _, nxt_end = plans[g + 1]
         if (problem.group_fixed[g] or problem.group_fixed[g + 1] or grp.end_xy is not None

@@ -18,7 +18,7 @@ import time
 import numpy as np
 from ortools.sat.python import cp_model
 
-from ..solvers import Status
+from ..solvers import Status, run_native
 from .bounds import lower_bound
 from .ils import warm_start
 from .problem import OPTIMAL_ABS_TOL, Group, GroupSolution, trivial_solution
@@ -235,7 +235,9 @@ def _solve_circuit(group: Group, t0, time_limit_s, hint, num_workers, seed, clos
     solver.parameters.max_time_in_seconds = left
     solver.parameters.num_workers = int(num_workers)
     solver.parameters.random_seed = int(seed)
-    code = solver.Solve(mod.model)
+    # Ctrl-C: ``solvers.run_native`` stops the search (CP-SAT's own handler would hide it)
+    solver.parameters.catch_sigint_signal = False
+    code, _ = run_native(lambda: solver.solve(mod.model), solver.stop_search)
     status = STATUS.get(code, Status.FALLBACK)
     if closed:
         if status not in (Status.OPTIMAL, Status.FEASIBLE):

@@ -136,21 +136,29 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
         group_fixed=np.asarray(gfixed, bool), group_label=tuple(glabel), origin_xy=origin,
         options=options, cost_unit=COST_UNIT[options.objective],
         curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), layout=lay)
+    step_s = None
     if options.objective == "time":
-        problem = with_pricer(program, problem)
+        step_s = plan(program).duration_s if options.copied_gaps == "planner" else None
+        problem = with_pricer(program, problem, step_s)
     if options.mode == "safe" and options.blocks:
         problem = order_blocks(program, problem, CurveGroups(boundary, key, fixed, tuple(labels),
                                                              wall_like))
+        if problem.base is not None and options.objective == "time":
+            # priced again on the groups the islands' new order made (blocks.permuted)
+            base = with_pricer(program, problem.base, step_s)
+            problem = dataclasses.replace(problem, base=base, pricer=base.pricer)
     return problem
 
 
-def with_pricer(program: Program, problem: OrderingProblem) -> OrderingProblem:
+def with_pricer(program: Program, problem: OrderingProblem,
+                step_s: np.ndarray | None = None) -> OrderingProblem:
     """``problem`` with the time objective's link costs (``cost.TimePricer``): the rule the
     emitter follows (``travel.TravelRule``, read from the file's own travels) and the planner's
     limits for each move (``cost.MoveTimes``, ``limits.machine_limits``)."""
     lay = problem.layout
     rule = TravelRule.of(program, problem, lay)
     move = MoveTimes.from_limits(machine_limits(program))
-    step_s = plan(program).duration_s if problem.options.copied_gaps == "planner" else None
+    if step_s is None and problem.options.copied_gaps == "planner":
+        step_s = plan(program).duration_s
     return dataclasses.replace(problem, cost_unit=COST_UNIT["time"],
                                pricer=TimePricer(program, lay, problem, rule, move, step_s))

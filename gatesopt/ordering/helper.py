@@ -178,6 +178,10 @@ def main() -> None:
     """The helper process: solve the groups from the back until the main process reaches them."""
     from multiprocessing import resource_tracker, shared_memory
 
+    import signal
+    # Ctrl-C reaches every process of the terminal's group: the main process stops the run (and
+    # this process, ``Helper.stop``); here it would only print a traceback
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     results = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)                               # stray prints (HiGHS, numba) go to stderr
     with open(sys.argv[1], "rb") as f:

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from ..solvers import Status
+from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
 from .chain import end_of, look_ahead, path_options, pick_paths, rescored
 from .helper import Helper
@@ -59,6 +59,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                              warm_up=(formulations.warm_up if "warm_up" in record.capabilities
                                       else None))
         for g in range(problem.n_groups):
+            if stop_requested():        # Ctrl-C (``solvers.stop_scope``): no whole answer yet
+                raise Interrupted(f"curve ordering stopped at group {g} of {problem.n_groups}")
             end = end_of(problem, g)
             if end is None and helper:
                 end = helper.entry_of(g + 1)    # the next group's path, if the helper has it

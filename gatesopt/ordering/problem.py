@@ -526,6 +526,10 @@ class OrderingSolution:
 
     ``curve_order``: curves in print order; ``curve_reversed[c]``: curve c is printed backwards;
     ``curve_seam[c]``: vertex offset a closed loop starts at (0: the slicer's seam).
+    ``travel_before_mm`` / ``_after_mm``: the solver's *model* travel (straight links
+    between curve ends, from the origin on), the objective, not the travel of the file as printed
+    (the emitted travels go around walls, retract, start from the start G-code's end): that one
+    is measured on the emitted file (``rewrite.figures.travel``, what every report gives).
     """
 
     curve_order: np.ndarray     # (n,) int64

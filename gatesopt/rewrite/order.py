@@ -2,8 +2,9 @@
 re-parse -> verify -> report (``order_program``; ``reorder`` stops before the verification, which
 ``rewrite.pipeline.run`` does on the gated output).
 
-Travel numbers in the report are measured on the two parsed files (``ordering.travel``), not the
-solver's model.
+Travel and print time in the report are the figures every report gives (``rewrite.figures``:
+travel measured on the two parsed files, print time under the planner model); the solver's own
+model travel is there too, as ``model_travel_*_mm``.
 """
 from __future__ import annotations
 
@@ -18,11 +19,11 @@ from ..ordering.emitter import emit
 from ..ordering.groups import build
 from ..ordering.layers import model_travel_mm, solve
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
-from ..ordering.travel_stats import travel_stats
 from ..parse import parse
 from ..planner import plan
 from ..program import Program
 from ..verify.ordering import check
+from .figures import figures
 
 
 @dataclass(frozen=True, eq=False)
@@ -268,49 +269,41 @@ def _solve_counts(problem: OrderingProblem, solution: OrderingSolution, slower_l
             if lay is not None and row["layer"] < len(lay.layer_why) and lay.layer_keep[row["layer"]]:
                 why = lay.layer_why[row["layer"]]
             row["kept_why"] = why or KEPT_NOTHING
-    lay_counts["reorderable"] = len({int(problem.group_layer[g]) for g, _ in decided})
+    # layers with a group of >= 2 curves to decide, or whose islands moved as blocks
+    lay_counts["reorderable"] = len({int(problem.group_layer[g]) for g, _ in decided}
+                                    | set(np.unique(problem.curve_layer[moved]).tolist()))
     return layers, counts, lay_counts, decided
 
 
-def _slower_notes(before_s: float, after_s: float, before: dict, after: dict,
-                  slower_layers) -> list[str]:
-    """The report's lines on a re-ordered print that is slower under the planner model (or layers
-    kept because they were)."""
+def _slower_notes(fig: dict | None, slower_layers) -> list[str]:
+    """The report's lines on a re-ordered print that is slower (or layers kept because they were)."""
     slower = []
     if len(slower_layers):
         slower.append(kept_slower_note(len(slower_layers)))
-    if after_s > before_s + GUARD_TOL_S:
-        slower.append(f"the re-ordered print takes {after_s - before_s:.1f} s longer (planner "
-                      f"model): its travels retract {after['retractions']:,} times instead of "
-                      f"{before['retractions']:,}")
+    if fig is not None and fig["print_time_after_s"] > fig["print_time_before_s"] + GUARD_TOL_S:
+        slower.append(f"the re-ordered print takes {fig['print_time_after_s'] - fig['print_time_before_s']:.1f} s "
+                      f"longer (planner model): its travels retract {fig['retractions_after']:,} "
+                      f"times instead of {fig['retractions_before']:,}")
     return slower
 
 
 def order_summary(program: Program, out: Program, problem: OrderingProblem,
                   solution: OrderingSolution, options: OrderingOptions, slower_layers,
                   findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
-                  solve_budget_s: float | None, workers: int, wall_s: float) -> dict:
-    """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` adds its travel
-    and group keys): travel, travel and print time, travels and retractions measured on the
-    parsed input and output, how each group and layer was solved."""
-    before, after = travel_stats(program), travel_stats(out)
+                  solve_budget_s: float | None, workers: int, wall_s: float,
+                  with_figures: bool = True) -> dict:
+    """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` has it under
+    ``"ordering"``): the figures of the input and the output (``rewrite.figures``: travel,
+    travels and retractions measured on the parsed files, print time under the planner model;
+    ``with_figures`` False leaves them to the caller, whose own output they would describe), the
+    solver's model travel, how each group and layer was solved."""
+    fig = figures(program, out) if with_figures else None
     layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
     sizes = np.diff(problem.group_curve_start)
-
-    def pct(a, b):
-        return 100.0 * (a / b - 1.0) if b else 0.0
-
-    # the print time under the planner model (what the time guard compares), from the first
-    # layer on: it leads the report
-    m_in, m_out = program.layer >= 0, out.layer >= 0
-    planner_before = float(step_times_s(program)[m_in].sum())
-    planner_after = float(step_times_s(out)[m_out].sum())
-    slower = _slower_notes(planner_before, planner_after, before, after, slower_layers)
+    slower = _slower_notes(fig, slower_layers)
     time_obj = problem.cost_unit == "ms"
     return {
         "objective": options.objective,
-        "print_time_planner_before_s": planner_before, "print_time_planner_after_s": planner_after,
-        "print_time_planner_change_pct": pct(planner_after, planner_before),
         # the objective the solver optimised: the travels' time as emitted (time) or their length
         "model_travel_time_before_s": solution.cost_before / 1000.0 if time_obj else None,
         "model_travel_time_after_s": solution.cost_after / 1000.0 if time_obj else None,
@@ -318,12 +311,8 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         "source": program.source, "formulation": formulation, "order_mode": options.mode,
         "move_seams": options.move_seams, "time_limit_s": time_limit_s, "budget_s": budget_s,
         "solve_budget_s": solve_budget_s, "workers": workers,
-        "travel_before_mm": before["travel_mm"], "travel_after_mm": after["travel_mm"],
-        "travel_change_pct": pct(after["travel_mm"], before["travel_mm"]),
-        "travel_time_before_s": before["travel_s"], "travel_time_after_s": after["travel_s"],
-        "print_time_before_s": before["print_s"], "print_time_after_s": after["print_s"],
-        "travels_before": before["travels"], "travels_after": after["travels"],
-        "retractions_before": before["retractions"], "retractions_after": after["retractions"],
+        **(fig or {}),
+        # the solver's objective: straight links between curve ends from the origin on
         "model_travel_before_mm": solution.travel_before_mm,
         "model_travel_after_mm": solution.travel_after_mm,
         "curves": problem.n_curves, "groups": problem.n_groups,

@@ -49,11 +49,9 @@ def energy_of(program: Program, *, firmware="3dgates", profile="paper", duration
     carries them out (``schedule.scheduled_lines``): the motors are then off over those intervals
     only, not from an added line to the motor's next step as the parsed state has them."""
     if scheduled is not None:
-        if duration_s is not None:
-            raise ValueError("energy_of: a scheduled firmware's intervals are on the file's own timeline")
-        return (*scheduled_energy(program, scheduled, _file_enable(program, original),
-                                  fwmod.stall_durations(program, firmware), profile=profile),
-                float(fwmod.stall_durations(program, firmware).sum()))
+        stall = fwmod.stall_durations(program, firmware)
+        return (*scheduled_energy(program, scheduled, _file_enable(program, original), stall, profile=profile,
+                                  duration_s=duration_s), float(stall.sum()))
     prof = load_profile(profile)
     coeffs = prof.coefficients(program)
     stall = fwmod.stall_durations(program, firmware)

@@ -29,7 +29,8 @@ import numpy as np
 
 from .. import firmware as fwmod
 from ..energy import load_profile, step_power_w
-from ..planner import min_move_time_s
+from ..limits import machine_limits
+from ..planner import min_move_time_s, plan
 from ..program import AXES, Kind, Program
 from .finding import Finding
 from .motor_lines import read_motor_rows
@@ -67,16 +68,30 @@ def _barriers(output: Program, rows, parsed, mask, own, fw) -> np.ndarray:
     return cum
 
 
+def timeline_s(program: Program, firmware, printer=None) -> np.ndarray:
+    """(n_steps,) step durations under the dialect's time model (``Firmware.time_model``): the
+    paper's T = L/F, or ``planner.plan`` with the dialect's planner rules and the printer's limits
+    (``limits.machine_limits``), as ``gating.problem.build`` prices it; written here again so that
+    the verifier does not take the solver's timeline."""
+    fw = fwmod.get(firmware)
+    if fw.time_model != "planner":
+        return np.asarray(program.duration_s, float)
+    family = fw.planner.family if fw.planner is not None else None
+    return np.asarray(plan(program, machine_limits(program, family=family, printer=printer)).duration_s, float)
+
+
 def scheduled_lines(output: Program, *, firmware, start_ahead_s: float, end_late_s: float,
-                    printer=None, original: Program | None = None) -> list[ScheduledLine]:
+                    printer=None, original: Program | None = None, duration_s=None) -> list[ScheduledLine]:
     """Every (added line, motor) of ``output`` as the firmware's protocol carries it out (module
-    docstring), in file order; empty for a firmware without a schedule."""
+    docstring), in file order; empty for a firmware without a schedule. ``duration_s``: the step
+    durations (default ``timeline_s``)."""
     fw = fwmod.get(firmware)
     sched = fw.schedule(printer, start_ahead_s=start_ahead_s, end_late_s=end_late_s)
     if sched is None:
         return []
     n = output.n_steps
-    start = np.concatenate(([0.0], np.cumsum(np.asarray(output.duration_s, float))))
+    dur = timeline_s(output, fw, printer) if duration_s is None else np.asarray(duration_s, float)
+    start = np.concatenate(([0.0], np.cumsum(dur)))
     lb = np.concatenate(([0.0], np.cumsum(min_move_time_s(output, sched.arc_segment_mm))))
     steps = np.asarray(output.steps_motor(), bool)
     rows = np.flatnonzero(output.kind == Kind.MOTOR)
@@ -136,13 +151,13 @@ def check_schedule(output: Program, lines: list[ScheduledLine], *, max_findings:
 
 
 def scheduled_energy(output: Program, lines: list[ScheduledLine], file_enable: np.ndarray, stall_s: np.ndarray,
-                     *, profile="paper") -> tuple[float, float]:
+                     *, profile="paper", duration_s=None) -> tuple[float, float]:
     """(energy J, time s) of ``output`` with the motors as the file has them (``file_enable``), each
     firmware stall (``stall_s``) priced so, and each gated interval of ``lines`` off: the timeline
     cut at every step boundary and every pin change, each piece priced at its step's power with the
     motors off that are off then (so the XY coupling of the energy model is counted as it is)."""
     coeffs = load_profile(profile).coefficients(output)
-    dur = np.asarray(output.duration_s, float)
+    dur = np.asarray(output.duration_s if duration_s is None else duration_s, float)
     base = step_power_w(coeffs, file_enable) * (dur + stall_s)
     gated = [s for s in lines if s.gated and s.on_s > s.off_s]
     if not gated:
