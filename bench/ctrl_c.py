@@ -1,6 +1,6 @@
 """How soon `gatesopt solve` answers a Ctrl-C (issue 37: "within a second in every solver").
 
-    python bench/ctrl_c.py FILE --at S [S ...] [-- SOLVE ARGS]
+    python bench/ctrl_c.py --at S[,S...] FILE [SOLVE ARGS]
 
 Starts `gatesopt solve FILE -o OUT --json J SOLVE ARGS` in a fresh process, sends it SIGINT ``S``
 seconds after its start, and prints: the time from the signal to the process's exit, its exit
@@ -49,12 +49,10 @@ def one(path: str, at_s: float, extra: list[str]) -> dict:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--at", required=True, metavar="S[,S...]", help="seconds after the start")
     ap.add_argument("file")
-    ap.add_argument("--at", type=float, nargs="+", required=True, metavar="S")
-    ap.add_argument("extra", nargs=argparse.REMAINDER)
-    a = ap.parse_args()
-    extra = [x for x in a.extra if x != "--"]
-    for at in a.at:
+    a, extra = ap.parse_known_args()
+    for at in (float(v) for v in a.at.split(",")):
         print(json.dumps(one(a.file, at, extra)), flush=True)
     return 0
 

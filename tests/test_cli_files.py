@@ -234,7 +234,7 @@ def test_fuzzed_command_lines_end_in_a_result_or_one_error_line(argv, tmp_path_f
     monkeypatch.chdir(tmp)
     argv = [_value(t, tmp) for t in argv]
     flags = {f for a in _actions(argv[0]) for f in a.option_strings}
-    for flag, quick in (("--order-budget", "1"), ("--time-limit", "2")):
+    for flag, quick in (("--order-budget", "1"), ("--budget", "1"), ("--time-limit", "2")):
         if flag in flags and flag not in argv:
             argv += [flag, quick]
     rc, out, err = run_cli(argv, capsys, monkeypatch, TINY.encode())

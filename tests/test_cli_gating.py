@@ -196,8 +196,11 @@ def test_solve_reports_the_ordering_and_takes_its_mode(tmp_path, capsys):
     got = {}
     for mode, extra in (("safe", []), ("free", []), ("free", ["--order-formulation", "greedy"])):
         out, rj = tmp_path / f"{mode}{len(extra)}.gcode", tmp_path / f"{mode}{len(extra)}.json"
+        # the travel objective: its costs are symmetric, so the exact step proves every group
+        # (on the time objective the slicer's copied gaps make them asymmetric and the symmetric
+        # model's bound falls short of a proof on some: formulations/ordering.md)
         rc = main(["solve", str(src), "-o", str(out), "--formulation", "milp", "--rotate", "none",
-                   "--order-mode", mode, "--json", str(rj)] + extra)
+                   "--order-mode", mode, "--objective", "travel", "--json", str(rj)] + extra)
         assert rc == 0
         d = json.loads(rj.read_text())
         assert d["verified"] and d["ordered"] and d["formulation"] == "milp"
@@ -229,16 +232,18 @@ def test_solve_reports_the_ordering_and_takes_its_mode(tmp_path, capsys):
 def test_compare_ordering_formulations(tmp_path, capsys):
     """``compare --ordering``: one verified row per curve-ordering formulation, greedy (the Fleming
     et al. baseline) first; on a small bundled instance the exact ones prove every group, agree on
-    the solver's travel and are not worse than greedy; an unknown name is a row that says so."""
+    the solver's travel and are not worse than greedy (an unknown name is refused before any work:
+    tests/test_cli_files.py)."""
     src = Path(__file__).resolve().parents[1] / "instances" / "square_grid_m82.gcode"
     js, png = tmp_path / "cmp.json", tmp_path / "cmp.png"
-    rc = main(["compare", str(src), "--ordering", "--formulations", "auto,milp,cpsat,nosuch",
-               "--order-mode", "free", "--order-budget", "20", "--json", str(js), "--plot", str(png)])
+    rc = main(["compare", str(src), "--ordering", "--formulations", "auto,milp,cpsat",
+               "--order-mode", "free", "--order-budget", "20", "--objective", "travel",
+               "--json", str(js), "--plot", str(png)])
     assert rc == 0
     table = capsys.readouterr().out
-    assert "travel mm" in table and "unknown formulation 'nosuch'" in table
+    assert "travel mm" in table
     rows = json.loads(js.read_text())
-    assert [r["formulation"] for r in rows] == ["greedy", "auto", "milp", "cpsat", "nosuch"]
+    assert [r["formulation"] for r in rows] == ["greedy", "auto", "milp", "cpsat"]
     solved = {r["formulation"]: r for r in rows if "travel_after_mm" in r}
     assert all(r["verified"] for r in solved.values())
     assert all(r["travel_after_mm"] < r["travel_before_mm"] for r in solved.values())

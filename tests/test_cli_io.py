@@ -99,7 +99,7 @@ def test_solve_gives_the_ordering_a_budget(tmp_path, monkeypatch):
     monkeypatch.setattr(ordering_pipeline, "solve", spy)
     p = _copy(tmp_path)
     assert main(["solve", str(p), "-o", str(tmp_path / "a.gcode")]) == 0
-    assert main(["solve", str(p), "-o", str(tmp_path / "b.gcode"), "--order-budget", "3"]) == 0
+    assert main(["solve", str(p), "-o", str(tmp_path / "b.gcode"), "--budget", "3"]) == 0
     # the budget covers the ordering's build and emit too: the solve gets less
     from gatesopt.rewrite.order import FINISH_FIXED_S, FINISH_S_PER_LINE
     est = FINISH_FIXED_S + FINISH_S_PER_LINE * parse(str(p)).n_lines

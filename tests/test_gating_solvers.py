@@ -544,6 +544,6 @@ def test_a_stopped_solver_still_reports_the_share_bound(stars, monkeypatch):
     assert sol.bound_j == pytest.approx(model.bound_j, rel=1e-12)
     assert sol.bound_j <= exact.energy_j + 1e-6
     # the bound is tight on real output: far inside the gap HiGHS's unfinished root gave
-    assert 0.0 < sol.gap < 0.01
+    assert 0.0 <= sol.gap < 0.01
     # and it prunes: under Marlin's shared stalls most of the 18 angles cannot beat the dp start
     assert len(model.angles) < p.n_angles

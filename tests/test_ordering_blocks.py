@@ -99,4 +99,4 @@ def test_islands_whose_walls_share_one_run(seed):
     assert res.summary["block_segments_moved"] >= 1
     assert res.output.n_layers == prog.n_layers
     assert res.text.count(";LAYER_CHANGE") == prog.data.decode().count(";LAYER_CHANGE")
-    assert res.summary["print_time_planner_after_s"] < res.summary["print_time_planner_before_s"]
+    assert res.summary["print_time_after_s"] < res.summary["print_time_before_s"]

@@ -1,7 +1,6 @@
 """``gatesopt batch``: many files through solve + verify, one row each, on a process pool or Dask."""
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
@@ -48,7 +47,6 @@ def add_arguments(p) -> None:
     p.add_argument("--budget", type=float, default=10.0, metavar="S",
                    help="finish each file's run in about S seconds (default 10, as `solve --budget`: "
                         "the curve ordering gets what an estimate of the rest leaves)")
-    p.add_argument("--order-budget", type=float, dest="budget", help=argparse.SUPPRESS)
     p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
     p.add_argument("--profile", default="paper", metavar="NAME|TOML",
                    help="energy profile: shipped name or TOML file (default: paper)")

@@ -7,7 +7,6 @@ written to a temporary name in the target folder and renamed, never over an exis
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -53,7 +52,6 @@ def add_arguments(p) -> None:
                         "output, in about S seconds (default 10): the curve ordering gets what an "
                         "estimate of the rest leaves (an exact --formulation's --time-limit is "
                         "not part of the estimate)")
-    p.add_argument("--order-budget", type=float, dest="budget", help=argparse.SUPPRESS)
     p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
 

@@ -122,6 +122,8 @@ class PlannerRules:
     disable_dwell_s: float = 0.0  # dwelled on top of the queue drain of each disable line
 
 
+#: ``Firmware.split_moves``: every move may be split; all but extrude-only moves; none
+SPLIT_MOVES = ("all", "kinematic", "none")
 @dataclass(frozen=True)
 class Schedule:
     """Gating the firmware times itself (a dialect's ``Firmware.schedule``; the Klipper module's
@@ -177,6 +179,13 @@ class Firmware:
     no_drain_words: frozenset = frozenset()   # motor words it carries out without draining the queue
     stall_is_stop: bool = False   # the disable stall is a full stop (priced by the planner when given)
     drains_on_disable: bool = True  # a disable brings the head to rest (``planner.Plan.stop_cost_s``)
+    start_lead_s: float = 0.0     # counted on top of the start-ahead: the firmware steps this much
+                                  # before a move's nominal start (Klipper's input shaper)
+    note: str = ""                # what gating in this dialect cannot honour (said with the choice)
+    split_moves: str = "all"      # which moves a gating line may split: "all", "kinematic" (not an
+                                  # extrude-only move), "none"; a line that falls inside another
+                                  # goes before (on) or after (off) the whole move
+                                  # (``gating.timeline.whole_steps``, ``SPLIT_MOVES``)
     word_stalls: tuple = ()       # (word, off s, on s): a stall of its own for a word it carries out
     time_model: str = "paper"     # "planner": gating is priced with the planner (its limits, printer.cfg)
     planner: PlannerRules | None = field(default=None, repr=False)   # None: the file's own rules
@@ -448,7 +457,7 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     off_s = np.array([own.get(h, (fw.stall_off_s, fw.stall_on_s))[0] for h in heads], float)
     on_s = np.array([own.get(h, (fw.stall_off_s, fw.stall_on_s))[1] for h in heads], float)
     ok, on, off_s, on_s = ok[inverse], on[inverse], off_s[inverse], on_s[inverse]
-    # Klipper's ENABLE=1 dwells too, though we never write it
+    # an enable line stalls by its own price (Klipper's ENABLE=1: a look-ahead flush, no dwell)
     out[rows[ok]] = np.where(on[ok], on_s[ok], off_s[ok])
     if planner is not None and fw.stall_is_stop:
         for r in rows[ok & ~on]:

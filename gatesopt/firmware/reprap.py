@@ -33,4 +33,5 @@ DIALECT = Firmware(
     executes=frozenset({"M17", "M18", "M84"}),
     refused_note="RepRapFirmware's M18 marks X/Y/Z not homed and refuses the next move on them",
     description="RepRapFirmware: M18 waits for standstill and unhomes the axis",
-    rank=3, detect_rank=95, no_drain_words=frozenset({"M17"}), stall_is_stop=True, planner=PLANNER)
+    rank=3, detect_rank=95, no_drain_words=frozenset({"M17"}), stall_is_stop=True, split_moves="kinematic",
+    planner=PLANNER)

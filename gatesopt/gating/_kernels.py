@@ -66,12 +66,14 @@ def single_axis_time(dx, dy, w, c, s, snap_mm):
 
 @njit(cache=True)
 def idle_intervals(start_s, steps, rate, cum, stall_w, sa, el, on_line, stall_off_s, stall_on_s, per_event,
-                   split_lines):
+                   split_lines, whole):
     """Idle intervals of one motor (or enable group): (start, end, off_row, on_row, prev_row,
     next_row, saving_j, lines, stall_s, stall_j), all of length = number of intervals.
     ``per_event``: instruction lines (each with its stall) per off or on moment; ``split_lines``:
     an instruction inside a step splits it (one line more); False when the firmware times the
-    switch itself and the line goes between steps (``firmware.Schedule``)."""
+    switch itself and the line goes between steps (``firmware.Schedule``); ``whole`` (n,) bool:
+    steps an instruction must not split (``timeline.whole_steps``): an off that falls inside one
+    comes at its end, an on at its start (the safe sides)."""
     n = steps.shape[0]
     T = start_s[n]
     cap = 1
@@ -93,6 +95,18 @@ def idle_intervals(start_s, steps, rate, cum, stall_w, sa, el, on_line, stall_of
         b = T if j == n else start_s[j] - sa
         if b > T:
             b = T
+        if prev >= 0:
+            r = prev + 1
+            while r < n and start_s[r + 1] <= a + EPS_S:
+                r += 1
+            if r < n and whole[r] and start_s[r] + EPS_S < a:
+                a = start_s[r + 1]
+        if j < n:
+            q = j - 1
+            while q >= 0 and start_s[q] >= b - EPS_S:
+                q -= 1
+            if q >= 0 and whole[q] and b < start_s[q + 1] - EPS_S:
+                b = start_s[q]
         ok = b > a + EPS_S
         if prev < 0 and not b > 0.0:
             ok = False

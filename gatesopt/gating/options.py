@@ -56,6 +56,8 @@ class GatingOptions:
     stall_on_s: float = 0.0             # stall per on line
     on_line: bool = True                # re-enable needs a line (False: automatic at the first step)
     merge_lines: bool = True            # instructions of several motors at one moment share a line
+    split_moves: str = "all"            # moves a line may split: "all" | "kinematic" (not extrude-only)
+                                        # | "none"; else it goes before / after the whole move
     max_added_time_pct: float | None = None    # budget on stall time, % of the print time
     max_added_lines_pct: float | None = None   # budget on added lines, % of the file's lines
     num_workers: int = 2                # CP-SAT workers
@@ -112,6 +114,9 @@ class GatingOptions:
             seen |= set(g)
             groups.append(g)
         object.__setattr__(self, "shared_enable", tuple(groups))
+        if self.split_moves not in fw_mod.SPLIT_MOVES:
+            raise GatingOptionsError(f"split_moves must be one of {', '.join(fw_mod.SPLIT_MOVES)}, "
+                                     f"not {self.split_moves!r}")
         if self.time_model not in TIME_MODELS:
             raise GatingOptionsError(f"time_model must be one of {', '.join(TIME_MODELS)}, not {self.time_model!r}")
         if self.schedule is not None:
@@ -158,7 +163,9 @@ class GatingOptions:
     def for_firmware(cls, firmware: str = "3dgates", *, printer: PrinterConfig | None = None,
                      **changes) -> "GatingOptions":
         """Options with the numbers of a ``gatesopt.firmware`` dialect: stalls and lines, its own
-        timing of the switches (``Firmware.schedule``) and its time model. ``printer``: the
+        timing of the switches (``Firmware.schedule``), its time model, the moves its lines may
+        split (``split_moves``) and its ``start_lead_s`` (steps before a move's nominal start, added
+        to the start-ahead). ``printer``: the
         printer's Klipper config (``gatesopt.printer_config``): the planner's limits, the input
         shaper's step window, the options a firmware module reads there (``gating_defaults``: a
         value in ``changes`` that disagrees with it is an error; None in ``changes``: not given)."""
@@ -167,7 +174,7 @@ class GatingOptions:
         kw = dict(firmware=c.firmware, stall_off_s=c.stall_off_s, stall_on_s=c.stall_on_s,
                   on_line=c.on_lines_per_gate > 0, merge_lines=c.off_lines_merged,
                   time_model=fw.time_model, planner_family=fw.planner.family if fw.planner else None,
-                  printer=printer)
+                  printer=printer, split_moves=fw.split_moves)
         defaults = dict(fw.gating_defaults(printer))
         gateable = defaults.pop("gateable", None)
         for k, v in defaults.items():
@@ -177,6 +184,7 @@ class GatingOptions:
                                            f"{printer.source} ({v:g}), which the firmware uses")
         kw.update(defaults)
         kw.update({k: v for k, v in changes.items() if v is not None})
+        kw["start_ahead_s"] = kw.get("start_ahead_s", cls.start_ahead_s) + fw.start_lead_s
         opts = cls(**kw)
         fw.check_motors(opts.motors)
         if gateable is not None and not set(opts.motors) <= set(gateable):

@@ -37,6 +37,7 @@ from ..program import AXES, Kind, Program, X, Y
 from . import _kernels as _k
 from .options import GatingOptions
 from .rotation import greedy_angle, rotated_rows, rotation_candidates, rotation_center, steps_at
+from .timeline import whole_steps
 
 
 @dataclass(frozen=True, eq=False)
@@ -293,6 +294,8 @@ class _Timing:
     lb_cum_s: np.ndarray | None     # (n+1,) cumulative ``planner.min_move_time_s``; None: no schedule
     barrier_cum: np.ndarray | None  # (n+1, 4) cumulative count of steps where the firmware switches a
                                     # motor itself (homing, the file's own motor lines it carries out)
+    whole: np.ndarray               # (n,) bool: steps no line may split (``timeline.whole_steps``;
+                                    # none under a schedule: its lines go between steps)
 
 
 def _schedule_keep(o: GatingOptions, t: _Timing, m: int, prev, nxt) -> np.ndarray:
@@ -328,7 +331,7 @@ def _idle_table(o: GatingOptions, t: _Timing, group_rate_w: dict, steps_list, an
             out = dict(zip(names, _k.idle_intervals(
                 start_s, np.ascontiguousarray(st), rates[m], cums[m], stall_w, float(o.on_margin_s(m)),
                 float(o.off_margin_s(m)), bool(o.on_line), float(o.stall_off_s), float(o.stall_on_s),
-                per_event, o.schedule is None)))
+                per_event, o.schedule is None, t.whole)))
             prev, nxt = out["idle_prev_row"], out["idle_next_row"]
             if o.schedule is not None:
                 keep = _schedule_keep(o, t, m, prev, nxt)
@@ -426,7 +429,9 @@ def _timing(program: Program, o: GatingOptions, start_s, dur, stall_w) -> _Timin
     """The timeline, and a schedule's lower-bound clock and the steps where the firmware switches
     motors itself: homing, and the file's own motor lines it carries out (``Firmware.reads``)."""
     if o.schedule is None:
-        return _Timing(start_s, dur, stall_w, None, None)
+        # steps no line may split (not moves; moves the dialect does not split: ``split_moves``)
+        whole = np.ascontiguousarray(whole_steps(program.steps_motor(), program.kind, o.split_moves))
+        return _Timing(start_s, dur, stall_w, None, None, whole)
     lb = min_move_time_s(program, o.schedule.arc_segment_mm)
     barrier = np.zeros((program.n_steps, 4), bool)
     barrier[program.kind == Kind.HOME] = True
@@ -438,7 +443,8 @@ def _timing(program: Program, o: GatingOptions, start_s, dur, stall_w) -> _Timin
             barrier[r, [AXES.index(m) for m in parsed[1]]] = True
     cum = np.zeros((program.n_steps + 1, 4), np.int64)
     cum[1:] = np.cumsum(barrier, axis=0)
-    return _Timing(start_s, dur, stall_w, np.concatenate(([0.0], np.cumsum(lb))), cum)
+    return _Timing(start_s, dur, stall_w, np.concatenate(([0.0], np.cumsum(lb))), cum,
+                   np.zeros(program.n_steps, bool))
 
 
 def build(program: Program, options: GatingOptions | None = None, *, duration_s=None,

@@ -75,7 +75,7 @@ def local_search_xy(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=Fal
                 elif has_end:
                     old += _d(ext[xj, 0], ext[xj, 1], ex, ey)
                     new += _d(ent[ni, 0], ent[ni, 1], ex, ey)
-                if new < old - IMPROVE_EPS_MM:
+                if new < old - IMPROVE_EPS:
                     a, b = i, j
                     while a < b:
                         t = seq[a]
@@ -113,7 +113,7 @@ def local_search_xy(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=Fal
                     rem += _d(ext[l, 0], ext[l, 1], ex, ey) - _d(px, py, ex, ey)
                 if closed and L >= n - 1:
                     break
-                best_delta = -IMPROVE_EPS_MM
+                best_delta = -IMPROVE_EPS
                 best_a = -2
                 best_rev = False
                 # insertion after position a (a = -1: right after the start point)
