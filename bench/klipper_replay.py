@@ -956,6 +956,7 @@ GATING_LINE = {
     "klipper": re.compile(r"^SET_STEPPER_ENABLE\s+STEPPER=\w+\s+ENABLE=[01]\s*$", re.M),
     "3dgates": re.compile(r"^S[01]\s+[XYZE](\s+[XYZE])*\s*$", re.M),
     "marlin": re.compile(r"^M1[78]\s+[XYZE](\s+[XYZE])*\s*$", re.M),
+    "klipper-gating": re.compile(r"^GATESOPT_GATE\s+STEPPERS=[\w,]+\s*$", re.M),
 }
 
 
@@ -984,10 +985,15 @@ def read_gcode(path: Path) -> str:
 # gatesopt side
 # --------------------------------------------------------------------------------------------
 
-def solve(path: Path, firmware: str, extra: list[str], out_dir: Path) -> tuple[Path, dict]:
+#: dialects whose firmware times its own switches: solved for the printer.cfg they are replayed on
+SCHEDULED = ("klipper-gating",)
+
+
+def solve(path: Path, firmware: str, extra: list[str], out_dir: Path, tag_extra: str = "") -> tuple[Path, dict]:
     """``gatesopt solve`` from this worktree (its installed package, the same Python): the
     output file and its JSON report."""
-    tag = re.sub(r"[^A-Za-z0-9]+", "_", " ".join(extra)).strip("_") or "default"
+    words = [w for w in extra if not w.endswith(".cfg")] + ([tag_extra] if tag_extra else [])
+    tag = re.sub(r"[^A-Za-z0-9]+", "_", " ".join(words)).strip("_") or "default"
     stem = path.name.removesuffix(".gz").removesuffix(".gcode")
     out = out_dir / f"{stem}.{firmware}.{tag}.gcode"
     rep = out.with_suffix(".json")
@@ -1030,6 +1036,7 @@ def compare(orig: Replay, out: Replay, stripped: Replay | None, report: dict, fi
         "end_late_min_s": min((v.end_late_min_s for v in out.steppers.values() if v.gated), default=float("nan")),
         "off_time_s": {MOTOR_OF[k]: v.off_time_s for k, v in out.steppers.items() if v.gated},
         "report_off_time_s": report.get("off_time_s", {}),
+        "saving_pct": report.get("saving_pct"),
         "klippy_s": orig.klippy_s + out.klippy_s, "decode_s": orig.decode_s + out.decode_s,
     }
     if stripped is not None:
@@ -1114,6 +1121,32 @@ def summary(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def scheduled_table(rows: list[dict]) -> str:
+    """One line per output of a dialect whose firmware times its own switches (klipper-gating,
+    replayed with its module): what issue 34 asks of it, with the 3dgates optimum of the same file
+    and solve (its row in ``rows``) beside the saving."""
+    best = {(r["file"], r["solve"]): r.get("saving_pct") for r in rows
+            if r.get("firmware") == "3dgates" and "error" not in r}
+    out = ["| file | shaper | print s | added s (%) | lines | steps while off | start-ahead min ms | "
+           "end-late min ms | gated intervals | off s replay / report | saving % | 3dgates saving % |",
+           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        if r.get("firmware") not in SCHEDULED:
+            continue
+        if "error" in r:
+            out.append(f"| {r['file']} | {r['shaper']} | {r['error'][:120]} |" + " |" * 9)
+            continue
+        off = " ".join(f"{k} {r['off_time_s'].get(k, 0.0):.1f}/{float(r['report_off_time_s'].get(k, 0.0)):.1f}"
+                       for k in sorted(set(r["off_time_s"]) | {k for k, v in r["report_off_time_s"].items() if v}))
+        sav, opt = r.get("saving_pct"), best.get((r["file"], r["solve"]))
+        out.append(
+            f"| {r['file']} | {r['shaper']} | {r['print_s']:.1f} | {r['added_s']:+.3f} ({r['added_pct']:+.3f} %) | "
+            f"{r['gating_lines']} | {sum(r['steps_while_off'].values())} | {_ms(r['start_ahead_min_s'])} | "
+            f"{_ms(r['end_late_min_s'])} | {_fmt_motors(r['gated'], str)} | {off} | "
+            f"{'—' if sav is None else f'{sav:.2f}'} | {'—' if opt is None else f'{opt:.2f}'} |")
+    return "\n".join(out)
+
+
 def section(rows: list[dict], command: str, notes: list[str], title: str | None = None) -> str:
     return "\n".join([
         f"## Klipper replay: {title}" if title else SECTION, "",
@@ -1132,7 +1165,14 @@ def section(rows: list[dict], command: str, notes: list[str], title: str | None 
         "was told to take while that motor's enable pin was off; *start-ahead* / *end-late*: over "
         "every gated off interval (a step before and after it): pin on → next step, last step → "
         "pin off; *off s*: total gated off time per motor in Klipper vs gatesopt's `off_time_s`.",
-        "", summary(rows), "", table(rows), "", *notes])
+        "", summary(rows), "", table(rows), "",
+        *(["Outputs for gatesopt's Klipper module (`--module`), each solved for the printer.cfg it is "
+           "replayed on (`--printer-config`: the shaper's window, the module's options): *steps while "
+           "off* over the module's own pin changes; *gated intervals*: off intervals per motor in the "
+           "MCU stream; *saving %*: gatesopt's report (the energy model on the verified output); "
+           "*3dgates saving %*: the paper's patched-firmware optimum of the same file and solve.", "",
+           scheduled_table(rows), ""] if any(r.get("firmware") in SCHEDULED for r in rows) else []),
+        *notes])
 
 
 # --------------------------------------------------------------------------------------------
@@ -1204,6 +1244,8 @@ def cmd_run(a) -> int:
     else:
         rows, notes = replay_rows(a)
     print(summary(rows) + "\n\n" + table(rows))
+    if any(r.get("firmware") in SCHEDULED for r in rows):
+        print("\n" + scheduled_table(rows))
     if a.json:
         Path(a.json).write_text(json.dumps({"command": command, "notes": notes, "rows": rows},
                                            indent=1, default=_json_default))
@@ -1234,18 +1276,33 @@ def replay_rows(a) -> tuple[list[dict], list[str]]:
             if n_ph:
                 notes.append(f"- {path.name}: {n_ph} lines with unexpanded slicer placeholders "
                              "replayed as comments (original and outputs alike).")
-            outputs = {}
-            for fw in firmwares:
-                for v in variants:
+            solved = {}
+
+            def output_of(fw, v, label, cfg):
+                # a dialect whose firmware times its own switches (klipper-gating) is solved for the
+                # printer it is replayed on (--printer-config: the shaper's window, the module's
+                # options); every other dialect once
+                key = (fw, v, label) if fw in SCHEDULED else (fw, v)
+                if key not in solved:
+                    extra = shlex.split(v)
+                    if fw in SCHEDULED:
+                        # the replay's printer runs the module: its lines whatever the file says
+                        extra += ["--force-firmware", fw]
+                        cfg_path = work / f"printer.{re.sub(r'[^A-Za-z0-9]+', '_', label)}.cfg"
+                        cfg_path.write_text(cfg)
+                        extra += ["--printer-config", str(cfg_path)]
                     t0 = time.perf_counter()
                     try:
-                        outputs[(fw, v)] = (*solve(path, fw, shlex.split(v), work), time.perf_counter() - t0)
+                        solved[key] = (*solve(path, fw, extra, work, tag_extra=label if fw in SCHEDULED else ""),
+                                       time.perf_counter() - t0)
                     except ReplayError as exc:
-                        outputs[(fw, v)] = exc
+                        solved[key] = exc
+                return solved[key]
             for shaper in shapers:
                 cfg = printer_config(shaper, gating, a.pressure_advance)
                 pins = stepper_pins(cfg)
                 label = shaper.label if shaper else "none"
+                outputs = {(fw, v): output_of(fw, v, label, cfg) for fw in firmwares for v in variants}
                 try:
                     orig = k.run(cfg, orig_text, pins)
                 except ReplayError as exc:

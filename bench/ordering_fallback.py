@@ -42,8 +42,8 @@ def _run(groups, limit_us: float, repeats: int):
         t = time.perf_counter()
         sols = [auto.solve(g, time_limit_s=limit_us * 1e-6 * g.n_curves) for g in groups]
         best_s = min(best_s, time.perf_counter() - t)
-    travel = sum(s.objective_mm for s in sols)
-    gaps = [(s.objective_mm - s.bound_mm) / s.objective_mm for s in sols if s.objective_mm > 0]
+    travel = sum(s.objective for s in sols)
+    gaps = [(s.objective - s.bound) / s.objective for s in sols if s.objective > 0]
     return best_s, travel, float(np.median(gaps)), float(np.mean(np.asarray(gaps) <= 0.02))
 
 

@@ -9,7 +9,7 @@ A group's reported gap is (path - bound) / path, so a wide gap is a weak bound, 
 both. Per sampled group (groups of the symmetric model, formulations/ordering.md), this measures
 each bound gatesopt has against the best path found:
 
-- *cheap*: ``bounds.lower_bound_mm``, the bound a budget's fallback groups reported before the
+- *cheap*: ``bounds.lower_bound``, the bound a budget's fallback groups reported before the
   matching;
 - *matching*: the cheapest perfect matching of the end points (``symmetric_graph.matching_path``: the
   bound fallback groups report now, its time, and its patched path polished by the local search);
@@ -84,24 +84,24 @@ def measure(args) -> None:
             t = time.perf_counter()
             m_order, m_bound = symmetric_graph.matching_path(grp)
             m_s = time.perf_counter() - t
-            m_path = grp.path_cost_mm(greedy.improve(grp, m_order)) if m_order is not None else None
+            m_path = grp.path_cost(greedy.improve(grp, m_order)) if m_order is not None else None
             _, deg, deg_s = _root(grp, heur.order, cuts=False)
             _, root, root_s = _root(grp, fb, cuts=True)
             row = {"file": args.file, "mode": args.mode, "group": int(g), "n": grp.n_curves,
                    "select": args.select, "sample": args.sample, "seed": args.seed,
-                   "min_curves": args.min_curves, "max_curves": args.max_curves, "cheap_mm": heur.bound_mm, "greedy_mm": heur.objective_mm,
-                   "fallback_path_mm": grp.path_cost_mm(fb), "degree_lp_mm": deg, "degree_lp_s": deg_s,
+                   "min_curves": args.min_curves, "max_curves": args.max_curves, "cheap_mm": heur.bound, "greedy_mm": heur.objective,
+                   "fallback_path_mm": grp.path_cost(fb), "degree_lp_mm": deg, "degree_lp_s": deg_s,
                    "root_mm": root, "root_s": root_s, "matching_mm": m_bound, "matching_s": m_s,
                    "matching_path_mm": m_path}
             if at1 is None:
                 ex = auto.solve(grp, time_limit_s=args.time_limit)
-                row.update(exact_mm=ex.objective_mm, exact_bound_mm=ex.bound_mm, exact_status=ex.status,
+                row.update(exact_mm=ex.objective, exact_bound_mm=ex.bound, exact_status=ex.status,
                            exact_s=ex.solve_s, time_limit_s=args.time_limit)
             else:
-                row.update(at1_mm=at1.objective_mm, at1_bound_mm=at1.bound_mm, at1_s=at1.solve_s)
+                row.update(at1_mm=at1.objective, at1_bound_mm=at1.bound, at1_s=at1.solve_s)
                 deadline = time.perf_counter() + args.time_limit
                 more = ils.improve_ils(grp, at1.order, deadline=deadline)
-                row.update(ils_long_mm=grp.path_cost_mm(more))
+                row.update(ils_long_mm=grp.path_cost(more))
                 cap = symmetric.MAX_BRANCH_COLUMNS_PER_NODE
                 symmetric.MAX_BRANCH_COLUMNS_PER_NODE = 10 ** 9
                 try:
@@ -201,7 +201,7 @@ def report(args) -> str:
                   f"`python bench/ordering_gaps.py figure --file {f['file']} --mode {f['mode']} --group {f['group']} "
                   f"--time-limit {f['time_limit_s']:g} --png docs/figures/{png}`: {f['n']} curves; root LP bound "
                   f"{f['root_mm']:.2f} mm, best path {f['path_mm']:.2f} mm ({f['status']} after {f['time_limit_s']:g} s, "
-                  f"bound {f['bound_mm']:.2f} mm).", ""]
+                  f"bound {f['bound']:.2f} mm).", ""]
     return "\n".join(lines)
 
 
@@ -233,16 +233,16 @@ def figure(args) -> None:
         a = grp.cand_entry_xy[k]
         axes[1].plot([prev[0], a[0]], [prev[1], a[1]], "-", color="tab:red", lw=1.4)
         prev = grp.cand_exit_xy[k]
-    axes[1].set_title(f"best path {ex.objective_mm:.1f} mm ({ex.status}, {args.time_limit:g} s)")
+    axes[1].set_title(f"best path {ex.objective:.1f} mm ({ex.status}, {args.time_limit:g} s)")
     fig.suptitle(f"{args.file} {args.mode} group {args.group}: {grp.n_curves} curves (grey); travel in red")
     fig.tight_layout(rect=(0, 0, 1, 0.95))
     fig.savefig(args.png, dpi=80)
     # what the report says about the figure, beside it
     meta = {"file": args.file, "mode": args.mode, "group": args.group, "n": grp.n_curves,
-            "time_limit_s": args.time_limit, "root_mm": root, "path_mm": ex.objective_mm,
-            "bound_mm": ex.bound_mm, "status": ex.status}
+            "time_limit_s": args.time_limit, "root_mm": root, "path_mm": ex.objective,
+            "bound": ex.bound, "status": ex.status}
     Path(args.png).with_suffix(".json").write_text(json.dumps(meta) + "\n")
-    print(args.png, f"root {root:.3f} mm, path {ex.objective_mm:.3f} mm, {ex.status}")
+    print(args.png, f"root {root:.3f} mm, path {ex.objective:.3f} mm, {ex.status}")
 
 
 def main() -> None:

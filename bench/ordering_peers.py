@@ -20,7 +20,7 @@ Benchmark only. Peers:
 
 Peers get integer arc costs (micrometres, coarser only if LKH's int range demands it); every tour
 is decoded into a candidate order and re-scored with float Euclidean distances
-(``Group.path_cost_mm``), the same measure as gatesopt's objective.
+(``Group.path_cost``), the same measure as gatesopt's objective.
 
 Group instances are built as ``gatesopt.ordering.layers.solve`` builds them, except that each
 group starts where the *slicer's* order left the previous group (so the instances do not depend on
@@ -45,7 +45,7 @@ DEFAULT_OUT = ROOT / "bench" / "ordering-peers.jsonl"
 DEFAULT_FILES = ("cura413_cyl_grid20.gcode.gz,real_prusa261_benchy.gcode.gz,"
                  "real_orca230_arcs.gcode.gz,real_ideamaker514.gcode.gz,real_cura591.gcode.gz,"
                  "real_kisslicer206.gcode.gz,slic3r13_star_honey20.gcode.gz")
-EQ_TOL_MM = 1e-3      # |a - b| within this counts as equal (gatesopt's OPTIMAL_ABS_TOL_MM)
+EQ_TOL_MM = 1e-3      # |a - b| within this counts as equal (gatesopt's OPTIMAL_ABS_TOL)
 LKH_INT_MAX = 2 ** 31 - 1
 LKH_PRECISION = 100   # LKH's default: internal costs are PRECISION * c
 
@@ -93,11 +93,11 @@ def _scale(grp, n_arcs_bound):
 
 def int_costs(grp, scale):
     """Integer (m,m) cand->cand, (m,) start->cand, (m,) cand->end costs (inf on same curve)."""
-    arc = grp.arc_cost_mm()
+    arc = grp.arc_cost()
     same = ~np.isfinite(arc)
     arc = np.rint(np.where(same, 0, arc) * scale).astype(np.int64)
-    start = np.rint(grp.start_cost_mm() * scale).astype(np.int64)
-    end = np.rint(grp.end_cost_mm() * scale).astype(np.int64)
+    start = np.rint(grp.start_cost() * scale).astype(np.int64)
+    end = np.rint(grp.end_cost() * scale).astype(np.int64)
     return arc, same, start, end
 
 
@@ -231,7 +231,7 @@ def score(grp, order):
         grp.check_order(order)
     except ValueError as e:
         return None, str(e)
-    return grp.path_cost_mm(order), None
+    return grp.path_cost(order), None
 
 
 def run(args) -> None:
@@ -273,7 +273,7 @@ def run(args) -> None:
         ot_obj, ot_err = (None, ot.get("error")) if "order" not in ot else score(grp, ot["order"])
         row = {"run": run_id, "file": name, "mode": mode, "group": int(g), "label": grp.label,
                "curves": grp.n_curves, "cands": grp.n_cands, "has_end": grp.end_xy is not None,
-               "exact": {"travel_mm": ex_obj, "status": ex.status, "bound_mm": ex.bound_mm,
+               "exact": {"travel_mm": ex_obj, "status": ex.status, "bound": ex.bound,
                          "gap": ex.gap, "method": ex.formulation, "solve_s": ex_s, "error": err},
                "lkh": {"travel_mm": lk_obj, "solve_s": lk.get("solve_s"), "wall_s": lk.get("wall_s"),
                        "contiguous": lk.get("contiguous"), "scale": lk.get("scale"), "error": lk_err},
@@ -412,7 +412,7 @@ def report(args) -> str:
             for r in rr:
                 e = r["exact"]
                 lines.append(f"| {r['file']} | {r['mode']} | {r['group']} | {r['curves']} | {e['status']} | "
-                             f"{f3(e['travel_mm'])} | {e['bound_mm']:.3f} | {100 * e['gap']:.1f} % | "
+                             f"{f3(e['travel_mm'])} | {e['bound']:.3f} | {100 * e['gap']:.1f} % | "
                              f"{e['solve_s']:.2f} | {f3(r['lkh']['travel_mm'])} | {f3(r['ortools']['travel_mm'])} |")
     lines.append("")
     return "\n".join(lines)

@@ -69,10 +69,10 @@ def measure(args) -> None:
                     finally:
                         symmetric.EXACT_BLOSSOM_SHARE = share
                     row[f"at1_{name}_status"] = one.status
-                    row[f"at1_{name}_gap_pct"] = _pct(one.objective_mm, one.bound_mm)
-                    row[f"at1_{name}_mm"] = one.objective_mm
+                    row[f"at1_{name}_gap_pct"] = _pct(one.objective, one.bound)
+                    row[f"at1_{name}_mm"] = one.objective
                 best = auto.solve(grp, time_limit_s=args.time_limit)
-                row.update(best_mm=min(best.objective_mm, row["at1_fast_mm"], row["at1_exact_mm"]),
+                row.update(best_mm=min(best.objective, row["at1_fast_mm"], row["at1_exact_mm"]),
                            best_status=best.status, share=share)
                 out.write(json.dumps(row) + "\n")
                 out.flush()

@@ -12,6 +12,8 @@ import os
 import sys
 import threading
 
+from .solvers import Stopped, in_stop_scope, native_call, request_stop, stop_requested, stop_scope
+
 _lock = threading.Lock()
 try:
     _libc = ctypes.CDLL(None)
@@ -52,16 +54,41 @@ def native_stdout_to_stderr():
             os.close(saved)
 
 
-def run_highs(h, deadline: float | None = None, start=None) -> bool:
+class HighsRun:
+    """What ``run_highs`` did: ``ran`` (False: the deadline had passed, nothing run; the object is
+    falsy then), and why HiGHS was stopped early, if it was: ``stopped`` (a stop request:
+    Ctrl-C) or ``by_rule`` (the caller's ``stop_when`` said its answer was good enough)."""
+
+    __slots__ = ("ran", "stopped", "by_rule")
+
+    def __init__(self, ran: bool):
+        self.ran = ran
+        self.stopped = Stopped.NO
+        self.by_rule = False
+
+    def __bool__(self) -> bool:
+        return self.ran
+
+
+def run_highs(h, deadline: float | None = None, start=None, stop_when=None) -> HighsRun:
     """Run the HiGHS model ``h`` with native stdout on stderr: until ``deadline`` (a
     ``time.perf_counter()`` value; None: the model's own time limit), from the start solution
-    ``start`` (column values) if given. Returns False, without running, when the deadline has
-    passed."""
+    ``start`` (column values) if given. Returns a falsy ``HighsRun``, without running, when the
+    deadline has passed.
+
+    HiGHS asks its interrupt callbacks (simplex and MIP) whether to stop: it stops on a stop
+    request (``solvers.stop_requested``: Ctrl-C inside a ``stop_scope``) and, in a MIP, when
+    ``stop_when(data_out)`` (the callback's ``HighsCallbackOutput``: ``mip_primal_bound``,
+    ``mip_dual_bound``, ``mip_solution``...) is true: the caller's stopping rule, e.g. the gap it
+    will report (``gating.milp``). The callbacks run in this thread between HiGHS's own steps,
+    which is also where a pending Ctrl-C reaches Python (``stop_scope``'s handler only records
+    it; a second one is raised after the call, ``native_call``)."""
     import time
+    run = HighsRun(False)
     if deadline is not None:
         left = deadline - time.perf_counter()
         if left <= 0:
-            return False
+            return run
         # HiGHS's time_limit is checked against the run time the instance has accumulated over
         # all its runs (getRunTime), not this run's: a model solved again and again (cuts, node
         # LPs) would otherwise stop at "time limit" long before the deadline
@@ -72,6 +99,40 @@ def run_highs(h, deadline: float | None = None, start=None) -> bool:
         sol.col_value = list(start)
         sol.value_valid = True
         h.setSolution(sol)
-    with native_stdout_to_stderr():     # HiGHS may printf; stdout can carry G-code
-        h.run()
-    return True
+    run.ran = True
+
+    def interrupt(e):
+        try:
+            if stop_requested():
+                run.stopped = Stopped.INTERRUPTED
+                e.interrupt()
+        except KeyboardInterrupt:       # no stop_scope here: never raise through HiGHS
+            request_stop()
+            run.stopped = Stopped.INTERRUPTED
+            e.interrupt()
+
+    def mip_interrupt(e):
+        interrupt(e)
+        if stop_when is not None and not run.stopped:
+            try:
+                if stop_when(e.data_out):
+                    run.by_rule = True
+                    e.interrupt()
+            except KeyboardInterrupt:
+                request_stop()
+                run.stopped = Stopped.INTERRUPTED
+                e.interrupt()
+    h.cbSimplexInterrupt.subscribe(interrupt)
+    h.cbMipInterrupt.subscribe(mip_interrupt)
+    # outside a caller's stop_scope a Ctrl-C is Python's KeyboardInterrupt, as anywhere: raised
+    # once HiGHS has stopped (its own scope only keeps it from raising inside HiGHS)
+    raise_after = not in_stop_scope()
+    try:
+        with stop_scope(), native_call(), native_stdout_to_stderr():   # HiGHS may printf
+            h.run()
+    finally:
+        h.cbSimplexInterrupt.unsubscribe(interrupt)
+        h.cbMipInterrupt.unsubscribe(mip_interrupt)
+    if raise_after and run.stopped == Stopped.INTERRUPTED:
+        raise KeyboardInterrupt
+    return run

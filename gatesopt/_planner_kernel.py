@@ -28,6 +28,7 @@ JUNCTION_CODE = {"jerk": JERK, "deviation": DEVIATION, "scv": SCV}
 C_MAX_ACCEL, C_MAX_FEED, C_JERK = 0, 4, 8
 C_ACCEL_PRINT, C_ACCEL_TRAVEL, C_ACCEL_RETRACT, C_ACCEL_TO_DECEL = 12, 13, 14, 15
 C_JD, C_SCV, C_MAX_VELOCITY, C_MIN_SEGMENT_TIME, C_MIN_FEED, C_MIN_TRAVEL_FEED = 16, 17, 18, 19, 20, 21
+C_MIN_CRUISE_RATIO = 22
 MINIMUM_PLANNER_SPEED = 0.05      # Marlin planner.h (mm/s)
 KLIPPER_INSTANT_CORNER_V = 1.0    # Klipper kinematics/extruder.py instant_corner_velocity default (mm/s)
 ARC_SEGMENT_MM = 1.0              # firmware arc segment (Marlin MM_PER_ARC_SEGMENT, Klipper gcode_arcs resolution)

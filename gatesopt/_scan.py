@@ -32,6 +32,9 @@ ERR_ABSURD = 3          # coordinate beyond ABSURD_MM
 ERR_BAD_FEED = 4        # F <= 0
 ERR_ARC = 5             # G2/G3 without I/J or R, or R too small for the chord
 ERR_BAD_CHAR = 6        # a character that is no part of a G-code word inside a G command
+ERR_EXPONENT = 7        # a number written with an exponent on a move or G92 line (FLAG_EXPONENT)
+ERR_LETTER_RUN = 8      # a move or G92 line with a letter straight after a letter (``X0xa``)
+ERR_HEX = 9             # a move or G92 line with a hexadecimal-looking number (FLAG_HEX)
 
 ABSURD_MM = 100000.0    # 100 m: no printer has this; an X/Y/Z beyond it is corrupt input
 ABSURD_E_MM = 1.0e8     # 100 km of filament: E is cumulative, and a 1 kg spool is ~330 m
@@ -260,6 +263,13 @@ def _comment_marker(buf, i, b, rows, text):
 
 
 @njit(cache=True)
+def _text_command(m):
+    """An M command whose parameter is text (M23/M28/M30/M32/M33 file names, M117/M118 messages,
+    M928 log name: Marlin's parser.cpp takes the rest of the line as a string)."""
+    return m == 23.0 or m == 28.0 or m == 30.0 or m == 32.0 or m == 33.0 or m == 117.0 or m == 118.0 or m == 928.0
+
+
+@njit(cache=True)
 def _is_letter(c):
     return (65 <= c <= 90) or (97 <= c <= 122)
 
@@ -270,14 +280,26 @@ def _upper(c):
 
 
 @njit(cache=True)
-def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
+def _parse_words(buf, a, b, present, value, bad, info, touched):
     """Tokenize buf[a:b] (one line, no line ending). Fills present/value/bad per letter.
 
     Returns (cmd_letter, cmd_number, first_word_pos, lenient_stop) where cmd_letter is the
     upper-case ASCII code of the first word's letter (0 if none, EXT for an extended command).
-    ``bad[k]`` marks a letter whose number failed to parse.
+    ``bad[k]`` marks a letter whose number failed to parse. ``info`` (int64 [4]) gets: [0] an
+    unexpanded {placeholder} was dropped; [1] parameter words written straight after a number,
+    no blank between (``G1X10Y5`` has two); [2] how many of them are E words shaped like a
+    number's exponent (``X1e400``: e, a sign or not, digits, no '.'): when all of them are, the
+    line's words are otherwise apart, and these are exponents; [3] a letter given twice; [4] a
+    parameter letter straight after a letter (``X0xa``): Klipper reads the run as one parameter
+    name ("XA"), Marlin each letter as a word without a value; [5] a number written like a
+    hexadecimal one (``Y0x10``: an X word straight after a lone 0).
     """
-    placeholder[0] = False
+    info[0] = 0
+    info[1] = 0
+    info[2] = 0
+    info[3] = 0
+    info[4] = 0
+    info[5] = 0
     # reset only the letters the previous line set (touched[0] counts them, touched[1:] lists them):
     # resetting all 3 x 26 slots on every line cost more than the rest of the tokenizer
     for t in range(1, touched[0] + 1):
@@ -299,6 +321,7 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
     cmd_number = np.nan
     first = True
     first_pos = -1
+    cmd_end = a                 # where the command word's number ends
     while i < b:
         c = buf[i]
         if c == 32 or c == 9 or c == 13:
@@ -324,10 +347,30 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
         if first and i + 1 < b and (_is_letter(buf[i + 1]) or buf[i + 1] == 95):
             # extended command word (SET_VELOCITY_LIMIT, EXCLUDE_OBJECT_START, ...)
             return EXT, np.nan, i, True
+        if not first and i > a and (48 <= buf[i - 1] <= 57 or buf[i - 1] == 46):
+            nglued_cmd = i - 1 < cmd_end       # straight after the command's number: compact
+            # written straight after a number: compact G-code (G1X10Y5E.2), or an exponent that
+            # firmware reads as an E word (Marlin parser.h value_float stops at 'E'/'e', Klipper
+            # gcode.py splits the upper-cased line at letters: X1e400 is X1 E400 to both)
+            info[1] += 1
+            if L == 88 and buf[i - 1] == 48 and i - 2 >= a and (
+                    _is_letter(buf[i - 2]) or buf[i - 2] == 43 or buf[i - 2] == 45):
+                info[5] = 1
+            if L == 69 and not nglued_cmd:
+                j = i + 1
+                if j < b and (buf[j] == 43 or buf[j] == 45):
+                    j += 1
+                if j < b and 48 <= buf[j] <= 57:
+                    while j < b and 48 <= buf[j] <= 57:
+                        j += 1
+                    if j >= b or buf[j] != 46:
+                        info[2] += 1
         i += 1
         v, nd, j = _scan_number(buf, i, b)
         k = L - _A
-        if touched[0] < 26:
+        if not first and present[k]:
+            info[3] = 1         # firmware takes the last (Marlin's FASTER_GCODE_PARSER, Klipper)
+        if touched[0] < 26 and not present[k]:
             touched[0] += 1
             touched[touched[0]] = k
         if nd == 0 and j == i and j < b and buf[j] == 123 and not first:
@@ -336,10 +379,12 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
             while j < b and buf[j] != 125:
                 j += 1
             i = j + 1
-            placeholder[0] = True
+            info[0] = 1
             continue
         if nd == 0 and j > i:   # a sign or dot without digits
             bad[k] = True
+        if nd == 0 and j == i and j < b and _is_letter(buf[j]) and not first:
+            info[4] = 1
         # what follows a number must end the word
         if nd > 0 and j < b:
             cj = buf[j]
@@ -353,6 +398,7 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
             cmd_number = v
             first_pos = i - 1
             first = False
+            cmd_end = j
         else:
             present[k] = True
             value[k] = v
@@ -362,6 +408,16 @@ def _parse_words(buf, a, b, present, value, bad, placeholder, touched):
 
 #: ``l_flags`` bit of a line that set the part-cooling fan (``Program.part_fan_lines``)
 FLAG_PART_FAN = 4
+#: ``l_flags`` bit of a line with a number written with an exponent (``X1e400``), which firmware
+#: reads as an E word: on a line whose words are otherwise apart, E words straight after a
+#: number, shaped like an exponent (``_parse_words`` ``info[2]``); refused on moves and G92
+FLAG_EXPONENT = 8
+#: ``l_flags`` bit of a line that gives a letter twice (``G1 X0x10``: X0, then X10)
+FLAG_REPEATED = 16
+#: ``l_flags`` bit of a line with a number written like a hexadecimal one (``Y0x10``): Klipper
+#: reads Y0 X10; Marlin's ``value_float`` hands "0x10" to strtod, which reads 16 where the C
+#: library reads hexadecimal (32-bit boards) and 0 where it does not (avr-libc); refused on moves
+FLAG_HEX = 32
 
 STATE_SIZE = 21   # pos[4], G92 offset[4], enable[4], G91, M83, G20, feed, fan, hotend, bed, reached x2
 
@@ -409,7 +465,8 @@ def _step_arrays(n_lines):
             np.empty((n_lines, 4), np.bool_),
             # per line: the first word's letter and number, and flags: bit 0 an unexpanded
             # {placeholder} was dropped; bit 1 a G0-G3 line carries an axis the model has not got
-            # (A B C U V W); bit 2 an M106 / M107 set the part-cooling fan (FLAG_PART_FAN)
+            # (A B C U V W); bit 2 an M106 / M107 set the part-cooling fan (FLAG_PART_FAN); bit 3
+            # a number with an exponent (FLAG_EXPONENT); bit 4 a letter given twice (FLAG_REPEATED)
             np.zeros(n_lines, np.uint8), np.full(n_lines, np.nan, np.float32), np.zeros(n_lines, np.uint8))
 
 
@@ -693,7 +750,7 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
     mk_span = np.empty((1024, 2), np.int64)
     n_mk = 0
     no_markers = (np.empty(0, np.int64), np.empty(0, np.int16), np.empty(0, np.float64), np.empty((0, 2), np.int64))
-    placeholder = np.zeros(1, np.bool_)
+    info = np.zeros(6, np.int64)
     touched = np.zeros(27, np.int64)
     present = np.zeros(26, np.bool_)
     value = np.full(26, np.nan)
@@ -733,9 +790,17 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 mk_span[n_mk, 1] = nb
                 n_mk += 1
             continue
-        letter, number, fpos, lenient = _parse_words(buf, a, b, present, value, bad, placeholder, touched)
-        if placeholder[0]:
+        letter, number, fpos, lenient = _parse_words(buf, a, b, present, value, bad, info, touched)
+        if info[0] != 0:
             l_flags[ln] |= 1
+        if (info[2] != 0 or info[3] != 0 or info[5] != 0) and (
+                letter == 71 or (letter == 77 and not _text_command(number))):
+            if info[2] != 0 and info[2] == info[1]:
+                l_flags[ln] |= FLAG_EXPONENT
+            if info[3] != 0:
+                l_flags[ln] |= FLAG_REPEATED
+            if info[5] != 0:
+                l_flags[ln] |= FLAG_HEX
         l_letter[ln] = letter
         l_number[ln] = number
         if letter == 0:
@@ -755,6 +820,13 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 # the tokenizer stopped at a stray character: firmware would read on past it and
                 # we would not; a G command we cannot read the way the firmware does is corrupt
                 return ERR_BAD_CHAR, ln, -1, n, arrs, no_markers
+            if (l_flags[ln] & FLAG_EXPONENT) != 0 and (g == 0.0 or g == 1.0 or g == 2.0 or g == 3.0
+                                                       or g == 92.0):
+                # firmware moves by an E word the writer did not mean (X1e400: 400 mm of filament)
+                return ERR_EXPONENT, ln, LE, n, arrs, no_markers
+            if (l_flags[ln] & FLAG_HEX) != 0 and (g == 0.0 or g == 1.0 or g == 2.0 or g == 3.0
+                                                  or g == 92.0):
+                return ERR_HEX, ln, -1, n, arrs, no_markers
             if g == 0.0 or g == 1.0 or g == 2.0 or g == 3.0:
                 any_axis = False
                 for q in range(4):
@@ -773,6 +845,8 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                     if value[LF] <= 0.0:
                         return ERR_BAD_FEED, ln, LF, n, arrs, no_markers
                     feed = value[LF] * scale / 60.0
+                if info[4] != 0:
+                    return ERR_LETTER_RUN, ln, -1, n, arrs, no_markers
                 for k in FOREIGN_AXES:
                     if present[k]:
                         l_flags[ln] |= 2
@@ -831,6 +905,8 @@ def scan(buf, line_start, klipper, hot_rate, bed_rate, ambient_c, home_s, defaul
                 err, err_k = _set_offsets(present, value, bad, pos, off, scale)
                 if err != OK:
                     return err, ln, err_k, n, arrs, no_markers
+                if info[4] != 0:
+                    return ERR_LETTER_RUN, ln, -1, n, arrs, no_markers
         elif letter == 77:  # M
             m = number
             if m == 82.0 or m == 83.0:

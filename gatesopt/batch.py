@@ -7,6 +7,7 @@ for scheduling. The 3DGates paper evaluated 338 files / 71 M lines this way (Sec
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import os
@@ -19,17 +20,18 @@ from pathlib import Path
 import numpy as np
 
 from .errors import GatesoptError
-from .program import Kind, Program
+from .program import Program
 
 # columns of a result row, in CSV order; timing columns vary run to run (TIMING_COLUMNS)
 COLUMNS = (
     "file", "formulation", "verified", "error", "slicer", "flavor", "infill_pattern", "lines", "layers",
-    "energy_before_j", "energy_after_j", "saving_pct", "time_before_s", "time_after_s", "added_time_pct",
-    "lines_before", "lines_after", "lines_added", "bytes_before", "bytes_after", "size_change_pct",
-    "rotation_deg", "status", "gap", "objective_j", "bound", "ordered", "travel_before_mm",
-    "travel_after_mm", "travel_reduction_pct", "max_curves_per_layer", "off_time_X_s", "off_time_Y_s",
-    "off_time_Z_s", "off_time_E_s", "max_snap_mm", "firmware", "firmware_line", "rotation_line", "findings",
-    "output", "solve_s", "wall_s",
+    "energy_before_j", "energy_after_j", "saving_pct", "print_time_before_s", "print_time_after_s",
+    "print_time_change_pct", "print_time_model", "paper_time_before_s", "paper_time_after_s",
+    "added_time_pct", "lines_before", "lines_after", "lines_added", "bytes_before", "bytes_after",
+    "size_change_pct", "rotation_deg", "status", "stopped", "gap", "objective_j", "bound", "ordered",
+    "travel_before_mm", "travel_after_mm", "travel_reduction_pct", "max_curves_per_layer",
+    "off_time_X_s", "off_time_Y_s", "off_time_Z_s", "off_time_E_s", "max_snap_mm", "firmware",
+    "firmware_line", "rotation_line", "findings", "warnings", "output", "solve_s", "wall_s",
 )
 TIMING_COLUMNS = ("solve_s", "wall_s")
 
@@ -49,18 +51,13 @@ class BatchOptions:
     max_added_time_pct: object = "default"    # "default": 1 % for stock firmware; None: no budget
     max_added_lines_pct: float | None = None
     time_limit_s: float | None = 60.0
+    budget_s: float | None = 10.0       # the whole run of a file, as `gatesopt solve --budget`
+    order_mode: str = "safe"            # the curve ordering's mode, as `gatesopt solve --order-mode`
+    order_workers: int = 1              # processes of the ordering (2: as `solve` on 2 cores)
     order: bool = True
     gating: bool = True
     profile: str = "paper"
     write_dir: str | None = None        # write each verified output here (never an unverified one)
-
-
-def travel_mm(program: Program) -> float:
-    """XY length of all motion that deposits nothing (what curve ordering cuts)."""
-    moving = program.kind <= Kind.ARC
-    travel = moving & ~program.extruding
-    d = program.end_mm[travel, :2] - program.start_mm[travel, :2]
-    return float(np.hypot(d[:, 0], d[:, 1]).sum())
 
 
 def max_curves_per_layer(order_problem) -> int:
@@ -79,17 +76,29 @@ def _infill_pattern(program: Program) -> str:
     return m.group(1).decode() if m else ""
 
 
-def process_file(path: str, options: BatchOptions) -> dict:
-    """Solve + verify one file; a row of ``COLUMNS``. Never raises: errors become the ``error`` column."""
+STDIN_FILE = "-"        # a path that means the G-code given on standard input (``data``)
+
+
+def output_name(path: str) -> str:
+    """The name of ``path``'s output under ``--write-dir`` (``.gz`` dropped)."""
+    return "stdin.gcode" if path == STDIN_FILE else Path(path).name.removesuffix(".gz")
+
+
+def process_file(path: str, options: BatchOptions, data: bytes | None = None) -> dict:
+    """Solve + verify one file; a row of ``COLUMNS``. Never raises: errors become the ``error``
+    column. ``data``: the G-code itself, for the path ``-`` (standard input, read once by the
+    caller)."""
+    from .ordering import FORMULATIONS as ORDER_FORMULATIONS, OrderingOptions
     from .rewrite.pipeline import run
     from .rewrite.printer import DEFAULT, choose
     from .parse import parse
 
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     row = {c: "" for c in COLUMNS}
     row.update(file=str(path), formulation=options.formulation, verified=False)
     try:
-        program = parse(path)
+        program = parse(data, source="<stdin>") if path == STDIN_FILE else parse(path)
+        row["warnings"] = " | ".join(program.warnings)[:2000]
         row.update(slicer=program.header.get("slicer", ""), flavor=program.header.get("flavor", ""),
                    infill_pattern=_infill_pattern(program), lines=program.n_lines, layers=program.n_layers)
         budget = options.max_added_time_pct
@@ -99,8 +108,16 @@ def process_file(path: str, options: BatchOptions) -> dict:
                         rotate=options.rotate, start_ahead_s=options.start_ahead_s,
                         end_late_s=options.end_late_s, max_added_lines_pct=options.max_added_lines_pct,
                         profile=options.profile, bed_size_mm=options.bed_size_mm)
+        # as `gatesopt solve` runs a file: the same whole-run budget, ordering mode and formulation
+        # choice (the one the gating formulation names: milp, cpsat, greedy; auto for dp), so that
+        # a row's figures are the ones `solve` gives for that file
+        form = ORDER_FORMULATIONS.get(options.formulation)
+        order_formulation = options.formulation if form and "any_size" in form.capabilities else "auto"
         res = run(program, choice.options, formulation=options.formulation, time_limit_s=options.time_limit_s,
-                  order=options.order, gating=options.gating and choice.options is not None, choice=choice)
+                  order=options.order, gating=options.gating and choice.options is not None, choice=choice,
+                  budget_s=options.budget_s, order_options=OrderingOptions(mode=options.order_mode),
+                  started_s=t0, cpu_started_s=cpu0, order_workers=options.order_workers,
+                  order_formulation=order_formulation)
         s = res.summary()
         for k in COLUMNS:
             if k in s and not isinstance(s[k], (dict, list)):
@@ -111,11 +128,11 @@ def process_file(path: str, options: BatchOptions) -> dict:
         row["verified"] = bool(s.get("verified"))
         if res.order_problem is not None:
             row["max_curves_per_layer"] = max_curves_per_layer(res.order_problem)
-        tb, ta = travel_mm(program), travel_mm(res.output)
-        row.update(travel_before_mm=tb, travel_after_mm=ta,
-                   travel_reduction_pct=100.0 * (1.0 - ta / tb) if tb > 0 else 0.0)
+        # travel as every report measures it (``rewrite.figures``: on the files, first layer on)
+        tb, ta = s["travel_before_mm"], s["travel_after_mm"]
+        row["travel_reduction_pct"] = 100.0 * (1.0 - ta / tb) if tb > 0 else 0.0
         if options.write_dir and row["verified"]:
-            out = Path(options.write_dir) / (Path(path).name.removesuffix(".gz"))
+            out = Path(options.write_dir) / output_name(path)
             out.parent.mkdir(parents=True, exist_ok=True)
             tmp = out.with_name(out.name + f".tmp-{os.getpid()}")
             tmp.write_text(res.text, encoding="utf-8", errors="surrogateescape", newline="")
@@ -133,9 +150,13 @@ def process_file(path: str, options: BatchOptions) -> dict:
 
 # ------------------------------------------------------------------------------------------------
 def expand_paths(paths) -> list[str]:
-    """Files and folders (G-code files inside, sorted) to a list of files."""
+    """Files and folders (G-code files inside, sorted) to a list of files (``-``: standard input,
+    kept as it is)."""
     out = []
     for p in paths:
+        if p == STDIN_FILE:
+            out.append(p)
+            continue
         p = Path(p)
         if p.is_dir():
             out += sorted(str(q) for q in p.iterdir()
@@ -148,14 +169,41 @@ def expand_paths(paths) -> list[str]:
 
 
 def read_rows(path) -> list[dict]:
-    """Rows of an earlier results file (CSV or JSON), for --resume and for reports."""
+    """Rows of an earlier results file (CSV or JSON), for --resume and for reports; none when
+    ``path`` does not exist. Raises ``GatesoptError`` for a file that is not a results file."""
     path = Path(path)
     if not path.exists():
         return []
-    if path.suffix == ".json":
-        return json.loads(path.read_text() or "[]")
-    with open(path, newline="") as f:
-        return [_typed(r) for r in csv.DictReader(f)]
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise GatesoptError(f"{path}: not a results file of gatesopt batch (not text)") from None
+    return parse_rows(text, str(path), json_rows=path.suffix == ".json")
+
+
+def parse_rows(text: str, name: str, json_rows: bool | None = None) -> list[dict]:
+    """The rows of a results file's ``text`` (JSON, or CSV; ``json_rows`` None: JSON if it starts
+    with ``[``); ``name`` for messages."""
+    what = f"{name}: not a results file of gatesopt batch"
+    if json_rows is None:
+        json_rows = text.lstrip().startswith("[")
+    if json_rows:
+        try:
+            rows = json.loads(text or "[]")
+        except ValueError as exc:
+            raise GatesoptError(f"{what} (bad JSON: {exc})") from None
+        if not isinstance(rows, list) or not all(isinstance(r, dict) and "file" in r for r in rows):
+            raise GatesoptError(f"{what} (JSON that is not a list of rows with a 'file')")
+        return rows
+    try:
+        reader = csv.DictReader(io.StringIO(text, newline=""))
+        fields = reader.fieldnames or []
+        if "file" not in fields or "formulation" not in fields:
+            raise GatesoptError(f"{what} (a CSV whose first line names its columns, 'file' and "
+                                "'formulation' among them)")
+        return [_typed(r) for r in reader]
+    except csv.Error as exc:
+        raise GatesoptError(f"{what} ({exc})") from None
 
 
 def _typed(row: dict) -> dict:
@@ -167,7 +215,7 @@ def _typed(row: dict) -> dict:
             try:
                 out[k] = float(v) if v not in ("", None) and k not in ("file", "formulation", "error", "slicer",
                                                                         "flavor", "infill_pattern", "status",
-                                                                        "firmware", "findings", "output") else v
+                                                                        "firmware", "findings", "warnings", "output") else v
             except ValueError:
                 out[k] = v
     return out
@@ -212,8 +260,10 @@ def _json_default(o):
 
 
 def run_batch(paths, options: BatchOptions, *, out=None, jobs: int = 1, resume: bool = False,
-              dask: str | None = None, progress: bool = True, formulations: tuple | None = None) -> list[dict]:
-    """Every (file, formulation) through ``process_file``; rows in the order of ``paths``."""
+              dask: str | None = None, progress: bool = True, formulations: tuple | None = None,
+              stdin_data: bytes | None = None) -> list[dict]:
+    """Every (file, formulation) through ``process_file``; rows in the order of ``paths``.
+    ``stdin_data``: the G-code of the path ``-`` (standard input, read by the caller)."""
     files = expand_paths(paths)
     forms = formulations or (options.formulation,)
     todo = [(f, fm) for f in files for fm in forms]
@@ -223,7 +273,7 @@ def run_batch(paths, options: BatchOptions, *, out=None, jobs: int = 1, resume: 
     writer = ResultWriter(out, done_rows) if out else None
     rows = {}
     bar = _progress(len(todo), progress)
-    work = [(f, _with(options, formulation=fm)) for f, fm in todo]
+    work = [(f, _with(options, formulation=fm), stdin_data if f == STDIN_FILE else None) for f, fm in todo]
     try:
         for key, row in _execute(work, jobs, dask):
             rows[key] = row
@@ -280,7 +330,7 @@ def _execute(work, jobs: int, dask: str | None):
         else:
             cluster, client = None, Client(dask)
         try:
-            futures = {client.submit(process_file, f, o, pure=False): (f, o.formulation) for f, o in work}
+            futures = {client.submit(process_file, f, o, d, pure=False): (f, o.formulation) for f, o, d in work}
             for fut in dask_completed(futures):
                 yield futures[fut], fut.result()
         finally:
@@ -289,11 +339,11 @@ def _execute(work, jobs: int, dask: str | None):
                 cluster.close()
         return
     if jobs <= 1:
-        for f, o in work:
-            yield (f, o.formulation), process_file(f, o)
+        for f, o, d in work:
+            yield (f, o.formulation), process_file(f, o, d)
         return
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = {pool.submit(process_file, f, o): (f, o.formulation) for f, o in work}
+        futures = {pool.submit(process_file, f, o, d): (f, o.formulation) for f, o, d in work}
         for fut in as_completed(futures):
             yield futures[fut], fut.result()
 

@@ -67,6 +67,8 @@ def read_power_log(path_or_text, source: str | None = None) -> PowerLog:
                 text = f.read()
         except OSError as exc:
             raise CalibrationError(f"{name}: cannot read power log: {exc.strerror}") from None
+        except UnicodeDecodeError:
+            raise CalibrationError(f"{name}: not a power log: not text (a CSV of time, watts)") from None
     rows = list(csv.reader(io.StringIO(text)))
     times, watts = [], []
     for i, row in enumerate(rows, 1):

@@ -12,12 +12,14 @@ from .errors import GatesoptError
 
 #: the values of a gating run (``RunResult.summary()``) a row keeps
 GATING_KEYS = ("saving_pct", "energy_before_j", "energy_after_j", "lines_added", "instruction_lines",
-               "size_change_pct", "added_time_pct", "status", "gap", "bound", "solve_s",
-               "rotation_deg", "verified")
+               "size_change_pct", "added_time_pct", "print_time_change_pct", "status", "stopped",
+               "gap", "bound", "solve_s", "wall_s", "rotation_deg", "verified")
 #: the values of an ordering run (``OrderResult.summary``) a row keeps
 ORDERING_KEYS = ("travel_before_mm", "travel_after_mm", "travel_change_pct", "model_travel_after_mm",
-                 "print_time_before_s", "print_time_after_s", "groups_reordered", "groups_optimal",
-                 "groups_feasible", "groups_fallback", "worst_gap", "solve_s", "wall_s")
+                 "print_time_before_s", "print_time_after_s", "print_time_model", "groups_reordered",
+                 "groups_optimal", "groups_feasible", "groups_fallback", "worst_gap", "solve_s", "wall_s",
+                 # issue 36: what the ordering optimises
+                 "objective", "print_time_change_pct", "layers_kept_slower", "layers_reorderable")
 
 
 def formulation_rows(program, formulations, known, solve_row, installed=lambda name: True) -> list[dict]:

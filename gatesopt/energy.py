@@ -309,10 +309,13 @@ class EnergyReport:
     step_end_s: np.ndarray = field(repr=False)        # cumulative time at the end of each step
     layer_method: str = ""
     warnings: tuple = ()
+    energy_time_s: float | None = None   # the durations the energy integrates over, where they
+                                         # are not ``time_s``'s (``gatesopt profile``: the paper's)
 
     @property
     def mean_power_w(self) -> float:
-        return self.energy_j / self.time_s if self.time_s > 0 else 0.0
+        t = self.time_s if self.energy_time_s is None else self.energy_time_s
+        return self.energy_j / t if t > 0 else 0.0
 
     def to_dict(self, per_layer: bool = False) -> dict:
         d = {

@@ -40,7 +40,7 @@ KEYS = (
     "jerk_x", "jerk_y", "jerk_z", "jerk_e",
     "accel_print", "accel_travel", "accel_retract", "accel_to_decel",
     "junction_deviation", "square_corner_velocity", "max_velocity",
-    "min_segment_time", "min_feed", "min_travel_feed",
+    "min_segment_time", "min_feed", "min_travel_feed", "min_cruise_ratio",
 )
 K = {k: i for i, k in enumerate(KEYS)}
 INF = float("inf")
@@ -59,7 +59,7 @@ PRINTER_DEFAULTS: dict[str, dict[str, float]] = {
                             jerk_x=10, jerk_y=10, jerk_z=0.4, jerk_e=5,
                             accel_print=500, accel_travel=500, accel_retract=500, accel_to_decel=INF,
                             junction_deviation=np.nan, square_corner_velocity=np.nan, max_velocity=INF,
-                            min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+                            min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0, min_cruise_ratio=0.0),
     # Cura's fdmprinter.def.json default_value entries: what CuraEngine run from the command line
     # uses (the CLI does not evaluate a definition's "value" formulas), and so what Cura's own
     # estimate assumes for a file sliced that way
@@ -68,7 +68,7 @@ PRINTER_DEFAULTS: dict[str, dict[str, float]] = {
                             jerk_x=20, jerk_y=20, jerk_z=0.4, jerk_e=5,
                             accel_print=4000, accel_travel=4000, accel_retract=4000, accel_to_decel=INF,
                             junction_deviation=np.nan, square_corner_velocity=np.nan, max_velocity=INF,
-                            min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+                            min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0, min_cruise_ratio=0.0),
     # prusa_i3_mk3.def.json: fdmprinter plus default_value overrides machine_acceleration 1000,
     # machine_max_acceleration_z 500, machine_max_feedrate_z 12 / _e 120, machine_max_jerk_xy 10,
     # _z 0.2, _e 2.5 (default_value entries, so the CLI applies them too)
@@ -77,7 +77,7 @@ PRINTER_DEFAULTS: dict[str, dict[str, float]] = {
                          jerk_x=10, jerk_y=10, jerk_z=0.2, jerk_e=2.5,
                          accel_print=1000, accel_travel=1000, accel_retract=1000, accel_to_decel=INF,
                          junction_deviation=np.nan, square_corner_velocity=np.nan, max_velocity=INF,
-                         min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0),
+                         min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0, min_cruise_ratio=0.0),
 }
 # Which junction rule each default uses: Marlin 2 stock is junction deviation; the printer
 # definitions above (and Prusa / Creality firmware) use classic jerk.
@@ -104,6 +104,7 @@ class MachineLimits:
     min_segment_time_s: float           # Marlin M205 B (us -> s); 0: not modelled / none
     min_feed_mm_s: float                # M205 S: minimum printing feedrate
     min_travel_feed_mm_s: float         # M205 T: minimum travel feedrate
+    min_cruise_ratio: float             # Klipper minimum_cruise_ratio (0: none; with max_accel_to_decel)
     source: dict = field(default_factory=dict)   # key (see KEYS, plus firmware/junction) -> where it came from
     changes: tuple = ()                 # ((line, key, value), ...) applied from that line on, after the first motion
     profile: str = ""                   # which PRINTER_DEFAULTS row filled the gaps
@@ -115,7 +116,7 @@ class MachineLimits:
         v[12:] = (self.accel_print_mm_s2, self.accel_travel_mm_s2, self.accel_retract_mm_s2,
                   self.accel_to_decel_mm_s2, self.junction_deviation_mm,
                   self.square_corner_velocity_mm_s, self.max_velocity_mm_s, self.min_segment_time_s,
-                  self.min_feed_mm_s, self.min_travel_feed_mm_s)
+                  self.min_feed_mm_s, self.min_travel_feed_mm_s, self.min_cruise_ratio)
         return v
 
     def regimes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -167,7 +168,7 @@ def _from_vector(v, firmware, junction, source, changes, profile) -> MachineLimi
         accel_retract_mm_s2=float(v[14]), accel_to_decel_mm_s2=float(v[15]),
         junction_deviation_mm=float(v[16]), square_corner_velocity_mm_s=float(v[17]),
         max_velocity_mm_s=float(v[18]), min_segment_time_s=float(v[19]),
-        min_feed_mm_s=float(v[20]), min_travel_feed_mm_s=float(v[21]),
+        min_feed_mm_s=float(v[20]), min_travel_feed_mm_s=float(v[21]), min_cruise_ratio=float(v[22]),
         source=source, changes=tuple(changes), profile=profile)
 
 
@@ -275,17 +276,33 @@ def _printer_profile(data: bytes, firmware: str) -> tuple[str, str]:
     return firmware, f"stock {firmware} configuration"
 
 
-def machine_limits(program: Program, profile: str | None = None) -> MachineLimits:
+def machine_limits(program: Program, profile: str | None = None, *, family: str | None = None,
+                   printer=None) -> MachineLimits:
     """Planner limits for ``program``: file lines, then the slicer's config block, then defaults.
 
     ``profile`` names a ``PRINTER_DEFAULTS`` row for the values the file does not give (default:
-    recognised from the header, else the firmware's stock configuration).
+    recognised from the header, else the firmware's stock configuration). ``family``: the planner
+    rules ("marlin", "klipper", "reprap"; default: read from the file's flavor).
+
+    ``printer``: the printer's Klipper config (``gatesopt.printer_config.PrinterConfig``): the
+    machine is known, so its values replace the defaults, the slicer's config block (what the
+    slicer assumed) is not read, and of the file's lines only those Klipper carries out apply
+    (``M204`` and ``SET_VELOCITY_LIMIT`` without the ``ACCEL_TO_DECEL`` that Klipper 84104bb no
+    longer has; ``M201``/``M203``/``M205`` are unknown commands there).
     """
     data = program.data
     flavor = _flavor(data)
     cmds = _limit_commands(program)
     has_klipper_cmd = any(m.group(1).upper() == b"SET_VELOCITY_LIMIT" for _, m in cmds)
-    if "klipper" in flavor or has_klipper_cmd:
+    if printer is not None:
+        if family not in (None, "klipper"):
+            raise GatesoptError(f"a Klipper printer config plans with Klipper's rules, not {family!r}")
+        family = "klipper"
+        cmds = [(line, m) for line, m in cmds if m.group(1).upper() in (b"M204", b"SET_VELOCITY_LIMIT")]
+        profile = profile or family
+    if family is not None:
+        firmware.planner_rules(family)      # an unknown family is an error
+    elif "klipper" in flavor or has_klipper_cmd:
         family = "klipper"
     elif "reprapfirmware" in flavor or flavor == "rrf":
         # RepRapFirmware (M203 in mm/min, M566 jerk). Slic3r's "reprap" flavor is RepRap/Sprinter,
@@ -312,8 +329,14 @@ def machine_limits(program: Program, profile: str | None = None) -> MachineLimit
         junction = rules.junction
         source["junction"] = rules.junction_note
 
+    if printer is not None:
+        for k, x in printer.limit_values().items():
+            v[K[k]] = x
+            source[k] = f"printer config {printer.source}"
+        source["firmware"] = f"printer config {printer.source}"
+
     # --- 2: the slicer's config block ----------------------------------------------------------
-    config = _config(data)
+    config = _config(data) if printer is None else {}
     usage = config.get("machine_limits_usage", "").strip()
     if usage != "ignore":
         for key, name in _CONFIG_MAP.items():
@@ -371,8 +394,10 @@ def machine_limits(program: Program, profile: str | None = None) -> MachineLimit
             if b"ACCEL" in p:
                 sets += [("accel_print", p[b"ACCEL"]), ("accel_travel", p[b"ACCEL"]),
                          ("accel_retract", p[b"ACCEL"])]
-            if b"ACCEL_TO_DECEL" in p:
+            if b"ACCEL_TO_DECEL" in p and printer is None:
                 sets.append(("accel_to_decel", p[b"ACCEL_TO_DECEL"]))
+            if b"MINIMUM_CRUISE_RATIO" in p:
+                sets.append(("min_cruise_ratio", p[b"MINIMUM_CRUISE_RATIO"]))
             if b"SQUARE_CORNER_VELOCITY" in p:
                 sets.append(("square_corner_velocity", p[b"SQUARE_CORNER_VELOCITY"]))
             if b"VELOCITY" in p:

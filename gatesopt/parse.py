@@ -43,24 +43,37 @@ _ERR_TEXT = {
     _scan.ERR_BAD_FEED: "feedrate F must be positive",
     _scan.ERR_ARC: "arc needs I/J or an R that reaches the end point",
     _scan.ERR_BAD_CHAR: "unexpected character in a G command (not G-code, or a damaged line)",
+    # klippy/gcode.py reads a run of letters as one parameter name, Marlin's parser.cpp each letter
+    # as a word of its own without a value: the two firmwares move differently
+    _scan.ERR_LETTER_RUN: "a letter straight after a letter, with no number between: Marlin and "
+                          "Klipper read this line differently",
+    _scan.ERR_HEX: "a hexadecimal number (0x..): Klipper reads 0 and an X word, Marlin reads it as "
+                   "hexadecimal or as 0 depending on its board; write it in decimal",
 }
 
 
 # ------------------------------------------------------------------------------------------------
 # input
 def read_input(path_or_text, source: str | None = None) -> tuple[bytes, str]:
-    """Bytes and a display name from a path, a ``.gz`` path, bytes, or G-code text."""
+    """Bytes and a display name from a path (``.gz`` too), bytes, or G-code text.
+
+    A ``str`` names a file unless it holds a line break: a name that is no file is "no such
+    file", never read as G-code text (``parse("benchy")``); one line of G-code text goes through
+    ``parse_text``.
+    """
     if isinstance(path_or_text, bytes):
         data, name = path_or_text, source or "<bytes>"
     elif isinstance(path_or_text, os.PathLike) or (
-            isinstance(path_or_text, str) and "\n" not in path_or_text and len(path_or_text) < 4096
-            and (os.path.exists(path_or_text) or re.search(r"\.(gcode|gco|g|nc|gz|bgcode)$", path_or_text, re.I))):
+            isinstance(path_or_text, str) and path_or_text.strip()
+            and "\n" not in path_or_text and "\r" not in path_or_text):
         p = Path(path_or_text)
         name = source or str(p)
         try:
             data = p.read_bytes()
         except FileNotFoundError:
-            raise GcodeError(name, None, "no such file") from None
+            hint = (" (G-code text given as one line: use gatesopt.parse_text)"
+                    if _looks_like_gcode(str(path_or_text)) else "")
+            raise GcodeError(name, None, "no such file" + hint) from None
         except IsADirectoryError:
             raise GcodeError(name, None, "is a directory, not a G-code file") from None
         except OSError as exc:
@@ -75,6 +88,11 @@ def read_input(path_or_text, source: str | None = None) -> tuple[bytes, str]:
         except (OSError, EOFError) as exc:
             raise GcodeError(name, None, f"corrupt gzip file: {exc}") from None
     return data, name
+
+
+def _looks_like_gcode(text: str) -> bool:
+    """``text`` starts like a G-code line (a G/M/T word or a comment), for a hint."""
+    return re.match(r"\s*(?:[GMT]\d|;)", text, re.I) is not None
 
 
 def _check_bytes(data: bytes, name: str) -> list[str]:
@@ -270,6 +288,94 @@ def _read_header(data: bytes) -> dict:
 
 
 # ------------------------------------------------------------------------------------------------
+# what firmware would read differently, or would not do as written: one warning line each
+_EXPONENT = re.compile(r"([A-Za-z])([+-]?(?:\d+\.?\d*|\.\d+))[eE]([+-]?\d+)(?![\d.])")
+
+
+def _exponent_reason(text: str, refused: bool) -> str:
+    """What firmware makes of a number with an exponent on ``text`` (``_scan.FLAG_EXPONENT``):
+    Marlin's parser.h ``value_float`` stops at 'E'/'e' ("to prevent scientific notation
+    interpretation") and its parser.cpp starts a new word there; Klipper's gcode.py splits the
+    upper-cased line at every letter. Both read ``X1e400`` as X1 E400."""
+    m = _EXPONENT.search(text.split(";")[0])
+    if m is None:
+        return "a number with an exponent: no firmware reads exponents (it reads an E word)"
+    letter, mant, exp = m.group(1).upper(), m.group(2), m.group(3)
+    what = f"{m.group(0)}: no firmware reads exponents: Marlin and Klipper both read {letter}{mant} E{exp}"
+    if refused:
+        return f"{what}, an extruder move nobody meant; write the number without the exponent"
+    return f"{what}, and so does gatesopt"
+
+
+#: feeds beyond any printer, or so slow a move would take minutes per mm (mm/s)
+ABSURD_FEED_MM_S = 5000.0       # F300000; the fastest slicer output seen: 500 mm/s
+CRAWL_FEED_MM_S = 0.1           # F6; the slowest seen: 2.3 mm/s
+
+
+def _line_text(data: bytes, line_start, ln: int) -> str:
+    return data[line_start[ln]:line_start[ln + 1]].decode("utf-8", "replace").strip()
+
+
+def _number_warnings(data, line_start, l_flags, name, line_offset) -> list[str]:
+    """A line each for numbers written with an exponent (not on a move: those are refused) and
+    letters given twice, at the first such line, with the count."""
+    out = []
+    for flag, say in ((_scan.FLAG_EXPONENT, lambda t: _exponent_reason(t, refused=False)),
+                      # Marlin's FASTER_GCODE_PARSER (its default) keeps the last pointer set per
+                      # letter (parser.cpp ``set``); Klipper's params dict the last value
+                      (_scan.FLAG_REPEATED, lambda t: "a letter given twice: Marlin and Klipper "
+                       "take the last value, and so does gatesopt"),
+                      (_scan.FLAG_HEX, lambda t: "a hexadecimal number (0x..): firmware reads it "
+                       "as 0 and an X word, or as hexadecimal (Marlin on some boards); read here "
+                       "as 0 and an X word")):
+        lines = np.flatnonzero(l_flags & flag)
+        if len(lines):
+            ln = int(lines[0])
+            text = _line_text(data, line_start, ln)
+            more = f" ({len(lines) - 1} more lines like it)" if len(lines) > 1 else ""
+            out.append(f"{name}:{ln + 1 + line_offset}: {text[:60]}: {say(text)}{more}")
+    return out
+
+
+def _feed_warnings(data, line_start, step_line, kind, feed_mm_s, name, line_offset) -> list[str]:
+    """A line each for moves at a feed beyond any printer, and at a crawl (``ABSURD_FEED_MM_S``,
+    ``CRAWL_FEED_MM_S``): what the firmware does with them (Marlin's planner caps each axis at
+    max_feedrate, Klipper's toolhead.py ``Move`` at max_velocity; neither has a minimum feed by
+    default), and what the time models do."""
+    out = []
+    moving = kind <= Kind.ARC
+    for bad, say in (
+            (moving & (feed_mm_s > ABSURD_FEED_MM_S),
+             "beyond any printer: the firmware moves at its own limit instead (Marlin: max_feedrate, "
+             "M203; Klipper: max_velocity), as gatesopt's planner time model does; the paper's "
+             "T = L/F takes it as written"),
+            (moving & (feed_mm_s < CRAWL_FEED_MM_S),
+             "a crawl, and the firmware runs it that slowly; F is in mm/min")):
+        rows = np.flatnonzero(bad)
+        if len(rows):
+            r = int(rows[0])
+            ln = int(step_line[r])
+            more = f", {len(rows) - 1} more moves" if len(rows) > 1 else ""
+            out.append(f"{name}:{ln + 1 + line_offset}: {_line_text(data, line_start, ln)[:60]}: "
+                       f"feed {feed_mm_s[r]:.4g} mm/s{more}: {say}")
+    return out
+
+
+def _cut_last_line(data, line_start, step_line, kind, name, line_offset) -> str | None:
+    """A warning when the file ends inside a move (no line ending after the line of its last
+    step, a G0-G3 move): a file cut short (an interrupted copy or upload) ends mid-line, and its
+    last move goes somewhere else than the slicer wrote. Another command or a comment without a
+    line ending says nothing: a tool may end its file that way (FullControl: ``M84 ; disable
+    steppers``)."""
+    ln = len(line_start) - 2
+    if not data or data.endswith(b"\n") or not len(step_line) or step_line[-1] != ln or kind[-1] > Kind.ARC:
+        return None
+    return (f"{name}:{ln + 1 + line_offset}: {_line_text(data, line_start, ln)[:60]}: the file ends "
+            "inside this move (no line ending after it): was it cut short? Read as it is, as the "
+            "firmware would run it")
+
+
+# ------------------------------------------------------------------------------------------------
 def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | None = None,
           state: np.ndarray | None = None, line_offset: int = 0, require_moves: bool = True) -> Program:
     """Parse G-code (a path, a ``.gz`` path, bytes or text) into a lossless ``Program``.
@@ -301,8 +407,11 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     if err != _scan.OK:
         text = data[line_start[err_line]:line_start[err_line + 1]].decode("utf-8", "replace")
         letter = chr(err_letter + 65) if err_letter >= 0 else "?"
-        raise GcodeError(name, int(err_line) + 1 + line_offset,
-                         _ERR_TEXT[err].format(L=letter, lim=_scan.ABSURD_E_MM if letter == "E" else _scan.ABSURD_MM), text=text)
+        reason = (_exponent_reason(text, refused=True) if err == _scan.ERR_EXPONENT else
+                  _ERR_TEXT[err].format(L=letter, lim=_scan.ABSURD_E_MM if letter == "E" else _scan.ABSURD_MM))
+        if err_line == len(line_start) - 2 and not data.endswith(b"\n"):
+            reason += "; the file ends inside this line: was it cut short?"
+        raise GcodeError(name, int(err_line) + 1 + line_offset, reason, text=text)
     (s_line, s_kind, s_pos, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
      s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags) = arrs
     ph = np.flatnonzero(l_flags & 1)
@@ -312,6 +421,7 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
                         "(as the firmware ignores a word without a value)")
     if len(ph) > 5:
         warnings.append(f"{name}: {len(ph) - 5} more lines with unexpanded placeholders")
+    warnings += _number_warnings(data, line_start, l_flags, name, line_offset)
     s = slice(0, n)
     step_line, kind = s_line[s], s_kind[s]
     start, end = s_pos[:n], s_pos[1:n + 1]     # views of one buffer: start of step i = end of step i-1
@@ -331,6 +441,10 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
         warnings.append(f"{name}:{ln + 1 + line_offset}: {text[:60]}: {len(foreign)} moves carry an "
                         "axis gatesopt does not model (A B C U V W), ignored in the profile; "
                         "solve and order refuse to rewrite such a file")
+    warnings += _feed_warnings(data, line_start, step_line, kind, s_feed[s], name, line_offset)
+    cut = _cut_last_line(data, line_start, step_line, kind, name, line_offset)
+    if cut:
+        warnings.append(cut)
     if require_moves and not (end[:, 3] > start[:, 3]).any():
         warnings.append(f"{name}: no extrusion anywhere (E never increases)")
     m101 = re.search(rb"(?m)^[ \t]*M101\b", data) if b"M101" in data else None
@@ -355,3 +469,10 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
     for a in (prog.line, prog.kind, prog.start_mm, prog.end_mm, prog.duration_s, prog.enabled):
         a.flags.writeable = False
     return prog
+
+
+def parse_text(text: str | bytes, *, source: str = "<text>", **kwargs) -> Program:
+    """Parse G-code given as text (or bytes), never as a file name: ``parse_text("G1 X10 F600")``.
+    The keyword arguments are ``parse``'s."""
+    data = text if isinstance(text, bytes) else text.encode("utf-8", "surrogateescape")
+    return parse(data, source=source, **kwargs)

@@ -306,7 +306,9 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
     rules = fwmod.planner_rules(limits.firmware, None)
     if m and (rules.smoothed_lookahead if rules is not None else limits.junction == "scv"):
         # Klipper's smoothed look-ahead, where the file sets ACCEL_TO_DECEL below ACCEL
-        a_smooth = np.minimum(table[regime, _k.C_ACCEL_TO_DECEL], acc)
+        # (newer Klipper: minimum_cruise_ratio, the pseudo acceleration max_accel * (1 - ratio))
+        a_smooth = np.minimum(np.minimum(table[regime, _k.C_ACCEL_TO_DECEL], acc),
+                              acc * (1.0 - table[regime, _k.C_MIN_CRUISE_RATIO]))
         if np.any(a_smooth < acc):
             vnom = _k.klipper_cruise_cap(L, acc, a_smooth, vnom, vj, stop_before)
 
@@ -332,6 +334,61 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
                 accel_mm_s2=full(acc), length_mm=np.array(program.length_mm, dtype=float),
                 nominal_mm_s=full(vnom), limits=limits, move_step=idx, step_move=step_move,
                 _vj=vj, _vj_free=vj_free, _safe=safe, _stop_before=stop_before, _barrier=barrier)
+
+
+# ------------------------------------------------------------------------------------------------
+_SPEED_FACTOR_RE = re.compile(rb"^[ \t]*(?:N\d+[ \t]*)?M22([01])(?![0-9.])[^;\r\n]*?S[ \t]*([-+]?\d+\.?\d*)", re.M | re.I)
+#: relative margin taken off every lower bound: Klipper's own float sums may round the other way
+MIN_MOVE_MARGIN = 1e-9
+
+
+def min_move_time_s(program: Program, arc_segment_mm: float = ARC_SEGMENT_MM) -> np.ndarray:
+    """(n_steps,) a lower bound of the time each step takes in the firmware's planner that never
+    exceeds Klipper's ``Move.min_move_t`` (klippy/toolhead.py: the move's distance over its speed,
+    the speed after every limit) -- what a firmware that proves gating rules from its queued moves
+    sums (``firmware.Schedule``). formulations/gating.md §9 argues it:
+
+    * a line move: L / F, L its XYZ length (``|dE|`` for an extrude-only move) and F the requested
+      speed. Klipper's ``min_move_t`` is ``move_d / v`` with ``move_d`` the same length and ``v =
+      min(F, max_velocity, the kinematics' and extruder's caps)`` <= F, so L / F <= min_move_t;
+      bed-mesh splitting only lengthens the path;
+    * an arc: Klipper's gcode_arcs cuts it into ``n = max(1, floor(L / resolution))`` chords that
+      are shorter than the arc: ``n`` chords of the start radius, an ``n`` taken one less where
+      ``L / resolution`` is within rounding of an integer (fewer chords are shorter), less the
+      difference between the arc's start and end radius (the last chord ends on the target);
+    * M220 above 100 % speeds every move up and M221 below 100 % shortens an extrude-only move:
+      the bound is scaled by the smallest factor the file sets anywhere;
+    * every other step (dwell, heating, homing, motor lines) 0: none of them is a queued move.
+
+    Less a relative ``MIN_MOVE_MARGIN`` for the rounding of Klipper's own sums."""
+    kind = program.kind
+    n = program.n_steps
+    moving = np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype)) & (program.length_mm > 0)
+    out = np.where(moving, np.asarray(program.duration_s, float), 0.0)
+    arcs = np.flatnonzero(moving & (kind == Kind.ARC))
+    if len(arcs):
+        L = program.length_mm[arcs].astype(float)
+        dz = program.end_mm[arcs, Z] - program.start_mm[arcs, Z]
+        c = program.arc_center_mm[arcs]
+        r0 = np.hypot(program.start_mm[arcs, X] - c[:, 0], program.start_mm[arcs, Y] - c[:, 1])
+        r1 = np.hypot(program.end_mm[arcs, X] - c[:, 0], program.end_mm[arcs, Y] - c[:, 1])
+        flat = np.sqrt(np.maximum(L * L - dz * dz, 0.0))
+        theta = flat / np.maximum(r0, 1e-12)
+        n_seg = np.maximum(1.0, np.floor(L / arc_segment_mm * (1.0 - 1e-9) - 1e-9))
+        chord = np.hypot(2.0 * r0 * np.sin(theta / (2.0 * n_seg)), dz / n_seg)
+        chords = np.maximum(n_seg * chord - np.abs(r1 - r0), 0.0)
+        out[arcs] = np.minimum(chords, L) / program.feed_mm_s[arcs]
+    speed, extrude = 1.0, 1.0
+    for m in _SPEED_FACTOR_RE.finditer(program.data):
+        pct = float(m.group(2))
+        if m.group(1) == b"0" and pct > 0:
+            speed = min(speed, 100.0 / pct)
+        elif m.group(1) == b"1" and pct >= 0:
+            extrude = min(extrude, pct / 100.0)
+    e_only = moving & ~np.any(program.end_mm[:, :3] != program.start_mm[:, :3], axis=1) if n else moving
+    out = out * speed
+    out[e_only] *= extrude
+    return out * (1.0 - MIN_MOVE_MARGIN)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -81,13 +81,18 @@ def _parse_piece(piece: bytes, name: str, state, line0: int, flavor: str | None)
 
 
 def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT_CHUNK_BYTES,
-                   progress=None, time_model: str = "paper") -> EnergyReport:
+                   progress=None, time_model: str = "paper",
+                   energy_time_model: str | None = None) -> EnergyReport:
     """``energy.profile`` of a file of any size, chunk by chunk (per-step arrays are not kept).
 
-    With ``time_model="planner"`` the machine limits are read once, from the first chunk (where the
+    ``time_model``: the times reported (total, by kind, per layer); ``energy_time_model`` (default:
+    the same): the durations the energy integrates over (``gatesopt profile`` keeps the paper's,
+    as ``solve`` and ``verify`` do, and reports the planner's time).
+    With a "planner" model the machine limits are read once, from the first chunk (where the
     slicer writes them), and each chunk is planned on its own: the look-ahead restarts at a chunk
     boundary, a few moves in millions.
     """
+    energy_time_model = energy_time_model or time_model
     prof = load_profile(profile_name)
     state = _scan.initial_state(prof.time.ambient_c if prof.kind == "table" else 25.0, DEFAULT_FEED_MM_S)
     name = str(path)
@@ -111,14 +116,21 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
         if prog.n_steps == 0:
             continue
         any_moves = any_moves or bool((prog.kind <= 5).any())
-        dur = None
-        if time_model == "planner":
+        planned = None
+        if "planner" in (time_model, energy_time_model):
             from .limits import machine_limits
             from .planner import durations
             limits = limits if limits is not None else machine_limits(prog)
-            dur = durations(prog, model="planner", limits=limits)
+            planned = durations(prog, model="planner", limits=limits)
+        dur = planned if energy_time_model == "planner" else None
         r = profile(prog, prof, duration_s=dur)
+        if time_model != energy_time_model:     # times under the other model: a second profile
+            rt = profile(prog, prof, duration_s=planned if time_model == "planner" else None)
+            r = dataclasses.replace(r, time_s=rt.time_s, by_kind_s=rt.by_kind_s,
+                                    layer_time_s=rt.layer_time_s)
+            dur = planned if time_model == "planner" else None
         tot["time"] += r.time_s
+        tot["energy_time"] += float((prog.duration_s if energy_time_model == "paper" else planned).sum())
         tot["energy"] += r.energy_j
         n_steps += r.n_steps
         n_moves += r.n_moves
@@ -160,6 +172,7 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
     return EnergyReport(
         source=name, profile=prof.name, n_lines=n_lines, n_steps=n_steps, n_moves=n_moves,
         n_layers=len(layer_z), time_s=tot["time"], energy_j=tot["energy"], sectors_j=dict(sectors),
+        energy_time_s=tot["energy_time"],
         by_kind_j=dict(by_kind_j), by_kind_s=dict(by_kind_s), layer_time_s=np.array(layer_t),
         layer_energy_j=np.array(layer_e), layer_z_mm=np.array(layer_z), step_energy_j=empty,
         step_end_s=empty, layer_method=(method + " (streamed)") if method else "streamed",

@@ -3,7 +3,8 @@
 Gating: the exact optimum (dp, proven by its own bound and cross-checked by milp) under the defaults
 of `gatesopt solve` (paper energy profile, 3DGates firmware S0/S1, motors X and Y, start-ahead
 1.8 ms, end-late 1.0 ms, rotation auto), curve ordering off. Ordering: travel after the `auto`
-formulation in safe mode and how many groups were proven optimal.
+formulation in safe mode (as every report measures it, ``rewrite.figures.travel``: non-extruding
+XY moves from the first layer on) and how many groups were proven optimal.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ HERE = Path(__file__).resolve().parent
 def rows():
     import gatesopt
     from gatesopt import gating, ordering
-    from gatesopt.batch import travel_mm
+    from gatesopt.rewrite.figures import travel
     for path in sorted(HERE.glob("*.gcode")):
         program = gatesopt.parse(path)
         problem = gating.build(program, gating.GatingOptions())
@@ -29,7 +30,7 @@ def rows():
         statuses = [g.status for g in osol.groups] if hasattr(osol, "groups") else []
         proven = sum(s == "optimal" for s in statuses)
         yield (path.name, f"{dp.energy_before_j:.6f}", f"{dp.energy_j:.6f}", f"{dp.saving_pct:.4f}",
-               f"{dp.rotation_deg:.6g}", f"{travel_mm(program):.3f}", f"{travel_mm(out):.3f}",
+               f"{dp.rotation_deg:.6g}", f"{travel(program)['travel_mm']:.3f}", f"{travel(out)['travel_mm']:.3f}",
                f"{proven}/{len(statuses)}")
 
 

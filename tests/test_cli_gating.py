@@ -36,8 +36,9 @@ def test_solve_writes_verified_output_and_json(square, tmp_path, capsys):
     text = out.read_text()
     assert "S0 " in text and "S1 " in text
     d = json.loads(rj.read_text())
-    for k in ("energy_before_j", "energy_after_j", "time_before_s", "time_after_s", "lines_added",
-              "rotation_deg", "formulation", "status", "gap", "solve_s"):
+    for k in ("energy_before_j", "energy_after_j", "print_time_before_s", "print_time_after_s",
+              "paper_time_before_s", "paper_time_after_s", "lines_added", "rotation_deg",
+              "formulation", "status", "gap", "solve_s", "travel_before_mm", "times"):
         assert k in d
     assert d["energy_after_j"] < d["energy_before_j"] and d["formulation"] == "dp"
     assert d["lines_added"] == len(text.splitlines()) - len(SQUARE.splitlines())
@@ -195,8 +196,11 @@ def test_solve_reports_the_ordering_and_takes_its_mode(tmp_path, capsys):
     got = {}
     for mode, extra in (("safe", []), ("free", []), ("free", ["--order-formulation", "greedy"])):
         out, rj = tmp_path / f"{mode}{len(extra)}.gcode", tmp_path / f"{mode}{len(extra)}.json"
+        # the travel objective: its costs are symmetric, so the exact step proves every group
+        # (on the time objective the slicer's copied gaps make them asymmetric and the symmetric
+        # model's bound falls short of a proof on some: formulations/ordering.md)
         rc = main(["solve", str(src), "-o", str(out), "--formulation", "milp", "--rotate", "none",
-                   "--order-mode", mode, "--json", str(rj)] + extra)
+                   "--order-mode", mode, "--objective", "travel", "--json", str(rj)] + extra)
         assert rc == 0
         d = json.loads(rj.read_text())
         assert d["verified"] and d["ordered"] and d["formulation"] == "milp"
@@ -214,27 +218,32 @@ def test_solve_reports_the_ordering_and_takes_its_mode(tmp_path, capsys):
     # the exact ordering proves every group here; it is never worse than greedy
     assert got["free", False]["groups_fallback"] == got["free", False]["groups_feasible"] == 0
     assert got["free", False]["travel_after_mm"] <= got["free", True]["travel_after_mm"] + 1e-6
-    # --no-order: no ordering keys, and the report says the slicer's order was kept
+    # --no-order: no ordering keys, the travel of the file unchanged, and the report says the
+    # slicer's order was kept
     out = tmp_path / "no.gcode"
     rj = tmp_path / "no.json"
     assert main(["solve", str(src), "-o", str(out), "--rotate", "none", "--no-order", "--json", str(rj)]) == 0
-    assert "travel_before_mm" not in json.loads(rj.read_text())
+    d = json.loads(rj.read_text())
+    assert "groups_optimal" not in d and "ordering" not in d
+    assert d["travel_after_mm"] == pytest.approx(d["travel_before_mm"], abs=1e-6)
     assert "ordering      none" in capsys.readouterr().out
 
 
 def test_compare_ordering_formulations(tmp_path, capsys):
     """``compare --ordering``: one verified row per curve-ordering formulation, greedy (the Fleming
     et al. baseline) first; on a small bundled instance the exact ones prove every group, agree on
-    the solver's travel and are not worse than greedy; an unknown name is a row that says so."""
+    the solver's travel and are not worse than greedy (an unknown name is refused before any work:
+    tests/test_cli_files.py)."""
     src = Path(__file__).resolve().parents[1] / "instances" / "square_grid_m82.gcode"
     js, png = tmp_path / "cmp.json", tmp_path / "cmp.png"
-    rc = main(["compare", str(src), "--ordering", "--formulations", "auto,milp,cpsat,nosuch",
-               "--order-mode", "free", "--order-budget", "20", "--json", str(js), "--plot", str(png)])
+    rc = main(["compare", str(src), "--ordering", "--formulations", "auto,milp,cpsat",
+               "--order-mode", "free", "--order-budget", "20", "--objective", "travel",
+               "--json", str(js), "--plot", str(png)])
     assert rc == 0
     table = capsys.readouterr().out
-    assert "travel mm" in table and "unknown formulation 'nosuch'" in table
+    assert "travel mm" in table
     rows = json.loads(js.read_text())
-    assert [r["formulation"] for r in rows] == ["greedy", "auto", "milp", "cpsat", "nosuch"]
+    assert [r["formulation"] for r in rows] == ["greedy", "auto", "milp", "cpsat"]
     solved = {r["formulation"]: r for r in rows if "travel_after_mm" in r}
     assert all(r["verified"] for r in solved.values())
     assert all(r["travel_after_mm"] < r["travel_before_mm"] for r in solved.values())

@@ -82,8 +82,8 @@ def test_option_combinations_are_refused(tmp_path, capsys):
     msgs = capsys.readouterr().err
     assert "--in-place" in msgs and "must not be the input" in msgs and "--force" in msgs
     assert "--rotate 45" in msgs and "--no-gating" in msgs
-    assert main(["solve", str(p), "-o", str(tmp_path / "r.gcode"), "--order-budget", "0"]) == 2
-    assert "--order-budget" in capsys.readouterr().err
+    assert main(["solve", str(p), "-o", str(tmp_path / "r.gcode"), "--budget", "0"]) == 2
+    assert "--budget" in capsys.readouterr().err
 
 
 def test_solve_gives_the_ordering_a_budget(tmp_path, monkeypatch):
@@ -99,7 +99,7 @@ def test_solve_gives_the_ordering_a_budget(tmp_path, monkeypatch):
     monkeypatch.setattr(ordering_pipeline, "solve", spy)
     p = _copy(tmp_path)
     assert main(["solve", str(p), "-o", str(tmp_path / "a.gcode")]) == 0
-    assert main(["solve", str(p), "-o", str(tmp_path / "b.gcode"), "--order-budget", "3"]) == 0
+    assert main(["solve", str(p), "-o", str(tmp_path / "b.gcode"), "--budget", "3"]) == 0
     # the budget covers the ordering's build and emit too: the solve gets less
     from gatesopt.rewrite.order import FINISH_FIXED_S, FINISH_S_PER_LINE
     est = FINISH_FIXED_S + FINISH_S_PER_LINE * parse(str(p)).n_lines

@@ -508,16 +508,23 @@ def test_rotation_sweep_refuses_a_sequential_print(tmp_path):
     from gatesopt.report import rotation_sweep
     seq = tmp_path / "seq.gcode"
     seq.write_text(sequential_squares_gcode())
-    with pytest.raises(GatesoptError, match=r"no rotation sweep: 3 of 4 angles refused.*one at a time"):
-        rotation_sweep(seq, angles=(0, 30, 60, 90))
+    with pytest.raises(GatesoptError, match=r"no rotation sweep: --rotate auto tries only 0 deg.*one at a time"):
+        rotation_sweep(seq)
     flat = tmp_path / "flat.gcode"
     flat.write_text(rotated_square_gcode(n_layers=8))
-    sweep = rotation_sweep(flat, angles=(0, 30, 73))
-    assert [a for a, _ in sweep] == [0.0, 30.0, 73.0]
+    sweep = rotation_sweep(flat)
+    # the file names no bed: the command would not turn it; the sweep is the model's what-if at
+    # the angles --rotate auto tries on a bed, and says so
+    assert not sweep.bed_checked and 0.0 in sweep.angles_deg and 30.0 in sweep.angles_deg
+    energy = dict(zip(sweep.angles_deg, sweep.energy_j))
     # the square is turned by 17 deg: at 73 deg its sides run along the axes and one motor can be
     # gated on each; at 0 and 30 deg both motors move on every side (the same energy)
-    energy = dict(sweep)
-    assert energy[73.0] < energy[0.0] == energy[30.0]
+    at73 = min(energy, key=lambda a: abs(a % 90.0 - 73.0))
+    assert abs(at73 % 90.0 - 73.0) < 0.01 and math.isclose(sweep.chosen_deg % 90.0, 73.0, abs_tol=0.01)
+    assert energy[at73] < energy[0.0] == energy[30.0]
+    # with a bed the print fits, the angles are those the command tries, checked against it
+    bedded = rotation_sweep(flat, options=GatingOptions(bed_size_mm=(220, 220)))
+    assert bedded.bed_checked and math.isclose(bedded.chosen_deg % 90.0, 73.0, abs_tol=0.01)
 
 
 def test_a_stopped_solver_still_reports_the_share_bound(stars, monkeypatch):
@@ -528,7 +535,8 @@ def test_a_stopped_solver_still_reports_the_share_bound(stars, monkeypatch):
     p = build(stars, GatingOptions.for_firmware("marlin"))
     exact = solve(p, "milp", time_limit_s=60)
     assert exact.status == "optimal"
-    monkeypatch.setattr(milp, "run_highs", lambda h, start=None: None)
+    from gatesopt._native import HighsRun
+    monkeypatch.setattr(milp, "run_highs", lambda h, start=None, **kw: HighsRun(False))
     sol = solve(p, "milp", time_limit_s=60)
     start = dp.solve(p)
     assert sol.status == "fallback" and sol.energy_j == pytest.approx(start.energy_j, rel=1e-12)
@@ -536,6 +544,6 @@ def test_a_stopped_solver_still_reports_the_share_bound(stars, monkeypatch):
     assert sol.bound_j == pytest.approx(model.bound_j, rel=1e-12)
     assert sol.bound_j <= exact.energy_j + 1e-6
     # the bound is tight on real output: far inside the gap HiGHS's unfinished root gave
-    assert 0.0 < sol.gap < 0.01
+    assert 0.0 <= sol.gap < 0.01
     # and it prunes: under Marlin's shared stalls most of the 18 angles cannot beat the dp start
     assert len(model.angles) < p.n_angles

@@ -51,7 +51,7 @@ def test_a_budget_does_not_count_time_spent_compiling(monkeypatch):
     def record(grp, *, time_limit_s, **kw):
         given.append(time_limit_s)
         order = np.arange(grp.n_curves) * 2
-        return GroupSolution.make(order, grp.path_cost_mm(order), 0.0, "fallback", 0.0, "stand-in")
+        return GroupSolution.make(order, grp.path_cost(order), 0.0, "fallback", 0.0, "stand-in")
 
     for compiling in (False, True):
         t0 = time.perf_counter() - 0.3          # 0.3 s of a 0.5 s budget gone, to compiling or not
@@ -94,7 +94,7 @@ def test_a_group_whose_limit_went_to_compiling_is_solved_again(monkeypatch):
         calls.append(grp.n_curves)
         order = np.arange(grp.n_curves) * 2
         status = "optimal" if len(calls) == 3 else "feasible"
-        return GroupSolution.make(order, grp.path_cost_mm(order), 0.0, status, 0.0, "stand-in")
+        return GroupSolution.make(order, grp.path_cost(order), 0.0, status, 0.0, "stand-in")
 
     runner = GroupRunner(prob, solver, 1.0, None, time.perf_counter(), {})
     assert runner.run(0, prob.group(0, prob.origin_xy)).status == "feasible"

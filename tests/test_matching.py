@@ -126,8 +126,8 @@ def test_matching_bound_and_path_on_ordering_groups(seed):
     opt = dp.solve(grp)
     order, bound = symmetric_graph.matching_path(grp)
     grp.check_order(order)
-    assert bound <= opt.objective_mm + 1e-6
-    assert grp.path_cost_mm(order) >= opt.objective_mm - 1e-6
+    assert bound <= opt.objective + 1e-6
+    assert grp.path_cost(order) >= opt.objective - 1e-6
     model = symmetric.SymmetricModel(grp, opt.order)
     _, masks, _ = symmetric_graph.odd_sets(model.C, model.deg, grp.end_xy is None)
     travel = model.tour_edges(opt.order)
@@ -141,13 +141,13 @@ def test_auto_takes_the_matching_bound_and_stays_exact():
     the same optimum as the DP."""
     prob = random_problem(77, 14, closed_share=0.0, clustered=True)
     grp = prob.group(0, prob.origin_xy)
-    opt = dp.solve(grp).objective_mm
+    opt = dp.solve(grp).objective
     quick = auto.solve(grp, time_limit_s=1e-4)
-    assert quick.bound_mm <= opt + 1e-6 and quick.objective_mm >= opt - 1e-6
+    assert quick.bound <= opt + 1e-6 and quick.objective >= opt - 1e-6
     _, mbound = symmetric_graph.matching_path(grp)
-    assert quick.bound_mm >= mbound - 1e-9
+    assert quick.bound >= mbound - 1e-9
     full = auto.solve(grp, time_limit_s=5.0)
-    assert full.status == "optimal" and full.objective_mm == pytest.approx(opt, abs=1e-6)
+    assert full.status == "optimal" and full.objective == pytest.approx(opt, abs=1e-6)
 
 
 def test_the_kept_workspace_gives_what_a_fresh_one_gives():
@@ -221,7 +221,7 @@ def test_travel_matching_equals_the_dense_matching(seed):
     idx = np.repeat(np.arange(N), rep)
     C2 = C[np.ix_(idx, idx)]
     ok = np.isfinite(C2) & (idx[:, None] != idx[None, :])
-    units = np.floor(np.where(ok, C2, 0.0) * matching.UNITS_PER_MM).astype(np.int64)
+    units = np.floor(np.where(ok, C2, 0.0) * matching.UNITS_PER_COST).astype(np.int64)
     dense, _, _ = min_cost_perfect_matching(units, ok)
     got, mate, _ = matching.travel_matching(C, idx, 3, 0)
     assert (dense is None) == (got is None)

@@ -126,7 +126,7 @@ def test_budgeted_solve_gives_small_groups_the_exact_time_first(monkeypatch):
     def record(grp, *, time_limit_s, **kw):     # the slicer's order, at once
         given[grp.n_curves] = time_limit_s
         order = np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
-        obj = grp.path_cost_mm(order)
+        obj = grp.path_cost(order)
         return GroupSolution.make(order, obj, 0.0, "fallback", 0.0, "stand-in")
 
     _stand_in(monkeypatch, "auto", record)
@@ -146,7 +146,7 @@ def test_a_group_never_gets_more_than_the_wall_clock_time_left(monkeypatch):
     def record(grp, *, time_limit_s, **kw):
         given.append(time_limit_s)
         order = np.arange(grp.n_curves) * 2
-        return GroupSolution.make(order, grp.path_cost_mm(order), 0.0, "fallback", 0.0, "stand-in")
+        return GroupSolution.make(order, grp.path_cost(order), 0.0, "fallback", 0.0, "stand-in")
 
     import time
     runner = GroupRunner(prob, record, 5.0, 0.5, time.perf_counter(), {}, other_alive=lambda: True)
@@ -162,22 +162,22 @@ def test_auto_tries_the_model_before_the_dp_above_12_curves_and_stays_exact(seed
     prob = random_problem(700 + seed, 14, closed_share=0.0, clustered=seed % 2 == 0)
     grp = prob.group(0, prob.origin_xy)
     assert dp.fits(grp) and symmetric_graph.applies(grp)
-    opt = dp.solve(grp).objective_mm
+    opt = dp.solve(grp).objective
     a = auto.solve(grp, time_limit_s=5.0)
     assert a.status == "optimal" and a.formulation in ("auto:milp", "auto:bound", "auto:matching",
                                                     "auto:ils+bound")
-    assert a.objective_mm == pytest.approx(opt, abs=1e-6)
+    assert a.objective == pytest.approx(opt, abs=1e-6)
     # a limit below the DP's own time (it cannot be stopped): no DP, the heuristic path, never
     # called optimal unless it is
     assert dp.time_s(grp) > 1e-4
     b = auto.solve(grp, time_limit_s=1e-4)
-    assert b.formulation != "auto:dp" and b.objective_mm >= opt - 1e-6
-    assert b.status != "optimal" or b.objective_mm == pytest.approx(opt, abs=1e-6)
+    assert b.formulation != "auto:dp" and b.objective >= opt - 1e-6
+    assert b.status != "optimal" or b.objective == pytest.approx(opt, abs=1e-6)
     # no time for the model but enough for the DP (by its estimate): the DP, still exact
     monkeypatch.setattr(dp, "S_PER_WORK", 1e-4 / dp.work(grp))
     c = auto.solve(grp, time_limit_s=2e-4)
     assert c.status == "optimal" and c.formulation == "auto:dp"
-    assert c.objective_mm == pytest.approx(opt, abs=1e-6)
+    assert c.objective == pytest.approx(opt, abs=1e-6)
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -266,7 +266,7 @@ def _brute_free_start(grp):
     for perm in itertools.permutations(range(grp.n_curves)):
         for pick in itertools.product(*[cands[c] for c in perm]):
             o = np.asarray(pick)
-            best = min(best, grp.path_cost_mm(o) - float(np.hypot(*(grp.cand_entry_xy[o[0]] - grp.start_xy))))
+            best = min(best, grp.path_cost(o) - float(np.hypot(*(grp.cand_entry_xy[o[0]] - grp.start_xy))))
     return best
 
 
@@ -282,7 +282,7 @@ def test_backwards_group_costs_the_path_without_its_first_travel(seed):
     for _ in range(20):
         order = np.array([rng.choice(np.flatnonzero(grp.cand_curve == c)) for c in rng.permutation(grp.n_curves)])
         first = float(np.hypot(*(grp.cand_entry_xy[order[0]] - grp.start_xy)))
-        assert back.path_cost_mm(order[::-1]) == pytest.approx(grp.path_cost_mm(order) - first)
+        assert back.path_cost(order[::-1]) == pytest.approx(grp.path_cost(order) - first)
     with pytest.raises(ValueError):
         prob.group(0, end).backwards()
 
@@ -319,9 +319,9 @@ def test_helper_solves_the_chain_from_the_back(monkeypatch):
         entry = prob.group(g + 1, np.zeros(2)).cand_entry_xy[nxt.order[0]]
         grp = prob.group(g, np.zeros(2), entry)
         assert gs.status == "optimal"
-        assert gs.objective_mm == pytest.approx(_brute_free_start(grp), abs=1e-6)
+        assert gs.objective == pytest.approx(_brute_free_start(grp), abs=1e-6)
         first = float(np.hypot(*(grp.cand_entry_xy[gs.order[0]] - grp.start_xy)))
-        assert grp.path_cost_mm(gs.order) - first == pytest.approx(gs.objective_mm, abs=1e-6)
+        assert grp.path_cost(gs.order) - first == pytest.approx(gs.objective, abs=1e-6)
         checked += 1
     assert checked >= 3
     # the file's last group was solved from a guessed start and scored from the real one: its
@@ -330,8 +330,8 @@ def test_helper_solves_the_chain_from_the_back(monkeypatch):
     if "+kept" not in prev.formulation:
         start = prob.group(prob.n_groups - 2, np.zeros(2)).cand_exit_xy[prev.order[-1]]
         grp = prob.group(prob.n_groups - 1, start)
-        assert last.objective_mm == pytest.approx(grp.path_cost_mm(last.order))
-        assert last.bound_mm <= dp.solve(grp).objective_mm + 1e-6
+        assert last.objective == pytest.approx(grp.path_cost(last.order))
+        assert last.bound <= dp.solve(grp).objective + 1e-6
     assert two.travel_after_mm <= two.travel_before_mm + 1e-9
 
 
@@ -393,7 +393,7 @@ def test_one_slow_group_early_does_not_starve_the_groups_after_it(monkeypatch):
                 pass
         given.append((grp.n_curves, time_limit_s))
         order = np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
-        return GroupSolution.make(order, grp.path_cost_mm(order), 0.0, "fallback", 0.0, "stand-in")
+        return GroupSolution.make(order, grp.path_cost(order), 0.0, "fallback", 0.0, "stand-in")
 
     _stand_in(monkeypatch, "auto", record)
     layers.solve(prob, "auto", time_limit_s=2.0, budget_s=2.0)
@@ -428,4 +428,4 @@ def test_a_fallback_group_runs_ils_only_when_its_limit_leaves_time_for_it(monkey
     big = auto.solve(grp, time_limit_s=0.2)
     if small.status != "optimal":
         assert len(calls) == 1 and big.formulation == "auto:ils"
-        assert big.objective_mm <= small.objective_mm + 1e-9
+        assert big.objective <= small.objective + 1e-9

@@ -11,11 +11,11 @@ import pytest
 
 import gatesopt
 from gatesopt.ordering import cpsat, dp, greedy, tsp
-from gatesopt.ordering.bounds import lower_bound_mm
+from gatesopt.ordering.bounds import lower_bound
 from gatesopt.ordering.layers import solve
 from gatesopt.rewrite.order import order_program
 from gatesopt.ordering.polylines import from_polylines
-from gatesopt.ordering.problem import OPTIMAL_ABS_TOL_MM, OrderingOptions
+from gatesopt.ordering.problem import OPTIMAL_ABS_TOL, OrderingOptions
 
 from test_ordering import _handmade_gcode, random_problem
 
@@ -34,10 +34,10 @@ def _no_build(monkeypatch):
 
 def _sound(grp, gs):
     grp.check_order(gs.order)
-    assert gs.objective_mm == pytest.approx(grp.path_cost_mm(gs.order), abs=1e-9)
-    assert gs.bound_mm <= gs.objective_mm + 1e-9
+    assert gs.objective == pytest.approx(grp.path_cost(gs.order), abs=1e-9)
+    assert gs.bound <= gs.objective + 1e-9
     if gs.status == "optimal":
-        assert gs.objective_mm - gs.bound_mm <= OPTIMAL_ABS_TOL_MM
+        assert gs.objective - gs.bound <= OPTIMAL_ABS_TOL
 
 
 @pytest.mark.parametrize("closed,move_seams", [(False, False), (False, True), (True, True)])
@@ -59,9 +59,9 @@ def test_large_group_with_a_tiny_limit_keeps_the_warm_start_without_building(mon
     gs = cpsat.solve(grp, time_limit_s=0.05)
     assert gs.status == "fallback"
     _sound(grp, gs)
-    assert gs.bound_mm == pytest.approx(lower_bound_mm(grp))
+    assert gs.bound == pytest.approx(lower_bound(grp))
     # the warm start's path, never worse than nearest neighbour
-    assert gs.objective_mm <= grp.path_cost_mm(greedy.nearest_neighbour(grp)) + 1e-9
+    assert gs.objective <= grp.path_cost(greedy.nearest_neighbour(grp)) + 1e-9
 
 
 def test_no_time_left_keeps_the_hint(monkeypatch):
@@ -72,7 +72,7 @@ def test_no_time_left_keeps_the_hint(monkeypatch):
     _sound(grp, gs)
     assert np.array_equal(gs.order, hint.order)
     assert gs.status in ("fallback", "optimal")       # "optimal" only if the cheap bound proves it
-    assert (gs.status == "optimal") == (gs.objective_mm - lower_bound_mm(grp) <= OPTIMAL_ABS_TOL_MM)
+    assert (gs.status == "optimal") == (gs.objective - lower_bound(grp) <= OPTIMAL_ABS_TOL)
 
 
 def test_building_stops_at_its_deadline():
@@ -98,7 +98,7 @@ def test_closed_tour_of_a_large_group_with_a_tiny_limit_is_not_built(monkeypatch
     # tsp then takes the greedy tour
     sol = tsp.solve(grp, time_limit_s=0.05, exact_max_curves=200)
     grp.check_order(sol.order)
-    assert sol.bound_mm <= sol.objective_mm + 1e-9
+    assert sol.bound <= sol.objective + 1e-9
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -109,7 +109,7 @@ def test_small_groups_are_still_proven_and_agree_with_dp(seed):
     gs = cpsat.solve(grp, time_limit_s=30.0)
     assert gs.status == "optimal"
     _sound(grp, gs)
-    assert gs.objective_mm == pytest.approx(dp.solve(grp).objective_mm, abs=2e-3)
+    assert gs.objective == pytest.approx(dp.solve(grp).objective, abs=2e-3)
 
 
 def _closed_brute_force(grp) -> float:
@@ -145,7 +145,7 @@ def test_a_budgeted_cpsat_solve_mixes_proofs_and_fallbacks_soundly():
     assert sol.travel_after_mm <= sol.travel_before_mm + 1e-9
     for gs in sol.groups:
         assert gs.status in ("optimal", "feasible", "fallback")
-        assert gs.bound_mm <= gs.objective_mm + 1e-9
+        assert gs.bound <= gs.objective + 1e-9
 
 
 def test_cpsat_with_a_budget_gives_a_verified_file():

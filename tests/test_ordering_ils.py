@@ -51,31 +51,31 @@ def test_ils_is_valid_never_worse_and_deterministic(seed):
     prob = random_problem(300 + seed, 60, closed_share=0.2, clustered=seed % 2 == 0)
     grp = prob.group(0, prob.origin_xy)
     start = greedy.nearest_neighbour(grp)
-    local = grp.path_cost_mm(greedy.improve(grp, start))
+    local = grp.path_cost(greedy.improve(grp, start))
     a = ils.improve_ils(grp, start, kicks=400, seed=seed)
     grp.check_order(a)
-    assert grp.path_cost_mm(a) <= local + 1e-9
+    assert grp.path_cost(a) <= local + 1e-9
     b = ils.improve_ils(grp, start, kicks=400, seed=seed)
     assert np.array_equal(a, b)
 
 
 def test_ils_stops_at_its_target():
-    """``target_mm`` (a lower bound from the caller): a search that starts at or below it does
+    """``target`` (a lower bound from the caller): a search that starts at or below it does
     not kick at all, so the path comes back as it went in; without a target, kicks that tie or
     improve are taken and the same path does change."""
     for seed in range(4):
         prob = random_problem(700 + seed, 40, closed_share=0.2)
         grp = prob.group(0, prob.origin_xy)
         local = greedy.improve(grp, greedy.nearest_neighbour(grp))
-        cost = grp.path_cost_mm(local)
-        kept = ils.improve_ils(grp, local, kicks=300, local_optimum=True, target_mm=cost + 1e-6)
+        cost = grp.path_cost(local)
+        kept = ils.improve_ils(grp, local, kicks=300, local_optimum=True, target=cost + 1e-6)
         assert np.array_equal(kept, local)
         moved = ils.improve_ils(grp, local, kicks=300, local_optimum=True)
         assert not np.array_equal(moved, local)
         # a target it reaches on the way: it stops there, at or below the target
-        half = cost - 0.5 * (cost - grp.path_cost_mm(moved))
-        stopped = ils.improve_ils(grp, local, kicks=300, local_optimum=True, target_mm=half)
-        assert grp.path_cost_mm(moved) <= grp.path_cost_mm(stopped) <= half
+        half = cost - 0.5 * (cost - grp.path_cost(moved))
+        stopped = ils.improve_ils(grp, local, kicks=300, local_optimum=True, target=half)
+        assert grp.path_cost(moved) <= grp.path_cost(stopped) <= half
 
 
 def test_ils_reaches_the_dp_optimum_on_small_groups():
@@ -84,11 +84,11 @@ def test_ils_reaches_the_dp_optimum_on_small_groups():
     for seed in range(12):
         prob = random_problem(500 + seed, 12, closed_share=0.3)
         grp = prob.group(0, prob.origin_xy)
-        opt = dp.solve(grp).objective_mm
-        found = grp.path_cost_mm(ils.improve_ils(grp, greedy.nearest_neighbour(grp)))
+        opt = dp.solve(grp).objective
+        found = grp.path_cost(ils.improve_ils(grp, greedy.nearest_neighbour(grp)))
         assert found >= opt - 1e-6                      # nothing below the optimum
         hits += found <= opt + 1e-6
-        greedy_hits += greedy.solve(grp).objective_mm <= opt + 1e-6
+        greedy_hits += greedy.solve(grp).objective <= opt + 1e-6
         total += 1
     assert hits >= total - 1
     assert hits > greedy_hits                           # it does something the greedy does not
@@ -98,7 +98,7 @@ def _slicer_chain_group(name: str, mode: str, layer: int, n_curves: int):
     """The group of ``n_curves`` curves in ``layer`` of a corpus file (found by what it is, not by
     its index, which shifts whenever the build splits a layer differently), starting where the
     slicer's own order left the previous group (as bench/ordering_peers.py builds its instances)."""
-    prob = build(gatesopt.parse(SHARED_INSTANCES / name), OrderingOptions(mode=mode))
+    prob = build(gatesopt.parse(SHARED_INSTANCES / name), OrderingOptions(mode=mode, objective="travel"))
     pos = np.asarray(prob.origin_xy, float)
     for g in range(prob.n_groups):
         curves = prob.group_curves(g)
@@ -119,30 +119,30 @@ def test_ils_escapes_the_greedy_trap_on_a_real_layer():
     claim a bound above."""
     grp = _slicer_chain_group("real_ideamaker514.gcode.gz", "safe", 7, 60)
     g = greedy.solve(grp)
-    assert g.objective_mm > 59.0
+    assert g.objective > 59.0
     a = auto.solve(grp, time_limit_s=1.0)
     grp.check_order(a.order)
-    assert a.objective_mm <= 42.790 + 1e-3
-    assert a.bound_mm <= a.objective_mm + 1e-6
+    assert a.objective <= 42.790 + 1e-3
+    assert a.bound <= a.objective + 1e-6
     m = milp.solve(grp, time_limit_s=1.0)               # its default incumbent is the ILS path
-    assert m.objective_mm <= 42.790 + 1e-3
+    assert m.objective <= 42.790 + 1e-3
 
 
 @pytest.mark.parametrize("m", [1, 2, 5, 11, 60])
-def test_link_lists_equal_a_full_row_sort(m):
-    """``_link_lists``: the link matrix, and per candidate the k nearest of other curves as a
-    stable sort of its row gives (ties in index order: integer points make many), with its own
-    curve's candidates (at infinity) last when too few others exist."""
-    from gatesopt.ordering.ils import _link_lists
+def test_near_lists_equal_a_full_row_sort(m):
+    """``_near_lists``: per candidate the k cheapest links of other curves as a stable sort of its
+    row (out) and column (in) gives (ties in index order: integer points make many), with its own
+    curve's candidates (at infinity) last when too few others exist; asymmetric costs too."""
+    from gatesopt.ordering.ils import _near_lists
     rng = np.random.default_rng(m)
     ent = rng.integers(0, 4, (m, 2)).astype(float)
     ext = rng.integers(0, 4, (m, 2)).astype(float)
     cc = np.sort(rng.integers(0, max(m // 2, 1), m))     # curves of one or more candidates
-    D_ref = np.hypot(ext[:, None, 0] - ent[None, :, 0], ext[:, None, 1] - ent[None, :, 1])
-    far = np.where(cc[:, None] == cc[None, :], np.inf, D_ref)
+    D = np.hypot(ext[:, None, 0] - ent[None, :, 0], ext[:, None, 1] - ent[None, :, 1])
+    D = D + rng.integers(0, 2, (m, m))                    # asymmetric, with ties
+    far = np.where(cc[:, None] == cc[None, :], np.inf, D)
     for k in range(0, min(10, m - 1) + 1):
-        D, near_out, near_in = _link_lists(ent, ext, cc, k)
-        np.testing.assert_allclose(D, D_ref, rtol=0, atol=1e-12)
+        near_out, near_in = _near_lists(np.ascontiguousarray(far), cc.astype(np.int64), k)
         np.testing.assert_array_equal(near_out, np.argsort(far, axis=1, kind="stable")[:, :k])
         np.testing.assert_array_equal(near_in, np.argsort(far.T, axis=1, kind="stable")[:, :k])
 
@@ -159,22 +159,22 @@ def test_auto_spends_the_limit_the_exact_step_left_on_the_path(monkeypatch):
 
     def gave_up(group, *, time_limit_s, hint=None, **kw):
         calls.append(time_limit_s)
-        return GroupSolution.make(poor, group.path_cost_mm(poor), 0.0, "feasible", 0.0, "milp")
+        return GroupSolution.make(poor, group.path_cost(poor), 0.0, "feasible", 0.0, "milp")
 
     monkeypatch.setattr(milp, "solve", gave_up)
     a = auto.solve(grp, time_limit_s=2.0)
     assert calls, "the group never reached the exact step"
     assert a.formulation == "auto:milp+ils" and a.status == "feasible"
     # auto never keeps an exact step's path worse than its own warm start: ILS went on from that
-    assert a.objective_mm < greedy.solve(grp).objective_mm - 1e-6
-    assert a.objective_mm == pytest.approx(grp.path_cost_mm(a.order))
-    assert a.bound_mm <= a.objective_mm
+    assert a.objective < greedy.solve(grp).objective - 1e-6
+    assert a.objective == pytest.approx(grp.path_cost(a.order))
+    assert a.bound <= a.objective
 
     def used_it_all(group, *, time_limit_s, hint=None, **kw):
         import time
         time.sleep(time_limit_s)
-        return GroupSolution.make(poor, group.path_cost_mm(poor), 0.0, "feasible", 0.0, "milp")
+        return GroupSolution.make(poor, group.path_cost(poor), 0.0, "feasible", 0.0, "milp")
 
     monkeypatch.setattr(milp, "solve", used_it_all)
     b = auto.solve(grp, time_limit_s=0.3)
-    assert b.formulation == "auto:milp" and b.objective_mm > a.objective_mm
+    assert b.formulation == "auto:milp" and b.objective > a.objective

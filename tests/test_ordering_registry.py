@@ -11,7 +11,7 @@ from gatesopt.errors import GatesoptError
 from gatesopt.ordering import (FORMULATIONS, GroupSolution, OrderingOptions, OrderingOptionsError,
                                from_polylines, solve)
 from gatesopt.ordering.formulations import lookup
-from gatesopt.ordering.problem import OPTIMAL_ABS_TOL_MM
+from gatesopt.ordering.problem import OPTIMAL_ABS_TOL
 
 
 def test_importing_the_package_loads_no_solver_backend():
@@ -45,7 +45,7 @@ def test_bad_formulations_and_options_are_one_line_errors():
     prob = from_polylines([[np.array([[0.0, 0.0], [1.0, 0.0]])]])
     for call in (lambda: lookup("nope"), lambda: solve(prob, "nope"),
                  lambda: solve(prob, "greedy", workers=3),
-                 lambda: OrderingOptions(mode="fast"), lambda: OrderingOptions(cost="money"),
+                 lambda: OrderingOptions(mode="fast"), lambda: OrderingOptions(objective="money"),
                  lambda: OrderingOptions(seam_candidates=0)):
         with pytest.raises(OrderingOptionsError) as err:
             call()
@@ -61,12 +61,12 @@ def test_group_solutions_speak_the_solver_vocabulary():
     assert a.status is solvers.Status.FEASIBLE and a.status == "feasible"
     assert a.gap == pytest.approx(0.1) == solvers.relative_gap(10.0, 9.0)
     # within the absolute tolerance: no gap (and an optimal answer's bound is its objective)
-    b = GroupSolution.make([0], 10.0, 10.0 - 0.5 * OPTIMAL_ABS_TOL_MM, "feasible", 0.0, "x")
+    b = GroupSolution.make([0], 10.0, 10.0 - 0.5 * OPTIMAL_ABS_TOL, "feasible", 0.0, "x")
     assert b.gap == 0.0
     c = GroupSolution.make([0], 10.0, 3.0, "optimal", 0.0, "x")
-    assert c.bound_mm == 10.0 and c.gap == 0.0
+    assert c.bound == 10.0 and c.gap == 0.0
     # no bound is the trivial bound 0 (travel is never negative): a gap of 1, never NaN
     d = GroupSolution.make([0], 10.0, -np.inf, "fallback", 0.0, "x")
-    assert d.bound_mm == 0.0 and d.gap == 1.0
+    assert d.bound == 0.0 and d.gap == 1.0
     with pytest.raises(ValueError, match="unknown status"):
         GroupSolution.make([0], 1.0, 1.0, "fine", 0.0, "x")

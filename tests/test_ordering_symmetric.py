@@ -10,7 +10,7 @@ import pytest
 
 from gatesopt.ordering import auto, cpsat, dp, greedy, milp, separation, symmetric, symmetric_graph
 from gatesopt.ordering.polylines import from_polylines
-from gatesopt.ordering.problem import OPTIMAL_ABS_TOL_MM
+from gatesopt.ordering.problem import OPTIMAL_ABS_TOL
 
 from conftest import needs_shared
 from test_ordering import random_problem
@@ -26,18 +26,18 @@ def _groups():
         prob = random_problem(900 + seed, n, closed_share=0.25 if seed % 2 else 0.0,
                               clustered=seed % 3 == 0)
         end = (25.0, 25.0) if seed % 4 == 1 else None
-        out.append(prob.group(0, prob.origin_xy, end_xy=end))
+        out.append(prob.group(0, prob.origin_xy, end=end))
     return out
 
 
 @pytest.mark.parametrize("grp", _groups(), ids=lambda g: f"n{g.n_curves}")
 def test_symmetric_model_matches_the_dp_and_its_bound_is_valid(grp):
     assert symmetric_graph.applies(grp)
-    opt = dp.solve(grp).objective_mm
+    opt = dp.solve(grp).objective
     start = greedy.nearest_neighbour(grp)
     order, obj, bound, proven = symmetric.solve(grp, start, time.perf_counter() + 30)
     grp.check_order(order)
-    assert obj == pytest.approx(grp.path_cost_mm(order), abs=1e-9)
+    assert obj == pytest.approx(grp.path_cost(order), abs=1e-9)
     assert proven
     assert obj == pytest.approx(opt, abs=1e-6)
     assert bound <= opt + 1e-6
@@ -53,7 +53,7 @@ def test_pricing_and_reduced_cost_fixing_bring_back_missing_edges(seed, monkeypa
     monkeypatch.setattr(symmetric, "K_NEIGHBOURS", 1)
     prob = random_problem(1300 + seed, 11, closed_share=0.2, clustered=seed % 2 == 0)
     grp = prob.group(0, prob.origin_xy)
-    opt = dp.solve(grp).objective_mm
+    opt = dp.solve(grp).objective
     model = symmetric.SymmetricModel(grp, greedy.nearest_neighbour(grp))
     n_first = len(model.eu)
     order, obj, bound, proven = symmetric.solve(grp, greedy.nearest_neighbour(grp),
@@ -145,7 +145,7 @@ def test_exact_blossoms_cut_off_what_the_heuristic_left_and_keep_every_path():
             assert sum(val[j] * tour[idx[j]] for j in k) >= lo[r] - 1e-9   # kept by the path
         again = symmetric.SymmetricModel(grp, greedy.nearest_neighbour(grp))
         bound = again.root(time.perf_counter() + 30, exact_blossoms_s=30.0)
-        assert bound <= opt.objective_mm + 1e-6
+        assert bound <= opt.objective + 1e-6
         raised += bound > base + 1e-3
     assert found >= 5 and raised >= 5, (found, raised)
 
@@ -193,14 +193,14 @@ def test_real_groups_are_proven_and_agree_with_cpsat(name, mode, layer, n_curves
     a = auto.solve(grp, time_limit_s=20.0)
     grp.check_order(a.order)
     assert a.status == "optimal" and a.formulation == "auto:milp"
-    assert a.objective_mm - a.bound_mm <= OPTIMAL_ABS_TOL_MM
+    assert a.objective - a.bound <= OPTIMAL_ABS_TOL
     m = milp.solve(grp, time_limit_s=20.0)
-    assert m.objective_mm == pytest.approx(a.objective_mm, abs=2e-3)
-    assert greedy.solve(grp).objective_mm >= a.objective_mm - 1e-6
+    assert m.objective == pytest.approx(a.objective, abs=2e-3)
+    assert greedy.solve(grp).objective >= a.objective - 1e-6
     c = cpsat.solve(grp, time_limit_s=5.0, hint=a)
     if c.status == "optimal":
-        assert c.objective_mm == pytest.approx(a.objective_mm, abs=2e-3)
-    assert c.bound_mm <= a.objective_mm + 2e-3
+        assert c.objective == pytest.approx(a.objective, abs=2e-3)
+    assert c.bound <= a.objective + 2e-3
 
 
 def test_branch_and_cut_closes_root_gaps_to_the_dp_optimum():
@@ -211,21 +211,21 @@ def test_branch_and_cut_closes_root_gaps_to_the_dp_optimum():
     for seed in range(40):
         prob = random_problem(3000 + seed, 13 + seed % 3, closed_share=0.2 if seed % 2 else 0.0,
                               clustered=seed % 3 != 0)
-        grp = prob.group(0, prob.origin_xy, end_xy=(25.0, 0.0) if seed % 4 == 1 else None)
+        grp = prob.group(0, prob.origin_xy, end=(25.0, 0.0) if seed % 4 == 1 else None)
         if not (symmetric_graph.applies(grp) and dp.fits(grp)):
             continue
-        opt = dp.solve(grp).objective_mm
+        opt = dp.solve(grp).objective
         start = greedy.nearest_neighbour(grp)
         model = symmetric.SymmetricModel(grp, start)
         bound = model.root(time.perf_counter() + 30)
         assert bound <= opt + 1e-6 and model.complete
-        start_obj = grp.path_cost_mm(start)
-        if start_obj - bound <= OPTIMAL_ABS_TOL_MM:
+        start_obj = grp.path_cost(start)
+        if start_obj - bound <= OPTIMAL_ABS_TOL:
             continue
         branched += 1
         order, obj, b, proven = model.branch(start, start_obj, bound, time.perf_counter() + 30)
         grp.check_order(order)
-        assert proven and obj == pytest.approx(opt, abs=OPTIMAL_ABS_TOL_MM)
+        assert proven and obj == pytest.approx(opt, abs=OPTIMAL_ABS_TOL)
         assert b <= opt + 1e-6
     assert branched >= 5, branched
 
@@ -243,7 +243,7 @@ def test_a_node_lp_stopped_by_highs_is_never_taken_for_pruned(monkeypatch):
         start = greedy.nearest_neighbour(grp)
         model = symmetric.SymmetricModel(grp, start)
         bound = model.root(time.perf_counter() + 30)
-        start_obj = grp.path_cost_mm(start)
+        start_obj = grp.path_cost(start)
         if start_obj - bound <= 0.05 * start_obj:
             continue
 
@@ -266,7 +266,7 @@ def test_a_node_lp_stopped_by_highs_is_never_taken_for_pruned(monkeypatch):
         monkeypatch.setattr(symmetric, "run_highs", run)
         order, obj, b, proven = model.branch(start, start_obj, bound, time.perf_counter() + 30)
         monkeypatch.undo()
-        assert not proven and b <= obj - OPTIMAL_ABS_TOL_MM
+        assert not proven and b <= obj - OPTIMAL_ABS_TOL
         checked += 1
         if checked >= 3:
             break

@@ -5,7 +5,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gatesopt import GcodeError, parse
+from gatesopt import GcodeError, parse, parse_text
 from gatesopt.program import E
 
 number = st.one_of(
@@ -31,7 +31,7 @@ program_text = st.tuples(st.lists(line, min_size=1, max_size=30), st.sampled_fro
 @given(program_text)
 def test_random_gcode_never_crashes_and_round_trips(text):
     try:
-        prog = parse(text)
+        prog = parse_text(text)
     except GcodeError as err:
         msg = str(err)
         assert msg.startswith("<text>") and "\n" not in msg

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import math
 
-from ..parse import parse
-from .files import check_distinct, check_new_file, write_json
+from .files import check_distinct, check_input, check_new_file, check_one_stdin, read_program, write_json
 from .options import (add_gating_options, firmware_choice, gating_formulations, gating_options,
                       ordering_formulations, positive_s)
 from .progress import default_workers
@@ -19,7 +18,7 @@ DESCRIPTION = ("Solve each file with every gating formulation (greedy always inc
 
 
 def add_arguments(c) -> None:
-    c.add_argument("files", nargs="+", help="G-code files")
+    c.add_argument("files", nargs="+", help="G-code files (one of them may be - for standard input)")
     c.add_argument("--formulations", default=None, metavar="LIST",
                    help="comma separated (default: all of the compared kind); greedy is always a row")
     c.add_argument("--ordering", action="store_true",
@@ -29,6 +28,8 @@ def add_arguments(c) -> None:
                    help="with --ordering: as `order --order-mode` (default safe)")
     c.add_argument("--move-seams", action="store_true",
                    help="with --ordering: closed loops may start at another vertex")
+    c.add_argument("--objective", choices=("time", "travel"), default="time",
+                   help="what the curve ordering minimises: time (default), the travels' print time as emitted, retractions, z-hops and the slicer's own copied travels included; travel, their length (Fleming et al.)")
     c.add_argument("--order-budget", type=float, default=10.0, metavar="S",
                    help="with --ordering: each formulation's run of a file, parse to verified output, "
                         "in about S seconds (default 10, as `order --budget`)")
@@ -42,6 +43,9 @@ def run(args) -> int:
     from ..compare import gating_rows, ordering_rows
     known = ordering_formulations() if args.ordering else gating_formulations()
     forms = [f.strip() for f in (args.formulations or ",".join(known)).split(",") if f.strip()]
+    check_one_stdin(args.files)
+    for path in args.files:
+        check_input(path)
     check_distinct({"--plot": args.plot, "--json": args.json})
     if args.ordering:
         positive_s(args.order_budget, "--order-budget")
@@ -52,15 +56,16 @@ def run(args) -> int:
     rows = []
     if args.ordering:
         from ..ordering import OrderingOptions
-        order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+        order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams,
+                                    objective=args.objective)
         for path in args.files:
-            rows += ordering_rows(parse(path), order_options, forms, known, args.order_budget,
+            rows += ordering_rows(read_program(path), order_options, forms, known, args.order_budget,
                                   default_workers())
         print(format_compare_order(rows))
     else:
         fields = gating_options(args)
         for path in args.files:
-            program = parse(path)
+            program = read_program(path)
             choice = firmware_choice(args, program, **fields)   # per file: each names its printer
             print(f"{program.source}: firmware {choice.line}")
             if choice.options is None:
@@ -77,7 +82,8 @@ def run(args) -> int:
 
 def format_compare(rows: list[dict]) -> str:
     head = (f"{'file':28s} {'formulation':11s} {'saving %':>9s} {'instr':>7s} {'size +%':>8s} "
-            f"{'time +%':>8s} {'rot deg':>8s} {'status':>11s} {'gap':>9s} {'solve s':>8s} {'verified':>8s}")
+            f"{'print +%':>8s} {'rot deg':>8s} {'status':>11s} {'gap':>9s} {'solve s':>8s} {'run s':>7s} "
+            f"{'verified':>8s}")
     out = [head, "-" * len(head)]
     for r in rows:
         if "saving_pct" not in r:
@@ -85,15 +91,23 @@ def format_compare(rows: list[dict]) -> str:
                        f"{'':>8s} {r['status']:>11s}   {r.get('error', '')[:60]}")
             continue
         gap = "n/a" if r["gap"] is None else f"{100 * r['gap']:.3f}%"
+        status = str(r["status"]) + ("*" if r.get("stopped") else "")
         out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {r['saving_pct']:9.2f} "
-                   f"{r['instruction_lines']:7d} {r['size_change_pct']:8.2f} {r['added_time_pct']:8.3f} "
-                   f"{r['rotation_deg']:8.3f} {r['status']:>11s} {gap:>9s} {r['solve_s']:8.3f} "
+                   f"{r['instruction_lines']:7d} {r['size_change_pct']:8.2f} {r['print_time_change_pct']:8.3f} "
+                   f"{r['rotation_deg']:8.3f} {status:>11s} {gap:>9s} {r['solve_s']:8.3f} {r['wall_s']:7.2f} "
                    f"{'yes' if r['verified'] else 'NO':>8s}")
+    if any("saving_pct" in r for r in rows):
+        out.append("print +%: print time, planner model; solve s: every solve of the run (the rotation "
+                   "search and the solve again after rotating); run s: the whole run")
+    if any(r.get("stopped") for r in rows):
+        out.append("*: stopped before its gap (" + ", ".join(sorted({str(r['stopped']) for r in rows
+                                                                     if r.get("stopped")})) + ")")
     return "\n".join(out)
 
 
 def format_compare_order(rows: list[dict]) -> str:
     head = (f"{'file':28s} {'formulation':11s} {'travel mm':>11s} {'travel %':>9s} {'print s':>10s} "
+            f"{'time %':>7s} "
             f"{'optimal':>8s} {'feasible':>8s} {'fallback':>8s} {'worst gap':>9s} {'run s':>7s} {'verified':>8s}")
     out = [head, "-" * len(head)]
     for r in rows:
@@ -102,12 +116,14 @@ def format_compare_order(rows: list[dict]) -> str:
             continue
         gap = "n/a" if r["worst_gap"] is None else f"{100 * r['worst_gap']:.2f}%"
         out.append(f"{r['file'][:28]:28s} {r['formulation']:11s} {r['travel_after_mm']:11,.1f} "
-                   f"{r['travel_change_pct']:9.2f} {r['print_time_after_s']:10,.1f} {r['groups_optimal']:8d} "
+                   f"{r['travel_change_pct']:9.2f} {r['print_time_after_s']:10,.1f} "
+                   f"{r['print_time_change_pct']:7.2f} {r['groups_optimal']:8d} "
                    f"{r['groups_feasible']:8d} {r['groups_fallback']:8d} {gap:>9s} {r['wall_s']:7.2f} "
                    f"{'yes' if r['verified'] else 'NO':>8s}")
     if rows and "travel_before_mm" in rows[0]:
-        out.append("travel % is against the slicer's order; groups: proven optimal / feasible at the "
-                   "limit / fallback (heuristic); worst gap to the group's lower bound")
+        out.append("travel % and time % are against the slicer's order (travel measured on the files; "
+                   "print s, time %: the planner model); groups: proven optimal / feasible at the limit / fallback (heuristic); "
+                   "worst gap to the group's lower bound")
     return "\n".join(out)
 
 

@@ -60,6 +60,10 @@ class _NotGiven:
 BUDGET_NOT_GIVEN = _NotGiven()
 
 
+DEFAULT_START_AHEAD_MS = 1.8     # 3DGates Sec. 4.2
+DEFAULT_END_LATE_MS = 1.0
+
+
 def add_firmware_options(p) -> None:
     """``--firmware`` (auto: read from the file) and ``--force-firmware`` (``solve``, ``compare``,
     ``batch``)."""
@@ -70,6 +74,24 @@ def add_firmware_options(p) -> None:
     p.add_argument("--force-firmware", choices=firmware_names(), default=None, metavar="NAME",
                    help="write NAME's lines even where the file is for another firmware (refused "
                         "without it: marlin's M18 on a Klipper file stops the print)")
+    add_printer_config_option(p)
+
+
+def add_printer_config_option(p) -> None:
+    """``--printer-config`` (``solve``, ``compare``, ``batch``, ``verify``)."""
+    p.add_argument("--printer-config", default=None, metavar="printer.cfg",
+                   help="the printer's Klipper config, read by --firmware klipper-gating: the input "
+                        "shaper (its step window widens each switch's margins) and the [gatesopt_gating] "
+                        "section (start_ahead, end_late, min_off_time, steppers)")
+
+
+def printer_config(args):
+    """The ``--printer-config`` file read (``gatesopt.printer_config``), or None."""
+    path = getattr(args, "printer_config", None)
+    if not path:
+        return None
+    from ..printer_config import read_printer_config
+    return read_printer_config(path)
 
 
 def add_gating_options(p) -> None:
@@ -81,9 +103,9 @@ def add_gating_options(p) -> None:
     p.add_argument("--rotate", default="auto", metavar="auto|none|DEG",
                    help="rotate the model on the bed: auto (best angle), none, or degrees ccw "
                         "(a print of objects one at a time is never rotated)")
-    p.add_argument("--start-ahead-ms", type=float, default=1.8,
+    p.add_argument("--start-ahead-ms", type=float, default=DEFAULT_START_AHEAD_MS,
                    help="switch a motor on at least this long before it steps (default 1.8, paper)")
-    p.add_argument("--end-late-ms", type=float, default=1.0,
+    p.add_argument("--end-late-ms", type=float, default=DEFAULT_END_LATE_MS,
                    help="keep a motor on at least this long after it steps (default 1.0, paper)")
     p.add_argument("--max-added-time-pct", type=budget_pct, default=BUDGET_NOT_GIVEN, metavar="P|none",
                    help="budget: firmware stalls may add at most P %% to the print time (default: 1 for "
@@ -112,6 +134,16 @@ def firmware_choice(args, program, **gating):
     budget = getattr(args, "max_added_time_pct", BUDGET_NOT_GIVEN)
     motors = None if args.motors is None else motor_list(args.motors)
     forced = getattr(args, "force_firmware", None)
+    printer = printer_config(args)
+    if printer is not None:
+        gating.setdefault("printer", printer)
+        if printer.gating is not None:
+            # the module's [gatesopt_gating] options win over the command line's defaults (a value
+            # given that disagrees with them is refused by ``GatingOptions.for_firmware``)
+            for key, default_s in (("start_ahead_s", DEFAULT_START_AHEAD_MS / 1e3),
+                                   ("end_late_s", DEFAULT_END_LATE_MS / 1e3)):
+                if gating.get(key) == default_s:
+                    gating[key] = None
     return choose(program, forced or args.firmware, force=forced is not None,
                   max_added_time_pct=DEFAULT if budget is BUDGET_NOT_GIVEN else budget,
                   motors=motors, **gating)

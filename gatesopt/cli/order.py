@@ -11,11 +11,11 @@ import sys
 import time
 
 from ..errors import GatesoptError
-from ..parse import parse
-from .files import check_distinct, check_new_file, check_output, write_atomic, write_json
+from .files import (STDIO, check_distinct, check_input, check_new_file, check_output, read_program,
+                    write_atomic, write_json, write_stdout)
 from .options import ordering_formulations, positive_s
-from .progress import default_workers, group_progress
-from .summary import ordering_result_lines
+from .progress import default_workers, group_progress, wants_progress
+from .summary import figure_lines, ordering_result_lines
 
 NAME = "order"
 HELP = "re-order extrusion curves to cut travel (Fleming et al.)"
@@ -24,8 +24,9 @@ DESCRIPTION = ("Re-order each layer's extrusion curves, each in either direction
 
 
 def add_arguments(p) -> None:
-    p.add_argument("file", help="input G-code (.gcode or .gcode.gz)")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.gcode", help="output file")
+    p.add_argument("file", help="input G-code (.gcode or .gcode.gz), or - for standard input")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.gcode",
+                   help="output file (gzipped if its name ends in .gz), or - for standard output")
     p.add_argument("--formulation", choices=ordering_formulations(), default="auto",
                    help="greedy (nearest neighbour + 2-opt/Or-opt), tsp (Fleming's closed tour cut "
                         "open), cpsat, milp (exact), auto (exact where small enough; default)")
@@ -34,6 +35,8 @@ def add_arguments(p) -> None:
                         "free: re-order every curve of a layer, as the paper does")
     p.add_argument("--move-seams", action="store_true",
                    help="closed loops may start at another vertex (default: keep the seam)")
+    p.add_argument("--objective", choices=("time", "travel"), default="time",
+                   help="what the curve ordering minimises: time (default), the travels' print time as emitted, retractions, z-hops and the slicer's own copied travels included; travel, their length (Fleming et al.)")
     p.add_argument("--time-limit", type=float, default=2.0, metavar="S",
                    help="time limit per group for the exact formulations (default 2 s)")
     p.add_argument("--budget", type=float, default=None, metavar="S",
@@ -56,13 +59,15 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
-    started_s = time.perf_counter()     # a --budget counts from here: imports, parse, all of it
+    # a --budget counts from the command's start (``cli.clock``): imports, parse, all of it
+    started_s = getattr(args, "started_s", None) or time.perf_counter()
     from ..ordering import OrderingOptions
     from ..rewrite.order import order_program
     positive_s(args.time_limit, "--time-limit")
     if args.budget is not None:
         positive_s(args.budget, "--budget")
-    check_output(args.file, args.output, args.force)
+    check_input(args.file)
+    _check_output(args)
     check_distinct({"-o": args.output, "--json": args.json, "--plot": args.plot})
     if args.json:
         check_new_file(args.json, [args.file], args.force)
@@ -70,35 +75,47 @@ def run(args) -> int:
         raise GatesoptError("--plot-layer needs --plot OUT.png")
     if args.plot:
         check_new_file(args.plot, [args.file], args.force, png=True)
-    program = parse(args.file)
+    program = read_program(args.file)
     if args.plot_layer is not None and not 0 <= args.plot_layer < program.n_layers:
         raise GatesoptError(f"{args.file}: --plot-layer {args.plot_layer}: layers are 0 to "
                             f"{program.n_layers - 1}")
-    options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+    options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams,
+                                    objective=args.objective)
     deadline_s = None if args.budget is None else started_s + args.budget
-    with group_progress(sys.stderr.isatty(), deadline_s=deadline_s) as progress:
+    with group_progress(wants_progress(), deadline_s=deadline_s, after="verifying") as progress:
         result = order_program(program, options, formulation=args.formulation,
                                time_limit_s=args.time_limit, budget_s=args.budget,
                                workers=args.workers, time_guard=not args.allow_slower_layers,
                                progress=progress, started_s=started_s)
     s = result.summary
+    report_to = sys.stderr if args.output == STDIO else sys.stdout     # stdout carries the G-code
     if not result.ok:
-        print(format_report(s))
+        print(format_report(s), file=report_to)
         print(f"gatesopt: error: the output failed verification; nothing written to {args.output}",
               file=sys.stderr)
         for f in result.findings[:10]:
             print(f"  {f}", file=sys.stderr)
         return 1
-    check_output(args.file, args.output, args.force)
-    write_atomic(args.output, result.text)
+    if args.output == STDIO:
+        write_stdout(result.text)
+    else:
+        _check_output(args)             # again: the solve may have taken a while
+        write_atomic(args.output, result.text)
     s["output"] = args.output
-    print(format_report(s))
+    print(format_report(s), file=report_to)
     if args.json:
         write_json(args.json, s, default=float)
     if args.plot:
         from ..ordering.plot import plot_ordering
-        print(f"plot          {plot_ordering(program, result.output, args.plot, layer=args.plot_layer)}")
+        print(f"plot          {plot_ordering(program, result.output, args.plot, layer=args.plot_layer)}",
+              file=report_to)
     return 0
+
+
+def _check_output(args) -> None:
+    """``-o``: standard output, or a file that is not the input and not replaced without --force."""
+    if args.output != STDIO:
+        check_output(args.file, args.output, args.force)
 
 
 def format_report(s: dict) -> str:
@@ -109,6 +126,7 @@ def format_report(s: dict) -> str:
         + f"   time limit {s['time_limit_s']:g} s per group"
         + (f", budget {s['budget_s']:g} s for the whole run" if s.get("budget_s") else "")
         + (f", {s['workers']} processes" if s.get("workers", 1) > 1 else ""),
+        *figure_lines(s),
         *ordering_result_lines(s),
         f"solve         {s['solve_s']:.2f} s"
         + (f" of the {s['solve_budget_s']:.2f} s the budget left it" if s.get("solve_budget_s") else "")

@@ -1,14 +1,17 @@
 """``gatesopt profile FILE``: energy and time of a print under the instruction-level model."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import sys
 
+import numpy as np
+
 from ..energy import SECTORS, load_profile, profile
 from ..errors import GatesoptError
 from ..planner import TIME_MODELS, comparable_total_s, durations, slicer_estimate_s
-from .files import check_new_file, read_program
+from .files import check_input, check_new_file, print_warnings, read_program
 
 NAME = "profile"
 HELP = "energy and time of a G-code file (3DGates energy model)"
@@ -21,8 +24,14 @@ def add_arguments(p) -> None:
     p.add_argument("--profile", default="paper", metavar="NAME|TOML",
                    help="energy profile: a shipped name (paper, component_example) or a TOML file "
                         "(default: paper, the 3DGates tables)")
-    p.add_argument("--time-model", choices=TIME_MODELS, default="paper",
-                   help="paper: T = L/F (3DGates Eq. 2); planner: acceleration and junction limits")
+    p.add_argument("--time-model", choices=TIME_MODELS, default="planner",
+                   help="the time reported: planner (default; acceleration, junction speeds and the "
+                        "machine limits the file sets: within a few %% of the slicers' estimates) "
+                        "or paper (T = L/F, 3DGates Eq. 2: 20-27 %% under PrusaSlicer's)")
+    p.add_argument("--energy-time-model", choices=TIME_MODELS, default="paper",
+                   help="the durations the energy model integrates over: paper (default; T = L/F, "
+                        "what the 3DGates power tables were fitted on and what `solve` and `verify` "
+                        "report) or planner")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--per-layer", action="store_true", help="add a table by layer")
     p.add_argument("--plot", metavar="OUT.png",
@@ -37,8 +46,11 @@ STREAM_ABOVE_BYTES = 256 << 20     # whole-file arrays take ~8x the file: stream
 
 
 def _wants_stream(args) -> bool:
-    if args.file == "-" or not os.path.isfile(args.file):
-        return False            # the parser says what is wrong with a missing file
+    check_input(args.file)
+    if args.file == "-":
+        if args.stream:
+            raise GatesoptError("--stream reads a file chunk by chunk: give a file, not -")
+        return False
     return args.stream or os.path.getsize(args.file) > STREAM_ABOVE_BYTES
 
 
@@ -46,20 +58,41 @@ def run_stream(args) -> int:
     from ..stream import profile_stream
     if args.plot:
         raise GatesoptError("--plot needs the whole file in memory: drop --stream (or --plot)")
-    report = profile_stream(args.file, args.profile, time_model=args.time_model)
-    for w in report.warnings:
-        print(f"gatesopt: warning: {w}", file=sys.stderr)
+    report = profile_stream(args.file, args.profile, time_model=args.time_model,
+                            energy_time_model=args.energy_time_model)
+    print_warnings(report.warnings)
     if args.json:
-        d = report.to_dict(per_layer=args.per_layer)
-        d["time_model"] = args.time_model
-        json.dump(d, sys.stdout, indent=2)
+        json.dump(_json(report, args), sys.stdout, indent=2)
         print()
         return 0
-    print(format_report(report, args.time_model))
+    print(format_report(report, args.time_model, args.energy_time_model))
     if args.per_layer:
         print()
         print(format_layers(report))
     return 0
+
+
+def time_and_energy(program, prof, time_model: str, energy_time_model: str):
+    """The report of ``program``: energy over ``energy_time_model``'s durations, times (total, by
+    kind, per layer, the plot's time axis) under ``time_model``'s; and those durations."""
+    shown = durations(program, model=time_model)
+    under = shown if energy_time_model == time_model else durations(program, model=energy_time_model)
+    report = profile(program, prof, duration_s=under)
+    if energy_time_model != time_model:
+        rt = profile(program, prof, duration_s=shown)
+        report = dataclasses.replace(report, time_s=rt.time_s, by_kind_s=rt.by_kind_s,
+                                     layer_time_s=rt.layer_time_s, step_end_s=rt.step_end_s,
+                                     energy_time_s=float(np.sum(under)))
+    return report, shown
+
+
+def _json(report, args, program=None) -> dict:
+    d = report.to_dict(per_layer=args.per_layer)
+    d["time_model"] = args.time_model
+    d["energy_time_model"] = args.energy_time_model
+    if program is not None:
+        d["slicer_estimate_s"] = slicer_estimate_s(program)
+    return d
 
 
 def run(args) -> int:
@@ -67,24 +100,22 @@ def run(args) -> int:
         check_new_file(args.plot, [] if args.file == "-" else [args.file], args.force, png=True)
     if _wants_stream(args):
         return run_stream(args)
-    program = read_program(args.file)
+    program = read_program(args.file)       # its warnings on stderr
     prof = load_profile(args.profile)
-    duration_s = durations(program, model=args.time_model)
-    report = profile(program, prof, duration_s=duration_s)
-    for w in report.warnings:
-        print(f"gatesopt: warning: {w}", file=sys.stderr)
+    report, duration_s = time_and_energy(program, prof, args.time_model, args.energy_time_model)
     if args.plot:
         from ..plot import plot_profile
         plot_profile(report, args.plot)
     if args.json:
-        d = report.to_dict(per_layer=args.per_layer)
-        d["time_model"] = args.time_model
-        d["slicer_estimate_s"] = slicer_estimate_s(program)
+        d = _json(report, args, program)
+        if args.time_model != "paper":
+            d["paper_time_s"] = float(program.duration_s.sum())
         json.dump(d, sys.stdout, indent=2)
         print()
         return 0
-    print(format_report(report, args.time_model))
-    print(_slicer_line(program, duration_s))
+    print(format_report(report, args.time_model, args.energy_time_model,
+                        paper_time_s=None if args.time_model == "paper" else float(program.duration_s.sum())))
+    print(_slicer_line(program, duration_s, args.time_model))
     if args.per_layer:
         print()
         print(format_layers(report))
@@ -93,14 +124,14 @@ def run(args) -> int:
     return 0
 
 
-def _slicer_line(program, duration_s) -> str:
+def _slicer_line(program, duration_s, time_model: str = "planner") -> str:
     """The slicer's own estimate beside ours (heat-up waits and homing left out: no slicer counts them)."""
     est = slicer_estimate_s(program)
     if est is None:
         return "slicer      no estimate in the file"
     ours = comparable_total_s(program, duration_s)
-    return (f"slicer      {est:,.0f} s ({_hms(est)}) estimated by the slicer; ours without heat-up "
-            f"and homing {ours:,.0f} s, {100 * (ours / est - 1):+.1f} %")
+    return (f"slicer      {est:,.0f} s ({_hms(est)}) estimated by the slicer; ours ({time_model} model) "
+            f"without heat-up and homing {ours:,.0f} s, {100 * (ours / est - 1):+.1f} %")
 
 
 def _hms(s: float) -> str:
@@ -108,15 +139,28 @@ def _hms(s: float) -> str:
     return f"{s // 3600}h{s // 60 % 60:02d}m{s % 60:02d}s"
 
 
-def format_report(r, time_model: str = "paper") -> str:
+TIME_WORDS = {"planner": "planner model: acceleration, junction speeds",
+              "paper": "paper model T = L/F, 3DGates Eq. 2"}
+
+
+def format_report(r, time_model: str = "planner", energy_time_model: str = "paper",
+                  paper_time_s: float | None = None) -> str:
     total = r.energy_j or 1.0
+    other = ("--time-model paper" if time_model == "planner" else "--time-model planner")
     lines = [
         f"file        {r.source}",
         f"lines       {r.n_lines:,}   moves {r.n_moves:,}   timed steps {r.n_steps:,}",
         f"layers      {r.n_layers:,}   (found by {r.layer_method})",
-        f"time        {r.time_s:,.1f} s ({_hms(r.time_s)})   model: {time_model}",
+        f"time        {r.time_s:,.1f} s ({_hms(r.time_s)})   {TIME_WORDS[time_model]}"
+        + (f"; paper T = L/F {paper_time_s:,.1f} s" if paper_time_s is not None else "")
+        + f" ({other})",
         f"energy      {r.energy_j:,.0f} J = {r.energy_j / 3600:,.2f} Wh   "
         f"mean power {r.mean_power_w:.2f} W   profile: {r.profile}",
+        ("basis       the 3DGates power tables over the paper's T = L/F durations (Eq. 2): the energy "
+         "`solve` and `verify` report (--energy-time-model planner: over the planner's)"
+         if energy_time_model == "paper" else
+         "basis       the 3DGates power tables over the planner model's durations (--energy-time-model "
+         "paper: over T = L/F, the energy `solve` and `verify` report)"),
         "",
         "energy sectors (3DGates Fig. 5)",
     ]
@@ -125,7 +169,7 @@ def format_report(r, time_model: str = "paper") -> str:
         name = f"{s} motor" if len(s) == 1 else s
         lines.append(f"  {name:10s} {v / 3600:10.2f} Wh  {100 * v / total:5.1f} %")
     lines.append("")
-    lines.append("by step kind        time s     energy Wh")
+    lines.append(f"by step kind        time s     energy Wh   (time: {time_model} model)")
     for k, t in r.by_kind_s.items():
         lines.append(f"  {k:12s} {t:12,.1f} {r.by_kind_j[k] / 3600:12.2f}")
     return "\n".join(lines)

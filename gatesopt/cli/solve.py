@@ -7,17 +7,16 @@ written to a temporary name in the target folder and renamed, never over an exis
 """
 from __future__ import annotations
 
-import os
 import sys
 import time
 
 from ..errors import GatesoptError
-from .files import (STDIO, check_distinct, check_new_file, check_output, read_program, refuse_existing,
+from .files import (STDIO, check_distinct, check_input, check_new_file, check_output, read_program,
                     write_atomic, write_json, write_stdout)
 from .options import (add_gating_options, firmware_choice, gating_formulations, gating_options,
                       ordering_formulations, positive_s)
-from .progress import default_workers, group_progress
-from .summary import ordering_result_lines
+from .progress import default_workers, group_progress, wants_progress
+from .summary import figure_lines, ordering_result_lines, time_spent_line
 
 NAME = "solve"
 HELP = "insert motor power-gating instructions (and re-order curves)"
@@ -27,7 +26,8 @@ DESCRIPTION = ("Write gated G-code: motors switched off while idle (3DGates), op
 
 def add_arguments(p) -> None:
     p.add_argument("file", help="input G-code (.gcode or .gcode.gz), or - for standard input")
-    p.add_argument("-o", "--output", metavar="OUT.gcode", help="output file, or - for standard output")
+    p.add_argument("-o", "--output", metavar="OUT.gcode",
+                   help="output file (gzipped if its name ends in .gz), or - for standard output")
     p.add_argument("--in-place", action="store_true",
                    help="replace the input file (a slicer's post-processing step): written to a "
                         "temporary file beside it, verified, then renamed over it keeping its "
@@ -42,13 +42,16 @@ def add_arguments(p) -> None:
                         "objects (default); free re-orders every curve of a layer")
     p.add_argument("--move-seams", action="store_true",
                    help="closed loops may start at another vertex (default: keep the seam)")
+    p.add_argument("--objective", choices=("time", "travel"), default="time",
+                   help="what the curve ordering minimises: time (default), the travels' print time as emitted, retractions, z-hops and the slicer's own copied travels included; travel, their length (Fleming et al.)")
     p.add_argument("--order-formulation", choices=ordering_formulations(), default=None,
                    help="the curve ordering's formulation (default: the exact one named by "
                         "--formulation: milp or cpsat; greedy for greedy; auto for dp)")
-    p.add_argument("--order-budget", type=float, default=10.0, metavar="S",
-                   help="finish the curve ordering (build, solve, emit) in about S seconds "
-                        "(default 10; the solve gets what an estimate of the emit leaves, as "
-                        "`order --budget`)")
+    p.add_argument("--budget", type=float, default=10.0, metavar="S",
+                   help="finish the whole run, from the start of the command to the verified "
+                        "output, in about S seconds (default 10): the curve ordering gets what an "
+                        "estimate of the rest leaves (an exact --formulation's --time-limit is "
+                        "not part of the estimate)")
     p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
 
@@ -60,26 +63,34 @@ def order_formulation_of(gating_formulation: str) -> str:
     return gating_formulation if gating_formulation in ordering_formulations() else "auto"
 
 
+def status_text(s: dict) -> str:
+    """"optimal", or "feasible (stopped: time limit)": the status and why a search stopped."""
+    return str(s["status"]) + (f" (stopped: {s['stopped']})" if s.get("stopped") else "")
+
+
 def format_solve_report(s: dict) -> str:
-    def pct(a, b):
-        return 100.0 * (a / b - 1.0) if b else 0.0
     at = f" at the {s['rotation_deg']:g} deg rotation chosen" if s["rotation_deg"] else ""
     lines = [
         f"file          {s['source']}",
         f"firmware      {s.get('firmware_line') or s['firmware']}",
-        f"formulation   {s['formulation'] or '-'} ({s['firmware']} firmware)   status {s['status']}{at}"
+        f"formulation   {s['formulation'] or '-'} ({s['firmware']} firmware)   status {status_text(s)}{at}"
         + (f"   bound {s['bound']:.3f} J" if s.get("bound") is not None else "")
         + (f"   gap {100 * s['gap']:.4f} %" if s.get("gap") is not None else "   gap n/a"),
         f"energy        {s['energy_before_j']:.1f} J -> {s['energy_after_j']:.1f} J"
-        f"   saving {s['saving_pct']:.2f} %",
-        f"time          {s['time_before_s']:.2f} s -> {s['time_after_s']:.2f} s"
-        f"   ({pct(s['time_after_s'], s['time_before_s']):+.3f} %, firmware stalls included)",
-        f"lines         +{s['lines_added']} ({s['instruction_lines']} instruction lines, {s['splits']} moves split)"
+        f"   saving {s['saving_pct']:.2f} %   (3DGates model over the paper's T = L/F times, "
+        "firmware stalls included)",
+        figure_lines(s)[0],
+    ]
+    if s.get("max_added_time_pct") is not None:
+        lines.append(f"time budget   paper time T = L/F {s['added_time_pct']:+.3f} % (re-ordering and gating "
+                     f"together; the firmware's stalls may add at most {s['max_added_time_pct']:g} %)")
+    lines += [
+        f"lines         {s['lines_added']:+d} ({s['instruction_lines']} instruction lines, {s['splits']} moves split)"
         f"   file size {s['size_change_pct']:+.2f} %",
         f"rotation      {s.get('rotation_line') or 'none'}"
         + (f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um" if s["rotation_deg"] else ""),
         "off time      " + ("  ".join(f"{m} {t:.2f} s" for m, t in s["off_time_s"].items()) or "-"),
-        f"solve         {s['solve_s']:.3f} s   (whole run {s['wall_s']:.2f} s)",
+        figure_lines(s)[1],
     ]
     o = s.get("ordering")
     if o is not None:
@@ -89,6 +100,9 @@ def format_solve_report(s: dict) -> str:
         lines += ordering_result_lines(o)
     else:
         lines.append("ordering      none: the slicer's order")
+    lines.append(f"solve         {s['solve_s']:.2f} s   (every solver: ordering "
+                 f"{s['ordering_solve_s']:.2f} s, gating {s['gating_solve_s']:.2f} s)")
+    lines.append(time_spent_line(s))
     lines.append(f"verified      {'yes' if s['verified'] else 'NO'}")
     for n in s.get("notes", []):
         lines.append(f"note          {n}")
@@ -97,28 +111,24 @@ def format_solve_report(s: dict) -> str:
 
 def _solve_paths(args) -> tuple[str, str]:
     """(input, output) after checking the combination of FILE, -o and --in-place."""
+    check_input(args.file)
     if args.in_place:
         if args.output not in (None, args.file):
             raise GatesoptError("--in-place writes over the input: do not give -o as well")
         if args.file == STDIO:
             raise GatesoptError("--in-place needs a file, not standard input")
-        if not os.path.isfile(args.file):
-            raise GatesoptError(f"{args.file}: no such file")
         return args.file, args.file
     if not args.output:
         raise GatesoptError("give an output file with -o OUT.gcode (or -o - for standard output), "
                             "or --in-place to replace the input")
     if args.output != STDIO:
-        if args.file == STDIO:
-            refuse_existing(args.output, args.force)
-        else:
-            check_output(args.file, args.output, args.force)
+        check_output(args.file, args.output, args.force)
     return args.file, args.output
 
 
 def run(args) -> int:
     from ..rewrite.pipeline import run as run_job
-    positive_s(args.order_budget, "--order-budget")
+    positive_s(args.budget, "--budget")
     if args.no_gating and args.rotate not in ("auto", "none"):
         raise GatesoptError(f"--rotate {args.rotate}: the rotation is chosen with the gating, "
                             "which --no-gating turns off")
@@ -130,23 +140,27 @@ def run(args) -> int:
     report_to = sys.stderr if out == STDIO else sys.stdout     # stdout carries the G-code
     fields = gating_options(args)
     from ..ordering import OrderingOptions
-    order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams)
+    order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams,
+                                    objective=args.objective)
     # "--formulation milp means exact for both" (issue 4): the gating formulation names the
     # ordering's unless --order-formulation does; dp is gating's alone (ordering: auto)
     order_formulation = args.order_formulation or order_formulation_of(args.formulation)
+    started_s = getattr(args, "started_s", None) or time.perf_counter()
     program = read_program(inp)
     # the firmware the file's printer runs, its budget, and the line that says so (issue 37)
     choice = firmware_choice(args, program, **fields)
     gating = not args.no_gating and choice.options is not None
-    # the ordering starts now: its budget ends order_budget seconds from here
-    with group_progress(sys.stderr.isatty() and not args.no_order,
-                        deadline_s=time.perf_counter() + args.order_budget) as progress:
+    # the budget counts from the command's start (``cli.clock``): reading the file, all of it
+    with group_progress(wants_progress() and not args.no_order, after="gating, verifying",
+                        deadline_s=started_s + args.budget) as progress:
         result = run_job(program, choice.options, formulation=args.formulation, time_limit_s=args.time_limit,
                          order=not args.no_order, gating=gating, choice=choice,
-                         order_workers=default_workers(), order_budget_s=args.order_budget,
+                         order_workers=default_workers(), budget_s=args.budget,
                          order_progress=progress, order_options=order_options,
-                         order_formulation=order_formulation)
+                         order_formulation=order_formulation, started_s=started_s,
+                         cpu_started_s=getattr(args, "cpu_started_s", None))
     s = result.summary()
+    s["max_added_time_pct"] = None if choice.options is None else choice.options.max_added_time_pct
     if not result.report.ok:
         if out != STDIO:    # stderr keeps the one line a slicer shows
             print(format_solve_report(s))

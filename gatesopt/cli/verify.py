@@ -4,8 +4,9 @@ from __future__ import annotations
 import json
 import sys
 
-from ..parse import parse
-from .options import firmware_names
+from ..errors import GatesoptError
+from .files import check_input, check_one_stdin, read_bytes, read_program
+from .options import add_printer_config_option, firmware_names, printer_config
 
 NAME = "verify"
 HELP = "check a rewritten file against its original"
@@ -17,37 +18,40 @@ DESCRIPTION = ("Re-parse both files and check: extruded geometry per layer (afte
 
 
 def add_arguments(p) -> None:
-    p.add_argument("original", help="the original G-code")
-    p.add_argument("output", help="the rewritten G-code")
+    p.add_argument("original", help="the original G-code (- for standard input)")
+    p.add_argument("output", help="the rewritten G-code (- for standard input)")
     p.add_argument("--firmware", choices=("auto",) + firmware_names(), default="auto",
                    help="firmware the output is meant for (its motor-instruction dialect, the motors "
                         "it may gate, stall times, automatic re-enable); auto: the claimed report's, else "
                         "the dialect of the motor lines the rewrite added")
-    p.add_argument("--start-ahead-ms", type=float, default=1.8)
-    p.add_argument("--end-late-ms", type=float, default=1.0)
+    p.add_argument("--start-ahead-ms", type=float, default=1.8,
+                   help="a motor must be on at least this long before it steps (default 1.8, paper)")
+    p.add_argument("--end-late-ms", type=float, default=1.0,
+                   help="a motor must stay on at least this long after it steps (default 1.0, paper)")
     p.add_argument("--profile", default="paper", metavar="NAME|TOML", help="energy profile")
     p.add_argument("--reordered", action="store_true",
                    help="the output re-orders curves (default: detected from its header)")
     p.add_argument("--claimed", metavar="REPORT.json",
                    help="a `gatesopt solve --json` report: energy_after_j and time_after_s must match")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    add_printer_config_option(p)
 
 
 def run(args) -> int:
     from ..verify import verify
-    original = parse(args.original)
-    output = parse(args.output)
-    claimed = None
-    if args.claimed:
-        with open(args.claimed, encoding="utf-8") as f:
-            claimed = json.load(f)
+    check_one_stdin([args.original, args.output, args.claimed])
+    for path in (args.original, args.output) + ((args.claimed,) if args.claimed else ()):
+        check_input(path)
+    claimed = _read_claimed(args.claimed) if args.claimed else None
+    original = read_program(args.original)
+    output = read_program(args.output)
     firmware = args.firmware
     if firmware == "auto":
         from ..verify import detect_firmware
         firmware = (claimed or {}).get("firmware") or detect_firmware(original, output)
     rep = verify(original, output, firmware=firmware, start_ahead_s=args.start_ahead_ms / 1e3,
                  end_late_s=args.end_late_ms / 1e3, claimed=claimed, profile=args.profile,
-                 reordered=True if args.reordered else None)
+                 reordered=True if args.reordered else None, printer=printer_config(args))
     if args.json:
         json.dump(rep.to_dict(), sys.stdout, indent=2)
         print()
@@ -65,3 +69,14 @@ def run(args) -> int:
     for f in rep.findings:
         print(f"  {f}")
     return 1
+
+
+def _read_claimed(path: str) -> dict:
+    """The JSON report of ``gatesopt solve --json`` at ``path``."""
+    try:
+        claimed = json.loads(read_bytes(path).decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise GatesoptError(f"{path}: not a JSON report of gatesopt solve --json ({exc})") from None
+    if not isinstance(claimed, dict):
+        raise GatesoptError(f"{path}: not a JSON report of gatesopt solve --json (no object)")
+    return claimed

@@ -122,6 +122,35 @@ class PlannerRules:
     disable_dwell_s: float = 0.0  # dwelled on top of the queue drain of each disable line
 
 
+#: ``Firmware.split_moves``: every move may be split; all but extrude-only moves; none
+SPLIT_MOVES = ("all", "kinematic", "none")
+@dataclass(frozen=True)
+class Schedule:
+    """Gating the firmware times itself (a dialect's ``Firmware.schedule``; the Klipper module's
+    protocol is the example): the dialect writes one off line right after the last step of the
+    motors it names before their idle intervals, the firmware switches each motor off and on again
+    by itself, and keeps an interval on unless the rules below hold. ``gatesopt.gating`` plans with
+    these numbers (formulations/gating.md §9), ``gatesopt.verify`` derives the intervals from the
+    lines with them.
+
+    Per motor m (X Y Z E order): off at ``t_end + end_late + off_delay_s[m]`` (``t_end``: the end
+    of the steps before the line), on at ``t_next - start_ahead - on_lead_s[m]`` (``t_next``: the
+    start of m's next step). With ``gap`` the lower-bound time of the steps between the line and
+    that next step (``planner.min_move_time_s``, arcs as the firmware's chords of
+    ``arc_segment_mm``): rule A ``gap >= (end_late + off_delay) + (start_ahead + on_lead) +
+    min_off_s``; rule B: from m's previous "on" to this "off" at least ``min_spacing_s``, counted
+    as ``(start_ahead + on_lead) + (lower-bound time from the step that ended m's previous off
+    interval to the line) + (end_late + off_delay)``. A homing step or one of the file's own motor
+    lines the firmware carries out between line and next step: the firmware switches its motors
+    itself there, the interval is not gated."""
+
+    off_delay_s: tuple = (0.0, 0.0, 0.0, 0.0)   # beyond end-late, per motor: the firmware's own delay
+    on_lead_s: tuple = (0.0, 0.0, 0.0, 0.0)     # beyond start-ahead, per motor: the firmware's own lead
+    min_off_s: float = 0.0                      # rule A's floor
+    min_spacing_s: float = 0.0                  # rule B
+    arc_segment_mm: float = 1.0                 # the firmware's arc chords (lower bound of an arc's time)
+
+
 class FirmwareError(GatesoptError, ValueError):
     """A gating request the chosen firmware cannot carry out safely."""
 
@@ -150,6 +179,15 @@ class Firmware:
     no_drain_words: frozenset = frozenset()   # motor words it carries out without draining the queue
     stall_is_stop: bool = False   # the disable stall is a full stop (priced by the planner when given)
     drains_on_disable: bool = True  # a disable brings the head to rest (``planner.Plan.stop_cost_s``)
+    start_lead_s: float = 0.0     # counted on top of the start-ahead: the firmware steps this much
+                                  # before a move's nominal start (Klipper's input shaper)
+    note: str = ""                # what gating in this dialect cannot honour (said with the choice)
+    split_moves: str = "all"      # which moves a gating line may split: "all", "kinematic" (not an
+                                  # extrude-only move), "none"; a line that falls inside another
+                                  # goes before (on) or after (off) the whole move
+                                  # (``gating.timeline.whole_steps``, ``SPLIT_MOVES``)
+    word_stalls: tuple = ()       # (word, off s, on s): a stall of its own for a word it carries out
+    time_model: str = "paper"     # "planner": gating is priced with the planner (its limits, printer.cfg)
     planner: PlannerRules | None = field(default=None, repr=False)   # None: the file's own rules
 
     # -- text -------------------------------------------------------------------------------------
@@ -196,6 +234,18 @@ class Firmware:
         if parsed is None or _words(text)[0] not in self.executes:
             return None
         return parsed
+
+    # -- gating the firmware times itself ---------------------------------------------------------
+    def schedule(self, printer=None, *, start_ahead_s: float, end_late_s: float) -> Schedule | None:
+        """The firmware's own timing of its switches (``Schedule``), for a printer described by
+        ``printer`` (``gatesopt.printer_config.PrinterConfig`` or None); None: the lines switch at
+        the moment they are written (every stock dialect)."""
+        return None
+
+    def gating_defaults(self, printer=None) -> dict:
+        """Gating options the printer's config fixes for this dialect (``GatingOptions`` field
+        names, and ``gateable``: the motors it may gate there); none for a stock dialect."""
+        return {}
 
     # -- costs -------------------------------------------------------------------------------------
     def n_off_lines(self, n_motors: int) -> int:
@@ -401,10 +451,14 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     # start G-code ``M17`` therefore costs nothing on Klipper. This is the one place a motor
     # line's stall is decided: the verifier (``verify.energy_of``) and the gating problem
     # (``gating.problem.build``, for the file's own lines) both read it from here.
-    ok &= np.array([bool(k) and _words(t)[0] in fw.executes for k, t in zip(ok, texts)], bool)
-    ok, on = ok[inverse], on[inverse]
-    # Klipper's ENABLE=1 dwells too, though we never write it
-    out[rows[ok]] = np.where(on[ok], fw.stall_on_s, fw.stall_off_s)
+    heads = [_words(t)[0] if k else "" for k, t in zip(ok, texts)]
+    ok &= np.array([h in fw.executes for h in heads], bool)
+    own = dict((w, (off_s, on_s)) for w, off_s, on_s in fw.word_stalls)
+    off_s = np.array([own.get(h, (fw.stall_off_s, fw.stall_on_s))[0] for h in heads], float)
+    on_s = np.array([own.get(h, (fw.stall_off_s, fw.stall_on_s))[1] for h in heads], float)
+    ok, on, off_s, on_s = ok[inverse], on[inverse], off_s[inverse], on_s[inverse]
+    # an enable line stalls by its own price (Klipper's ENABLE=1: a look-ahead flush, no dwell)
+    out[rows[ok]] = np.where(on[ok], on_s[ok], off_s[ok])
     if planner is not None and fw.stall_is_stop:
         for r in rows[ok & ~on]:
             out[r] = float(planner(program, int(r)))

@@ -1,15 +1,44 @@
 """The ``klipper`` dialect: stock Klipper.
 
 ``klippy/extras/stepper_enable.py`` (read at Klipper3d/klipper@0e30b86 and 84104bb):
-``cmd_SET_STEPPER_ENABLE`` -> ``set_motors_enable`` runs ``toolhead.dwell(DISABLE_STALL_TIME)``
-(0.100 s), flushes the look-ahead (``get_last_move_time``), switches the pin, and dwells 0.100 s
-again: ~0.2 s of dwell plus the flush, 0.22 s measured. Klipper has no ``M17``: ``klippy/gcode.py``
-``cmd_default`` answers 'Unknown command:"M17"' and goes on (no dwell, nothing switched). Re-enable
-is automatic: ``motor_disable`` re-registers ``add_active_callback(self.motor_enable)``, so the
-first step of that stepper turns it back on at the step's own print time. ``SET_STEPPER_ENABLE``
-takes one ``STEPPER=`` per command (a mux command on that parameter, no list), so we write one line
-per stepper, each with its own stall. ``M18``/``M84`` go to ``motor_off()``, which disables *all*
-steppers and sends ``stepper_enable:motor_off`` (homing cleared): never emitted for Klipper.
+``cmd_SET_STEPPER_ENABLE`` -> ``set_motors_enable``. For ``ENABLE=0`` it flushes the look-ahead
+(``toolhead.flush_step_generation``: the moves before it end at rest), dwells
+``DISABLE_STALL_TIME`` (0.100 s), switches the pin, and dwells 0.100 s again: 0.22 s measured. For
+``ENABLE=1`` it flushes the same way and switches the pin at ``toolhead.get_last_move_time()``,
+without a dwell: after the flush ``_calc_print_time`` restarts the clock ``2 * kin_flush_delay``
+later (``motion_queuing.calc_step_gen_restart``: ``SDS_CHECK_TIME`` 1 ms, or the input shaper's
+step window if longer), so one enable line costs a full stop plus 2 ms (17-19 ms measured).
+
+Re-enable. Without an enable line Klipper re-enables a stepper by itself: ``motor_disable``
+re-registers ``add_active_callback(self.motor_enable)``, called with the print time of the first
+move that steps it (klippy/stepper.py ``_check_active``), i.e. the move's *nominal* start. That
+honours no start-ahead, and with an input shaper the shaped steps begin up to the shaper's
+pre-active time before the nominal start (klippy/chelper/kin_shaper.c: the last pulse time; mzv at
+30 Hz 14.3 ms, 3hump_ei at 20 Hz 58.3 ms, ``extras/shaper_defs.py``): steps were sent while the pin
+was off (docs/RESULTS.md). So this dialect writes ``SET_STEPPER_ENABLE STEPPER=... ENABLE=1``
+start-ahead before the stepper's next move, and counts ``SHAPER_LEAD_S`` on top of the start-ahead
+asked for (``start_lead_s``): the motor is on before the first shaped step of any of Klipper's
+shapers at 20 Hz or more. The pin goes on at the end of the moves before the line (the flush), so
+the moves between line and step are the start-ahead; the flush's stop only delays them.
+
+A flush brings the head to rest at the line: inside a move from its cruising speed (v / a, 50 ms
+at 150 mm/s and 3000 mm/s^2), between two moves from their junction speed, which is 0 next to a
+retraction (an extrude-only move starts and ends at rest, ``Move.calc_junction``). The price here
+is one stop at 50 mm/s; the real one depends on the speed where the line stands (measured per
+line in docs/RESULTS.md). No line of this dialect splits an extrude-only move (``split_moves``
+"kinematic": Klipper plans each half from rest to rest); splitting no move at all ("none") was
+tried and gated next to nothing: most idle intervals worth a 0.22 s stall lie inside one long
+single-axis move.
+
+What it cannot honour (``note``): an end-late below Klipper's 0.1 s dwell (the pin goes off 0.1 s
+after the moves before the line end, whatever end-late asked), and with an input shaper each flush
+costs ``2 * (pre-active - 1 ms)`` more than priced (+26.6 ms per line at mzv 30 Hz).
+
+Klipper has no ``M17``: ``klippy/gcode.py`` ``cmd_default`` answers 'Unknown command:"M17"' and
+goes on (no dwell, nothing switched). ``SET_STEPPER_ENABLE`` takes one ``STEPPER=`` per command (a
+mux command on that parameter, no list), so we write one line per stepper, each with its own
+stall. ``M18``/``M84`` go to ``motor_off()``, which disables *all* steppers and sends
+``stepper_enable:motor_off`` (homing cleared): never emitted for Klipper.
 
 Planner rules: klippy/toolhead.py -- one ``max_accel`` for every move (M204 S sets it, else
 min(P, T)), junctions by ``square_corner_velocity`` (default 5), ``max_velocity`` caps every move
@@ -29,6 +58,17 @@ from . import ExtendedMotorCommand, Firmware, PlannerRules
 # flush: 0.22 s measured (DESIGN.md)
 KLIPPER_STALL_S = 0.22
 KLIPPER_ENABLE_DWELL_S = 2 * 0.100
+#: klippy/extras/motion_queuing.py SDS_CHECK_TIME: the least ``kin_flush_delay``
+SDS_CHECK_TIME_S = 0.001
+#: a full stop and restart at a print speed of 50 mm/s with Klipper's 3000 mm/s^2: v / a
+#: (decelerating from v and accelerating back cost v/(2a) each over moving at v)
+KLIPPER_STOP_S = 50.0 / 3000.0
+#: an ``ENABLE=1`` line: the look-ahead flush (a full stop) and the clock's restart
+#: ``2 * kin_flush_delay`` later (toolhead ``_calc_print_time``); 17-19 ms measured, no shaper
+KLIPPER_ENABLE_STALL_S = round(KLIPPER_STOP_S + 2 * SDS_CHECK_TIME_S, 4)
+#: counted on top of the start-ahead: the longest pre-active time of Klipper's input shapers
+#: (klippy/extras/shaper_defs.py) at 20 Hz, 3hump_ei's 58.3 ms, rounded up
+SHAPER_LEAD_S = 0.060
 INF = math.inf
 
 #: Klipper's stepper names of the axes on a cartesian printer (printer.cfg sections)
@@ -43,7 +83,8 @@ PLANNER = PlannerRules(
                   jerk_x=math.nan, jerk_y=math.nan, jerk_z=math.nan, jerk_e=math.nan,
                   accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
                   junction_deviation=math.nan, square_corner_velocity=5.0, max_velocity=300,
-                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0))
+                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0,
+                  min_cruise_ratio=0.0))
 
 #: Klipper's ``SET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=0`` (klippy/extras/stepper_enable.py
 #: ``cmd_SET_STEPPER_ENABLE``: a mux command on one ``STEPPER``, ``ENABLE`` an integer, 1 when
@@ -62,10 +103,16 @@ class Klipper(Firmware):
 
 
 DIALECT = Klipper(
-    name="klipper", off_word="SET_STEPPER_ENABLE", on_word=None, merge_motors=False,
-    stall_off_s=KLIPPER_STALL_S, stall_on_s=KLIPPER_STALL_S, reenable="auto-first-step",
+    name="klipper", off_word="SET_STEPPER_ENABLE", on_word="SET_STEPPER_ENABLE", merge_motors=False,
+    stall_off_s=KLIPPER_STALL_S, stall_on_s=KLIPPER_ENABLE_STALL_S, reenable="exact",
     homing_kept=True, allowed_motors=frozenset(AXES),
     executes=frozenset({"SET_STEPPER_ENABLE", "M18", "M84"}),
-    description="Klipper: SET_STEPPER_ENABLE per stepper, ~0.22 s stall, auto re-enable",
+    description="Klipper: SET_STEPPER_ENABLE per stepper, ~0.22 s stall off, ~0.02 s on",
+    start_lead_s=SHAPER_LEAD_S, split_moves="kinematic",
+    note=(f"klipper: each motor switched on {SHAPER_LEAD_S * 1e3:g} ms more than the start-ahead "
+          "before its next move (an input shaper's steps start before the move); each "
+          "SET_STEPPER_ENABLE stops the print head (ENABLE=0 also dwells 2 x 0.1 s, so a motor "
+          "goes off >= 0.1 s after its last step whatever the end-late); with an input shaper "
+          "every such line costs 2 x its pre-active time more than priced"),
     rank=2, detect_words=("SET_STEPPER_ENABLE",), detect_rank=10,
     motor_commands=(SET_STEPPER_ENABLE,), planner=PLANNER)

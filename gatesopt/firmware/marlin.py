@@ -9,6 +9,11 @@ without draining, so it takes effect when the command is *parsed*, up to a queue
 re-enables X by itself when the planner queues it. Disabling marks the axis position untrusted;
 moves are refused only with ``NO_MOTION_BEFORE_HOMING`` + ``HOME_AFTER_DEACTIVATE``.
 
+A gating line never splits an extrude-only move here (``split_moves``): an ``M18`` between
+the halves of a retraction drains the queue in the middle of it (a stop more, and a retraction
+paused for the drain), and what the planner makes of the two halves was not measured; the line goes
+after (off) or before (on) the whole move, which only keeps the motor on longer.
+
 The stall of a disable is a full stop. Under the paper's time model (T = L / F, no acceleration)
 a full stop has no meaning; ``MARLIN_STOP_S`` stands for it: decelerating from v to 0 and
 accelerating back costs v/(2a) + v/(2a) = v/a over moving at v throughout, at a typical print
@@ -39,7 +44,8 @@ PLANNER = PlannerRules(
                   jerk_x=10, jerk_y=10, jerk_z=0.3, jerk_e=5,
                   accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
                   junction_deviation=0.013, square_corner_velocity=math.nan, max_velocity=INF,
-                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0))
+                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0,
+                  min_cruise_ratio=0.0))
 
 DIALECT = Firmware(
     name="marlin", off_word="M18", on_word="M17", merge_motors=True, stall_off_s=MARLIN_STOP_S,
@@ -47,4 +53,4 @@ DIALECT = Firmware(
     executes=frozenset({"M17", "M18", "M84"}),
     description="Marlin 2.x: M18 drains the queue (full stop), M17 enables at parse time",
     rank=1, detect_words=("M17", "M18"), detect_rank=20,
-    no_drain_words=frozenset({"M17"}), stall_is_stop=True, planner=PLANNER)
+    no_drain_words=frozenset({"M17"}), stall_is_stop=True, split_moves="kinematic", planner=PLANNER)

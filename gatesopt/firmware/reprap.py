@@ -24,7 +24,8 @@ PLANNER = PlannerRules(
                   jerk_x=15, jerk_y=15, jerk_z=0.3, jerk_e=5,
                   accel_print=500, accel_travel=500, accel_retract=250, accel_to_decel=INF,
                   junction_deviation=math.nan, square_corner_velocity=math.nan, max_velocity=INF,
-                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0))
+                  min_segment_time=0.0, min_feed=0.0, min_travel_feed=0.0,
+                  min_cruise_ratio=0.0))
 
 DIALECT = Firmware(
     name="reprap", off_word="M18", on_word="M17", merge_motors=True, stall_off_s=MARLIN_STOP_S,
@@ -32,4 +33,5 @@ DIALECT = Firmware(
     executes=frozenset({"M17", "M18", "M84"}),
     refused_note="RepRapFirmware's M18 marks X/Y/Z not homed and refuses the next move on them",
     description="RepRapFirmware: M18 waits for standstill and unhomes the axis",
-    rank=3, detect_rank=95, no_drain_words=frozenset({"M17"}), stall_is_stop=True, planner=PLANNER)
+    rank=3, detect_rank=95, no_drain_words=frozenset({"M17"}), stall_is_stop=True, split_moves="kinematic",
+    planner=PLANNER)

@@ -345,3 +345,176 @@ def render_plain(buf, line_start, ins_slot, ins_code, split_rows, split_line, cu
         p = _put_bytes(out, p, buf, line_start[li], line_start[nxt])
         li = nxt
     return p, added
+
+
+# ------------------------------------------------------------------------------------------------
+# Rotation without instructions (``emit_rotated``): the rotated text of a whole file
+_SNAP_MM = 1e-3                 # emit_line.SNAP_MM
+_MAX_EXACT = 9007199254740992   # 2**53: a mantissa below it is a float exactly
+_ROT_DECIMALS = 4               # emit_line.DECIMALS_MM["X"] / ["Y"]
+
+
+@njit(cache=True)
+def _text_value(txt, n):
+    """float(text) of the number text txt[:n] (as Python's ``float``: the exact decimal value,
+    rounded once); (0.0, False) where that is not exactly what a division gives."""
+    mant, dec = _scan_decimal(txt, 0, n)
+    if dec < 0 or abs(mant) >= _MAX_EXACT or dec > 22:
+        return 0.0, False
+    return mant / POW10[dec], True
+
+
+@njit(cache=True)
+def _rotated_row(out, p, buf, a, b, r, pstart, pend, offset_mm, rel_e, snap, has_snap,
+                 em_val, em_txt, em_len, em_off, stats, tok_a, tok_b, tok_axis, val_txt, val_len):
+    """Write line buf[a:b] (step r: an absolute, unsplit, non-arc G0/G1 in the rotated run) as
+    ``emit_line.LineRewriter.rewrite(r, [])`` writes it under a rotation, and update the
+    rewriter's state (``em_*``: the last X/Y text written, its offset, the head's XY) as it does.
+    Returns the position after it, or -1 to leave the line to the reference (not the plain form:
+    ``G<n>`` then `` <LETTER><number>`` words, each letter once; a number that needs more care)."""
+    body = b
+    while body > a and (buf[body - 1] == 10 or buf[body - 1] == 13):
+        body -= 1
+    code = a
+    while code < body and buf[code] != _SEMI:
+        code += 1
+    while code > a and (buf[code - 1] == _SP or buf[code - 1] == 9):
+        code -= 1
+    if code - a < 2 or buf[a] != 71:
+        return -1
+    j = _value_end(buf, a + 1, code)
+    if j < 0 or buf[a + 1] == _MINUS or buf[a + 1] == _PLUS or buf[a + 1] == _DOT or buf[j - 1] == _DOT:
+        return -1
+    g_end = j
+    n_tok = 0
+    seen = 0
+    axis_tok = np.full(4, -1, np.int64)
+    while j < code:
+        if buf[j] != _SP or j + 1 >= code or n_tok >= tok_a.shape[0]:
+            return -1
+        L = buf[j + 1]
+        if not (65 <= L <= 90) or (seen >> (L - 65)) & 1:
+            return -1
+        seen |= 1 << (L - 65)
+        v = _value_end(buf, j + 2, code)
+        if v < 0 or (v < code and buf[v] != _SP):
+            return -1
+        tok_a[n_tok] = j + 1
+        tok_b[n_tok] = v
+        ax = _AXIS_OF_LETTER[L - 65]
+        tok_axis[n_tok] = ax
+        if ax >= 0:
+            axis_tok[ax] = n_tok
+        n_tok += 1
+        j = v
+    if axis_tok[0] < 0 and axis_tok[1] < 0:
+        return -1           # X and Y added where the line names neither: the reference
+    # X and Y: the previous text where the move is single-axis after rotating (the snap), else
+    # the rotated end point, 4 decimals (``_snapped``, ``_piece_values``)
+    for k in range(2):
+        val_len[k] = -1
+        if has_snap and snap[r, k]:
+            ref = em_val[k] if not math.isnan(em_val[k]) else pstart[r, k]
+            dev = abs(ref - pend[r, k])
+            if dev > _SNAP_MM:
+                stats[1] += 1                       # refused: earlier snaps drifted
+            elif em_len[k] >= 0 and em_off[k] == offset_mm[r, k]:
+                for q in range(em_len[k]):
+                    val_txt[k, q] = em_txt[k, q]
+                val_len[k] = em_len[k]
+                stats[0] = max(stats[0], dev)
+            else:
+                stats[2] += 1                       # missed: no previous absolute text
+        if val_len[k] < 0:
+            n, ok = _round_scaled(pend[r, k] - offset_mm[r, k], _ROT_DECIMALS)
+            if not ok:
+                return -1
+            val_len[k] = _put_scaled(val_txt[k], 0, n, _ROT_DECIMALS)
+    # the head's XY after the line: the written text's value (``_written_xy``)
+    new_val = np.empty(2)
+    for k in range(2):
+        x, ok = _text_value(val_txt[k], val_len[k])
+        if not ok:
+            return -1
+        new_val[k] = x * 1.0 + offset_mm[r, k]
+    p0 = p
+    p = _put_bytes(out, p, buf, a, g_end)
+    xy_done = False
+    for t in range(n_tok):
+        ax = tok_axis[t]
+        if ax == 0 or ax == 1:
+            if xy_done:
+                continue
+            xy_done = True
+            for k in range(2):
+                out[p] = _SP
+                out[p + 1] = _LETTER_OF_AXIS[k]
+                p = _put_bytes(out, p + 2, val_txt[k], 0, val_len[k])
+            continue
+        out[p] = _SP
+        out[p + 1] = buf[tok_a[t]]
+        p += 2
+        if ax == 3 and rel_e[r]:
+            # a relative E keeps its value, written as Decimal writes it (``_dec_text``)
+            mant, dec = _scan_decimal(buf, tok_a[t] + 1, tok_b[t])
+            if dec < 0:
+                return -1
+            p = _put_scaled(out, p, mant, dec)
+        else:
+            p = _put_bytes(out, p, buf, tok_a[t] + 1, tok_b[t])
+    p = _put_bytes(out, p, buf, code, b)        # the comment and the line's own ending
+    for k in range(2):
+        em_val[k] = new_val[k]
+        for q in range(val_len[k]):
+            em_txt[k, q] = val_txt[k, q]
+        em_len[k] = val_len[k]
+        em_off[k] = offset_mm[r, k]
+    return p
+
+
+@njit(cache=True)
+def render_rotated(buf, line_start, li, row_of_line, rewrite, splittable, arc, rel_xyz, rel_e, inch,
+                   xy_moved, pstart, pend, end_mm, offset_mm, snap, has_snap, em_val, em_txt, em_len,
+                   em_off, stats, out, p):
+    """From line ``li`` on, write the rotated file into ``out`` at ``p`` as ``emit._write_lines``
+    does with ``emit_line.LineRewriter`` and no instruction: lines copied, the rows in
+    ``rewrite`` rewritten (``_rotated_row``), the rewriter's state (``em_*``, ``stats``: largest
+    snap, snaps refused, snaps missed) kept as its ``note_kept`` keeps it. Stops at the first line
+    it leaves to the reference (a relative, arc or inch move to rewrite, one not in the plain
+    form, an XY move kept as written). Returns (position, that line; ``n_lines`` when done)."""
+    n_lines = line_start.shape[0] - 1
+    tok_a = np.empty(64, np.int64)
+    tok_b = np.empty(64, np.int64)
+    tok_axis = np.empty(64, np.int64)
+    val_txt = np.empty((2, 64), np.uint8)
+    val_len = np.empty(2, np.int64)
+    while li < n_lines:
+        a, b = line_start[li], line_start[li + 1]
+        r = row_of_line[li]
+        if r >= 0 and rewrite[r]:
+            if arc[r] or rel_xyz[r] or inch[r]:
+                return p, li
+            q = _rotated_row(out, p, buf, a, b, r, pstart, pend, offset_mm, rel_e, snap, has_snap,
+                             em_val, em_txt, em_len, em_off, stats, tok_a, tok_b, tok_axis, val_txt, val_len)
+            if q < 0:
+                return p, li
+            p = q
+            li += 1
+            continue
+        if r >= 0:
+            # ``LineRewriter.note_kept``
+            if not splittable[r]:
+                if xy_moved[r]:                     # homing moved XY: no text to snap to
+                    em_len[0] = -1
+                    em_len[1] = -1
+                    em_val[0] = end_mm[r, 0]
+                    em_val[1] = end_mm[r, 1]
+            elif not xy_moved[r]:
+                if math.isnan(em_val[0]) or math.isnan(em_val[1]):
+                    em_val[0] = pend[r, 0]
+                    em_val[1] = pend[r, 1]
+            else:
+                return p, li                        # an XY move kept as written: its texts
+        p = _put_bytes(out, p, buf, a, b)
+        li += 1
+    return p, n_lines

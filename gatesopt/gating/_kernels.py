@@ -65,10 +65,15 @@ def single_axis_time(dx, dy, w, c, s, snap_mm):
 
 
 @njit(cache=True)
-def idle_intervals(start_s, steps, rate, cum, stall_w, sa, el, on_line, stall_off_s, stall_on_s, per_event):
+def idle_intervals(start_s, steps, rate, cum, stall_w, sa, el, on_line, stall_off_s, stall_on_s, per_event,
+                   split_lines, whole):
     """Idle intervals of one motor (or enable group): (start, end, off_row, on_row, prev_row,
     next_row, saving_j, lines, stall_s, stall_j), all of length = number of intervals.
-    ``per_event``: instruction lines (each with its stall) per off or on moment."""
+    ``per_event``: instruction lines (each with its stall) per off or on moment; ``split_lines``:
+    an instruction inside a step splits it (one line more); False when the firmware times the
+    switch itself and the line goes between steps (``firmware.Schedule``); ``whole`` (n,) bool:
+    steps an instruction must not split (``timeline.whole_steps``): an off that falls inside one
+    comes at its end, an on at its start (the safe sides)."""
     n = steps.shape[0]
     T = start_s[n]
     cap = 1
@@ -90,6 +95,18 @@ def idle_intervals(start_s, steps, rate, cum, stall_w, sa, el, on_line, stall_of
         b = T if j == n else start_s[j] - sa
         if b > T:
             b = T
+        if prev >= 0:
+            r = prev + 1
+            while r < n and start_s[r + 1] <= a + EPS_S:
+                r += 1
+            if r < n and whole[r] and start_s[r] + EPS_S < a:
+                a = start_s[r + 1]
+        if j < n:
+            q = j - 1
+            while q >= 0 and start_s[q] >= b - EPS_S:
+                q -= 1
+            if q >= 0 and whole[q] and b < start_s[q + 1] - EPS_S:
+                b = start_s[q]
         ok = b > a + EPS_S
         if prev < 0 and not b > 0.0:
             ok = False
@@ -134,14 +151,14 @@ def idle_intervals(start_s, steps, rate, cum, stall_w, sa, el, on_line, stall_of
         has_on = on_line and q < n
         ln = per_event
         rr = r if r < n else n - 1
-        if r < n and start_s[rr] + EPS_S < a and a < start_s[rr + 1] - EPS_S:
+        if split_lines and r < n and start_s[rr] + EPS_S < a and a < start_s[rr + 1] - EPS_S:
             ln += 1
         st = stall_off_s * per_event
         sj = stall_off_s * per_event * stall_w[rr]
         if has_on:
             ln += per_event
             qq = q
-            if start_s[qq] + EPS_S < b and b < start_s[qq + 1] - EPS_S:
+            if split_lines and start_s[qq] + EPS_S < b and b < start_s[qq + 1] - EPS_S:
                 ln += 1
             st += stall_on_s * per_event
             sj += stall_on_s * per_event * stall_w[qq]
@@ -172,3 +189,29 @@ def angle_stats(steps, steps0, arc, dur, rdur_x, rdur_y):
         if not sy:
             uby += rdur_y[i]
     return single, straight, ubx, uby
+
+
+@njit(cache=True)
+def chain_choice(net, p):
+    """Most valuable subset of a chain of intervals (``net`` each, in time order) in which interval
+    j may follow interval i only if i < p[j] (``problem.chain_predecessors``: rule B, the spacing
+    grows going back). Returns a bool mask. best(j) = net[j] + (the best subset of chain[:p[j]]);
+    a tie keeps the interval out (fewer lines)."""
+    k = net.shape[0]
+    top = np.zeros(k + 1)                 # top[q]: the best value over chain[:q]
+    last = np.full(k + 1, -1, np.int64)   # the last interval of that best subset (-1: none)
+    for j in range(k):
+        v = net[j] + top[p[j]]
+        if v > top[j]:
+            top[j + 1] = v
+            last[j + 1] = j
+        else:
+            top[j + 1] = top[j]
+            last[j + 1] = last[j]
+    out = np.zeros(k, np.bool_)
+    q = k
+    while last[q] >= 0:
+        j = last[q]
+        out[j] = True
+        q = p[j]
+    return out

@@ -11,15 +11,24 @@ the optimum (the *share bound*, ``bound_j``), which ``dp`` reports for its heuri
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..energy import step_power_w
 from ..program import X, Y
-from .problem import GatingProblem
+from .problem import GatingProblem, chain_predecessors
+from .scoring import line_moments
 from .solution import GatingSolution
 from .timeline import TIME_EPS_S, integral, is_split, row_at
+
+#: the exact formulations (``milp``, ``cpsat``) stop when the gap they report, on the energy, is
+#: within ``mip_rel_gap``; from then on the search goes on for the line tie-break (fewest lines at
+#: that energy) for at most this long, or this share of the time it took to get there if that is
+#: longer: lines are a tie-break, never a reason to run to the time limit (HiGHS's own gap counts
+#: them: it ran to 60 s limits on budgeted Marlin files while the energy gap was 6e-6..4e-5)
+LINE_TIEBREAK_S = 0.5
+LINE_TIEBREAK_SHARE = 0.25
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,6 +54,8 @@ class CoupledModel:
     max_lines: float
     pruned: tuple               # angle indices left out by the bound (see ``build_model``)
     bound_j: float = -math.inf  # lower bound on the optimum energy over all angles (``build_model``)
+    c_members: list = field(default_factory=list)   # cliques of x positions, at most one off each:
+                                                    # rule B of a firmware schedule (``_spacing_cliques``)
 
     @property
     def nx(self) -> int:
@@ -176,8 +187,9 @@ def _build_model(problem, kept_angles, keep_idle, neg_inter, use_inter) -> Coupl
     # events: one per off and per on instruction of each idle interval
     ev_x = np.concatenate((np.arange(nx), np.flatnonzero(has_on)))
     ev_on = np.concatenate((np.zeros(nx, bool), np.ones(int(has_on.sum()), bool)))
-    ev_t = np.concatenate((gs, ge[has_on]))
-    ev_row = np.concatenate((row_at(problem.start_s, gs, "off"), row_at(problem.start_s, ge[has_on], "on")))
+    off_t, off_row = line_moments(problem, problem.idle_motor[idle], gs)
+    ev_t = np.concatenate((off_t, ge[has_on]))
+    ev_row = np.concatenate((off_row, row_at(problem.start_s, ge[has_on], "on")))
     ev_split = is_split(problem.start_s, ev_row, ev_t)
     ev_ang = x_angle[ev_x]
     stall_w = _stall_power_w(problem)
@@ -236,12 +248,31 @@ def _build_model(problem, kept_angles, keep_idle, neg_inter, use_inter) -> Coupl
 
     a_pairs, a_energy = (_xy_pairs(problem, len(kept_angles), x_angle, idle, gs, ge) if use_inter
                         else (np.zeros((0, 2), np.int64), np.zeros(0)))
-    return CoupledModel(x_idle=idle, x_angle=x_angle, angles=kept_angles, x_energy_j=x_energy,
+    return CoupledModel(c_members=_spacing_cliques(problem, idle),
+                        x_idle=idle, x_angle=x_angle, angles=kept_angles, x_energy_j=x_energy,
                         x_lines=x_lines, x_stall_s=x_stall, z_members=z_members,
                         z_energy_j=np.array(z_energy, float), z_stall_s=np.array(z_stall, float),
                         w_members=w_members, a_pairs=a_pairs, a_energy_j=a_energy,
                         energy_before_j=E0, max_time_s=problem.max_added_time_s,
                         max_lines=problem.max_added_lines, pruned=pruned)
+
+
+def _spacing_cliques(problem: GatingProblem, x_idle: np.ndarray) -> list:
+    """Rule B of a firmware schedule as cliques over the x variables (formulations/gating.md §9):
+    in a chain of one angle and motor, intervals p[j]..j (``chain_predecessors``) pairwise break
+    the spacing, so at most one of them is off; only the maximal such sets are written."""
+    o = problem.options
+    if o.schedule is None or o.schedule.min_spacing_s <= 0 or not len(x_idle):
+        return []
+    key = problem.idle_angle[x_idle].astype(np.int64) * 8 + problem.idle_motor[x_idle]
+    starts = np.flatnonzero(np.concatenate(([True], key[1:] != key[:-1])))
+    out = []
+    for lo, hi in zip(starts, np.append(starts[1:], len(x_idle))):
+        p = chain_predecessors(problem, x_idle[lo:hi])
+        j = np.flatnonzero(p < np.arange(hi - lo))
+        maximal = (j == hi - lo - 1) | (p[np.minimum(j + 1, hi - lo - 1)] > p[j])
+        out += [np.arange(lo + p[i], lo + i + 1) for i in j[maximal]]
+    return out
 
 
 def _xy_pairs(problem: GatingProblem, n_angles: int, x_angle, x_idle, gs, ge):

@@ -1,8 +1,8 @@
 """Exact gating for the coupled problem with OR-Tools CP-SAT (formulations/gating.md "cpsat").
 
 The same model as ``gatesopt.gating.milp`` (``coupled.CoupledModel``: x, y, z, w, a), all Boolean, with
-integer coefficients: energy in units of ``unit_j`` (1 µJ, coarser only if the objective would not
-fit in 2^53), stall time in microseconds, and the lexicographic objective written exactly as
+integer coefficients: energy in units of ``unit_j`` (1 µJ, or 1e-9 of the objective's magnitude
+if finer, coarser only if the objective would not fit in 2^53), stall time in microseconds, and the lexicographic objective written exactly as
 ``energy_units * (lines_ub + 1) + lines``. Hinted with the dp (or given) solution, fixed seed,
 ``options.num_workers`` workers.
 """
@@ -14,13 +14,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..solvers import Status, relative_gap
-from .coupled import CoupledModel, build_model, hint_vector
+from ..solvers import Status, Stopped, relative_gap, run_native, stop_requested
+from .coupled import LINE_TIEBREAK_S, LINE_TIEBREAK_SHARE, CoupledModel, build_model, hint_vector
 from .dp import warm_start
 from .problem import GatingProblem
 from .solution import GatingSolution, solution_from_idle
 
 UNIT_J = 1e-6           # energy unit of the integer objective
+UNIT_REL = 1e-9         # ... or this share of the objective's magnitude, if finer
 TIME_UNIT_S = 1e-6      # time unit of the stall budget
 
 
@@ -76,10 +77,12 @@ def _cp_model(cp, model: CoupledModel) -> _CpModel:
     ny = len(model.angles)
     lines_ub = int(round(model.x_lines.sum())) + nz + nw
     W = lines_ub + 1
-    # energy unit: 1 µJ unless sum |c| * W would leave the exactly representable integers
+    # energy unit: 1 µJ unless sum |c| * W would leave the exactly representable integers; finer
+    # for a tiny print (under 1 kJ: 1e-9 of it), so that the rounding's slack in the reported
+    # bound (``_energy_bound_j``) stays far within the gap tolerance it is judged by
     mag = (abs(model.energy_before_j) + np.abs(model.x_energy_j).sum() + np.abs(model.z_energy_j).sum()
            + np.abs(model.a_energy_j).sum())
-    unit = max(UNIT_J, mag * W / 2.0 ** 53)
+    unit = max(min(UNIT_J, mag * UNIT_REL), mag * W / 2.0 ** 53)
     m = cp.CpModel()
     x = [m.NewBoolVar(f"x_{g}") for g in model.x_idle]          # x[g]: idle interval g off
     y = [m.NewBoolVar(f"y_{k}") for k in model.angles]          # y[k]: rotation k chosen
@@ -90,6 +93,8 @@ def _cp_model(cp, model: CoupledModel) -> _CpModel:
     if ny > 1:
         for i, k in enumerate(model.x_angle.tolist()):
             m.AddImplication(x[i], y[k])
+    for mem in model.c_members:             # rule B of a firmware schedule
+        m.AddAtMostOne([x[j] for j in mem.tolist()])
     for i, mem in enumerate(model.z_members):
         for j in mem.tolist():
             m.AddImplication(x[j], z[i])
@@ -160,6 +165,9 @@ def _set_parameters(solver, problem: GatingProblem) -> int:
         solver.parameters.extra_subsolvers.append("max_lp")
     solver.parameters.random_seed = int(problem.options.seed)
     solver.parameters.relative_gap_limit = float(problem.options.mip_rel_gap)
+    # Ctrl-C is ours (``solvers.run_native`` stops the search and keeps its best answer): CP-SAT's
+    # own SIGINT handler would take the signal from Python, which then never learns of it
+    solver.parameters.catch_sigint_signal = False
     return nw
 
 
@@ -188,7 +196,8 @@ def _fewest_lines(cp, c: _CpModel, model: CoupledModel, solver, problem: GatingP
     # at most as long again as the first stage took, within what is left of the limit
     left = used if time_limit_s is None else min(used, float(time_limit_s) - used)
     second.parameters.max_time_in_seconds = max(left, 0.05)
-    st2 = second.Solve(c.m)
+    second.parameters.catch_sigint_signal = False
+    st2, _ = run_native(lambda: second.solve(c.m), second.stop_search)
     if st2 not in (cp.OPTIMAL, cp.FEASIBLE):
         return None
     return (np.array([second.BooleanValue(v) for v in x], bool),
@@ -196,8 +205,50 @@ def _fewest_lines(cp, c: _CpModel, model: CoupledModel, solver, problem: GatingP
             f"; fewest lines at that energy: {second.StatusName(st2)}")
 
 
+def _energy_bound_j(c: _CpModel, model: CoupledModel, nx: int, nz: int, na: int, bound_obj: float) -> float:
+    """CP-SAT's objective bound as a bound on the energy (J): obj = energy_units * W + lines with
+    0 <= lines <= lines_ub, so energy_units >= floor(bound / W); each rounded coefficient is off
+    by <= unit / 2; and never below the share bound."""
+    bound_units = math.floor((bound_obj - c.e0) / c.W)
+    slack = c.unit_j / 2.0 * (nx + nz + na + 1)            # +1: the rounded constant
+    return max(model.energy_before_j + bound_units * c.unit_j - slack, model.bound_j)
+
+
+def _gap_stop(cp, c: _CpModel, model: CoupledModel, nx: int, nz: int, na: int, rel_gap: float, t0: float):
+    """The stopping rule as CP-SAT callbacks: once the gap this formulation will report (the
+    energy against ``_energy_bound_j``) is at most ``rel_gap``, the search goes on for the line
+    tie-break only a little longer (``milp.LINE_TIEBREAK_S``, as HiGHS does): ``state["stop_at"]``,
+    the deadline ``solvers.run_native`` watches. An incumbent's energy is taken from its
+    objective, rounded up by the coefficients' rounding (its exact energy is re-scored at the
+    end, ``solution_from_idle``). Returns (solution callback, bound callback, state)."""
+    slack = c.unit_j / 2.0 * (nx + nz + na + 1)
+    state = {"energy": math.inf, "bound": -math.inf, "stop_at": None}
+
+    def check():
+        b = _energy_bound_j(c, model, nx, nz, na, state["bound"])
+        if (state["stop_at"] is None and math.isfinite(state["energy"])
+                and relative_gap(state["energy"], b) <= rel_gap):
+            now = time.perf_counter()
+            state["stop_at"] = now + max(LINE_TIEBREAK_S, LINE_TIEBREAK_SHARE * (now - t0))
+
+    class OnSolution(cp.CpSolverSolutionCallback):
+        def on_solution_callback(self):
+            units = math.floor((self.ObjectiveValue() - c.e0) / c.W)
+            state["energy"] = min(state["energy"], model.energy_before_j + units * c.unit_j + slack)
+            state["bound"] = max(state["bound"], self.BestObjectiveBound())
+            check()
+
+    def on_bound(bound):
+        state["bound"] = max(state["bound"], float(bound))
+        check()
+    return OnSolution(), on_bound, state
+
+
 def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
           hint: GatingSolution | None = None) -> GatingSolution:
+    """The coupled model solved by CP-SAT within ``time_limit_s`` for the whole call, stopped as
+    soon as the gap it reports is at most ``options.mip_rel_gap`` (``_gap_stop``), or on a stop
+    request (Ctrl-C, ``solvers.run_native``) with its best answer."""
     from ortools.sat.python import cp_model as cp
 
     t0 = time.perf_counter()
@@ -208,6 +259,9 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
                                   np.zeros(0, np.int64), solve_s=time.perf_counter() - t0,
                                   bound_j=problem.energy_before_j)
     nx, ny, nz, na = model.nx, len(model.angles), len(model.z_members), len(model.a_pairs)
+    if stop_requested():
+        return _start_answer(problem, start, model, Status.FEASIBLE, time.perf_counter() - t0,
+                             "not searched: stop requested", Stopped.INTERRUPTED)
     c = _cp_model(cp, model)
     hv = hint_vector(problem, model, start)
     if hv is not None:
@@ -217,31 +271,47 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     if time_limit_s is not None:
         # the limit is for the whole call: the dp start and building the model count against it
         solver.parameters.max_time_in_seconds = max(float(time_limit_s) - (time.perf_counter() - t0), 0.01)
-    st = solver.Solve(c.m)
+    on_solution, on_bound, rule = _gap_stop(cp, c, model, nx, nz, na, problem.options.mip_rel_gap, t0)
+    solver.best_bound_callback = on_bound
+    st, stopped = run_native(lambda: solver.solve(c.m, on_solution), solver.stop_search,
+                             lambda: rule["stop_at"])
+    by_rule = stopped == Stopped.TIME_LIMIT     # run_native's deadline is the rule's
+    if by_rule:
+        stopped = Stopped.NO
     mapped = _status_map().get(st, Status.FALLBACK)
-    solve_s = time.perf_counter() - t0
+    if not stopped and st != cp.OPTIMAL and not by_rule:
+        stopped = Stopped.TIME_LIMIT
     if st not in (cp.OPTIMAL, cp.FEASIBLE):
         status = Status.INFEASIBLE if mapped == Status.INFEASIBLE else Status.FALLBACK
-        return replace(start, formulation="cpsat", status=status, solve_s=solve_s,
-                       bound_j=model.bound_j, gap=relative_gap(start.energy_j, model.bound_j),
-                       message=f"CP-SAT {solver.StatusName(st)}; returned the dp/hint start")
+        return _start_answer(problem, start, model, status, time.perf_counter() - t0,
+                             f"CP-SAT {solver.StatusName(st)}", stopped)
     xs = np.array([solver.BooleanValue(v) for v in c.x], bool)
     ys = np.array([solver.BooleanValue(v) for v in c.y], bool)
     lines_note = ""
-    if st == cp.OPTIMAL and solver.ObjectiveValue() - solver.BestObjectiveBound() >= 1.0:
-        # relative_gap_limit stopped the search with room for a line less at the same energy (a
-        # gap of 1 unit is one line, see W): the second stage
+    if not stopped and solver.ObjectiveValue() - solver.BestObjectiveBound() >= 1.0:
+        # the gap rule stopped the search with room for a line less at the same energy (a gap
+        # of 1 unit is one line, see W): the second stage
         second = _fewest_lines(cp, c, model, solver, problem, nw, t0, time_limit_s)
         if second is not None:
             xs, ys, lines_note = second
     k = int(model.angles[int(np.argmax(ys))])
-    # bound: objective units -> J. obj = energy_units * W + lines with 0 <= lines <= lines_ub, so
-    # energy_units >= floor(bound / W); each rounded coefficient is off by <= unit / 2
-    bound_units = math.floor((solver.BestObjectiveBound() - c.e0) / c.W)
-    slack = c.unit_j / 2.0 * (nx + nz + na + 1)            # +1: the rounded constant
-    bound = max(model.energy_before_j + bound_units * c.unit_j - slack, model.bound_j)
-    return solution_from_idle(problem, "cpsat", mapped, k, model.x_idle[xs], solve_s=solve_s,
-                              bound_j=bound,
-                              message=f"CP-SAT {solver.StatusName(st)}; {nx} gap variables, {ny} angle(s), "
-                                      f"{len(model.pruned)} pruned by bound; energy unit {c.unit_j:.3g} J"
-                                      + lines_note)
+    bound = _energy_bound_j(c, model, nx, nz, na, solver.BestObjectiveBound())
+    sol = solution_from_idle(problem, "cpsat", Status.FEASIBLE, k, model.x_idle[xs],
+                             solve_s=time.perf_counter() - t0, bound_j=bound,
+                             message=f"CP-SAT {solver.StatusName(st)}; {nx} gap variables, {ny} angle(s), "
+                                     f"{len(model.pruned)} pruned by bound; energy unit {c.unit_j:.3g} J"
+                                     + lines_note)
+    proven = sol.gap <= problem.options.mip_rel_gap
+    return replace(sol, status=Status.OPTIMAL if proven else Status.FEASIBLE,
+                   stopped=Stopped.NO if proven else stopped)
+
+
+def _start_answer(problem: GatingProblem, start: GatingSolution, model: CoupledModel, status: Status,
+                  solve_s: float, why: str, stopped: Stopped) -> GatingSolution:
+    """The warm start as cpsat's answer, bounded by the share bound."""
+    gap = relative_gap(start.energy_j, model.bound_j)
+    if status == Status.FEASIBLE and gap <= problem.options.mip_rel_gap:
+        status = Status.OPTIMAL
+    return replace(start, formulation="cpsat", status=status, solve_s=solve_s, bound_j=model.bound_j,
+                   gap=gap, stopped=Stopped.NO if status == Status.OPTIMAL else stopped,
+                   message=f"{why}; returned the dp/hint start")

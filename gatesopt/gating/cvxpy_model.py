@@ -94,6 +94,8 @@ def to_cvxpy(problem: GatingProblem, *, incumbent_j: float = math.inf) -> CvxpyG
     if ny > 1:                                  # an interval of the chosen angle only
         pick = sp.csr_matrix((np.ones(nx), (np.arange(nx), model.x_angle)), shape=(nx, ny))
         cons.append(x <= pick @ y)
+    if model.c_members:                         # rule B of a firmware schedule: cliques
+        cons.append(_cliques(model.c_members, nx) @ x <= 1)
     for var, members in ((z, model.z_members), (w, model.w_members)):
         if var is not None:                     # a shared line/split is written if any member is off
             cons += [var >= 0, var <= 1, _members(members, nx) @ x <= _owners(members) @ var]
@@ -107,6 +109,15 @@ def to_cvxpy(problem: GatingProblem, *, incumbent_j: float = math.inf) -> CvxpyG
         objective = objective + model.a_energy_j @ a
     cons += _budgets(model, x, z, w)
     return CvxpyGating(problem, model, cp.Problem(cp.Minimize(objective), cons), x, y, z, w, a)
+
+
+def _cliques(cliques: list, nx: int):
+    """(number of cliques, nx) sparse: row c sums the x of clique c."""
+    import scipy.sparse as sp
+
+    lens = np.array([len(c) for c in cliques])
+    return sp.csr_matrix((np.ones(int(lens.sum())), (np.repeat(np.arange(len(cliques)), lens),
+                                                     np.concatenate(cliques))), shape=(len(cliques), nx))
 
 
 def _members(members: list, nx: int):

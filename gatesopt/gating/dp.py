@@ -17,17 +17,42 @@ from dataclasses import replace
 import numpy as np
 
 from ..solvers import Status, relative_gap
+from . import _kernels as _k
 from .coupled import build_model
-from .problem import GatingProblem
+from .problem import GatingProblem, chain_predecessors
 from .solution import GatingSolution, solution_from_idle
 
 _REL_TIE = 1e-12
 
 
+def spaced(problem: GatingProblem, candidates: np.ndarray) -> np.ndarray:
+    """The most valuable subset of the idle intervals in the mask ``candidates`` (each worth its
+    ``idle_net_j``) that keeps rule B of a firmware schedule (``problem.spacing_need_s``): per
+    angle and motor a chain, solved exactly by ``_kernels.chain_choice`` (formulations/gating.md
+    §7). Without rule B, ``candidates`` itself."""
+    o = problem.options
+    if o.schedule is None or o.schedule.min_spacing_s <= 0:
+        return candidates
+    out = np.zeros(len(candidates), bool)
+    key = problem.idle_angle.astype(np.int64) * 8 + problem.idle_motor
+    idx = np.flatnonzero(candidates)
+    if not len(idx):
+        return out
+    # idle arrays are sorted by angle, motor, time: each key's candidates are a run
+    starts = np.flatnonzero(np.concatenate(([True], key[idx][1:] != key[idx][:-1])))
+    for lo, hi in zip(starts, np.append(starts[1:], len(idx))):
+        chain = idx[lo:hi]
+        pick = _k.chain_choice(np.ascontiguousarray(problem.idle_net_j[chain], float),
+                               chain_predecessors(problem, chain))
+        out[chain[pick]] = True
+    return out
+
+
 def choose(problem: GatingProblem) -> tuple[int, np.ndarray]:
-    """(angle index, chosen idle-interval indices) of the separable optimum (budgets ignored)."""
+    """(angle index, chosen idle-interval indices) of the separable optimum (budgets ignored;
+    rule B of a firmware schedule kept, ``spaced``)."""
     net = problem.idle_net_j
-    on = net > 0.0
+    on = spaced(problem, net > 0.0)
     K = problem.n_angles
     gain = np.bincount(problem.idle_angle[on], weights=net[on], minlength=K)
     lines = np.bincount(problem.idle_angle[on], weights=problem.idle_lines[on], minlength=K)

@@ -52,8 +52,10 @@ from ..program import AXES, Kind, Program
 from .emit_line import (DECIMALS_INCH, DECIMALS_MM, DECIMALS_SPLIT_INCH, DECIMALS_SPLIT_MM, SNAP_MM,
                         SPLITTABLE, EmitError, EmitResult, LineRewriter, fmt_number, rotate_xy)
 from .emit_plain import render_plain
+from .emit_rotated import write_rotated
 from .placement import (SWITCH_EPS_S, Placed, PlacedArrays, Switch, place_switches, solution_arrays,
                         solution_placed, solution_snap)
+from .timeline import whole_steps
 
 from ..headers import ROTATE_HEADER  # noqa: F401  (re-exported: gating.emit.ROTATE_HEADER)
 _XY_WORD = re.compile(r"[XYxy]\s*[-+.0-9]")
@@ -111,7 +113,12 @@ def render(program: Program, placed, *, firmware="3dgates", rotation_deg: float 
                                            cx=fmt_number(float(center_mm[0]), 6),
                                            cy=fmt_number(float(center_mm[1]), 6)))
         bounds = header_bounds(program, float(rotation_deg), center_mm)
-    out, added, splits = _write_lines(program, em, before, cuts, rewrite, header, bounds)
+    written = None
+    if rotated and not before and not cuts:     # the rotation alone: a compiled pass
+        written = write_rotated(program, em, rewrite, header, bounds)
+    if written is None:
+        written = _write_lines(program, em, before, cuts, rewrite, header, bounds)
+    out, added, splits = written
     return EmitResult("".join(out), added, instr, splits, moved, em.max_snap, float(rotation_deg),
                       (float(center_mm[0]), float(center_mm[1])), _notes(em, moved))
 
@@ -124,9 +131,10 @@ def _place_lines(program: Program, fw, placed):
     cuts: dict[int, list] = {}
     moved = instr = 0
     inside: dict[int, list[Placed]] = {}     # unsplittable row -> instructions that fall inside it
+    whole = whole_steps(program.steps_motor(), program.kind, fw.split_moves)
     for pl in sorted(placed, key=lambda q: q.time_s):
         r = int(pl.row)
-        if r < n and pl.fraction is not None and 0.0 < pl.fraction < 1.0 and program.kind[r] not in SPLITTABLE:
+        if r < n and pl.fraction is not None and 0.0 < pl.fraction < 1.0 and whole[r]:
             inside.setdefault(r, []).append(pl)
             continue
         lines = fw.on_lines(pl.motors) if pl.on else fw.off_lines(pl.motors)
@@ -142,7 +150,8 @@ def _place_lines(program: Program, fw, placed):
         else:
             cuts.setdefault(r, []).append((float(pl.fraction), lines))
     for r, pls in inside.items():
-        # A dwell, heat-up wait or homing cannot be split. Per motor only the last instruction
+        # A dwell, heat-up wait or homing cannot be split, nor is an extrude-only move
+        # (``timeline.whole_steps``: Klipper plans each alone). Per motor only the last instruction
         # inside it matters: a final "on" goes before the step, a final "off" after it -- both on
         # the safe side of start-ahead / end-late (the motor is on for the whole step).
         last: dict[str, bool] = {}
@@ -245,7 +254,8 @@ def _notes(em: LineRewriter, moved: int) -> tuple[str, ...]:
         notes.append(f"{em.snap_refused} single-axis snaps refused (earlier snaps had drifted the axis "
                      f"by more than {SNAP_MM * 1e3:g} um): those moves step both motors")
     if moved:
-        notes.append(f"{moved} instruction(s) moved out of a dwell/wait/homing step to its safe side")
+        notes.append(f"{moved} instruction(s) moved out of a dwell/wait/homing step or an extrude-only move "
+                     "to its safe side")
     if em.placeholders:
         notes.append(f"{len(em.placeholders)} unexpanded placeholder axis word(s) (line "
                      f"{em.placeholders[0]}{', ...' if len(em.placeholders) > 1 else ''}) written as the "

@@ -103,6 +103,14 @@ class MotionLine:
     gword: str
     words: list            # [(LETTER, value_text)] in the original order, G word excluded
     suffix: str            # from the end of the code to the end of the line (comment), no ending
+    first: dict = field(default_factory=dict, repr=False)   # letter -> its first word's value text
+
+    def __post_init__(self):
+        first = {}
+        for k, v in self.words:
+            if k not in first:
+                first[k] = v
+        self.first = first
 
     @classmethod
     def parse(cls, text: str) -> "MotionLine":
@@ -123,10 +131,8 @@ class MotionLine:
     def value(self, letter: str) -> str | None:
         """The number text of the first word ``letter``; None if absent or a placeholder (which the
         firmware ignores: a rewrite writes the axis as a number where it must, see ``rewrite``)."""
-        for k, v in self.words:
-            if k == letter:
-                return None if v.startswith("{") else v
-        return None
+        v = self.first.get(letter)
+        return None if v is None or v.startswith("{") else v
 
     def placeholder(self, letter: str) -> bool:
         return any(k == letter and v.startswith("{") for k, v in self.words)
@@ -158,6 +164,17 @@ class LineRewriter:
         # machine does not know about the rotation, so a relative first move starts there)
         self.em_val = (np.asarray(program.start_mm[0, :2], float).copy() if program.n_steps
                        else np.array([math.nan, math.nan]))
+        # every row's start and end point (X Y Z E), XY in the output's frame, computed once for
+        # the whole file: ``_point`` at fractions 0 and 1 is a lookup (as rows (lo, hi] start and
+        # rows [lo, hi) end rotated, ``start_rot`` / ``end_rot``)
+        self._start = np.asarray(program.start_mm, float).copy()
+        self._end = np.asarray(program.end_mm, float).copy()
+        if self.rotated and program.n_steps:
+            rows = np.arange(program.n_steps)
+            srot = ((rows > lo) & (rows <= hi)) | ((rows == lo) & (lo == 0))
+            erot = (rows >= lo) & (rows < hi)
+            self._start[srot, :2] = rotate_xy(self._start[srot, :2], self.deg, self.center)
+            self._end[erot, :2] = rotate_xy(self._end[erot, :2], self.deg, self.center)
 
     # -- rotation of one row's end points (rows [lo, hi) end rotated; a row starts where the
     # previous one ended, so rows (lo, hi] start rotated) --------------------------------------------
@@ -172,6 +189,10 @@ class LineRewriter:
 
     def _point(self, r: int, f: float) -> np.ndarray:
         """Machine X Y Z E at fraction f of step r, XY in the output's (rotated) frame."""
+        if f == 0.0:
+            return self._start[r].copy()
+        if f == 1.0:
+            return self._end[r].copy()
         p = self.p
         a = p.start_mm[r].astype(float).copy()
         b = p.end_mm[r].astype(float).copy()

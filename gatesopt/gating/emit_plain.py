@@ -8,8 +8,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..program import AXES, Kind, Program
-from .emit_line import SPLITTABLE, EmitResult, LineRewriter
+from .emit_line import EmitResult, LineRewriter
 from .placement import PlacedArrays
+from .timeline import whole_steps
 
 
 def instruction_table(fw):
@@ -45,7 +46,8 @@ def render_plain(program: Program, fw, placed: PlacedArrays, rotation_deg: float
     r0 = np.minimum(row, n - 1)
     line_r = program.line[r0]
     strictly_inside = split & (frac > 0.0) & (frac < 1.0)
-    unsplittable = in_prog & strictly_inside & ~np.isin(program.kind[r0], SPLITTABLE)
+    whole = whole_steps(program.steps_motor(), program.kind, fw.split_moves)
+    unsplittable = in_prog & strictly_inside & whole[r0]
     live = ~unsplittable & (code_lines[code] > 0)
     cut = live & in_prog & split & ~(frac <= 0.0) & ~(frac >= 1.0)
     put = live & ~cut
@@ -57,7 +59,8 @@ def render_plain(program: Program, fw, placed: PlacedArrays, rotation_deg: float
     ins_slot, ins_rank, ins_code = [slot[put]], [np.ones(int(put.sum()), np.int64)], [code[put]]
     moved = int(unsplittable.sum())
     if moved:
-        # A dwell, heat-up wait or homing cannot be split. Per motor only the last instruction
+        # A dwell, heat-up wait or homing cannot be split, nor an extrude-only move
+        # (``timeline.whole_steps``). Per motor only the last instruction
         # inside it matters: a final "on" goes before the step, a final "off" after it -- both on
         # the safe side of start-ahead / end-late (the motor is on for the whole step).
         idx = np.flatnonzero(unsplittable)

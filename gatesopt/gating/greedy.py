@@ -54,11 +54,32 @@ def choose_idle_intervals(problem: GatingProblem, k: int) -> np.ndarray:
     return g[edge | layer_change | apart]
 
 
+def keep_spacing(problem: GatingProblem, chosen: np.ndarray) -> np.ndarray:
+    """``chosen`` (sorted) without the intervals that would break rule B of a firmware schedule:
+    per motor, in time order, an interval stays only at the spacing from the last one kept (the
+    paper's algorithm knows no such rule; this is the least change that makes its answer one the
+    firmware carries out)."""
+    o = problem.options
+    if o.schedule is None or o.schedule.min_spacing_s <= 0 or not len(chosen):
+        return chosen
+    keep = np.ones(len(chosen), bool)
+    for m in np.unique(problem.idle_motor[chosen]):
+        need = problem.spacing_need_s(int(m))
+        last_on = -np.inf
+        for i in np.flatnonzero(problem.idle_motor[chosen] == m):
+            g = chosen[i]
+            if problem.idle_lb_off_s[g] - last_on >= need:
+                last_on = problem.idle_lb_on_s[g]
+            else:
+                keep[i] = False
+    return chosen[keep]
+
+
 def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
           hint: GatingSolution | None = None) -> GatingSolution:
     t0 = time.perf_counter()
     k = choose_angle(problem)
-    chosen = choose_idle_intervals(problem, k)
+    chosen = keep_spacing(problem, choose_idle_intervals(problem, k))
     sol = solution_from_idle(problem, "greedy", Status.FEASIBLE, k, chosen, solve_s=time.perf_counter() - t0)
     over = []
     if sol.added_time_s > problem.max_added_time_s + 1e-9:

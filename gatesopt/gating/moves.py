@@ -66,4 +66,6 @@ def from_moves(start_mm, end_mm, duration_s, options: GatingOptions | None = Non
                              np.atleast_2d(np.asarray(end_mm, float)), duration_s, extruding, source, layer)
     if bed_size_mm is not None:
         program = program.replace(header={"bed_size_mm": tuple(bed_size_mm)})
-    return build(program, options, coeffs=coeffs, stall_coeffs=stall_coeffs, rotate_rows=(0, program.n_steps))
+    # the caller's own times, whatever the options' time model
+    return build(program, options, duration_s=program.duration_s, coeffs=coeffs, stall_coeffs=stall_coeffs,
+                 rotate_rows=(0, program.n_steps))

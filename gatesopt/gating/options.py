@@ -2,8 +2,9 @@
 
 3DGates (Chen et al., ASPLOS'17) Section 4.2 gives the defaults: Start-Ahead 1.8 ms (NEMA 17
 start-up delay) and End-Late 1.0 ms (empirical stop delay). Firmware numbers (stall per motor line,
-whether re-enable needs a line, whether motors share a line) are plain numbers here;
-``GatingOptions.for_firmware(name)`` fills them from ``gatesopt.firmware``'s presets.
+whether re-enable needs a line, whether motors share a line, a firmware that times its own
+switches: ``schedule``, the time model) are plain values here; ``GatingOptions.for_firmware(name)``
+fills them from the dialect in ``gatesopt.firmware`` (and the printer's Klipper config, if given).
 """
 from __future__ import annotations
 
@@ -13,7 +14,11 @@ from dataclasses import dataclass
 
 from .. import firmware as fw_mod
 from ..errors import GatesoptError
+from ..firmware import Schedule
+from ..printer_config import PrinterConfig
 from ..program import AXES
+
+TIME_MODELS = ("paper", "planner")
 
 
 class GatingOptionsError(GatesoptError, ValueError):
@@ -51,6 +56,8 @@ class GatingOptions:
     stall_on_s: float = 0.0             # stall per on line
     on_line: bool = True                # re-enable needs a line (False: automatic at the first step)
     merge_lines: bool = True            # instructions of several motors at one moment share a line
+    split_moves: str = "all"            # moves a line may split: "all" | "kinematic" (not extrude-only)
+                                        # | "none"; else it goes before / after the whole move
     max_added_time_pct: float | None = None    # budget on stall time, % of the print time
     max_added_lines_pct: float | None = None   # budget on added lines, % of the file's lines
     num_workers: int = 2                # CP-SAT workers
@@ -58,6 +65,11 @@ class GatingOptions:
     mip_rel_gap: float = 1e-6           # MILP/CP-SAT relative gap at which to stop
     neighbour_mm: float = 0.5           # greedy grouping threshold (3DGates Algorithm 1 neigh_t)
     shared_enable: tuple = ()           # groups of motors wired to one enable pin, e.g. (("X", "Y"),)
+    schedule: Schedule | None = None    # the firmware times its own switches (``firmware.Schedule``):
+                                        # the off line goes right after the motors' last step
+    time_model: str = "paper"           # "paper": T = L / F (3DGates Eq. 2); "planner": gatesopt.planner
+    planner_family: str | None = None   # the planner's rules ("klipper"; None: the file's flavor)
+    printer: PrinterConfig | None = None  # the printer's Klipper config: planner limits, shaper
 
     def __post_init__(self):
         motors = tuple(str(m).upper() for m in self.motors)
@@ -102,6 +114,28 @@ class GatingOptions:
             seen |= set(g)
             groups.append(g)
         object.__setattr__(self, "shared_enable", tuple(groups))
+        if self.split_moves not in fw_mod.SPLIT_MOVES:
+            raise GatingOptionsError(f"split_moves must be one of {', '.join(fw_mod.SPLIT_MOVES)}, "
+                                     f"not {self.split_moves!r}")
+        if self.time_model not in TIME_MODELS:
+            raise GatingOptionsError(f"time_model must be one of {', '.join(TIME_MODELS)}, not {self.time_model!r}")
+        if self.schedule is not None:
+            if self.on_line or not self.merge_lines or self.stall_off_s or self.stall_on_s or self.shared_enable:
+                raise GatingOptionsError("a firmware that times its own switches (schedule) writes one off "
+                                         "line per moment, no on line, no stall, one pin per motor")
+
+    def off_margin_s(self, m: int) -> float:
+        """Seconds from the end of motor ``m``'s last step to its off: end-late, plus the
+        firmware's own delay when it times its switches (``schedule``)."""
+        extra = self.schedule.off_delay_s[m] if self.schedule is not None else 0.0
+        return self.end_late_s + extra
+
+    def on_margin_s(self, m: int) -> float:
+        """Seconds from motor ``m``'s on to its next step: start-ahead (0 when the firmware
+        re-enables at the step itself, no on line), plus the firmware's own lead (``schedule``)."""
+        if self.schedule is not None:
+            return self.start_ahead_s + self.schedule.on_lead_s[m]
+        return self.start_ahead_s if self.on_line else 0.0
 
     @property
     def motor_index(self) -> tuple[int, ...]:
@@ -126,12 +160,37 @@ class GatingOptions:
         return dataclasses.replace(self, **changes)
 
     @classmethod
-    def for_firmware(cls, firmware: str = "3dgates", **changes) -> "GatingOptions":
-        """Options with the stall/line numbers of a ``gatesopt.firmware`` preset."""
-        c = fw_mod.gating_costs(firmware)
+    def for_firmware(cls, firmware: str = "3dgates", *, printer: PrinterConfig | None = None,
+                     **changes) -> "GatingOptions":
+        """Options with the numbers of a ``gatesopt.firmware`` dialect: stalls and lines, its own
+        timing of the switches (``Firmware.schedule``), its time model, the moves its lines may
+        split (``split_moves``) and its ``start_lead_s`` (steps before a move's nominal start, added
+        to the start-ahead). ``printer``: the
+        printer's Klipper config (``gatesopt.printer_config``): the planner's limits, the input
+        shaper's step window, the options a firmware module reads there (``gating_defaults``: a
+        value in ``changes`` that disagrees with it is an error; None in ``changes``: not given)."""
+        fw = fw_mod.get(firmware)
+        c = fw_mod.gating_costs(fw)
         kw = dict(firmware=c.firmware, stall_off_s=c.stall_off_s, stall_on_s=c.stall_on_s,
-                  on_line=c.on_lines_per_gate > 0, merge_lines=c.off_lines_merged)
-        kw.update(changes)
+                  on_line=c.on_lines_per_gate > 0, merge_lines=c.off_lines_merged,
+                  time_model=fw.time_model, planner_family=fw.planner.family if fw.planner else None,
+                  printer=printer, split_moves=fw.split_moves)
+        defaults = dict(fw.gating_defaults(printer))
+        gateable = defaults.pop("gateable", None)
+        for k, v in defaults.items():
+            given = changes.get(k)
+            if given is not None and abs(float(given) - float(v)) > 1e-12:
+                raise fw_mod.FirmwareError(f"{k} = {given:g} disagrees with the printer config "
+                                           f"{printer.source} ({v:g}), which the firmware uses")
+        kw.update(defaults)
+        kw.update({k: v for k, v in changes.items() if v is not None})
+        kw["start_ahead_s"] = kw.get("start_ahead_s", cls.start_ahead_s) + fw.start_lead_s
         opts = cls(**kw)
-        fw_mod.get(firmware).check_motors(opts.motors)
+        fw.check_motors(opts.motors)
+        if gateable is not None and not set(opts.motors) <= set(gateable):
+            raise fw_mod.FirmwareError(f"{printer.source}: [gatesopt_gating] steppers lets the module gate "
+                                       f"{','.join(gateable)} only, not {','.join(opts.motors)}")
+        schedule = fw.schedule(printer, start_ahead_s=opts.start_ahead_s, end_late_s=opts.end_late_s)
+        if schedule is not None:
+            opts = opts.replace(schedule=schedule)
         return opts

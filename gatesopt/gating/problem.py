@@ -31,10 +31,13 @@ import numpy as np
 from .. import firmware as fw_mod
 from ..energy import PowerCoefficients, load_profile, step_energy_j, step_power_w
 from ..errors import GatesoptError
-from ..program import Kind, Program, X, Y
+from ..limits import machine_limits
+from ..planner import min_move_time_s, plan
+from ..program import AXES, Kind, Program, X, Y
 from . import _kernels as _k
 from .options import GatingOptions
 from .rotation import greedy_angle, rotated_rows, rotation_candidates, rotation_center, steps_at
+from .timeline import whole_steps
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,6 +102,11 @@ class GatingProblem:
     # a fixed cost of the print, whatever gating does; one stall piece each in ``Pieces``
     own_stall_row: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
     own_stall_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    # --- a firmware that times its own switches (``options.schedule``, formulations/gating.md §9) --
+    # the lower-bound clock (sum of ``planner.min_move_time_s``) at each idle interval's off line
+    # (after its motor's last step) and at the start of the step that ends it; 0 without a schedule
+    idle_lb_off_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    idle_lb_on_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     @property
     def n_steps(self) -> int:
@@ -131,10 +139,20 @@ class GatingProblem:
         lo, hi = np.searchsorted(self.idle_angle, [angle_index, angle_index + 1])
         return np.arange(lo, hi)
 
+    def spacing_need_s(self, motor: int) -> float:
+        """Rule B of a firmware that times its switches (``options.schedule``): two off intervals
+        i before j of ``motor`` may both be off only if ``idle_lb_off_s[j] - idle_lb_on_s[i]`` is at
+        least this; -inf without such a rule."""
+        o = self.options
+        if o.schedule is None or o.schedule.min_spacing_s <= 0:
+            return -math.inf
+        return o.schedule.min_spacing_s - o.on_margin_s(motor) - o.off_margin_s(motor) + RULE_EPS_S
+
     @property
     def separable(self) -> bool:
-        """True when idle intervals are independent: no budgets, no shared stall, additive XY
-        power."""
+        """True when the exact answer is per motor: no budgets, no shared stall, additive XY power
+        (the idle intervals of a motor are then independent, or a chain under rule B, which dp
+        solves exactly too)."""
         o = self.options
         shared_stall = o.merge_lines and (o.stall_off_s > 0 or o.stall_on_s > 0) and len(o.groups) > 1
         return not o.has_budget and not shared_stall and not self.xy_coupled
@@ -183,8 +201,29 @@ def readonly(a) -> np.ndarray:
     return a
 
 
+def chain_predecessors(problem: GatingProblem, chain: np.ndarray) -> np.ndarray:
+    """Rule B over ``chain`` (idle intervals of one angle and motor, in time order): p[j] = the
+    number of chain members before j that may be off together with j (they are chain[:p[j]]: the
+    spacing only grows going back). ``p[j] == j`` for every j without rule B."""
+    chain = np.asarray(chain, np.int64)
+    k = len(chain)
+    if k == 0:
+        return np.zeros(0, np.int64)
+    need = problem.spacing_need_s(int(problem.idle_motor[chain[0]]))
+    if not np.isfinite(need):
+        return np.arange(k, dtype=np.int64)
+    on = problem.idle_lb_on_s[chain]
+    p = np.searchsorted(on, problem.idle_lb_off_s[chain] - need, side="right")
+    return np.minimum(p, np.arange(k)).astype(np.int64)
+
+
 # ------------------------------------------------------------------------------------------------
 # Builders
+#: rules A and B of a firmware schedule are checked with this much to spare (s): the firmware's own
+#: float sums of the same lower bounds may round the other way
+RULE_EPS_S = 1e-9
+
+
 @dataclass(frozen=True, eq=False)
 class _Rates:
     """What switching motors off saves per step (W), from the one energy model."""
@@ -244,31 +283,68 @@ def _stall_program(program: Program) -> Program:
                            arc_center_mm=np.full((n, 2), np.nan))
 
 
-def _idle_table(o: GatingOptions, start_s, dur, group_rate_w: dict, stall_w, steps_list, angles_idx):
+@dataclass(frozen=True, eq=False)
+class _Timing:
+    """What the idle intervals are measured with: the timeline and, for a firmware that times its
+    own switches (``options.schedule``), its lower-bound clock and where it switches by itself."""
+
+    start_s: np.ndarray             # (n+1,) the problem's timeline
+    dur: np.ndarray                 # (n,)
+    stall_w: np.ndarray             # (n,) power of a stall at each step
+    lb_cum_s: np.ndarray | None     # (n+1,) cumulative ``planner.min_move_time_s``; None: no schedule
+    barrier_cum: np.ndarray | None  # (n+1, 4) cumulative count of steps where the firmware switches a
+                                    # motor itself (homing, the file's own motor lines it carries out)
+    whole: np.ndarray               # (n,) bool: steps no line may split (``timeline.whole_steps``;
+                                    # none under a schedule: its lines go between steps)
+
+
+def _schedule_keep(o: GatingOptions, t: _Timing, m: int, prev, nxt) -> np.ndarray:
+    """Idle intervals of motor ``m`` a firmware schedule may gate: one after a step of ``m`` (the
+    line goes after it), rule A on the lower-bound clock, nothing between line and next step where
+    the firmware switches ``m`` itself (formulations/gating.md §9)."""
+    n = len(t.dur)
+    after = np.minimum(prev + 1, n)
+    gap = t.lb_cum_s[np.minimum(nxt, n)] - t.lb_cum_s[after]
+    need = o.off_margin_s(m) + o.on_margin_s(m) + o.schedule.min_off_s + RULE_EPS_S
+    clear = t.barrier_cum[np.minimum(nxt, n), m] == t.barrier_cum[after, m]
+    return (prev >= 0) & (gap >= need) & clear
+
+
+def _idle_table(o: GatingOptions, t: _Timing, group_rate_w: dict, steps_list, angles_idx):
     """Idle-interval table for all (angle, enable group) pairs. ``steps_list[k]``: (n,4) step mask
     of angle ``angles_idx[k]``.
 
     A group of motors on one enable pin is one interval owner (its first motor): it must be on
     whenever any member steps, and saves what all members draw (``group_rate_w``)."""
-    sa_eff = o.start_ahead_s if o.on_line else 0.0     # automatic re-enable happens at the step
+    start_s, dur, n = t.start_s, t.dur, len(t.dur)
     rates = {g[0]: np.ascontiguousarray(group_rate_w[g[0]]) for g in o.groups}
     cums = {m: np.concatenate(([0.0], np.cumsum(r * dur))) for m, r in rates.items()}
-    stall_w = np.ascontiguousarray(stall_w)
+    stall_w = np.ascontiguousarray(t.stall_w)
+    names = ("idle_start_s", "idle_end_s", "idle_off_row", "idle_on_row", "idle_prev_row",
+             "idle_next_row", "idle_saving_j", "idle_lines", "idle_stall_s", "idle_stall_j")
     parts = []
     for k, steps in zip(angles_idx, steps_list):
         for grp in o.groups:
             m = grp[0]
             st = steps[:, list(grp)].any(axis=1) if len(grp) > 1 else steps[:, m]
             per_event = 1 if o.merge_lines else len(grp)     # one line per motor unless merged
-            out = _k.idle_intervals(start_s, np.ascontiguousarray(st), rates[m], cums[m], stall_w,
-                                    float(sa_eff), float(o.end_late_s), bool(o.on_line),
-                                    float(o.stall_off_s), float(o.stall_on_s), per_event)
+            out = dict(zip(names, _k.idle_intervals(
+                start_s, np.ascontiguousarray(st), rates[m], cums[m], stall_w, float(o.on_margin_s(m)),
+                float(o.off_margin_s(m)), bool(o.on_line), float(o.stall_off_s), float(o.stall_on_s),
+                per_event, o.schedule is None, t.whole)))
+            prev, nxt = out["idle_prev_row"], out["idle_next_row"]
+            if o.schedule is not None:
+                keep = _schedule_keep(o, t, m, prev, nxt)
+                out = {nm: v[keep] for nm, v in out.items()}
+                prev, nxt = out["idle_prev_row"], out["idle_next_row"]
+                out["idle_lb_off_s"] = t.lb_cum_s[np.minimum(prev + 1, n)]
+                out["idle_lb_on_s"] = t.lb_cum_s[np.minimum(nxt, n)]
+            else:
+                out["idle_lb_off_s"] = out["idle_lb_on_s"] = np.zeros(len(prev))
             parts.append((k, m, out))
-    names = ("idle_start_s", "idle_end_s", "idle_off_row", "idle_on_row", "idle_prev_row",
-             "idle_next_row", "idle_saving_j", "idle_lines", "idle_stall_s", "idle_stall_j")
-    res = {nm: np.concatenate([p[2][j] for p in parts]) for j, nm in enumerate(names)}
-    res["idle_angle"] = np.concatenate([np.full(len(p[2][0]), p[0], np.int32) for p in parts])
-    res["idle_motor"] = np.concatenate([np.full(len(p[2][0]), p[1], np.int8) for p in parts])
+    res = {nm: np.concatenate([p[2][nm] for p in parts]) for nm in parts[0][2]}
+    res["idle_angle"] = np.concatenate([np.full(len(p[2]["idle_start_s"]), p[0], np.int32) for p in parts])
+    res["idle_motor"] = np.concatenate([np.full(len(p[2]["idle_start_s"]), p[1], np.int8) for p in parts])
     return res
 
 
@@ -304,8 +380,8 @@ def _angle_table(program: Program, o: GatingOptions, angles, lo, hi, center, dur
                        np.array(ub))
 
 
-def _built_idle_intervals(o: GatingOptions, angles_deg, table: _AngleTable, start_s, dur,
-                          rates: _Rates, stall_w) -> tuple[dict, np.ndarray]:
+def _built_idle_intervals(o: GatingOptions, angles_deg, table: _AngleTable, t: _Timing,
+                          rates: _Rates) -> tuple[dict, np.ndarray]:
     """(idle-interval arrays of the angles built, (K,) bool built), angles pruned by their bound.
 
     Upper bound on what gating can save at each angle: every motor off whenever it does not step
@@ -322,13 +398,16 @@ def _built_idle_intervals(o: GatingOptions, angles_deg, table: _AngleTable, star
     order = [g_angle] + [int(k) for k in np.argsort(-ub, kind="stable") if k != g_angle]
     built, best = [], -math.inf
     parts = []
-    tol = 1e-9 * max(abs(float(rates.p0_w @ dur)), 1.0)
+    tol = 1e-9 * max(abs(float(rates.p0_w @ t.dur)), 1.0)
     for k in order:
         if prunable and k != g_angle and ub[k] < best - tol:
             continue
-        gk = _idle_table(o, start_s, dur, rates.group_rate_w, stall_w, [table.steps[k]], [k])
+        gk = _idle_table(o, t, rates.group_rate_w, [table.steps[k]], [k])
         net = gk["idle_saving_j"] - gk["idle_stall_j"]
-        best = max(best, float(net[net > 0].sum()))
+        # (under a schedule's rule B the positive intervals may not all be off together: the
+        # bound of a built angle is then not reached, and no angle is pruned against it)
+        if o.schedule is None or o.schedule.min_spacing_s <= 0:
+            best = max(best, float(net[net > 0].sum()))
         built.append(k)
         parts.append(gk)
     ordk = np.argsort(built, kind="stable")
@@ -338,12 +417,44 @@ def _built_idle_intervals(o: GatingOptions, angles_deg, table: _AngleTable, star
     return idle, has_idle
 
 
+def time_model_durations(program: Program, o: GatingOptions) -> np.ndarray:
+    """Step durations under the options' time model (``build``'s default timeline)."""
+    if o.time_model == "planner":
+        limits = machine_limits(program, family=o.planner_family, printer=o.printer)
+        return plan(program, limits).duration_s
+    return program.duration_s
+
+
+def _timing(program: Program, o: GatingOptions, start_s, dur, stall_w) -> _Timing:
+    """The timeline, and a schedule's lower-bound clock and the steps where the firmware switches
+    motors itself: homing, and the file's own motor lines it carries out (``Firmware.reads``)."""
+    if o.schedule is None:
+        # steps no line may split (not moves; moves the dialect does not split: ``split_moves``)
+        whole = np.ascontiguousarray(whole_steps(program.steps_motor(), program.kind, o.split_moves))
+        return _Timing(start_s, dur, stall_w, None, None, whole)
+    lb = min_move_time_s(program, o.schedule.arc_segment_mm)
+    barrier = np.zeros((program.n_steps, 4), bool)
+    barrier[program.kind == Kind.HOME] = True
+    fw = fw_mod.get(o.firmware)
+    rows = np.flatnonzero(program.kind == Kind.MOTOR)
+    for r in rows.tolist():
+        parsed = fw.reads(program.line_text(int(program.line[r])))
+        if parsed is not None:
+            barrier[r, [AXES.index(m) for m in parsed[1]]] = True
+    cum = np.zeros((program.n_steps + 1, 4), np.int64)
+    cum[1:] = np.cumsum(barrier, axis=0)
+    return _Timing(start_s, dur, stall_w, np.concatenate(([0.0], np.cumsum(lb))), cum,
+                   np.zeros(program.n_steps, bool))
+
+
 def build(program: Program, options: GatingOptions | None = None, *, duration_s=None,
           coeffs: PowerCoefficients | None = None, stall_coeffs: PowerCoefficients | None = None,
           rotate_rows: tuple[int, int] | None = None) -> GatingProblem:
     """The gating problem of ``program`` (steps, coefficients, rotation candidates, idle intervals).
 
-    ``duration_s`` overrides the paper's time model (e.g. an acceleration-aware planner's times).
+    ``duration_s`` overrides the options' time model (``options.time_model``: "paper", T = L / F;
+    "planner": ``planner.plan`` with the printer's limits, ``limits.machine_limits`` with
+    ``options.printer`` and ``options.planner_family``).
     Rows [first extrusion, last extrusion] are the ones a rotation moves (start and end G-code
     such as purge lines and parking stay where the slicer put them); ``rotate_rows`` overrides.
     """
@@ -351,7 +462,9 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
     n = program.n_steps
     if n == 0:
         raise GatesoptError(f"{program.source}: no timed steps: nothing to gate")
-    dur = np.asarray(program.duration_s if duration_s is None else duration_s, float)
+    if duration_s is None:
+        duration_s = time_model_durations(program, o)
+    dur = np.asarray(duration_s, float)
     if dur.shape != (n,) or not np.all(np.isfinite(dur)) or np.any(dur < 0):
         raise GatesoptError(f"{program.source}: duration_s must be {n} finite non-negative numbers")
     prof = load_profile(o.profile)
@@ -377,7 +490,8 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
     angles, notes = list(plan.angles_deg), list(plan.notes)
     angles_arr = np.array(angles)
     table = _angle_table(program, o, angles, lo, hi, center, dur, rate, steps0, arc)
-    idle, has_idle = _built_idle_intervals(o, angles_arr, table, start_s, dur, rates, stall_w)
+    timing = _timing(program, o, start_s, dur, stall_w)
+    idle, has_idle = _built_idle_intervals(o, angles_arr, table, timing, rates)
     energy_before = float(step_energy_j(dur, coeffs, enable0).sum()
                           + step_energy_j(own_s, stall_coeffs.take(own_row), enable0[own_row]).sum())
     ro = readonly

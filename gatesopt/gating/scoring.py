@@ -14,7 +14,7 @@ import numpy as np
 from ..energy import step_energy_j
 from ..program import AXES
 from .problem import GatingProblem, steps_motor_at
-from .timeline import TIME_EPS_S, is_split, row_at
+from .timeline import TIME_EPS_S, is_split, nearest_boundary, row_at
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,6 +107,19 @@ def normalise(problem, off_motor, off_start_s, off_end_s):
     return m[order], a[order], b[order]
 
 
+def line_moments(problem, motor, t_off) -> tuple[np.ndarray, np.ndarray]:
+    """(moment, row) of the off lines of intervals of ``motor`` that go off at ``t_off``: the off
+    moment itself, in the step that holds it; with a firmware that times its own switches
+    (``options.schedule``) the step boundary ``off_margin_s`` before it, where the line goes
+    right after the motor's last step (the line stands before that row)."""
+    o = problem.options
+    if o.schedule is None:
+        return t_off, row_at(problem.start_s, t_off, "off")
+    margin = np.array([o.off_margin_s(i) for i in range(4)])
+    r = nearest_boundary(problem.start_s, np.asarray(t_off, float) - margin[np.asarray(motor, np.int64)])
+    return problem.start_s[r], r
+
+
 def instructions(problem, off_motor, off_start_s, off_end_s) -> Instructions:
     """The instruction lines of off intervals, in time order (one per moment and direction when
     ``merge_lines``), each placed in the step that holds it."""
@@ -114,7 +127,7 @@ def instructions(problem, off_motor, off_start_s, off_end_s) -> Instructions:
     n = problem.n_steps
     T = problem.total_s
     m, a, b = normalise(problem, off_motor, off_start_s, off_end_s)
-    t_off, r_off = a, row_at(problem.start_s, a, "off")
+    t_off, r_off = line_moments(problem, m, a)
     has_on = (b < T - TIME_EPS_S) & o.on_line
     t_on, r_on = b[has_on], row_at(problem.start_s, b[has_on], "on")
     t = np.concatenate((t_off, t_on))
@@ -199,12 +212,13 @@ def score(problem: GatingProblem, off_motor, off_start_s, off_end_s) -> Score:
 
 def check_feasible(problem: GatingProblem, angle_index: int, off_motor, off_start_s, off_end_s) -> list[str]:
     """Violations of the gating invariants (empty list = feasible): every off interval of motor m
-    keeps start_ahead_s before and end_late_s after every step of m (start-ahead 0 when re-enable is
-    automatic at the first step), and intervals of one motor do not overlap."""
+    keeps its on margin before and its off margin after every step of m (``options.on_margin_s``:
+    start-ahead, 0 when re-enable is automatic at the first step, plus a firmware's own lead;
+    ``off_margin_s``), and intervals of one motor do not overlap. Under a firmware schedule, rule
+    B between consecutive intervals of a motor too (rule A holds for every idle interval built)."""
     o = problem.options
     steps, _ = steps_motor_at(problem, angle_index)
     m, a, b = normalise(problem, off_motor, off_start_s, off_end_s)
-    sa = o.start_ahead_s if o.on_line else 0.0
     bad = []
     tol = 1e-9
     for mm in np.unique(m):
@@ -212,9 +226,10 @@ def check_feasible(problem: GatingProblem, angle_index: int, off_motor, off_star
         aa, bb = a[sel], b[sel]
         if np.any(aa[1:] < bb[:-1] - tol):
             bad.append(f"motor {AXES[mm]}: overlapping off intervals")
+        bad += _spacing_violations(problem, angle_index, int(mm), aa, bb)
         rows = np.flatnonzero(steps[:, mm])
-        lo = problem.start_s[rows] - sa
-        hi = problem.start_s[rows + 1] + o.end_late_s
+        lo = problem.start_s[rows] - o.on_margin_s(int(mm))
+        hi = problem.start_s[rows + 1] + o.off_margin_s(int(mm))
         # any required interval (lo, hi) intersecting an off interval (aa, bb)?
         j = np.searchsorted(aa, hi - tol, "left") - 1
         hit = (j >= 0) & (bb[np.maximum(j, 0)] > lo + tol)
@@ -222,3 +237,21 @@ def check_feasible(problem: GatingProblem, angle_index: int, off_motor, off_star
             r = rows[np.argmax(hit)]
             bad.append(f"motor {AXES[mm]}: off within start-ahead/end-late of step {r}")
     return bad
+
+
+def _spacing_violations(problem: GatingProblem, angle_index: int, motor: int, a, b) -> list[str]:
+    """Rule B of a firmware schedule between consecutive off intervals (a, b) of ``motor``, each
+    one of the problem's idle intervals."""
+    need = problem.spacing_need_s(motor)
+    if not np.isfinite(need) or len(a) < 2:
+        return []
+    g = np.flatnonzero((problem.idle_angle == angle_index) & (problem.idle_motor == motor))
+    j = np.searchsorted(problem.idle_start_s[g], a)
+    if np.any(j >= len(g)) or np.any(np.abs(problem.idle_start_s[g[np.minimum(j, len(g) - 1)]] - a) > 1e-9):
+        return [f"motor {AXES[motor]}: an off interval that is no idle interval under the firmware's schedule"]
+    g = g[j]
+    gap = problem.idle_lb_off_s[g[1:]] - problem.idle_lb_on_s[g[:-1]]
+    if np.any(gap < need - 1e-12):
+        return [f"motor {AXES[motor]}: rule B: an off within {problem.options.schedule.min_spacing_s:g} s "
+                f"of the previous on"]
+    return []

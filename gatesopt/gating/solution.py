@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..program import AXES
-from ..solvers import Status, relative_gap
+from ..solvers import Status, Stopped, relative_gap
 from . import scoring
 from .problem import GatingProblem, readonly, steps_motor_at
 from .scoring import Instructions, Pieces
@@ -37,6 +37,7 @@ class GatingSolution:
     gap: float = math.nan           # solvers.relative_gap(energy_j, bound_j): a fraction
     solve_s: float = 0.0
     message: str = ""
+    stopped: Stopped = Stopped.NO   # why the search ended before its gap (time limit, Ctrl-C)
 
     @property
     def rotation_deg(self) -> float:
@@ -96,7 +97,7 @@ class GatingSolution:
             "max_snap_mm": self.max_snap_mm, "off_time_s": self.off_time_s(),
             "bound": None if math.isnan(self.bound_j) else self.bound_j,
             "gap": None if math.isnan(self.gap) else self.gap, "solve_s": self.solve_s,
-            "message": self.message,
+            "stopped": str(self.stopped), "message": self.message,
         }
 
     def __repr__(self) -> str:
@@ -108,7 +109,7 @@ class GatingSolution:
 
 def make_solution(problem: GatingProblem, formulation: str, status: str, angle_index: int,
                   off_motor, off_start_s, off_end_s, *, bound_j=math.nan, solve_s=0.0,
-                  message: str = "") -> GatingSolution:
+                  message: str = "", stopped: Stopped = Stopped.NO) -> GatingSolution:
     """Score off intervals with the one energy model and wrap them (every formulation ends here)."""
     try:
         status = Status(status)
@@ -122,7 +123,7 @@ def make_solution(problem: GatingProblem, formulation: str, status: str, angle_i
                           energy_before_j=problem.energy_before_j, lines_added=sc.lines_added,
                           added_time_s=sc.added_time_s, bound_j=float(bound_j),
                           gap=relative_gap(sc.energy_j, float(bound_j)),
-                          solve_s=float(solve_s), message=message)
+                          solve_s=float(solve_s), message=message, stopped=Stopped(stopped))
 
 
 def solution_from_idle(problem: GatingProblem, formulation: str, status: str, angle_index: int,

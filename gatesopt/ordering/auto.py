@@ -26,7 +26,7 @@ import numpy as np
 from ..solvers import Status
 from . import dp, greedy, ils, matching, milp, symmetric, symmetric_graph
 from .budget import exact_time_s
-from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
+from .problem import OPTIMAL_ABS_TOL, Group, GroupSolution
 
 #: largest group (in candidates, i.e. ~2x curves) handed to the exact formulation (HiGHS: its
 #: model has ~m^2 columns; beyond ~160 candidates it rarely closes the gap within seconds)
@@ -77,29 +77,29 @@ def _matching_path(group: Group, heur: GroupSolution) -> GroupSolution:
     """The better of ``heur`` and the matching's path (``symmetric_graph.matching_path``,
     polished by the greedy local search), with the better of the two bounds."""
     order, bound = symmetric_graph.matching_path(group)
-    bound = max(bound, heur.bound_mm)
-    best, obj, formulation = heur.order, heur.objective_mm, heur.formulation
+    bound = max(bound, heur.bound)
+    best, obj, formulation = heur.order, heur.objective, heur.formulation
     if order is not None:
         order = greedy.improve(group, order)
-        o = group.path_cost_mm(order)
+        o = group.path_cost(order)
         if o < obj - 1e-9:
             best, obj, formulation = order, o, "matching"
-    status = Status.OPTIMAL if obj - bound <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
+    status = Status.OPTIMAL if obj - bound <= OPTIMAL_ABS_TOL else Status.FEASIBLE
     return GroupSolution.make(best, obj, bound, status, heur.solve_s, formulation)
 
 
-def _ils_from(group: Group, start: GroupSolution, bound_mm: float, deadline: float,
+def _ils_from(group: Group, start: GroupSolution, bound: float, deadline: float,
               formulation: str, **kwargs) -> GroupSolution:
     """``start``, or the ILS path from it (``ils.improve_ils`` until ``deadline``, stopped once
-    it reaches ``bound_mm``) if that is shorter: then with its status against ``bound_mm``,
+    it reaches ``bound``) if that is shorter: then with its status against ``bound``,
     ``start``'s solve time and ``formulation``."""
     order = ils.improve_ils(group, start.order, deadline=deadline,
-                            target_mm=bound_mm + OPTIMAL_ABS_TOL_MM, **kwargs)
-    obj = group.path_cost_mm(order)
-    if obj >= start.objective_mm - 1e-9:
+                            target=bound + OPTIMAL_ABS_TOL, **kwargs)
+    obj = group.path_cost(order)
+    if obj >= start.objective - 1e-9:
         return start
-    status = Status.OPTIMAL if obj - bound_mm <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
-    return GroupSolution.make(order, obj, bound_mm, status, start.solve_s, formulation)
+    status = Status.OPTIMAL if obj - bound <= OPTIMAL_ABS_TOL else Status.FEASIBLE
+    return GroupSolution.make(order, obj, bound, status, start.solve_s, formulation)
 
 
 def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
@@ -114,11 +114,11 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         # 10-140 ms and cannot be stopped: under a budget's small share it would take the time of
         # several proofs by the model from the groups after it
         ex = dp.solve(group)
-        return GroupSolution.make(ex.order, ex.objective_mm, ex.bound_mm, Status.OPTIMAL,
+        return GroupSolution.make(ex.order, ex.objective, ex.bound, Status.OPTIMAL,
                                   time.perf_counter() - t0, "auto:dp")
     heur = greedy.solve(group, hint=hint)
     if heur.status == Status.OPTIMAL or group.n_curves <= 1:
-        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.OPTIMAL,
+        return GroupSolution.make(heur.order, heur.objective, heur.bound, Status.OPTIMAL,
                                   time.perf_counter() - t0, "auto:bound")
     if sym and 2 * group.n_curves + 2 <= matching.MAX_VERTICES:
         # the cheapest perfect matching of the end points: a bound within ~2 % of the optimum
@@ -126,7 +126,7 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         # often the optimum (formulations/ordering.md, "Bounds")
         heur = _matching_path(group, heur)
         if heur.status == Status.OPTIMAL:
-            return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.OPTIMAL,
+            return GroupSolution.make(heur.order, heur.objective, heur.bound, Status.OPTIMAL,
                                       time.perf_counter() - t0, "auto:matching")
     # escape the local optimum before anything else: a better incumbent is what lets the exact
     # step (or the bound) prove it, and what a fallback group keeps. Before the symmetric model a
@@ -140,28 +140,28 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
             and deadline - time.perf_counter() < MIN_FALLBACK_ILS_S_PER_CURVE * group.n_curves):
         # a budget's heuristic share, spent by the greedy path and the matching: ILS would still
         # pay for its link matrix and a kick, past the deadline, for next to nothing
-        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.FALLBACK,
+        return GroupSolution.make(heur.order, heur.objective, heur.bound, Status.FALLBACK,
                                   time.perf_counter() - t0, "auto:greedy")
-    heur = _ils_from(group, heur, heur.bound_mm, deadline, "ils", kicks=kicks,
+    heur = _ils_from(group, heur, heur.bound, deadline, "ils", kicks=kicks,
                      local_optimum=heur.formulation in ("greedy", "matching"))
     if heur.status == Status.OPTIMAL:
-        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.OPTIMAL,
+        return GroupSolution.make(heur.order, heur.objective, heur.bound, Status.OPTIMAL,
                                   time.perf_counter() - t0, "auto:ils+bound")
     if not exact_next:
-        return GroupSolution.make(heur.order, heur.objective_mm, heur.bound_mm, Status.FALLBACK,
+        return GroupSolution.make(heur.order, heur.objective, heur.bound, Status.FALLBACK,
                                   time.perf_counter() - t0, "auto:ils")
     left = max(time_limit_s - (time.perf_counter() - t0), 0.05)
     ex = milp.solve(group, time_limit_s=left, hint=heur, give_up_gap=GIVE_UP_GAP,
-                    known_bound_mm=heur.bound_mm)
-    if ex.objective_mm > heur.objective_mm:        # never worse than the warm start
-        ex = GroupSolution.make(heur.order, heur.objective_mm, max(ex.bound_mm, heur.bound_mm),
+                    known_bound=heur.bound)
+    if ex.objective > heur.objective:        # never worse than the warm start
+        ex = GroupSolution.make(heur.order, heur.objective, max(ex.bound, heur.bound),
                                 Status.FEASIBLE, ex.solve_s, ex.formulation)
     if ex.status != Status.OPTIMAL and dp.fits(group) and dp.time_s(group) <= time_limit_s:
         # the model did not prove it in time: the DP will, in at most about one limit more
         d = dp.solve(group)
-        return GroupSolution.make(d.order, d.objective_mm, d.bound_mm, Status.OPTIMAL,
+        return GroupSolution.make(d.order, d.objective, d.bound, Status.OPTIMAL,
                                   time.perf_counter() - t0, "auto:dp")
-    bound = max(ex.bound_mm, heur.bound_mm)
+    bound = max(ex.bound, heur.bound)
     deadline = t0 + time_limit_s
     if (ex.status != Status.OPTIMAL
             and deadline - time.perf_counter() >= MIN_FALLBACK_ILS_S_PER_CURVE * group.n_curves):
@@ -173,7 +173,7 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         # 182.0 / 76.8)
         polished = _ils_from(group, ex, bound, deadline, "auto:milp+ils")
         if polished is not ex:
-            return GroupSolution.make(polished.order, polished.objective_mm, bound, polished.status,
+            return GroupSolution.make(polished.order, polished.objective, bound, polished.status,
                                       time.perf_counter() - t0, polished.formulation)
-    return GroupSolution.make(ex.order, ex.objective_mm, bound, ex.status,
+    return GroupSolution.make(ex.order, ex.objective, bound, ex.status,
                               time.perf_counter() - t0, "auto:milp")

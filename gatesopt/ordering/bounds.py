@@ -10,17 +10,19 @@ out of curves (the last curve leaves to nothing). Relaxing "which" to "the cheap
     LB_out = min_k s_k + sum_i out_i - max_i out_i out_i: cheapest link out of curve i
     LB_half: each link split in halves between the curves it joins (see ``_half_link``)
 
-Both need only the nearest other-curve point of every candidate: a KD-tree query, so they cost
-O(m log m) and serve as the proof of optimality for the many small or trivially-chained groups
-of real layers (for instance a group whose heuristic path uses exactly each curve's nearest
-links), and as the reported bound for groups no exact formulation touched.
+All need only each candidate's cheapest link in and out: a column and row minimum of the link
+matrix (any costs: the time objective's are asymmetric and break the triangle inequality, which
+none of these bounds uses), or for groups without a matrix a KD-tree query over the points
+(travel distance only). They serve as the proof of optimality for the many small or
+trivially-chained groups of real layers (for instance a group whose heuristic path uses exactly
+each curve's cheapest links), and as the reported bound for groups no exact formulation touched.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .problem import Group
+from .problem import EuclideanCosts, Group
 
 
 def _nearest_other(src_xy, src_curve, dst_xy, dst_curve, n_curves) -> np.ndarray:
@@ -36,22 +38,32 @@ def _nearest_other(src_xy, src_curve, dst_xy, dst_curve, n_curves) -> np.ndarray
     return d.min(axis=1)
 
 
-def lower_bound_mm(group: Group) -> float:
+def lower_bound(group: Group) -> float:
     """max(LB_in, LB_out) for the group (0 for an empty group)."""
     n = group.n_curves
     if n == 0:
         return 0.0
     cc = group.cand_curve
-    s_cand = group.start_cost_mm()
-    e_cand = group.end_cost_mm()
+    s_cand = group.start_cost()
+    e_cand = group.end_cost()
     if n == 1:
         return float((s_cand + e_cand).min())
     s = np.full(n, np.inf)
     np.minimum.at(s, cc, s_cand)
     e = np.full(n, np.inf)
     np.minimum.at(e, cc, e_cand)
-    into = _nearest_other(group.cand_entry_xy, cc, group.cand_exit_xy, cc, n)   # per candidate
-    out_ = _nearest_other(group.cand_exit_xy, cc, group.cand_entry_xy, cc, n)
+    if group.dense:
+        # the cheapest link into each candidate (its column of the link matrix; inf within its
+        # own curve) and out of it (its row): valid for any costs, asymmetric or not
+        D = group.arc_cost()
+        into, out_ = D.min(axis=0), D.min(axis=1)
+    elif isinstance(group.costs, EuclideanCosts) or group.costs is None:
+        into = _nearest_other(group.cand_entry_xy, cc, group.cand_exit_xy, cc, n)   # per candidate
+        out_ = _nearest_other(group.cand_exit_xy, cc, group.cand_entry_xy, cc, n)
+    else:
+        # no link matrix and costs that are not distances (a group above DENSE_MAX_CANDS under
+        # the time objective): a path enters its first curve from the start, that is all
+        return float(max(s.min() + e.min(), 0.0))
     in_c = np.full(n, np.inf)
     np.minimum.at(in_c, cc, into)
     out_c = np.full(n, np.inf)

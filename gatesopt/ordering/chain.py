@@ -9,10 +9,10 @@ import time
 
 import numpy as np
 
-from ..solvers import Status
+from ..solvers import Status, stop_requested
 from . import dp
 from .budget import exact_time_s
-from .problem import OPTIMAL_ABS_TOL_MM, GroupSolution, OrderingProblem
+from .problem import OPTIMAL_ABS_TOL, Anchor, GroupSolution, OrderingProblem
 
 #: look-ahead at a boundary (``look_ahead``): next groups of up to this many curves (the subset DP
 #: solves one from each of its possible entries in well under a millisecond)
@@ -33,31 +33,33 @@ def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwar
     bound with a free end plus g+1's optimum from ``e``) is lowest and below the pair as solved:
     group g again with its end at ``e``; if g's path to ``e`` and g+1's path from it cost less than
     the pair, both join the groups' options (in place) and ``pick_paths`` takes them where the whole
-    chain gets shorter. Identical re-solves (layers that repeat) are solved once. Seen on KISSlicer
+    chain gets cheaper. Identical re-solves (layers that repeat) are solved once. Seen on KISSlicer
     output: a 24-curve infill group proven optimal for itself ended 19 mm further from the next
-    layer's 2-curve group than the greedy path did."""
+    layer's 2-curve group than the greedy path did. (``plans``: per group (Group, options, start
+    Anchor, end Anchor or None).)"""
     cache: dict = {}
     for g in range(problem.n_groups - 1):
-        if deadline is not None and time.perf_counter() > deadline:
-            return
-        grp, opts = plans[g]
-        nxt, nxt_opts = plans[g + 1]
+        if (deadline is not None and time.perf_counter() > deadline) or stop_requested():
+            return              # (Ctrl-C: every group has its answer; the options stay as they are)
+        grp, opts, start, _ = plans[g]
+        nxt, nxt_opts, _, nxt_end = plans[g + 1]
         if (problem.group_fixed[g] or problem.group_fixed[g + 1] or grp.end_xy is not None
                 or grp.n_curves == 0 or not 0 < nxt.n_curves <= LOOKAHEAD_CURVES
                 or opts[0].status != Status.OPTIMAL):
             continue
-        pair = opts[0].objective_mm + nxt_opts[0].objective_mm
-        entries = np.unique(nxt.cand_entry_xy, axis=0)
+        pair = opts[0].objective + nxt_opts[0].objective
+        _, first = np.unique(nxt.cand_entry_xy, axis=0, return_index=True)
         ahead = []
-        for e in entries:
-            ng = problem.group(g + 1, e, nxt.end_xy)
+        for k in first.tolist():
+            e = problem.cand_anchor(g + 1, nxt, k)
+            ng = problem.group(g + 1, Anchor.of(e.xy), nxt_end)      # already at e
             ns = dp.solve(ng) if dp.fits(ng) else fn(ng, time_limit_s=time_limit_s, **kwargs)
-            low = opts[0].bound_mm + ns.objective_mm
-            if low < pair - OPTIMAL_ABS_TOL_MM:
-                ahead.append((low, tuple(e), ns))
+            low = opts[0].bound + ns.objective
+            if low < pair - OPTIMAL_ABS_TOL:
+                ahead.append((low, k, e, ns))
         ahead.sort(key=lambda a: a[0])
-        for low, e, ns in ahead[:LOOKAHEAD_TRIES]:
-            gg = problem.group(g, grp.start_xy, e)
+        for low, k, e, ns in ahead[:LOOKAHEAD_TRIES]:
+            gg = problem.group(g, start, e)
             key = gg.key()
             gs = cache.get(key)
             if gs is None:
@@ -69,17 +71,19 @@ def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwar
                         return
                 gs = cache[key] = fn(gg, time_limit_s=limit, **kwargs)
                 gg.check_order(gs.order)
-            if gs.objective_mm + ns.objective_mm < pair - OPTIMAL_ABS_TOL_MM:
-                opts.append(GroupSolution.make(gs.order, gs.objective_mm, gs.bound_mm, gs.status,
+            if gs.objective + ns.objective < pair - OPTIMAL_ABS_TOL:
+                opts.append(GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status,
                                                gs.solve_s, gs.formulation + "+ahead"))
-                nxt_opts.append(GroupSolution.make(ns.order, ns.objective_mm, ns.bound_mm,
+                nxt_opts.append(GroupSolution.make(ns.order, ns.objective, ns.bound,
                                                    ns.status, ns.solve_s, ns.formulation + "+ahead"))
 
 
 def end_of(problem: OrderingProblem, g: int):
-    """Where group g's path must travel on to: the next group's entry if that one is fixed."""
+    """Where group g's path must travel on to: the next group's entry (an Anchor: its first
+    curve as the slicer printed it) if that group is fixed, else None."""
     if g + 1 < problem.n_groups and problem.group_fixed[g + 1]:
-        return problem.curve_start_xy[problem.group_curve_start[g + 1]]
+        c = int(problem.group_curve_start[g + 1])
+        return Anchor(problem.curve_start_xy[c].copy(), c, False)
     return None
 
 
@@ -92,40 +96,43 @@ def path_options(grp, gs: GroupSolution, backwards: bool = False) -> list:
         ident = ident[::-1]
     opts = [gs]
     if len(ident) == grp.n_curves and not np.array_equal(ident, gs.order):
-        ident_obj = grp.path_cost_mm(ident)
-        opts.append(GroupSolution.make(ident, ident_obj, gs.bound_mm, gs.status, gs.solve_s,
+        ident_obj = grp.path_cost(ident)
+        opts.append(GroupSolution.make(ident, ident_obj, gs.bound, gs.status, gs.solve_s,
                                        gs.formulation + "+kept"))
-        if ident_obj < gs.objective_mm - 1e-9:
+        if ident_obj < gs.objective - 1e-9:
             opts = opts[::-1]
     return opts
 
 
-def solve_backwards(runner, problem: OrderingProblem, g: int, end_xy) -> tuple:
+def solve_backwards(runner, problem: OrderingProblem, g: int, end) -> tuple:
     """Group g with its end fixed (the next group's entry) and its start free: solved as
     ``Group.backwards()``. Returns (forward Group, options in forward order). Each option is
     proven for that problem: the travel into its first curve belongs to the group before, whose
     own end is then chosen to be this path's entry (formulations/ordering.md, "Two processes")."""
-    fwd = problem.group(g, end_xy, end_xy)      # (its start is not used)
+    fwd = problem.group(g, end, end)            # (its start is not used)
     back = fwd.backwards()
     gs = runner.run(g, back)
     back.check_order(gs.order)
-    opts = [GroupSolution.make(o.order[::-1].copy(), o.objective_mm, o.bound_mm, o.status, o.solve_s,
+    opts = [GroupSolution.make(o.order[::-1].copy(), o.objective, o.bound, o.status, o.solve_s,
                                o.formulation + "+back")
             for o in path_options(back, gs, backwards=True)]
     return fwd, opts
 
 
-def rescored(grp, opts, guess_xy) -> list:
-    """Options solved from a guessed start, scored from the real one (``grp.start_xy``): a path
-    from the real start costs at least its cost from the guess minus the distance between the
-    two (triangle inequality), so the bound stays valid; "optimal" stays only if it still closes."""
-    shift = float(np.hypot(*(np.asarray(grp.start_xy) - guess_xy)))
+def rescored(problem: OrderingProblem, g: int, grp, opts, guess) -> list:
+    """Options solved from a guessed start (an Anchor), scored from the real one (``grp``'s): a
+    path from the real start costs its cost from the guess less the guess's start cost of its
+    first candidate plus the real one, so its bound minus the largest such difference stays
+    valid (for travel distance at most |s - s'|, the triangle inequality; the time objective
+    has none); "optimal" stays only if it still closes."""
+    guessed = problem.group(g, guess, None if grp.end_xy is None else grp.end_xy)
+    shift = float(np.max(guessed.start_cost() - grp.start_cost())) if grp.n_cands else 0.0
     out = []
     for o in opts:
-        obj = grp.path_cost_mm(o.order)
-        bound = max(0.0, o.bound_mm - shift)
+        obj = grp.path_cost(o.order)
+        bound = max(0.0, o.bound - max(shift, 0.0))
         status = o.status
-        if status == Status.OPTIMAL and obj - bound > OPTIMAL_ABS_TOL_MM:
+        if status == Status.OPTIMAL and obj - bound > OPTIMAL_ABS_TOL:
             status = Status.FEASIBLE
         out.append(GroupSolution.make(o.order, obj, bound, status, o.solve_s, o.formulation))
     return out
@@ -133,28 +140,28 @@ def rescored(grp, opts, guess_xy) -> list:
 
 def pick_paths(problem: OrderingProblem, plans) -> list[int]:
     """Pick, per group, the solver's path or the slicer's order so that the whole chain is
-    shortest (a DP over groups with one state per option: each path is fixed, only the link into
+    cheapest (a DP over groups with one state per option: each path is fixed, only the link into
     it depends on where the previous group ended). Contains the all-original choice, so the
-    total never exceeds the slicer's travel."""
-    pos = [np.asarray(problem.origin_xy, float)]
+    total never exceeds the slicer's."""
+    pos = [Anchor.of(problem.origin_xy)]
     cost = [0.0]
     back = []
-    for grp, opts in plans:
+    for g, (grp, opts, _, _) in enumerate(plans):
         new_pos, new_cost, new_back = [], [], []
         for gs in opts:
             o = gs.order
             if len(o) == 0:
-                inner, entry, exit_ = 0.0, None, None
-            else:
-                entry, exit_ = grp.cand_entry_xy[o[0]], grp.cand_exit_xy[o[-1]]
-                inner = float(np.hypot(*(grp.cand_entry_xy[o[1:]] - grp.cand_exit_xy[o[:-1]]).T).sum())
-            best, arg = np.inf, 0
-            for j, (p, c) in enumerate(zip(pos, cost)):
-                v = c + (0.0 if entry is None else float(np.hypot(*(entry - p))))
-                if v < best - 1e-12:
-                    best, arg = v, j
-            new_cost.append(best + inner)
-            new_pos.append(pos[arg] if exit_ is None else exit_)
+                new_cost.append(min(cost))
+                arg = int(np.argmin(cost))
+                new_pos.append(pos[arg])
+                new_back.append(arg)
+                continue
+            entry = problem.cand_anchor(g, grp, int(o[0]))
+            inner = grp.path_cost(o) - float(grp.start_cost()[o[0]]) - float(grp.end_cost()[o[-1]])
+            links = [c + problem.link_cost(p, entry) for p, c in zip(pos, cost)]
+            arg = int(np.argmin(links))
+            new_cost.append(links[arg] + inner)
+            new_pos.append(problem.exit_anchor(g, grp, o))
             new_back.append(arg)
         pos, cost = new_pos, new_cost
         back.append(new_back)

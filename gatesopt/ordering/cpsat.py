@@ -18,10 +18,10 @@ import time
 import numpy as np
 from ortools.sat.python import cp_model
 
-from ..solvers import Status
-from .bounds import lower_bound_mm
+from ..solvers import Status, run_native
+from .bounds import lower_bound
 from .ils import warm_start
-from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution, trivial_solution
+from .problem import OPTIMAL_ABS_TOL, Group, GroupSolution, trivial_solution
 
 #: integer cost scale: 1 unit = 0.1 µm of travel (rounding error <= n * 0.05 µm per path)
 SCALE = 10_000
@@ -95,7 +95,7 @@ class _Model:
     def __init__(self, group: Group, closed: bool):
         m, n = group.n_cands, group.n_curves
         self.group, self.closed, self.m, self.n = group, closed, m, n
-        arc = group.arc_cost_mm()
+        arc = group.arc_cost()
         self.us, self.vs = np.nonzero(np.isfinite(arc))     # x[u, v]: v follows u (other curves)
         self.arc_c = np.rint(arc[self.us, self.vs] * SCALE).astype(np.int64)
         counts = np.bincount(group.cand_curve, minlength=n)
@@ -150,8 +150,8 @@ class _Model:
         if self.closed:
             ovars, ocost = [x], [self.arc_c]
         else:
-            start_c = np.rint(g.start_cost_mm() * SCALE).astype(np.int64)
-            end_c = np.rint(g.end_cost_mm() * SCALE).astype(np.int64)
+            start_c = np.rint(g.start_cost() * SCALE).astype(np.int64)
+            end_c = np.rint(g.end_cost() * SCALE).astype(np.int64)
             ovars = [self.o_first + np.arange(m), self.o_last + np.arange(m), x]
             ocost = [start_c, end_c, self.arc_c]
         ovars, ocost = np.concatenate(ovars), np.concatenate(ocost)
@@ -202,9 +202,9 @@ def _kept(group: Group, hint, t0: float) -> GroupSolution:
     solution ("optimal" if the bound proves it)."""
     order = np.asarray(getattr(hint, "order", hint), np.int64)
     group.check_order(order)
-    obj = group.path_cost_mm(order)
-    bound = lower_bound_mm(group)
-    status = Status.OPTIMAL if obj - bound <= OPTIMAL_ABS_TOL_MM else Status.FALLBACK
+    obj = group.path_cost(order)
+    bound = lower_bound(group)
+    status = Status.OPTIMAL if obj - bound <= OPTIMAL_ABS_TOL else Status.FALLBACK
     return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "cpsat")
 
 
@@ -235,7 +235,9 @@ def _solve_circuit(group: Group, t0, time_limit_s, hint, num_workers, seed, clos
     solver.parameters.max_time_in_seconds = left
     solver.parameters.num_workers = int(num_workers)
     solver.parameters.random_seed = int(seed)
-    code = solver.Solve(mod.model)
+    # Ctrl-C: ``solvers.run_native`` stops the search (CP-SAT's own handler would hide it)
+    solver.parameters.catch_sigint_signal = False
+    code, _ = run_native(lambda: solver.solve(mod.model), solver.stop_search)
     status = STATUS.get(code, Status.FALLBACK)
     if closed:
         if status not in (Status.OPTIMAL, Status.FEASIBLE):
@@ -246,14 +248,14 @@ def _solve_circuit(group: Group, t0, time_limit_s, hint, num_workers, seed, clos
         return _kept(group, hint, t0)
     order = mod.decode(solver)
     # integer rounding: each of the n links is off by at most 0.5 unit
-    bound = max(solver.BestObjectiveBound() / SCALE - (n + 1) * 0.5 / SCALE, lower_bound_mm(group))
+    bound = max(solver.BestObjectiveBound() / SCALE - (n + 1) * 0.5 / SCALE, lower_bound(group))
     group.check_order(order)
-    obj = group.path_cost_mm(order)
+    obj = group.path_cost(order)
     # integer costs: the model's optimum may be a hair longer than the hint in float travel
     h_order = np.asarray(getattr(hint, "order", hint), np.int64)
-    h_obj = group.path_cost_mm(h_order)
+    h_obj = group.path_cost(h_order)
     if h_obj < obj - 1e-9:
         order, obj = h_order, h_obj
-    if status == Status.OPTIMAL or obj - bound <= OPTIMAL_ABS_TOL_MM:
+    if status == Status.OPTIMAL or obj - bound <= OPTIMAL_ABS_TOL:
         status = Status.OPTIMAL
     return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "cpsat")

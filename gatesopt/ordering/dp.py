@@ -1,11 +1,14 @@
 """Exact ordering of small groups by dynamic programming over subsets (Held–Karp for clusters;
 formulations/ordering.md, "dp").
 
-    D[S, k] = travel of the cheapest path from the start point through exactly the curves in S,
+    D[S, k] = cost of the cheapest path from the start point through exactly the curves in S,
               ending with candidate k (its curve in S)
-    D[{i}, k]      = |s - p_k|                                  k in K_i
-    D[S + {j}, v]  = min_{k: curve in S} D[S, k] + |q_k - p_v|   v in K_j, j not in S
-    J*             = min_k D[all, k] + |q_k - e|                (e: end point, if any)
+    D[{i}, k]      = c(s, k)                                    k in K_i
+    D[S + {j}, v]  = min_{k: curve in S} D[S, k] + c(k, v)      v in K_j, j not in S
+    J*             = min_k D[all, k] + c(k, e)                  (e: end point, if any)
+
+with c the group's link costs (``Group.arc_cost``, ``start_cost``, ``end_cost``: travel |q_k - p_v|,
+or its time as emitted, asymmetric; the recursion needs no symmetry or triangle inequality).
 
 O(2^n m^2) time and O(2^n m) memory (m candidates), so it is used up to ``MAX_STATES`` work; most
 groups of real layers are that small (an island's few infill pieces, gap fill), and there it is
@@ -42,7 +45,7 @@ def time_s(group: Group) -> float:
 
 
 @numba.njit(cache=True)
-def _held_karp(n, cand_curve, ent, ext, start_c, end_c):
+def _held_karp(n, cand_curve, arc, start_c, end_c):
     m = len(cand_curve)
     full = (1 << n) - 1
     D = np.full((1 << n, m), np.inf)
@@ -54,12 +57,11 @@ def _held_karp(n, cand_curve, ent, ext, start_c, end_c):
             dk = D[S, k]
             if dk == np.inf:
                 continue
-            qx, qy = ext[k, 0], ext[k, 1]
             for v in range(m):
                 b = 1 << cand_curve[v]
                 if S & b:
                     continue
-                c = dk + np.sqrt((qx - ent[v, 0]) ** 2 + (qy - ent[v, 1]) ** 2)
+                c = dk + arc[k, v]
                 if c < D[S | b, v]:
                     D[S | b, v] = c
                     P[S | b, v] = k
@@ -87,7 +89,9 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None) -> GroupSoluti
     if not fits(group):
         raise OrderingOptionsError(f"dp: group of {group.n_curves} curves / {group.n_cands} "
                                    "candidates is too large")
-    order, best = _held_karp(group.n_curves, group.cand_curve, group.cand_entry_xy, group.cand_exit_xy,
-                             group.start_cost_mm(), group.end_cost_mm())
-    obj = group.path_cost_mm(order)
+    order, best = _held_karp(group.n_curves, np.asarray(group.cand_curve, np.int64),
+                             np.ascontiguousarray(group.arc_cost(), float),
+                             np.ascontiguousarray(group.start_cost(), float),
+                             np.ascontiguousarray(group.end_cost(), float))
+    obj = group.path_cost(order)
     return GroupSolution.make(order, obj, obj, Status.OPTIMAL, time.perf_counter() - t0, "dp")

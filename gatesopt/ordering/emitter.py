@@ -12,8 +12,8 @@ Rules (formulations/ordering.md, "Emit"; ``layout`` explains the line classes):
   parameters read from the file (``travel.TravelStyle``): retract (if the travel is at least the
   shortest travel the slicer retracted for), z-hop, one straight travel, lower, unretract. If the slicer combs (it made
   long travels without retracting), a rebuilt travel that crosses no wall of its layer and is
-  no longer than the slicer's own dry travels skips the retraction, as the slicer would
-  (``travel.WallCrossing``). Its non-motion lines are kept:
+  no longer than the slicer's own dry travels (and ``travel.COMB_TESTED_MAX_MM``) skips the
+  retraction, as the slicer would (``travel.TravelRule``, the rule the time objective prices). Its non-motion lines are kept:
   a boundary gap's lines (layer change, barriers) stay at the boundary in their order; a gap
   inside a group travels with the curve that followed it (minus ``;TYPE:``/wipe comments, which
   are re-derived).
@@ -34,7 +34,7 @@ from ..program import Program
 from .gaps import rebuilt_gap
 from .layout import Layout, layout
 from .problem import OrderingProblem, OrderingSolution
-from .travel import TravelStyle, WallCrossing, travel_style
+from .travel import TravelRule
 from .writer import F_WORD, Writer, gcode_number, required_state, states_at
 
 
@@ -48,6 +48,7 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     feedrate, state lines, feature, E up to ``MEMO_E_TOL_MM``) gets the text it got before; E
     words differ from a fresh emit by at most that tolerance, where rounding tips a last digit."""
     program.check_rewritable()
+    problem = problem.program_problem       # (a solution is in the program's curve numbering)
     lay = problem.layout if problem.layout is not None else layout(program)
     p = program
     n = len(lay.curve_s0)
@@ -62,14 +63,14 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     # segments, per-line and per-curve lists) is made once per memo, not once per guard pass
     fixed = memo.get(_FIXED) if memo is not None else None
     if fixed is None:
-        style = travel_style(program, lay)
-        walls = WallCrossing(program, problem, lay) if style.comb_max_mm > 0 else None
-        fixed = (style, walls, Writer.per_line(program, lay), _Plan.per_curve(p, problem, lay))
+        # the time objective's pricer holds the rule it priced (its walls' grids built already)
+        rule = problem.pricer.rule if problem.pricer is not None else TravelRule.of(program, problem, lay)
+        fixed = (rule, Writer.per_line(program, lay), _Plan.per_curve(p, problem, lay))
         if memo is not None:
             memo[_FIXED] = fixed
-    style, walls, lists, per_curve = fixed
+    rule, lists, per_curve = fixed
     w = Writer(program, lay, lists)
-    plan = _Plan(p, lay, style, walls, order, rev, seam, per_curve)
+    plan = _Plan(p, lay, rule, order, rev, seam, per_curve)
     changed, gap_lines = plan.changed, plan.gap_lines
 
     # prefix + first gap: verbatim (the first layer keeps its order, so curve 0 stays first)
@@ -132,9 +133,9 @@ class _Plan:
     """What ``emit`` knows about the file and the solution, per curve as Python lists (numpy
     scalar indexing curve by curve was a fifth of the emit)."""
 
-    def __init__(self, p: Program, lay: Layout, style: TravelStyle, walls, order, rev, seam,
+    def __init__(self, p: Program, lay: Layout, rule: TravelRule, order, rev, seam,
                  per_curve: tuple):
-        self.p, self.lay, self.style, self.walls = p, lay, style, walls
+        self.p, self.lay, self.rule = p, lay, rule
         self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
         self.changed = (rev | (seam != 0)).tolist()
         (self.group_first, self.layer, self.l0, self.l1, self.feature, self.req,
@@ -182,8 +183,8 @@ def _emit_curve(plan: _Plan, w: Writer, k: int, prev: int) -> int:
                     lines.append((plan.gap_lines(c), False))
             elif c != first:
                 lines.append((plan.gap_lines(c), False))
-            rebuilt_gap(w, p, lay, plan.style, lines, c,
-                         _entry_mm(p, lay, c, plan.rev[c], plan.seam[c]), plan.walls, plan.layer[c])
+            rebuilt_gap(w, p, lay, plan.rule, lines, c,
+                        _entry_mm(p, lay, c, plan.rev[c], plan.seam[c]), plan.layer[c])
     w.reissue(plan.curve_state, c)      # state the curve saw in the original
     fi = plan.feature[c]
     if fi >= 0 and w.feature != p.feature_names[fi]:

@@ -2,7 +2,7 @@
 its travels (formulations/ordering.md, "Emit"): retract (if the travel is at least the shortest
 travel the slicer retracted for), z-hop, one straight travel, lower, unretract, with the
 parameters read from the file (``travel.TravelStyle``). A combing slicer's travel that crosses no
-wall of its layer skips the retraction (``travel.WallCrossing``). The gaps' non-motion lines are
+wall of its layer skips the retraction (``travel.TravelRule``, ``travel.WallCrossing``). The gaps' non-motion lines are
 kept around it.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 from ..program import Program
 from .layout import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, LINE_NEUTRAL,
                      Layout)
-from .travel import TravelStyle, WallCrossing
+from .travel import TravelRule
 from .writer import Writer
 
 #: the gap lines a curve moved elsewhere leaves behind: feature labels and wipe markers are
@@ -97,8 +97,8 @@ def _sort_lines(w: Writer, p: Program, line_sets) -> _GapLines:
                      early_push, fw_lines, fw_net, fw_boundary, fw_retracted)
 
 
-def rebuilt_gap(w: Writer, p: Program, lay: Layout, style: TravelStyle, line_sets, c: int,
-                target, walls: WallCrossing | None = None, layer: int = -1) -> None:
+def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets, c: int,
+                target, layer: int = -1) -> None:
     """One rebuilt travel into curve c, with the non-motion lines of the given original gaps.
 
     Each gap's lines split where the slicer retracted, travelled and unretracted: lines before
@@ -106,17 +106,20 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, style: TravelStyle, line_set
     after its unretraction after ours. The filament
     the consumed gaps pulled back and pushed forward is kept: the retraction length is the
     slicer's own for this gap (else the file's median), and the net E of the consumed gaps is
-    unchanged, so E per layer (and across a layer change) stays what it was.
+    unchanged, so E per layer (and across a layer change) stays what it was. Whether it
+    retracts is ``rule``'s (``travel.TravelRule``), which ``cost.TimePricer`` prices: the
+    retraction length is the boundary gap's, else the file's median.
     """
+    style = rule.style
     g = _sort_lines(w, p, line_sets)
     pre, mid, post, late, gap, net = g.pre, g.mid, g.post, g.late, g.gap, g.net
-    r_boundary, r_internal, boundary_retracted = g.r_boundary, g.r_internal, g.boundary_retracted
+    r_boundary, boundary_retracted = g.r_boundary, g.boundary_retracted
     fw_lines, fw_boundary = g.fw_lines, g.fw_boundary
     cls_of, de_of = w.line_cls, w.line_de
     # firmware retraction (bare G10 / G11): rebuilt as one G10 before our travel and one G11
     # after it, unless the consumed gaps do not end as retracted as they began (then copied)
     use_fw = g.fw_net == 0 and (g.fw_retracted or (
-        style.firmware_retract and r_boundary <= 0 and r_internal <= 0))
+        style.firmware_retract and r_boundary <= 0 and g.r_internal <= 0))
     if use_fw and fw_lines:
         pre, mid, post, late = ([i for i in b if i not in fw_lines] for b in (pre, mid, post, late))
     s = int(lay.curve_s0[c])
@@ -149,14 +152,18 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, style: TravelStyle, line_set
     (tx, ty, tz), (x0, y0, z0) = target.tolist(), w.xyz.tolist()
     dist = math.hypot(tx - x0, ty - y0)
     moving = dist > 1e-9 or abs(tz - z0) > 1e-9
-    r = r_boundary if r_boundary > 0 else (r_internal if r_internal > 0 else style.retract_mm)
+    # the boundary gap's own retraction length where it retracted (a layer change may retract
+    # more), else the file's median: a link inside a group costs the same whichever curve it
+    # enters, which keeps the time objective's costs symmetric there (cost.py)
+    r = r_boundary if r_boundary > 0 else style.retract_mm
     if use_fw:
         retract = moving and (fw_boundary or (style.firmware_retract and dist >= style.min_travel_mm))
     else:
         retract = moving and r > 0 and (boundary_retracted
                                         or (style.retract_mm > 0 and dist >= style.min_travel_mm))
-    if (retract and walls is not None and dist <= style.comb_max_mm
-            and abs(target[2] - w.xyz[2]) <= 1e-9 and not walls.crosses(layer, w.xyz, target)):
+    cap = rule.comb_cap_mm
+    if (retract and cap > 0 and dist <= cap and abs(tz - z0) <= 1e-9
+            and not rule.walls.crosses(layer, (x0, y0), (tx, ty))):
         retract = False     # the slicer combs: a travel over infill that crosses no wall goes dry
     if retract and use_fw:
         w.write("G10")

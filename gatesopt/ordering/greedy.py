@@ -1,17 +1,21 @@
 """Greedy curve ordering: nearest neighbour with flips, then 2-opt, Or-opt and an exact
 orientation pass (formulations/ordering.md, "greedy").
 
-- Nearest neighbour: a KD-tree over every candidate's entry point with an availability mask (the
-  idea of vpype's ``LineIndex``, which indexes both line ends): from the current point, the nearest
-  entry of a curve not yet printed; choosing a reversed candidate is choosing the flip.
-- 2-opt: reverse a run of the path *and flip every curve in it*; travel is symmetric, so the
-  inside of the run costs the same and only the two boundary links change (O(1) delta).
+- Nearest neighbour: from the current candidate's exit, the cheapest link into a curve not yet
+  printed (a scan of its row of the link matrix); choosing a reversed candidate is choosing the
+  flip. Groups without a link matrix (``problem.DENSE_MAX_CANDS``) walk a KD-tree over every
+  candidate's entry point with an availability mask (the idea of vpype's ``LineIndex``).
+- 2-opt: reverse a run of the path *and flip every curve in it*. Under travel distance the inside
+  of the run costs the same reversed; under the time objective a copied gap costs what it costs
+  one way only, so the inside's change is summed as the run grows (O(1) per move).
 - Or-opt: move a run of 1-3 curves elsewhere, forwards or reversed.
 - Orientation pass: for the curve order found, pick each curve's candidate (direction, seam) by
   an exact dynamic programme over the clusters (a shortest path through layers of candidates).
 
-The local search kernels are numba-compiled loops (first improvement; the greedy is also the
-warm start of the exact formulations, so it has to be fast on groups of thousands of curves).
+The local search kernels are numba-compiled loops over the link matrix ``D`` (``Group.arc_cost``)
+with the start costs ``ds`` and end costs ``de`` (first improvement; the greedy is also the warm
+start of the exact formulations, so it has to be fast on groups of thousands of curves). Groups
+without a matrix use the same moves on XY points (``greedy_xy``).
 """
 from __future__ import annotations
 
@@ -22,26 +26,26 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..solvers import Status
-from .bounds import lower_bound_mm
-from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
+from .bounds import lower_bound
+from .greedy_xy import local_search_xy, orient_dp_xy, path_cost_xy
+from .problem import OPTIMAL_ABS_TOL, Group, GroupSolution
 
-#: a move must shorten the path by more than this (mm) to be taken: float noise is no improvement
-IMPROVE_EPS_MM = 1e-9
+#: a move must lower the path's cost by more than this to be taken: float noise is no improvement
+IMPROVE_EPS = 1e-9
 
 
 def nearest_neighbour(group: Group, first: int | None = None) -> np.ndarray:
-    """Candidate order built by nearest neighbour with flips from ``group.start_xy``.
+    """Candidate order built by nearest neighbour with flips from the group's start (the
+    cheapest link each step).
 
     ``first``: force the first candidate (used by the closed-tour construction).
     """
     m, n = group.n_cands, group.n_curves
     if n == 0:
         return np.zeros(0, np.int64)
-    if m <= NN_SCAN_MAX_CANDS:
-        return _nn_scan(np.ascontiguousarray(group.cand_entry_xy, np.float64),
-                        np.ascontiguousarray(group.cand_exit_xy, np.float64),
-                        np.asarray(group.cand_curve, np.int64), n,
-                        float(group.start_xy[0]), float(group.start_xy[1]), -1 if first is None else int(first))
+    if m <= NN_SCAN_MAX_CANDS and group.dense:
+        return _nn_scan(group.arc_cost(), group.start_cost(), np.asarray(group.cand_curve, np.int64),
+                        n, -1 if first is None else int(first))
     order = np.empty(n, np.int64)
     curve_used = np.zeros(n, bool)
     avail_idx = np.arange(m)                    # candidates of curves not yet used (tree rows)
@@ -85,13 +89,13 @@ NN_SCAN_MAX_CANDS = 3000
 
 
 @numba.njit(cache=True)
-def _nn_scan(ent, ext, cand_curve, n, sx, sy, first):
-    """Nearest neighbour by scanning every candidate of a curve not yet printed; ties go to the
-    lowest candidate index."""
+def _nn_scan(D, ds, cand_curve, n, first):
+    """Nearest neighbour by scanning every candidate of a curve not yet printed (the cheapest
+    link from the current exit); ties go to the lowest candidate index."""
     m = len(cand_curve)
     order = np.empty(n, np.int64)
     used = np.zeros(n, np.bool_)
-    px, py = sx, sy
+    prev = -1
     for step in range(n):
         best = -1
         if step == 0 and first >= 0:
@@ -101,19 +105,19 @@ def _nn_scan(ent, ext, cand_curve, n, sx, sy, first):
             for k in range(m):
                 if used[cand_curve[k]]:
                     continue
-                d = (ent[k, 0] - px) ** 2 + (ent[k, 1] - py) ** 2
+                d = ds[k] if prev < 0 else D[prev, k]
                 if d < bd:
                     bd = d
                     best = k
+            if best < 0:                    # every remaining link infinite: take any
+                for k in range(m):
+                    if not used[cand_curve[k]]:
+                        best = k
+                        break
         order[step] = best
         used[cand_curve[best]] = True
-        px, py = ext[best, 0], ext[best, 1]
+        prev = best
     return order
-
-
-@numba.njit(cache=True, inline="always")
-def _d(ax, ay, bx, by):
-    return np.sqrt((ax - bx) ** 2 + (ay - by) ** 2)
 
 
 @numba.njit(cache=True, inline="always")
@@ -133,34 +137,42 @@ def keep_smallest(val, idx, cnt, k, d, b):
     return cnt + 1 if cnt < k else cnt
 
 
+@numba.njit(cache=True, inline="always")
+def link(D, ds, de, a, b):
+    """Cost from candidate a's exit to candidate b's entry; a = -1: the start; b = -1: the end
+    (``de``: 0 without an end point)."""
+    if a < 0:
+        return ds[b]
+    if b < 0:
+        return de[a]
+    return D[a, b]
+
+
 @numba.njit(cache=True)
-def path_cost(seq, ent, ext, sx, sy, closed, has_end=False, ex=0.0, ey=0.0):
-    """Travel (mm) of candidate order ``seq``: from (sx, sy) or, ``closed``, around the tour; on
-    to (ex, ey) with ``has_end``."""
+def path_cost(seq, D, ds, de, closed):
+    """Cost of candidate order ``seq``: from the start through ``seq`` to the end (``de``), or,
+    ``closed``, around the tour."""
     n = len(seq)
     if n == 0:
         return 0.0
-    if closed:
-        t = _d(ext[seq[n - 1], 0], ext[seq[n - 1], 1], ent[seq[0], 0], ent[seq[0], 1])
-    else:
-        t = _d(sx, sy, ent[seq[0], 0], ent[seq[0], 1])
+    t = D[seq[n - 1], seq[0]] if closed else ds[seq[0]] + de[seq[n - 1]]
     for i in range(n - 1):
-        t += _d(ext[seq[i], 0], ext[seq[i], 1], ent[seq[i + 1], 0], ent[seq[i + 1], 1])
-    if has_end and not closed:
-        t += _d(ext[seq[n - 1], 0], ext[seq[n - 1], 1], ex, ey)
+        t += D[seq[i], seq[i + 1]]
     return t
 
 
 @numba.njit(cache=True)
-def _local_search(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=False, ex=0.0, ey=0.0):
-    """2-opt with flips + Or-opt (runs of 1..3, either direction), first improvement.
+def _local_search(seq, D, ds, de, flip, closed, max_passes):
+    """2-opt with flips + Or-opt (runs of 1..3, either direction), first improvement, on the link
+    matrix.
 
     One numba kernel of ~120 lines: both moves share the loop over passes and the sequence they
     rewrite in place; split into calls, each move's scan would pass the arrays again per position.
 
-    Open path (``closed`` False): position -1 is the start point (exit only), and after the last
-    curve comes the end point (``has_end``: the next fixed group's entry) or nothing (travel 0).
-    Closed tour: positions wrap around.
+    Open path (``closed`` False): position -1 is the start (exit only, ``ds``), and after the last
+    curve comes the end (``de``; 0 without an end point). Closed tour: positions wrap around.
+    Reversing a run changes the links inside it when the costs are not the same both ways
+    (``inner``: summed as the run grows).
     """
     n = len(seq)
     seq = seq.copy()
@@ -172,25 +184,26 @@ def _local_search(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=False
         for i in range(n):
             if closed:
                 p = seq[(i - 1) % n]
-                px, py = ext[p, 0], ext[p, 1]
             elif i == 0:
-                px, py = sx, sy
+                p = -1
             else:
-                px, py = ext[seq[i - 1], 0], ext[seq[i - 1], 1]
-            ni = seq[i]
+                p = seq[i - 1]
             jmax = n - 1 if not closed else (n - 2 if i == 0 else n - 1)
-            for j in range(i + 1, jmax + 1):
-                xj = seq[j]
-                old = _d(px, py, ent[ni, 0], ent[ni, 1])
-                new = _d(px, py, ext[xj, 0], ext[xj, 1])
+            inner = 0.0
+            j = i + 1
+            while j <= jmax:
+                ni, xj = seq[i], seq[j]
+                inner += D[flip[xj], flip[seq[j - 1]]] - D[seq[j - 1], xj]
+                old = link(D, ds, de, p, ni)
+                new = link(D, ds, de, p, flip[xj])
                 if closed or j < n - 1:
                     q = seq[(j + 1) % n]
-                    old += _d(ext[xj, 0], ext[xj, 1], ent[q, 0], ent[q, 1])
-                    new += _d(ent[ni, 0], ent[ni, 1], ent[q, 0], ent[q, 1])
-                elif has_end:
-                    old += _d(ext[xj, 0], ext[xj, 1], ex, ey)
-                    new += _d(ent[ni, 0], ent[ni, 1], ex, ey)
-                if new < old - IMPROVE_EPS_MM:
+                    old += D[xj, q]
+                    new += D[flip[ni], q]
+                else:
+                    old += de[xj]
+                    new += de[flip[ni]]
+                if new + inner < old - IMPROVE_EPS:
                     a, b = i, j
                     while a < b:
                         t = seq[a]
@@ -201,7 +214,11 @@ def _local_search(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=False
                     if a == b:
                         seq[a] = flip[seq[a]]
                     improved = True
-                    ni = seq[i]
+                    # the run is reversed in place: its inside is the new path's
+                    inner = 0.0
+                    for t in range(i, j):
+                        inner += D[flip[seq[t + 1]], flip[seq[t]]] - D[seq[t], seq[t + 1]]
+                j += 1
         # ---- Or-opt: move seq[i..k] (k = i+L-1) after position a, forwards or reversed
         for L in range(1, 4):
             if L >= n:
@@ -210,54 +227,39 @@ def _local_search(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=False
             while i + L - 1 < n:
                 k = i + L - 1
                 f, l = seq[i], seq[k]
-                # removal gain
                 if i == 0:
-                    if closed:
-                        p = seq[n - 1]
-                        px, py = ext[p, 0], ext[p, 1]
-                    else:
-                        px, py = sx, sy
+                    p = seq[n - 1] if closed else -1
                 else:
-                    px, py = ext[seq[i - 1], 0], ext[seq[i - 1], 1]
+                    p = seq[i - 1]
                 has_next = closed or k < n - 1
-                rem = _d(px, py, ent[f, 0], ent[f, 1])
-                if has_next:
-                    q = seq[(k + 1) % n]
-                    rem += _d(ext[l, 0], ext[l, 1], ent[q, 0], ent[q, 1]) - _d(px, py, ent[q, 0], ent[q, 1])
-                elif has_end:
-                    rem += _d(ext[l, 0], ext[l, 1], ex, ey) - _d(px, py, ex, ey)
+                q = seq[(k + 1) % n] if has_next else -1
                 if closed and L >= n - 1:
                     break
-                best_delta = -IMPROVE_EPS_MM
+                rem = link(D, ds, de, p, f) + link(D, ds, de, l, q) - link(D, ds, de, p, q)
+                # the run reversed: its own links the other way
+                turn = 0.0
+                for t in range(i, k):
+                    turn += D[flip[seq[t + 1]], flip[seq[t]]] - D[seq[t], seq[t + 1]]
+                best_delta = -IMPROVE_EPS
                 best_a = -2
                 best_rev = False
-                # insertion after position a (a = -1: right after the start point)
+                # insertion after position a (a = -1: right after the start)
                 for a in range(-1, n):
                     if a >= i - 1 and a <= k:
                         continue
                     if closed and a == -1:
                         continue
-                    if a == -1:
-                        ax, ay = sx, sy
-                    else:
-                        ax, ay = ext[seq[a], 0], ext[seq[a], 1]
+                    x = seq[a] if a >= 0 else -1
                     b_next = closed or a < n - 1
                     if b_next:
-                        bnode = seq[(a + 1) % n]
                         if closed and (a + 1) % n == i:
                             continue
-                        bx, by = ent[bnode, 0], ent[bnode, 1]
-                        base = _d(ax, ay, bx, by)
-                        fwd = _d(ax, ay, ent[f, 0], ent[f, 1]) + _d(ext[l, 0], ext[l, 1], bx, by)
-                        rev = _d(ax, ay, ext[l, 0], ext[l, 1]) + _d(ent[f, 0], ent[f, 1], bx, by)
-                    elif has_end:
-                        base = _d(ax, ay, ex, ey)
-                        fwd = _d(ax, ay, ent[f, 0], ent[f, 1]) + _d(ext[l, 0], ext[l, 1], ex, ey)
-                        rev = _d(ax, ay, ext[l, 0], ext[l, 1]) + _d(ent[f, 0], ent[f, 1], ex, ey)
+                        y = seq[(a + 1) % n]
                     else:
-                        base = 0.0
-                        fwd = _d(ax, ay, ent[f, 0], ent[f, 1])
-                        rev = _d(ax, ay, ext[l, 0], ext[l, 1])
+                        y = -1
+                    base = link(D, ds, de, x, y)
+                    fwd = link(D, ds, de, x, f) + link(D, ds, de, l, y)
+                    rev = link(D, ds, de, x, flip[l]) + link(D, ds, de, flip[f], y) + turn
                     df = fwd - base - rem
                     dr = rev - base - rem
                     if df < best_delta:
@@ -282,7 +284,7 @@ def _local_search(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=False
 
 
 @numba.njit(cache=True)
-def orient_dp(curve_seq, cand_start, cand_list, ent, ext, sx, sy, has_end=False, ex=0.0, ey=0.0):
+def orient_dp(curve_seq, cand_start, cand_list, D, ds, de):
     """Exact candidate choice (direction, seam) for a fixed curve order: DP over clusters."""
     n = len(curve_seq)
     out = np.empty(n, np.int64)
@@ -295,23 +297,20 @@ def orient_dp(curve_seq, cand_start, cand_list, ent, ext, sx, sy, has_end=False,
     back = np.full((n, maxc), -1, np.int64)
     c0 = curve_seq[0]
     for a in range(cand_start[c0 + 1] - cand_start[c0]):
-        v = cand_list[cand_start[c0] + a]
-        cost[0, a] = _d(sx, sy, ent[v, 0], ent[v, 1])
+        cost[0, a] = ds[cand_list[cand_start[c0] + a]]
     for t in range(1, n):
         cp, cc = curve_seq[t - 1], curve_seq[t]
         for b in range(cand_start[cc + 1] - cand_start[cc]):
             v = cand_list[cand_start[cc] + b]
             for a in range(cand_start[cp + 1] - cand_start[cp]):
                 u = cand_list[cand_start[cp] + a]
-                c = cost[t - 1, a] + _d(ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1])
+                c = cost[t - 1, a] + D[u, v]
                 if c < cost[t, b]:
                     cost[t, b] = c
                     back[t, b] = a
     cl = curve_seq[n - 1]
-    if has_end:
-        for a in range(cand_start[cl + 1] - cand_start[cl]):
-            u = cand_list[cand_start[cl] + a]
-            cost[n - 1, a] += _d(ext[u, 0], ext[u, 1], ex, ey)
+    for a in range(cand_start[cl + 1] - cand_start[cl]):
+        cost[n - 1, a] += de[cand_list[cand_start[cl] + a]]
     b = 0
     for a in range(cand_start[cl + 1] - cand_start[cl]):
         if cost[n - 1, a] < cost[n - 1, b]:
@@ -331,29 +330,62 @@ def clusters(group: Group) -> tuple[np.ndarray, np.ndarray]:
     return cand_start, cand_list
 
 
+def matrices(group: Group):
+    """(D, ds, de) of a group with a dense link matrix, contiguous for the kernels."""
+    return (np.ascontiguousarray(group.arc_cost(), float),
+            np.ascontiguousarray(group.start_cost(), float),
+            np.ascontiguousarray(group.end_cost(), float))
+
+
 def improve(group: Group, order: np.ndarray, *, closed: bool = False, max_rounds: int = 8,
             max_passes: int = 50) -> np.ndarray:
     """Local search from ``order`` until neither 2-opt/Or-opt nor the orientation DP improves."""
+    order = np.asarray(order, np.int64)
+    if not group.dense:
+        return _improve_xy(group, order, closed, max_rounds, max_passes)
+    D, ds, de = matrices(group)
+    if closed:
+        # a closed tour has neither start nor end
+        ds, de = np.zeros_like(ds), np.zeros_like(de)
+    if group.n_curves < 2:
+        if group.n_curves == 1 and not closed:
+            return orient_dp(group.cand_curve[order], *clusters(group), D, ds, de)
+        return order
+    cand_start, cand_list = clusters(group)
+    flip = np.asarray(group.cand_flip, np.int64)
+    for _ in range(max_rounds):
+        order = _local_search(order, D, ds, de, flip, closed, max_passes)
+        if closed:
+            break
+        new = orient_dp(group.cand_curve[order], cand_start, cand_list, D, ds, de)
+        if path_cost(new, D, ds, de, False) >= path_cost(order, D, ds, de, False) - IMPROVE_EPS:
+            break               # the orientations were already optimal: a local optimum of both
+        order = new             # cheaper: search its neighbourhood again
+    return order
+
+
+def _improve_xy(group: Group, order, closed, max_rounds, max_passes) -> np.ndarray:
+    """``improve`` on XY points (a group without a link matrix: ``greedy_xy``)."""
     ent, ext = group.cand_entry_xy, group.cand_exit_xy
     sx, sy = float(group.start_xy[0]), float(group.start_xy[1])
     he = group.end_xy is not None and not closed
     ex, ey = (float(group.end_xy[0]), float(group.end_xy[1])) if he else (0.0, 0.0)
-    order = np.asarray(order, np.int64)
     if group.n_curves < 2:
         if group.n_curves == 1 and not closed:
-            return orient_dp(group.cand_curve[order], *clusters(group), ent, ext, sx, sy, he, ex, ey)
+            return orient_dp_xy(group.cand_curve[order], *clusters(group), ent, ext, sx, sy, he, ex, ey)
         return order
     cand_start, cand_list = clusters(group)
     for _ in range(max_rounds):
-        order = _local_search(order, ent, ext, group.cand_flip, sx, sy, closed, max_passes, he, ex, ey)
+        order = local_search_xy(order, ent, ext, group.cand_flip, sx, sy, closed, max_passes, he,
+                                ex, ey)
         if closed:
             break
-        new = orient_dp(group.cand_curve[order], cand_start, cand_list, ent, ext, sx, sy, he, ex, ey)
-        c_new = path_cost(new, ent, ext, sx, sy, False, he, ex, ey)
-        c_old = path_cost(order, ent, ext, sx, sy, False, he, ex, ey)
-        if c_new >= c_old - IMPROVE_EPS_MM:
-            break               # the orientations were already optimal: a local optimum of both
-        order = new             # shorter: search its neighbourhood again
+        new = orient_dp_xy(group.cand_curve[order], cand_start, cand_list, ent, ext, sx, sy, he, ex, ey)
+        c_new = path_cost_xy(new, ent, ext, sx, sy, False, he, ex, ey)
+        c_old = path_cost_xy(order, ent, ext, sx, sy, False, he, ex, ey)
+        if c_new >= c_old - IMPROVE_EPS:
+            break
+        order = new
     return order
 
 
@@ -365,7 +397,7 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None) -> GroupSoluti
     else:
         order = nearest_neighbour(group)
     order = improve(group, order)
-    obj = group.path_cost_mm(order)
-    lb = lower_bound_mm(group)
-    status = Status.OPTIMAL if obj - lb <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
+    obj = group.path_cost(order)
+    lb = lower_bound(group)
+    status = Status.OPTIMAL if obj - lb <= OPTIMAL_ABS_TOL else Status.FEASIBLE
     return GroupSolution.make(order, obj, lb, status, time.perf_counter() - t0, "greedy")

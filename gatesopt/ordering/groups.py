@@ -10,14 +10,20 @@ does. Layers the layout keeps (the first, fatal lines, ...) are fixed in both mo
 """
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import numpy as np
 
+from ..limits import machine_limits
 from ..program import Kind, Program
+from ..planner import plan
 from ..slicers import FIXED_FEATURE
+from .cost import MoveTimes, TimePricer
 from .layout import Layout, layout
-from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
+from .blocks import CurveGroups, order_blocks
+from .problem import CLOSED_TOL_MM, COST_UNIT, OrderingOptions, OrderingProblem, group_starts
+from .travel import TravelRule
 
 #: a curve without a feature comment whose end lies this close to its start is a clipped loop
 #: (a wall) in safe mode
@@ -90,8 +96,10 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
     feature = program.feature[s0].astype(np.int64)
     fixed_feat = _fixed_features(program) | _pattern_fixed(program)
     has_features = len(program.feature_names) > 0
-    # ---- groups
-    gstart, glayer, gfixed, glabel = [], [], [], []
+    # ---- groups: per curve whether it keeps the slicer's order, and the key a group shares
+    fixed = np.zeros(n, bool)
+    key = np.zeros(n, np.int64)
+    labels = []
     for c in range(n):
         lay_c = int(layer[c])
         keep = bool(lay.layer_keep[lay_c]) if lay_c < len(lay.layer_keep) else True
@@ -102,34 +110,55 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
                 fx = bool(fixed_feat[feature[c]])
             else:
                 fx = bool(wall_like[c])
-            key = (feature[c], fx)
+            key[c] = 2 * (feature[c] + 1) + fx
         else:
             fx = keep
-            key = (fx,)
-        new = c == 0 or lay.gap_boundary[c] or layer[c] != layer[c - 1] or key != prev_key
-        if new:
-            gstart.append(c)
-            glayer.append(lay_c)
-            gfixed.append(fx)
-            fname = program.feature_names[feature[c]] if feature[c] >= 0 else ("loops" if wall_like[c] else "curves")
-            glabel.append(f"L{lay_c} {fname if options.mode == 'safe' else 'all'}")
-        prev_key = key
-    gstart.append(n)
+            key[c] = fx
+        fixed[c] = fx
+        fname = program.feature_names[feature[c]] if feature[c] >= 0 else ("loops" if wall_like[c] else "curves")
+        labels.append(f"L{lay_c} {fname if options.mode == 'safe' else 'all'}")
+    boundary = np.ones(n, bool)
+    if n > 1:
+        boundary[1:] = lay.gap_boundary[1:] | (layer[1:] != layer[:-1])
+    gstart = group_starts(boundary, key)
+    glayer = layer[gstart[:-1]]
+    gfixed = fixed[gstart[:-1]]
+    glabel = [labels[c] for c in gstart[:-1].tolist()]
     origin = program.start_mm[s0[0], :2] if n else np.zeros(2)
-    feed = options.travel_feed_mm_s
-    if feed is None:
-        tr = (program.kind == Kind.TRAVEL) & (program.length_mm > 1.0)
-        feed = float(np.median(program.feed_mm_s[tr])) if tr.any() else 100.0
-    per_mm = {"distance": 1.0, "time": 1.0 / feed, "energy": options.travel_power_w / feed}[options.cost]
-    unit = {"distance": "mm", "time": "s", "energy": "J"}[options.cost]
     notes = list(lay.notes)
     for i, w in enumerate(lay.layer_why):
         if w and i > 0:
             notes.append(f"layer {i}: {w}")
-    return OrderingProblem(
+    problem = OrderingProblem(
         curve_start_xy=start_xy, curve_end_xy=end_xy, curve_closed=np.asarray(closed, bool),
         curve_layer=layer, points_xy=pts, curve_point_start=pstart,
-        group_curve_start=np.asarray(gstart, np.int64), group_layer=np.asarray(glayer, np.int64),
+        group_curve_start=gstart, group_layer=np.asarray(glayer, np.int64),
         group_fixed=np.asarray(gfixed, bool), group_label=tuple(glabel), origin_xy=origin,
-        options=options, cost_per_mm=per_mm, cost_unit=unit,
-        curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), travel_feed_mm_s=feed, layout=lay)
+        options=options, cost_unit=COST_UNIT[options.objective],
+        curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), layout=lay)
+    step_s = None
+    if options.objective == "time":
+        step_s = plan(program).duration_s if options.copied_gaps == "planner" else None
+        problem = with_pricer(program, problem, step_s)
+    if options.mode == "safe" and options.blocks:
+        problem = order_blocks(program, problem, CurveGroups(boundary, key, fixed, tuple(labels),
+                                                             wall_like))
+        if problem.base is not None and options.objective == "time":
+            # priced again on the groups the islands' new order made (blocks.permuted)
+            base = with_pricer(program, problem.base, step_s)
+            problem = dataclasses.replace(problem, base=base, pricer=base.pricer)
+    return problem
+
+
+def with_pricer(program: Program, problem: OrderingProblem,
+                step_s: np.ndarray | None = None) -> OrderingProblem:
+    """``problem`` with the time objective's link costs (``cost.TimePricer``): the rule the
+    emitter follows (``travel.TravelRule``, read from the file's own travels) and the planner's
+    limits for each move (``cost.MoveTimes``, ``limits.machine_limits``)."""
+    lay = problem.layout
+    rule = TravelRule.of(program, problem, lay)
+    move = MoveTimes.from_limits(machine_limits(program))
+    if step_s is None and problem.options.copied_gaps == "planner":
+        step_s = plan(program).duration_s
+    return dataclasses.replace(problem, cost_unit=COST_UNIT["time"],
+                               pricer=TimePricer(program, lay, problem, rule, move, step_s))

@@ -39,6 +39,7 @@ import numpy as np
 
 from . import formulations
 from .chain import end_of, path_options, solve_backwards
+from .problem import Anchor
 from .runner import GroupRunner
 
 #: fewer groups to solve than this: no helper (its start-up, ~1.5 s for a fresh interpreter with
@@ -61,10 +62,13 @@ def known_start(problem, g: int):
     return None
 
 
-def _slicer_start(problem, g: int):
-    """Where the slicer's own order came from before group g's first curve."""
+def _slicer_start(problem, g: int) -> Anchor:
+    """Where the slicer's own order came from before group g's first curve (its curve as the
+    slicer printed it)."""
     c = int(problem.group_curve_start[g]) - 1
-    return np.asarray(problem.origin_xy, float) if c < 0 else problem.curve_end_xy[c]
+    if c < 0:
+        return Anchor.of(problem.origin_xy)
+    return Anchor(problem.curve_end_xy[c].copy(), c, False)
 
 
 def _views(buf, n_groups):
@@ -174,6 +178,10 @@ def main() -> None:
     """The helper process: solve the groups from the back until the main process reaches them."""
     from multiprocessing import resource_tracker, shared_memory
 
+    import signal
+    # Ctrl-C reaches every process of the terminal's group: the main process stops the run (and
+    # this process, ``Helper.stop``); here it would only print a traceback
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     results = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)                               # stray prints (HiGHS, numba) go to stderr
     with open(sys.argv[1], "rb") as f:
@@ -209,7 +217,7 @@ def main() -> None:
                 grp.check_order(gs.order)
                 opts = path_options(grp, gs)
             runner.passed(g)
-            entry[g] = grp.cand_entry_xy[opts[0].order[0]]     # (groups to solve are not empty)
+            entry[g] = problem.cand_anchor(g, grp, int(opts[0].order[0]))    # (not empty)
             body = pickle.dumps((g, opts, entry[g], guess))
             results.write(_HEAD.pack(len(body)) + body)
             results.flush()

@@ -18,13 +18,12 @@ clock, so a group gets the same path on every machine; ``deadline`` is only a sa
 """
 from __future__ import annotations
 
-import time
-
 import numba
 import numpy as np
 
-from .greedy import (IMPROVE_EPS_MM, clusters, improve, keep_smallest, nearest_neighbour,
-                     orient_dp, path_cost)
+from .._jit import now_ns
+from .greedy import (IMPROVE_EPS, clusters, improve, keep_smallest, matrices,
+                     nearest_neighbour, orient_dp, path_cost)
 from .problem import Group
 
 #: kicks per curve in the group, and the cap: enough to match LKH-3's tour on most of the hardest
@@ -95,17 +94,28 @@ def _apply_move(seq, posof, cc, flip, i, k, a, rev):
 
 
 @numba.njit(cache=True, inline="always")
-def _gain_2opt(seq, flip, D, ds, de, lo, hi):
+def _gain_2opt(seq, flip, D, ds, de, lo, hi, turn):
+    """Gain of reversing seq[lo..hi]: its two boundary links, plus the change of the links
+    inside it (``turn``: prefix sums of each link's cost reversed minus forwards, 0 where the
+    costs are the same both ways)."""
     n = len(seq)
     p = seq[lo - 1] if lo > 0 else -1
     q = seq[hi + 1] if hi < n - 1 else -1
     old = _link(D, ds, de, p, seq[lo]) + _link(D, ds, de, seq[hi], q)
     new = _link(D, ds, de, p, flip[seq[hi]]) + _link(D, ds, de, flip[seq[lo]], q)
-    return old - new
+    return old - new - (turn[hi] - turn[lo])
 
 
 @numba.njit(cache=True)
-def _try_curve(seq, posof, cc, flip, D, ds, de, near_out, near_in, c):
+def _turn_prefix(seq, flip, D, turn):
+    """turn[t] = sum over links s_i -> s_(i+1), i < t, of (reversed minus forwards cost)."""
+    turn[0] = 0.0
+    for t in range(len(seq) - 1):
+        turn[t + 1] = turn[t] + D[flip[seq[t + 1]], flip[seq[t]]] - D[seq[t], seq[t + 1]]
+
+
+@numba.njit(cache=True)
+def _try_curve(seq, posof, cc, flip, D, ds, de, near_out, near_in, c, turn):
     """First improving 2-opt or Or-opt move involving curve c; applied. Returns the curves next
     to a changed link (to wake them; -1: the start or end point) or an empty array.
 
@@ -143,7 +153,7 @@ def _try_curve(seq, posof, cc, flip, D, ds, de, near_out, near_in, c):
                         continue
             if hi <= lo:
                 continue
-            if _gain_2opt(seq, flip, D, ds, de, lo, hi) > IMPROVE_EPS_MM:
+            if _gain_2opt(seq, flip, D, ds, de, lo, hi, turn) > IMPROVE_EPS:
                 p = seq[lo - 1] if lo > 0 else -1
                 q = seq[hi + 1] if hi < n - 1 else -1
                 woken = np.array([_curve(cc, p), cc[seq[lo]], cc[seq[hi]], _curve(cc, q)])
@@ -191,8 +201,9 @@ def _try_curve(seq, posof, cc, flip, D, ds, de, near_out, near_in, c):
                 y = seq[a + 1] if a + 1 < n else -1
                 base = _link(D, ds, de, x, y)
                 fwd = _link(D, ds, de, x, f) + _link(D, ds, de, l, y) - base
-                rv = _link(D, ds, de, x, flip[l]) + _link(D, ds, de, flip[f], y) - base
-                if fwd < rem - IMPROVE_EPS_MM or rv < rem - IMPROVE_EPS_MM:
+                rv = (_link(D, ds, de, x, flip[l]) + _link(D, ds, de, flip[f], y) - base
+                      + turn[k] - turn[s])
+                if fwd < rem - IMPROVE_EPS or rv < rem - IMPROVE_EPS:
                     woken = np.array([_curve(cc, p), cc[f], cc[l], _curve(cc, q), _curve(cc, x),
                                       _curve(cc, y)])
                     _apply_move(seq, posof, cc, flip, s, k, a, rv < fwd)
@@ -205,6 +216,8 @@ def _descend(seq, posof, cc, flip, D, ds, de, near_out, near_in, active):
     """Local search from the curves marked in ``active`` until none of them has a move."""
     n = len(seq)
     stack = np.empty(4 * n + 64, np.int64)
+    turn = np.empty(n)
+    _turn_prefix(seq, flip, D, turn)
     top = 0
     for c in range(len(active)):
         if active[c]:
@@ -214,9 +227,10 @@ def _descend(seq, posof, cc, flip, D, ds, de, near_out, near_in, active):
         top -= 1
         c = stack[top]
         active[c] = False
-        touched = _try_curve(seq, posof, cc, flip, D, ds, de, near_out, near_in, c)
+        touched = _try_curve(seq, posof, cc, flip, D, ds, de, near_out, near_in, c, turn)
         if len(touched) == 0:
             continue
+        _turn_prefix(seq, flip, D, turn)
         for cw in touched:
             if cw >= 0:
                 if not active[cw] and top < len(stack):
@@ -230,13 +244,13 @@ def _descend(seq, posof, cc, flip, D, ds, de, near_out, near_in, active):
 
 
 @numba.njit(cache=True)
-def _ils(seq, cc, cand_start, cand_list, ent, ext, flip, sx, sy, has_end, ex, ey,
-         D, ds, de, near_out, near_in, kicks, max_seg, seed, deadline_ns, target):
+def _ils(seq, cc, cand_start, cand_list, flip, D, ds, de, near_out, near_in, kicks, max_seg,
+         seed, deadline_ns, target):
     np.random.seed(seed)
     n = len(seq)
     n_curves = len(cand_start) - 1
     best = seq.copy()
-    best_cost = path_cost(best, ent, ext, sx, sy, False, has_end, ex, ey)
+    best_cost = path_cost(best, D, ds, de, False)
     if n < 4:
         return best
     posof = np.zeros(n_curves, np.int64)
@@ -245,11 +259,9 @@ def _ils(seq, cc, cand_start, cand_list, ent, ext, flip, sx, sy, has_end, ex, ey
     for it in range(kicks):
         if best_cost <= target:
             break
-        if deadline_ns > 0 and (it & 15) == 0:
-            with numba.objmode(now="int64"):
-                now = time.perf_counter_ns()
-            if now > deadline_ns:
-                break
+        # the clock without numba.objmode, which is compiled again in every process (_jit)
+        if deadline_ns > 0 and (it & 15) == 0 and now_ns() > deadline_ns:
+            break
         # kick: A B C D -> A C' B' D
         lb = np.random.randint(1, min(max_seg, n - 1) + 1)
         lc = np.random.randint(1, min(max_seg, n - lb) + 1)
@@ -273,37 +285,31 @@ def _ils(seq, cc, cand_start, cand_list, ent, ext, flip, sx, sy, has_end, ex, ey
         _descend(cand, posof, cc, flip, D, ds, de, near_out, near_in, active)
         for t in range(n):
             curve_seq[t] = cc[cand[t]]
-        cand = orient_dp(curve_seq, cand_start, cand_list, ent, ext, sx, sy, has_end, ex, ey)
-        c = path_cost(cand, ent, ext, sx, sy, False, has_end, ex, ey)
-        if c < best_cost + IMPROVE_EPS_MM:          # equal too: drifting on plateaus helps escape
+        cand = orient_dp(curve_seq, cand_start, cand_list, D, ds, de)
+        c = path_cost(cand, D, ds, de, False)
+        if c < best_cost + IMPROVE_EPS:          # equal too: drifting on plateaus helps escape
             best, best_cost = cand, min(c, best_cost)
     return best
 
 
 def link_matrix(group: Group, k: int = NEIGHBOURS):
-    """(D, ds, de, near_out, near_in): exit->entry lengths between candidates, start->entry,
-    exit->end (0 without an end: the path just stops), and per candidate the k candidates of
-    other curves nearest its exit (``near_out``) and nearest its entry (``near_in``)."""
+    """(D, ds, de, near_out, near_in): the group's link costs (exit -> entry between candidates,
+    start -> entry, exit -> end: 0 without an end) and per candidate the k candidates of other
+    curves cheapest to link to from its exit (``near_out``) and into its entry (``near_in``)."""
     k = min(k, group.n_cands - 1)
-    D, near_out, near_in = _link_lists(np.ascontiguousarray(group.cand_entry_xy, float),
-                                       np.ascontiguousarray(group.cand_exit_xy, float),
-                                       np.ascontiguousarray(group.cand_curve, np.int64), max(k, 0))
-    return (D, np.ascontiguousarray(group.start_cost_mm(), float),
-            np.ascontiguousarray(group.end_cost_mm(), float), near_out, near_in)
+    D, ds, de = matrices(group)
+    near_out, near_in = _near_lists(D, np.ascontiguousarray(group.cand_curve, np.int64), max(k, 0))
+    return D, ds, de, near_out, near_in
 
 
 @numba.njit(cache=True)
-def _link_lists(ent, ext, cc, k):
-    """The link matrix and both neighbour lists in one compiled pass: each row's k nearest
-    candidates of other curves, nearest first, ties in index order, then (a group with fewer than
-    k of them) the row's own curve's candidates in index order, as a stable sort of the row with
-    those at infinity gives. Numpy (hypot, a masked copy, a partial sort per row) took ~1 ms on
-    a 200-candidate group, this ~0.25 ms (measured: 52 Cura bunny groups, 45 -> 13 ms)."""
-    m = len(ent)
-    D = np.empty((m, m))
-    for a in range(m):
-        for b in range(m):
-            D[a, b] = np.sqrt((ext[a, 0] - ent[b, 0]) ** 2 + (ext[a, 1] - ent[b, 1]) ** 2)
+def _near_lists(D, cc, k):
+    """Both neighbour lists in one compiled pass: each row's k cheapest candidates of other
+    curves, cheapest first, ties in index order, then (a group with fewer than k of them) the
+    row's own curve's candidates in index order, as a stable sort of the row with those at
+    infinity gives. (Numpy, a masked copy and a partial sort per row, took ~4x as long on
+    200-candidate groups.)"""
+    m = len(cc)
     near_out = np.empty((m, k), np.int64)
     near_in = np.empty((m, k), np.int64)
     val = np.empty(k + 1)
@@ -324,12 +330,12 @@ def _link_lists(ent, ext, cc, k):
                     out[a, cnt] = b
                     cnt += 1
                 b += 1
-    return D, near_out, near_in
+    return near_out, near_in
 
 
 def improve_ils(group: Group, order, *, kicks: int | None = None, seed: int = 0,
                 deadline: float | None = None, local_optimum: bool = False,
-                target_mm: float = -np.inf) -> np.ndarray:
+                target: float = -np.inf) -> np.ndarray:
     """The best path found by ``kicks`` kicks from ``order`` after its own local search (default:
     KICKS_PER_CURVE per curve, at most MAX_KICKS); never longer than ``improve(order)``. Groups
     above MAX_CANDS candidates get the plain local search only. ``local_optimum``: ``order`` is
@@ -338,7 +344,7 @@ def improve_ils(group: Group, order, *, kicks: int | None = None, seed: int = 0,
     if not local_optimum:
         order = improve(group, order)
     n = group.n_curves
-    if n < 4 or group.n_cands > MAX_CANDS:
+    if n < 4 or group.n_cands > MAX_CANDS or not group.dense:
         return order
     if kicks is None:
         kicks = min(MAX_KICKS, KICKS_PER_CURVE * n)
@@ -346,15 +352,12 @@ def improve_ils(group: Group, order, *, kicks: int | None = None, seed: int = 0,
         # nothing to kick (auto before the symmetric model): the link matrix below would cost
         # ~1 ms on a 100-curve group for nothing
         return order
-    he = group.end_xy is not None
-    ex, ey = (float(group.end_xy[0]), float(group.end_xy[1])) if he else (0.0, 0.0)
     cand_start, cand_list = clusters(group)
     D, ds, de, near_out, near_in = link_matrix(group)
     deadline_ns = 0 if deadline is None else int(deadline * 1e9)
     return _ils(order, group.cand_curve.astype(np.int64), cand_start, cand_list,
-                group.cand_entry_xy, group.cand_exit_xy, group.cand_flip.astype(np.int64),
-                float(group.start_xy[0]), float(group.start_xy[1]), he, ex, ey, D, ds, de, near_out, near_in,
-                int(kicks), MAX_SEGMENT, int(seed), deadline_ns, float(target_mm))
+                group.cand_flip.astype(np.int64), D, ds, de, near_out, near_in,
+                int(kicks), MAX_SEGMENT, int(seed), deadline_ns, float(target))
 
 
 def warm_start(group: Group, hint, t0: float, time_limit_s: float):

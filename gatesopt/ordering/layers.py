@@ -16,12 +16,12 @@ import time
 
 import numpy as np
 
-from ..solvers import Status
+from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
 from .chain import end_of, look_ahead, path_options, pick_paths, rescored
 from .helper import Helper
-from .problem import (GroupSolution, OrderingOptionsError, OrderingProblem, OrderingSolution,
-                      path_travel_mm)
+from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
+                      OrderingSolution, path_travel_mm)
 from .runner import GroupRunner
 
 
@@ -46,8 +46,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     reversed_ = np.zeros(n, bool)
     seam = np.zeros(n, np.int64)
     sols = []
-    pos = np.asarray(problem.origin_xy, float)
-    plans = []      # per group: [(GroupSolution, Group)] options: the solver's path, the slicer's
+    pos = Anchor.of(problem.origin_xy)
+    plans = []      # per group: (Group, options: the solver's path, the slicer's..., start, end)
     proven = 0      # re-orderable groups proven so far (for ``progress``)
     reorderable = problem.group_reorderable
     helper = (Helper.start(problem, formulation, time_limit_s, budget_s, t0, kwargs)
@@ -59,13 +59,15 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                              warm_up=(formulations.warm_up if "warm_up" in record.capabilities
                                       else None))
         for g in range(problem.n_groups):
+            if stop_requested():        # Ctrl-C (``solvers.stop_scope``): no whole answer yet
+                raise Interrupted(f"curve ordering stopped at group {g} of {problem.n_groups}")
             end = end_of(problem, g)
             if end is None and helper:
                 end = helper.entry_of(g + 1)    # the next group's path, if the helper has it
             grp = problem.group(g, pos, end)
             if problem.group_fixed[g] or grp.n_curves == 0:
                 order = np.arange(grp.n_cands)      # one candidate per curve, in the slicer's order
-                obj = grp.path_cost_mm(order)
+                obj = grp.path_cost(order)
                 opts = [GroupSolution.make(order, obj, obj, Status.OPTIMAL, 0.0, "fixed")]
             else:
                 answer = helper.take(g) if helper else None
@@ -76,15 +78,15 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                 else:
                     opts, guess = answer
                     if guess is not None:
-                        opts = rescored(grp, opts, guess)
+                        opts = rescored(problem, g, grp, opts, guess)
                     for gs in opts:
                         grp.check_order(gs.order)
-            plans.append((grp, opts))
+            plans.append((grp, opts, pos, end))
             runner.passed(g)
             if progress is not None:
                 proven += bool(reorderable[g]) and opts[0].status == Status.OPTIMAL
                 progress(g + 1, problem.n_groups, proven)
-            pos = grp.exit_xy(opts[0].order)
+            pos = problem.exit_anchor(g, grp, opts[0].order) if grp.n_curves else pos
     finally:
         if helper:
             helper.stop()
@@ -92,7 +94,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
         deadline = None if budget_s is None else t0 + budget_s - runner.rest_s(problem.n_groups - 1)
         look_ahead(problem, plans, fn, time_limit_s, deadline, kwargs)
     choice = pick_paths(problem, plans)
-    for g, (grp, opts) in enumerate(plans):
+    for g, (grp, opts, _, _) in enumerate(plans):
         gs = opts[choice[g]]
         curves = problem.group_curves(g)
         for k in gs.order:
@@ -101,19 +103,25 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             reversed_[c] = bool(grp.cand_reversed[k])
             seam[c] = int(grp.cand_seam[k])
         sols.append(gs)
-    after = model_travel_mm(problem, np.asarray(order_out, np.int64), reversed_, seam)
-    return OrderingSolution(np.asarray(order_out, np.int64), reversed_, seam, tuple(sols),
-                            problem.original_travel_mm(), after, time.perf_counter() - t0, formulation)
+    order_out = np.asarray(order_out, np.int64)
+    if problem.curve_source is not None:
+        # a problem whose curves were permuted (safe mode's blocks): the solution in the
+        # program's numbering, as emit and the time guard read it
+        src = problem.curve_source
+        order_out = src[order_out]
+        reversed_[src], seam[src] = reversed_.copy(), seam.copy()
+    base = problem.program_problem
+    ident = np.arange(n)
+    no = np.zeros(n, bool)
+    return OrderingSolution(order_out, reversed_, seam, tuple(sols), base.original_travel_mm(),
+                            model_travel_mm(base, order_out, reversed_, seam),
+                            time.perf_counter() - t0, formulation,
+                            cost_before=base.order_cost(ident, no, np.zeros(n, np.int64)),
+                            cost_after=base.order_cost(order_out, reversed_, seam),
+                            cost_unit=problem.cost_unit)
 
 
 def model_travel_mm(problem: OrderingProblem, order, reversed_, seam) -> float:
     """Model travel of a full solution (start of each curve from the end of the one before)."""
-    order = np.asarray(order, np.int64)
-    a, b = problem.curve_start_xy[order].copy(), problem.curve_end_xy[order].copy()
-    moved = np.flatnonzero(seam[order] != 0)        # a loop entered and left at another vertex
-    if len(moved):
-        c = order[moved]
-        a[moved] = b[moved] = problem.points_xy[problem.curve_point_start[c] + seam[c]]
-    rev = np.asarray(reversed_, bool)[order]
-    a[rev], b[rev] = b[rev], a[rev].copy()
+    a, b = problem.entry_exit_xy(order, reversed_, seam)
     return path_travel_mm(problem.origin_xy, a, b)

@@ -180,17 +180,9 @@ def _line_classes(program: Program, step_of_line: np.ndarray) -> tuple[np.ndarra
         if head in STATE_EXT:
             cls[i] = LINE_STATE
     # object labels written as comments are barriers (M486 / EXCLUDE_OBJECT are barriers already)
-    at = []
-    low = program.data.lower()
-    for word in OBJECT_LABEL_WORDS:
-        i = low.find(word)
-        while i >= 0:
-            at.append(i)
-            i = low.find(word, i + 1)
-    if at:
-        lab = np.unique(np.searchsorted(program.line_start, np.asarray(at), side="right") - 1)
-        lab = lab[cls[lab] == LINE_NEUTRAL]
-        cls[lab] = LINE_BARRIER
+    lab = object_label_lines(program)
+    lab = lab[cls[lab] == LINE_NEUTRAL]
+    cls[lab] = LINE_BARRIER
     kind = program.kind
     steps = np.flatnonzero(is_step)
     sk = kind[step_of_line[steps]]
@@ -199,6 +191,21 @@ def _line_classes(program: Program, step_of_line: np.ndarray) -> tuple[np.ndarra
     cls[steps[~motion]] = LINE_BARRIER           # dwell, heat wait, homing handled as FATAL above
     cls[steps[sk == Kind.HOME]] = LINE_FATAL
     return cls, g92_xyz
+
+
+def object_label_lines(program: Program) -> np.ndarray:
+    """Lines that carry an object label (``OBJECT_LABEL_WORDS`` anywhere in them, any case):
+    M486, EXCLUDE_OBJECT_*, ``; printing object``, ``; stop printing object``, ``;MESH:``."""
+    at = []
+    low = program.data.lower()
+    for word in OBJECT_LABEL_WORDS:
+        i = low.find(word)
+        while i >= 0:
+            at.append(i)
+            i = low.find(word, i + 1)
+    if not at:
+        return np.zeros(0, np.int64)
+    return np.unique(np.searchsorted(program.line_start, np.asarray(at), side="right") - 1)
 
 
 def _curves(program: Program, cls: np.ndarray) -> tuple:

@@ -28,7 +28,7 @@ from .blossom import perfect_matching
 from .greedy import keep_smallest
 
 #: cost units per mm (0.1 um): costs are rounded down to whole units
-UNITS_PER_MM = 1e4
+UNITS_PER_COST = 1e4
 #: rounds of adding the left-out edges with negative reduced cost to a sparse search graph;
 #: what is still negative after them is repaired in the dual (``_certify``)
 MAX_PRICING_ROUNDS = 3
@@ -208,7 +208,7 @@ def travel_matching(C: np.ndarray, idx: np.ndarray, k: int, search_node: int,
         return None, None, []
     idx = np.ascontiguousarray(idx, np.int64)
     hub1 = int(hub) + 1 if hub is not None else 0
-    c, ok, sub = _prepare(np.ascontiguousarray(C, float), idx, int(k), int(search_node), UNITS_PER_MM)
+    c, ok, sub = _prepare(np.ascontiguousarray(C, float), idx, int(k), int(search_node), UNITS_PER_COST)
     out = _solve(c, ok, sub, hub1, True)
     if out[0] is None:              # no perfect matching among the nearest edges: all of them
         out = _solve(c, ok, ok.copy(), hub1, False)

@@ -22,9 +22,9 @@ import numpy as np
 from .._native import run_highs
 from ..solvers import Status
 from . import symmetric, symmetric_graph
-from .bounds import lower_bound_mm
+from .bounds import lower_bound
 from .ils import warm_start
-from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution, trivial_solution
+from .problem import OPTIMAL_ABS_TOL, Group, GroupSolution, trivial_solution
 
 _OPT = highspy.HighsModelStatus.kOptimal
 
@@ -34,13 +34,13 @@ class _Model:
 
     def __init__(self, group: Group):
         m, n = group.n_cands, group.n_curves
-        arc = group.arc_cost_mm()
+        arc = group.arc_cost()
         self.us, self.vs = np.nonzero(np.isfinite(arc))
         A = len(self.us)
         self.m, self.n, self.A = m, n, A
         self.o_first, self.o_last, self.o_x, self.o_y = 0, m, 2 * m, 2 * m + A
         ncol = 3 * m + A
-        cost = np.concatenate([group.start_cost_mm(), group.end_cost_mm(), arc[self.us, self.vs], np.zeros(m)])
+        cost = np.concatenate([group.start_cost(), group.end_cost(), arc[self.us, self.vs], np.zeros(m)])
         h = highspy.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("mip_rel_gap", 1e-9)
@@ -171,10 +171,10 @@ def _lp_rounds(model, t0: float, time_limit_s: float, max_rounds: int = 60) -> f
 
 
 def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
-          give_up_gap: float | None = None, known_bound_mm: float | None = None) -> GroupSolution:
+          give_up_gap: float | None = None, known_bound: float | None = None) -> GroupSolution:
     """``give_up_gap``: stop after the LP rounds if their bound leaves a larger relative gap (the
     branch-and-cut loop rarely closes such gaps within seconds; ``auto`` uses 0.15).
-    ``known_bound_mm``: a lower bound already proven for this group (else the cheap bound of
+    ``known_bound``: a lower bound already proven for this group (else the cheap bound of
     ``bounds.py`` is computed)."""
     t0 = time.perf_counter()
     triv = trivial_solution(group, t0, "milp")
@@ -182,21 +182,21 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
         return triv
     hint = warm_start(group, hint, t0, time_limit_s)
     best = np.asarray(getattr(hint, "order", hint), np.int64)
-    best_obj = group.path_cost_mm(best)
+    best_obj = group.path_cost(best)
     # auto passes the bound it has (the cheap one or the matching's: ~0.7 ms to recompute the
     # cheap one on a 100-curve group)
-    bound = lower_bound_mm(group) if known_bound_mm is None else float(known_bound_mm)
+    bound = lower_bound(group) if known_bound is None else float(known_bound)
     if symmetric_graph.applies(group):
         order, obj, lp_bound, proven = symmetric.solve(group, best, t0 + time_limit_s)
         group.check_order(order)
         bound = max(bound, lp_bound)
-        status = Status.OPTIMAL if proven or obj - bound <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
+        status = Status.OPTIMAL if proven or obj - bound <= OPTIMAL_ABS_TOL else Status.FEASIBLE
         return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "milp")
     model = _Model(group)
     h = model.h
     status = Status.FALLBACK
     bound = max(bound, _lp_rounds(model, t0, time_limit_s))
-    if best_obj - bound <= OPTIMAL_ABS_TOL_MM:       # the LP bound alone proves the warm start
+    if best_obj - bound <= OPTIMAL_ABS_TOL:       # the LP bound alone proves the warm start
         return GroupSolution.make(best, best_obj, bound, Status.OPTIMAL, time.perf_counter() - t0, "milp")
     if give_up_gap is not None and best_obj > 0 and (best_obj - bound) / best_obj > give_up_gap:
         return GroupSolution.make(best, best_obj, bound, Status.FEASIBLE, time.perf_counter() - t0, "milp")
@@ -212,7 +212,7 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
         col = np.asarray(h.getSolution().col_value)
         path, cycles = model.decode(col)
         if not cycles and len(path) == group.n_curves:
-            obj = group.path_cost_mm(path)
+            obj = group.path_cost(path)
             if obj < best_obj:
                 best, best_obj = path, obj
             if ms == _OPT:
@@ -225,6 +225,6 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
             break
         model.add_rows([model.cut(c) for c in cycles])
     group.check_order(best)
-    if best_obj - bound <= OPTIMAL_ABS_TOL_MM:
+    if best_obj - bound <= OPTIMAL_ABS_TOL:
         status = Status.OPTIMAL
     return GroupSolution.make(best, best_obj, bound, status, time.perf_counter() - t0, "milp")

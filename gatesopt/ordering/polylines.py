@@ -1,6 +1,8 @@
 """Ordering problems without G-code: plain polylines (pen plotters, laser cutters)."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
@@ -8,13 +10,16 @@ from .problem import CLOSED_TOL_MM, OrderingOptions, OrderingProblem
 
 def from_polylines(layers, *, origin_xy=(0.0, 0.0), options: OrderingOptions | None = None,
                    fixed_layers=()) -> OrderingProblem:
-    """One group per layer; each polyline is an (k >= 1, 2) array of XY vertices in mm.
+    """One group per layer; each polyline is an (k >= 1, 2) array of XY vertices in mm. The
+    objective is travel distance (there is no printer whose time to model).
 
     A polyline whose last vertex equals its first (within CLOSED_TOL_MM) is a closed loop and keeps
     its start vertex as seam (unless ``options.move_seams``). ``fixed_layers``: layer indices
     whose order must be kept.
     """
     options = options or OrderingOptions(mode="free")
+    # no printer to time: the links cost their length (Fleming Eq. 1)
+    options = dataclasses.replace(options, objective="travel")
     starts, ends, closed, layer_of, pts, pstart = [], [], [], [], [], [0]
     gstart, glayer, gfixed, glabel = [0], [], [], []
     for li, layer in enumerate(layers):

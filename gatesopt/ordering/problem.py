@@ -23,6 +23,7 @@ Units: ``_mm`` millimetres, ``_s`` seconds, ``_j`` joules (see gatesopt.program)
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -33,6 +34,14 @@ from ..solvers import STATUSES, Status, relative_gap
 
 #: closed-loop tolerance: a curve whose end lies within this of its start is a closed loop
 CLOSED_TOL_MM = 1e-3
+#: the objectives (``OrderingOptions.objective``) and the unit of their costs: time in
+#: milliseconds (so that the solvers' absolute tolerances, 1e-3 of a unit, are 1 us of print
+#: time where they are 1 um of travel)
+OBJECTIVES = ("time", "travel")
+COST_UNIT = {"time": "ms", "travel": "mm"}
+#: groups above this many candidates get no dense link matrix (m^2 doubles: 2000 -> 32 MB); their
+#: solvers work on the XY points (``greedy``'s Euclidean kernels) and the path is priced link by link
+DENSE_MAX_CANDS = 2000
 
 
 class OrderingOptionsError(GatesoptError, ValueError):
@@ -46,17 +55,66 @@ class OrderingOptions:
     mode: str = "safe"                  # "safe": keep the slicer's feature groups; "free": one group per layer
     move_seams: bool = False            # closed loops may start at another vertex
     seam_candidates: int = 16           # with move_seams: vertices tried per loop (evenly spread, seam included)
-    cost: str = "distance"              # objective unit: "distance" (mm), "time" (s) or "energy" (J)
-    travel_feed_mm_s: float | None = None   # travel speed for "time"/"energy"; None: the file's most common
-    travel_power_w: float = 21.30       # travel power for "energy" (3DGates Table 2, G0 row)
+    #: what a link between two curves costs (formulations/ordering.md, "Cost model"): "time", the
+    #: time the travel takes as emitted (its moves under ``cost.MoveTimes``, retraction, z-hop and
+    #: the slicer's own copied gaps included; in ms), or "travel", its length (mm, Fleming Eq. 1)
+    objective: str = "time"
+    #: safe mode: re-order whole islands and objects of a layer as blocks (``blocks.py``)
+    blocks: bool = True
+    #: the time objective's price of a slicer's gap copied as it was (formulations/ordering.md,
+    #: "Cost model"): "planner", its steps' time under ``planner.plan`` of the input (the curves
+    #: around it are the same, so are its junctions); "moves", each of its moves from and to a
+    #: junction speed, as a rebuilt travel is priced (a combed gap of many short moves then costs
+    #: ~25 % more than it takes: cura413_xend_zigzag100, 874.7 s vs 680.8 s over the file)
+    copied_gaps: str = "planner"
 
     def __post_init__(self):
         if self.mode not in ("safe", "free"):
             raise OrderingOptionsError(f"order mode must be 'safe' or 'free', not {self.mode!r}")
-        if self.cost not in ("distance", "time", "energy"):
-            raise OrderingOptionsError(f"cost must be 'distance', 'time' or 'energy', not {self.cost!r}")
+        if self.objective not in OBJECTIVES:
+            raise OrderingOptionsError(f"objective must be 'time' or 'travel', not {self.objective!r}")
+        if self.copied_gaps not in ("planner", "moves"):
+            raise OrderingOptionsError(f"copied_gaps must be 'planner' or 'moves', not {self.copied_gaps!r}")
         if self.seam_candidates < 1:
             raise OrderingOptionsError("seam_candidates must be >= 1")
+
+
+@dataclass(frozen=True, eq=False)
+class Anchor:
+    """Where a group's path comes from (its start) or must go on to (its end).
+
+    ``curve``: the problem curve the head leaves (a start) or enters next (an end), -1 if none;
+    ``changed``: that curve is printed otherwise than the slicer printed it (reversed, or a loop
+    from another vertex). The time objective needs them: the travel between a curve and the
+    slicer's next one, both as the slicer printed them, is the slicer's own gap, copied
+    (``cost.TimePricer``); the travel objective uses ``xy`` only."""
+
+    xy: np.ndarray
+    curve: int = -1
+    changed: bool = False
+
+    @staticmethod
+    def of(value) -> "Anchor":
+        """An Anchor as is; a point (x, y) as an Anchor without a curve."""
+        if isinstance(value, Anchor):
+            return value
+        return Anchor(np.asarray(value, float)[:2].copy())
+
+
+@dataclass(frozen=True, eq=False)
+class LinkCosts:
+    """A group's link costs in the objective's unit (``OrderingProblem.cost_unit``).
+
+    ``arc[u, v]``: from candidate u's exit to candidate v's entry (inf within one curve), or None
+    for a group above ``DENSE_MAX_CANDS`` candidates (then ``link(u, v)`` prices chosen links);
+    ``start[k]``: from the group's start into k; ``end[k]``: from k on to the group's end (0
+    without one). Asymmetric in general (formulations/ordering.md, "Cost model")."""
+
+    arc: np.ndarray | None
+    start: np.ndarray
+    end: np.ndarray
+    link: object = None         # callable (u, v) -> costs, for groups without ``arc``
+    direct: float = 0.0         # from the start straight on to the end (a group without curves)
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,7 +124,8 @@ class Group:
     Candidate k belongs to local curve ``cand_curve[k]`` (0..n_curves-1); choosing it means the path
     arrives at ``cand_entry_xy[k]`` and leaves from ``cand_exit_xy[k]``. ``cand_flip[k]`` is the
     candidate that traverses the same curve the other way round (``k`` itself for a loop, whose
-    entry and exit coincide). Travel from point p to point q costs |p - q| (mm).
+    entry and exit coincide). A link costs what ``costs`` says (the time objective: the travel's
+    time as emitted, ms); without ``costs``, the travel's length |p - q| (mm, Fleming Eq. 1).
     """
 
     start_xy: np.ndarray        # (2,)
@@ -81,37 +140,55 @@ class Group:
     cand_seam: np.ndarray | None = None       # (m,) int64: vertex a closed loop starts at (0: its seam)
     end_xy: np.ndarray | None = None          # (2,) where the path must go after its last curve
                                               # (the next group's fixed entry), or None: it just ends
+    costs: LinkCosts | None = None            # None: Euclidean travel (made on first use)
 
     @property
     def n_cands(self) -> int:
         return len(self.cand_curve)
 
-    def start_cost_mm(self) -> np.ndarray:
-        """(m,) travel from the start point to each candidate's entry."""
-        return np.hypot(*(self.cand_entry_xy - self.start_xy).T)
+    @property
+    def dense(self) -> bool:
+        """Whether the group has a link matrix (``arc_cost``): up to DENSE_MAX_CANDS candidates."""
+        return self._costs().arc is not None
 
-    def arc_cost_mm(self) -> np.ndarray:
-        """(m, m) travel from candidate u's exit to candidate v's entry; inf within one curve."""
-        d = self.cand_exit_xy[:, None, :] - self.cand_entry_xy[None, :, :]
-        c = np.hypot(d[..., 0], d[..., 1])
-        c[self.cand_curve[:, None] == self.cand_curve[None, :]] = np.inf
-        return c
+    def _costs(self) -> LinkCosts:
+        if self.costs is None:
+            # Euclidean, made once: a frozen dataclass, so written past __setattr__
+            object.__setattr__(self, "costs", euclidean_costs(self))
+        return self.costs
 
-    def end_cost_mm(self) -> np.ndarray:
-        """(m,) travel from each candidate's exit to the end point (0 without one)."""
-        if self.end_xy is None:
-            return np.zeros(self.n_cands)
-        return np.hypot(*(self.cand_exit_xy - self.end_xy).T)
+    def start_cost(self) -> np.ndarray:
+        """(m,) cost from the start point into each candidate."""
+        return self._costs().start
 
-    def path_cost_mm(self, order: np.ndarray) -> float:
-        """Travel of the open path visiting candidates ``order`` (one per curve) from start_xy
-        (and on to end_xy if the group has one)."""
+    def arc_cost(self) -> np.ndarray:
+        """(m, m) cost from candidate u's exit to candidate v's entry; inf within one curve."""
+        arc = self._costs().arc
+        if arc is None:
+            raise ValueError(f"group of {self.n_cands} candidates has no dense link matrix")
+        return arc
+
+    def end_cost(self) -> np.ndarray:
+        """(m,) cost from each candidate's exit to the end point (0 without one)."""
+        return self._costs().end
+
+    def link_cost(self, u, v) -> np.ndarray:
+        """Costs of the links u[i] -> v[i] (candidate indices)."""
+        c = self._costs()
+        u, v = np.asarray(u, np.int64), np.asarray(v, np.int64)
+        if c.arc is not None:
+            return c.arc[u, v]
+        return np.asarray(c.link(u, v), float)
+
+    def path_cost(self, order: np.ndarray) -> float:
+        """Cost of the open path visiting candidates ``order`` (one per curve) from the start
+        (and on to the end if the group has one)."""
         order = np.asarray(order, dtype=np.int64)
+        c = self._costs()
         if len(order) == 0:
-            return 0.0 if self.end_xy is None else float(np.hypot(*(self.end_xy - self.start_xy)))
-        travel = path_travel_mm(self.start_xy, self.cand_entry_xy[order], self.cand_exit_xy[order])
-        last = 0.0 if self.end_xy is None else float(np.hypot(*(self.cand_exit_xy[order[-1]] - self.end_xy)))
-        return travel + last
+            return float(c.direct) if self.end_xy is not None else 0.0
+        inner = float(self.link_cost(order[:-1], order[1:]).sum()) if len(order) > 1 else 0.0
+        return float(c.start[order[0]]) + inner + float(c.end[order[-1]])
 
     def check_order(self, order: np.ndarray) -> None:
         """Raise ValueError unless ``order`` visits every curve exactly once."""
@@ -125,56 +202,114 @@ class Group:
         return self.cand_exit_xy[order[-1]] if len(order) else self.start_xy
 
     def key(self) -> bytes:
-        """Exact identity of this group instance (coordinates to 0.1 µm): identical groups recur
-        layer after layer, and a solve's answer is kept under this key."""
+        """Exact identity of this group instance (coordinates to 0.1 µm, costs to 1e-4 of their
+        unit): identical groups recur layer after layer, and a solve's answer is kept under
+        this key."""
         parts = [self.start_xy, self.cand_entry_xy, self.cand_exit_xy,
                  np.zeros(2) - 1e9 if self.end_xy is None else self.end_xy]
-        q = np.concatenate([np.ravel(np.rint(np.asarray(a, float) * 1e4)) for a in parts]).astype(np.int64)
+        c = self.costs
+        if c is not None and not getattr(c, "euclidean", False):
+            parts += [c.start, c.end] + ([c.arc] if c.arc is not None else [])
+        q = np.concatenate([np.ravel(np.rint(np.nan_to_num(np.asarray(a, float), posinf=-1.0) * 1e4))
+                            for a in parts]).astype(np.int64)
         return q.tobytes() + self.cand_curve.tobytes()
 
     def backwards(self) -> "Group":
         """The mirror image of this group for a path whose end is fixed and whose start is free:
         it starts at ``end_xy`` and ends wherever it likes, each candidate's entry and exit
         swapped. Candidate indices keep their meaning, so its path k1..kn is this group's path
-        kn..k1, and its cost is that path's cost without the travel into its first curve. (The
-        helper process solves groups this way when only the next group's entry is known.)"""
+        kn..k1, and its cost is that path's cost without the travel into its first curve: the
+        link u -> v of the mirror is the link v -> u here, its start costs are the end costs here
+        and it has no end. (The helper process solves groups this way when only the next group's
+        entry is known.)"""
         if self.end_xy is None:
             raise ValueError("a group without an end point has no backwards problem")
+        c = self._costs()
+        link = None if c.link is None else _Mirrored(c.link)
+        mirror = LinkCosts(None if c.arc is None else np.ascontiguousarray(c.arc.T), c.end.copy(),
+                           np.zeros(self.n_cands), link)
         return Group(np.asarray(self.end_xy, float).copy(), self.cand_curve, self.cand_exit_xy,
                      self.cand_entry_xy, self.cand_flip, self.n_curves, self.layer, self.label,
-                     self.cand_reversed, self.cand_seam, None)
+                     self.cand_reversed, self.cand_seam, None, mirror)
+
+
+class _Mirrored:
+    """The links of a ``Group.backwards()`` mirror: u -> v there is v -> u in the group."""
+
+    def __init__(self, link):
+        self.link = link
+
+    def __call__(self, u, v):
+        return self.link(v, u)
+
+
+@dataclass(frozen=True, eq=False)
+class EuclideanCosts(LinkCosts):
+    """Travel length (mm): Fleming Eq. 1."""
+
+    euclidean: bool = True
+
+
+def euclidean_costs(group: Group) -> EuclideanCosts:
+    """The link costs of the travel objective: |q_u - p_v| (mm)."""
+    start = np.hypot(*(group.cand_entry_xy - group.start_xy).T)
+    direct = 0.0
+    if group.end_xy is None:
+        end = np.zeros(group.n_cands)
+    else:
+        end = np.hypot(*(group.cand_exit_xy - group.end_xy).T)
+        direct = float(np.hypot(*(group.end_xy - group.start_xy)))
+    ent, ext = group.cand_entry_xy, group.cand_exit_xy
+    cc = group.cand_curve
+    arc = None
+    if group.n_cands <= DENSE_MAX_CANDS:
+        d = ext[:, None, :] - ent[None, :, :]
+        arc = np.hypot(d[..., 0], d[..., 1])
+        arc[cc[:, None] == cc[None, :]] = np.inf
+    return EuclideanCosts(arc, start, end, _EuclideanLink(ext, ent), direct)
+
+
+class _EuclideanLink:
+    """|q_u - p_v| for chosen links (groups without a dense matrix)."""
+
+    def __init__(self, exit_xy, entry_xy):
+        self.exit_xy, self.entry_xy = exit_xy, entry_xy
+
+    def __call__(self, u, v):
+        return np.hypot(*(self.exit_xy[u] - self.entry_xy[v]).T)
 
 
 #: an objective within this of its bound counts as proven optimal (float noise, integer scaling);
 #: also the absolute tolerance of the gap (``solvers.relative_gap``): 0 within it
-OPTIMAL_ABS_TOL_MM = 1e-3
+OPTIMAL_ABS_TOL = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
 class GroupSolution:
-    """A formulation's answer for one Group (objective, bound in mm of travel)."""
+    """A formulation's answer for one Group (objective and bound in the problem's cost unit:
+    mm of travel, or ms of print time)."""
 
     order: np.ndarray           # (n_curves,) candidate indices in visiting order
-    objective_mm: float
-    bound_mm: float             # proven lower bound (0 where the formulation has none)
+    objective: float
+    bound: float             # proven lower bound (0 where the formulation has none)
     status: Status              # optimal | feasible | fallback (gatesopt.solvers)
     solve_s: float
     formulation: str            # what produced it, e.g. "auto:milp", "greedy+kept"
-    gap: float = field(default=0.0)     # solvers.relative_gap (abs_tol OPTIMAL_ABS_TOL_MM)
+    gap: float = field(default=0.0)     # solvers.relative_gap (abs_tol OPTIMAL_ABS_TOL)
 
     @staticmethod
-    def make(order, objective_mm, bound_mm, status, solve_s, formulation) -> "GroupSolution":
-        objective_mm = float(objective_mm)
-        bound_mm = float(min(max(bound_mm, 0.0), objective_mm))
+    def make(order, objective, bound, status, solve_s, formulation) -> "GroupSolution":
+        objective = float(objective)
+        bound = float(min(max(bound, 0.0), objective))
         if status not in STATUSES:
             raise ValueError(f"unknown status {status!r}: one of {', '.join(STATUSES)}")
         status = Status(status)
         if status == Status.OPTIMAL:
-            bound_mm = objective_mm
+            bound = objective
         # the bound is finite here (0 at worst: travel is never negative), so the gap is never
-        # NaN: 0 within OPTIMAL_ABS_TOL_MM, else (objective - bound) / objective
-        gap = relative_gap(objective_mm, bound_mm, abs_tol=OPTIMAL_ABS_TOL_MM)
-        return GroupSolution(np.asarray(order, dtype=np.int64), objective_mm, bound_mm, status,
+        # NaN: 0 within OPTIMAL_ABS_TOL, else (objective - bound) / objective
+        gap = relative_gap(objective, bound, abs_tol=OPTIMAL_ABS_TOL)
+        return GroupSolution(np.asarray(order, dtype=np.int64), objective, bound, status,
                              float(solve_s), formulation, gap)
 
 
@@ -182,10 +317,10 @@ def trivial_solution(group: Group, t0: float, formulation: str) -> GroupSolution
     """The answer for a group of 0 or 1 curves (no solver needed; ``t0``: when the solve
     started), else None."""
     if group.n_curves == 0:
-        return GroupSolution.make([], 0.0, 0.0, Status.OPTIMAL, time.perf_counter() - t0,
-                                  formulation)
+        c = group.path_cost([])
+        return GroupSolution.make([], c, c, Status.OPTIMAL, time.perf_counter() - t0, formulation)
     if group.n_curves == 1:
-        c = group.start_cost_mm() + group.end_cost_mm()
+        c = group.start_cost() + group.end_cost()
         k = int(np.argmin(c))
         return GroupSolution.make([k], c[k], c[k], Status.OPTIMAL, time.perf_counter() - t0,
                                   formulation)
@@ -213,14 +348,35 @@ class OrderingProblem:
     group_label: tuple = ()         # (G,) str, e.g. "L12 obj0 island1 infill"
     origin_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
     options: OrderingOptions = OrderingOptions()
-    cost_per_mm: float = 1.0        # objective units per mm of travel (1, 1/feed, power/feed)
-    cost_unit: str = "mm"
+    cost_unit: str = "mm"           # of the groups' costs: "mm" (travel) or "ms" (time)
     # Program-built problems: the step rows each curve covers (first, last+1); -1 for polylines
     curve_step_start: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     curve_step_stop: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     notes: tuple = ()               # why some layers were left alone (barriers, unsupported)
-    travel_feed_mm_s: float = 0.0   # travel speed used for travel time (0: unknown)
     layout: object = None           # layout.Layout for Program-built problems (used by emit)
+    #: the time objective's link costs (``cost.TimePricer``); None: Euclidean travel (mm)
+    pricer: object = None
+    #: a problem whose curves are the program's in another order (safe mode's blocks,
+    #: ``blocks.py``): ``curve_source[i]`` is problem curve i's curve in ``base``, the problem in
+    #: the program's order. Solutions (``layers.solve``) are in ``base``'s numbering; emit and
+    #: the time guard work on ``base``. None: this problem is in the program's order
+    curve_source: np.ndarray | None = None
+    base: "OrderingProblem | None" = None
+    #: safe mode's block pass (``blocks.order_blocks``): segments with three islands or more,
+    #: their blocks, segments whose islands moved, block orders proven optimal, seconds
+    block_report: dict = field(default_factory=dict)
+
+    @property
+    def program_problem(self) -> "OrderingProblem":
+        """The problem in the program's curve order (itself unless the curves were permuted)."""
+        return self if self.base is None else self.base
+
+    def source_curves(self, curves) -> np.ndarray:
+        """The program-order curves of problem curves ``curves`` (-1 stays -1)."""
+        curves = np.asarray(curves, np.int64)
+        if self.curve_source is None:
+            return curves
+        return np.where(curves >= 0, self.curve_source[np.maximum(curves, 0)], -1)
 
     @property
     def n_curves(self) -> int:
@@ -242,9 +398,12 @@ class OrderingProblem:
     def group_curves(self, g: int) -> np.ndarray:
         return np.arange(self.group_curve_start[g], self.group_curve_start[g + 1])
 
-    def group(self, g: int, start_xy, end_xy=None) -> Group:
-        """Group g as a solver instance starting at ``start_xy`` (the previous group's end) and,
-        if ``end_xy`` is given, travelling on to it after its last curve."""
+    def group(self, g: int, start, end=None) -> Group:
+        """Group g as a solver instance starting at ``start`` (an ``Anchor`` or a point: where
+        the previous group ended) and, if ``end`` is given, travelling on to it after its last
+        curve. With a time pricer the group carries its link costs (``LinkCosts``)."""
+        start, end = Anchor.of(start), (None if end is None else Anchor.of(end))
+        start_xy, end_xy = start.xy, (None if end is None else end.xy)
         curves = self.group_curves(g)
         fixed = bool(self.group_fixed[g])
         cc, ent, ext, flip, rev, seam = [], [], [], [], [], []
@@ -263,12 +422,68 @@ class OrderingProblem:
                 cc += [local, local]; ent += [a, b]; ext += [b, a]; flip += [k0 + 1, k0]
                 rev += [False, True]; seam += [0, 0]
         m = len(cc)
-        return Group(np.asarray(start_xy, float).copy(), np.asarray(cc, np.int64),
-                     np.asarray(ent, float).reshape(m, 2), np.asarray(ext, float).reshape(m, 2),
-                     np.asarray(flip, np.int64), len(curves), int(self.group_layer[g]),
-                     self.group_label[g] if self.group_label else "",
-                     np.asarray(rev, bool), np.asarray(seam, np.int64),
-                     None if end_xy is None else np.asarray(end_xy, float).copy())
+        grp = Group(np.asarray(start_xy, float).copy(), np.asarray(cc, np.int64),
+                    np.asarray(ent, float).reshape(m, 2), np.asarray(ext, float).reshape(m, 2),
+                    np.asarray(flip, np.int64), len(curves), int(self.group_layer[g]),
+                    self.group_label[g] if self.group_label else "",
+                    np.asarray(rev, bool), np.asarray(seam, np.int64),
+                    None if end_xy is None else np.asarray(end_xy, float).copy())
+        if self.pricer is None:
+            return grp
+        return dataclasses.replace(grp, costs=self.pricer.group_costs(
+            self.source_curves(curves), grp, self._source_anchor(start), self._source_anchor(end)))
+
+    def _source_anchor(self, a: "Anchor | None") -> "Anchor | None":
+        """An anchor with its curve in the program's numbering (the pricer's)."""
+        if a is None or self.curve_source is None or a.curve < 0:
+            return a
+        return Anchor(a.xy, int(self.curve_source[a.curve]), a.changed)
+
+    def cand_anchor(self, g: int, grp: Group, k: int) -> Anchor:
+        """Candidate k of group g (built by ``group``) as an Anchor at its entry (the end of a
+        path into it) -- use ``exit_anchor`` for where a path leaves it."""
+        return Anchor(grp.cand_entry_xy[k].copy(), int(self.group_curve_start[g] + grp.cand_curve[k]),
+                      bool(grp.cand_reversed[k] or grp.cand_seam[k] != 0))
+
+    def exit_anchor(self, g: int, grp: Group, order) -> Anchor:
+        """Where the path ``order`` of group g leaves its last curve (the start of the next group);
+        an empty path leaves from its start."""
+        if len(order) == 0:
+            return Anchor.of(grp.start_xy)
+        k = int(order[-1])
+        return Anchor(grp.cand_exit_xy[k].copy(), int(self.group_curve_start[g] + grp.cand_curve[k]),
+                      bool(grp.cand_reversed[k] or grp.cand_seam[k] != 0))
+
+    def link_cost(self, a: Anchor, b: Anchor) -> float:
+        """Cost of the travel from ``a`` (the head leaving a.curve at a.xy) into ``b`` (entering
+        b.curve at b.xy) in the objective's unit."""
+        if self.pricer is None:
+            return float(np.hypot(*(np.asarray(b.xy) - np.asarray(a.xy))))
+        return float(self.pricer.anchor_link(self._source_anchor(a), self._source_anchor(b)))
+
+    def order_cost(self, order, reversed_, seam) -> float:
+        """Cost of a whole solution (every curve from the end of the one before, the first from
+        ``origin_xy``), in the objective's unit: the model's print time of the travels, or their
+        length. ``solve`` reports it for the slicer's order and the solution."""
+        order = np.asarray(order, np.int64)
+        a, b = self.entry_exit_xy(order, reversed_, seam)
+        if self.pricer is None:
+            return path_travel_mm(self.origin_xy, a, b)
+        changed = (np.asarray(reversed_, bool) | (np.asarray(seam) != 0))[order]
+        return float(self.pricer.order_cost(self.source_curves(order), changed, a, b))
+
+    def entry_exit_xy(self, order, reversed_, seam):
+        """(entry, exit) points of the curves ``order`` printed as ``reversed_`` / ``seam`` say."""
+        order = np.asarray(order, np.int64)
+        a, b = self.curve_start_xy[order].copy(), self.curve_end_xy[order].copy()
+        seam = np.asarray(seam, np.int64)
+        moved = np.flatnonzero(seam[order] != 0)        # a loop entered and left at another vertex
+        if len(moved):
+            c = order[moved]
+            a[moved] = b[moved] = self.points_xy[self.curve_point_start[c] + seam[c]]
+        rev = np.asarray(reversed_, bool)[order]
+        a[rev], b[rev] = b[rev], a[rev].copy()
+        return a, b
 
     def seam_vertices(self, c: int) -> np.ndarray:
         """Vertex offsets a closed loop may start at: 0 (its seam) and, with move_seams, others."""
@@ -281,6 +496,17 @@ class OrderingProblem:
     def original_travel_mm(self) -> float:
         """Travel of the slicer's own order under the same Euclidean model."""
         return path_travel_mm(self.origin_xy, self.curve_start_xy, self.curve_end_xy)
+
+
+def group_starts(boundary: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """(G + 1,) first curve of each group and the curve count: a group is a run of curves with
+    one ``key`` and no ``boundary`` (the gap before a curve) inside it."""
+    n = len(key)
+    new = np.asarray(boundary, bool).copy()
+    if n:
+        new[0] = True
+        new[1:] |= key[1:] != key[:-1]
+    return np.concatenate((np.flatnonzero(new), [n])).astype(np.int64)
 
 
 def path_travel_mm(origin_xy, entry_xy, exit_xy) -> float:
@@ -300,16 +526,25 @@ class OrderingSolution:
 
     ``curve_order``: curves in print order; ``curve_reversed[c]``: curve c is printed backwards;
     ``curve_seam[c]``: vertex offset a closed loop starts at (0: the slicer's seam).
+    ``travel_before_mm`` / ``_after_mm``: the solver's *model* travel (straight links
+    between curve ends, from the origin on), the objective, not the travel of the file as printed
+    (the emitted travels go around walls, retract, start from the start G-code's end): that one
+    is measured on the emitted file (``rewrite.figures.travel``, what every report gives).
     """
 
     curve_order: np.ndarray     # (n,) int64
     curve_reversed: np.ndarray  # (n,) bool
     curve_seam: np.ndarray      # (n,) int64
     groups: tuple               # (G,) GroupSolution
-    travel_before_mm: float
+    travel_before_mm: float     # model travel (Euclidean, mm) of the slicer's order / this one
     travel_after_mm: float
     solve_s: float
     formulation: str
+    #: the objective (``OrderingProblem.order_cost``) of the slicer's order and of this one, in
+    #: ``cost_unit`` ("ms": the travels' print time as emitted; "mm": their length)
+    cost_before: float = float("nan")
+    cost_after: float = float("nan")
+    cost_unit: str = "mm"
 
     def layer_summary(self, problem: OrderingProblem) -> list[dict]:
         """Per layer: curves, largest group, worst status and gap, solve time."""
@@ -320,7 +555,7 @@ class OrderingSolution:
             n = int(problem.group_curve_start[g + 1] - problem.group_curve_start[g])
             d = out.setdefault(lay, {"layer": lay, "curves": 0, "groups": 0, "largest_group": 0,
                                      "status": "optimal", "gap": 0.0, "solve_s": 0.0,
-                                     "travel_mm": 0.0})
+                                     "cost": 0.0, "cost_unit": self.cost_unit})
             d["curves"] += n
             d["groups"] += 1
             d["largest_group"] = max(d["largest_group"], n)
@@ -328,5 +563,5 @@ class OrderingSolution:
                 d["status"] = gs.status
             d["gap"] = max(d["gap"], gs.gap)
             d["solve_s"] += gs.solve_s
-            d["travel_mm"] += gs.objective_mm
+            d["cost"] += gs.objective
         return [out[k] for k in sorted(out)]

@@ -50,7 +50,7 @@ class GroupRunner:
         key = grp.key()
         gs = self.cache.get(key)
         if gs is not None:
-            return GroupSolution.make(gs.order, gs.objective_mm, gs.bound_mm, gs.status, 0.0,
+            return GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status, 0.0,
                                       gs.formulation + "+cached")
         limit = self.time_limit_s
         if self.plan is not None:

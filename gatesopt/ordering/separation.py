@@ -13,6 +13,7 @@ import time
 import numba
 import numpy as np
 
+from .._jit import now_ns
 from .symmetric_graph import components
 
 #: an LP value above this is in the support (below 1 - COLUMN_EPS: fractional)
@@ -249,15 +250,11 @@ def gomory_hu_sides(n, indptr, head, cap, rev, seconds):
     sides = np.zeros((n - 1, n), np.bool_)
     queue = np.empty(n, np.int64)
     parent = np.empty(n, np.int64)
-    with numba.objmode(t0="f8"):
-        t0 = time.perf_counter()
+    t0 = now_ns()           # not numba.objmode: it is compiled again in every process (_jit)
     k = 0
     for s in range(1, n):
-        if s % 16 == 0:
-            with numba.objmode(now="f8"):
-                now = time.perf_counter()
-            if now - t0 > seconds:
-                break
+        if s % 16 == 0 and (now_ns() - t0) * 1e-9 > seconds:
+            break
         t = tree[s]
         _, side = max_flow(indptr, head, cap, rev, s, t, np.inf, queue, parent)
         sides[k] = side

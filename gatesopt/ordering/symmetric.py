@@ -32,7 +32,7 @@ import numpy as np
 from .._native import run_highs
 from . import separation
 from . import ils
-from .problem import OPTIMAL_ABS_TOL_MM, Group
+from .problem import OPTIMAL_ABS_TOL, Group
 from .separation import COLUMN_EPS, gomory_hu_sides, residual_arcs
 from .symmetric_graph import (components, decode_edges, fixed_edges, match_edges, matching_of,
                               odd_sets, travel_graph)
@@ -333,8 +333,8 @@ class SymmetricModel:
         rc = self.rc
         col_rc = np.asarray(h.getSolution().col_dual, float)
         n_old = len(col_rc)
-        open_mm = best_obj - bound + 1e-6       # UB - LB: an edge costing more is in no better path
-        iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(rc) & (rc <= open_mm), 1))
+        open_gap = best_obj - bound + 1e-6      # UB - LB: an edge costing more is in no better path
+        iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(rc) & (rc <= open_gap), 1))
         if n_old + len(iu) > MAX_BRANCH_COLUMNS_PER_NODE * self.N:
             return best, best_obj, bound, False
         self.add_columns(iu, iv)
@@ -355,13 +355,14 @@ class SymmetricModel:
 
         fix_by_reduced_cost()
         heap = [(bound, 0, ())]                 # (parent's LP bound, tiebreak, fixings)
+        unsettled = np.inf                      # least bound of integral nodes priced higher
         count = 1
         nodes = 0
         while heap:
             if time.perf_counter() > deadline or nodes >= max_nodes:
                 break
             node_bound, _, fixings = heapq.heappop(heap)
-            if node_bound >= best_obj - OPTIMAL_ABS_TOL_MM:
+            if node_bound >= best_obj - OPTIMAL_ABS_TOL:
                 continue
             nodes += 1
             # this node's fixings; the previous node's that it lacks go back to the global bounds
@@ -389,7 +390,7 @@ class SymmetricModel:
                     break
                 lp_obj = float(h.getInfo().objective_function_value)
                 x = np.asarray(h.getSolution().col_value)
-                if lp_obj >= best_obj - OPTIMAL_ABS_TOL_MM:
+                if lp_obj >= best_obj - OPTIMAL_ABS_TOL:
                     outcome = "pruned"
                     break
                 if not self.separate(x, deadline):
@@ -404,14 +405,19 @@ class SymmetricModel:
             if len(frac) == 0:                  # integral, connected (separation found nothing)
                 order = self.decode(x)
                 if order is not None:
-                    obj = self.group.path_cost_mm(order)
+                    obj = self.group.path_cost(order)
                     if obj < best_obj - 1e-9:
                         best, best_obj = order, obj
                         fix_by_reduced_cost()
+                    if obj > lp_obj + OPTIMAL_ABS_TOL:
+                        # the path costs more than the model's edges say (an edge priced the
+                        # cheaper way round: ``travel_graph``): another path of this node may
+                        # cost less than it, so the node's bound stays in the final bound
+                        unsettled = min(unsettled, lp_obj)
                 continue
             order = self.tour_from(x)
             if order is not None and len(order) == self.group.n_curves:
-                obj = self.group.path_cost_mm(order)
+                obj = self.group.path_cost(order)
                 if obj < best_obj - 1e-9:
                     best, best_obj = order, obj
                     fix_by_reduced_cost()
@@ -421,8 +427,8 @@ class SymmetricModel:
                 heapq.heappush(heap, (lp_obj, count, fixings + ((int(e), val),)))
                 count += 1
         open_bound = min((b for b, _, _ in heap), default=best_obj)
-        bound = max(bound, min(open_bound, best_obj))
-        proven = best_obj - bound <= OPTIMAL_ABS_TOL_MM
+        bound = max(bound, min(open_bound, unsettled, best_obj))
+        proven = best_obj - bound <= OPTIMAL_ABS_TOL
         return best, best_obj, bound, proven
 
     def _polish(self, order, best, best_obj, bound, deadline):
@@ -432,8 +438,8 @@ class SymmetricModel:
             return best, best_obj
         order = ils.improve_ils(self.group, order,
                                 kicks=POLISH_KICKS_PER_CURVE * self.group.n_curves,
-                                deadline=deadline, target_mm=bound + OPTIMAL_ABS_TOL_MM)
-        obj = self.group.path_cost_mm(order)
+                                deadline=deadline, target=bound + OPTIMAL_ABS_TOL)
+        obj = self.group.path_cost(order)
         return (order, obj) if obj < best_obj - 1e-9 else (best, best_obj)
 
 
@@ -442,17 +448,17 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     the incumbent; then branch-and-cut if a gap is left. Returns (order, objective, bound,
     proven optimal)."""
     best = np.asarray(incumbent, np.int64)
-    best_obj = group.path_cost_mm(best)
+    best_obj = group.path_cost(best)
     model = SymmetricModel(group, best)
     bound = model.seed_odd_sets()
-    if best_obj - bound <= OPTIMAL_ABS_TOL_MM:
+    if best_obj - bound <= OPTIMAL_ABS_TOL:
         return best, best_obj, bound, True
     bound = max(bound, model.root(
         deadline, exact_blossoms_s=EXACT_BLOSSOM_SHARE * (deadline - time.perf_counter())))
-    if best_obj - bound > OPTIMAL_ABS_TOL_MM and model.complete:
+    if best_obj - bound > OPTIMAL_ABS_TOL and model.complete:
         x = np.asarray(model.h.getSolution().col_value)
         best, best_obj = model._polish(model.tour_from(x), best, best_obj, bound, deadline)
-    if best_obj - bound <= OPTIMAL_ABS_TOL_MM:
+    if best_obj - bound <= OPTIMAL_ABS_TOL:
         return best, best_obj, bound, True
     if not model.complete:
         return best, best_obj, bound, False

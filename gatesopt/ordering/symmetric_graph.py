@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from scipy.spatial.distance import cdist
 
 from . import matching
 from .problem import Group
@@ -68,7 +67,14 @@ def travel_graph(group: Group):
     (joined by the curve: a fixed edge) and each loop's seam. Returns (positions, curve per node
     (-1 S, -2 E), degree per node (travel edges: 1, a seam 2), cost matrix (inf where no travel
     edge exists: same curve, S-E, the diagonal; 0 into E when the path may end anywhere), nodes
-    per curve, each curve's first candidate)."""
+    per curve, each curve's first candidate).
+
+    An edge x-y is a link either way: leaving x's curve at x into y's curve at y, or the reverse.
+    Its cost is the cheaper of the two (the group's link costs: travel distance, the same both
+    ways; the time objective's costs differ where one way is the slicer's own gap, copied). The
+    model then relaxes the group's problem: its bound is valid, and a path it finds is priced by
+    the group (``Group.path_cost``); it proves a path only where that price meets the bound.
+    Edges at S and E have one direction (S starts the path, E ends it): exact."""
     n = group.n_curves
     cc = group.cand_curve
     counts = np.bincount(cc, minlength=n)
@@ -89,9 +95,22 @@ def travel_graph(group: Group):
     deg = np.ones(N)
     deg[first_node[loop]] = 2.0
     curve_nodes = [(f,) if lp else (f, f + 1) for f, lp in zip(first_node.tolist(), loop.tolist())]
-    C = cdist(pos, pos)
-    if group.end_xy is None:
-        C[1, :] = C[:, 1] = 0.0                            # the path just ends
+    # per node: the candidate that enters its curve there and the one that leaves it there (an
+    # open curve's first candidate enters at its first node and leaves at its second; the flip
+    # the other way round; a loop's one candidate does both at its seam)
+    enter = np.full(N, -1, np.int64)
+    leave = np.full(N, -1, np.int64)
+    enter[first_node] = first_cand
+    leave[first_node] = np.where(loop, first_cand, group.cand_flip[first_cand])
+    enter[opened + 1] = group.cand_flip[first_cand[~loop]]
+    leave[opened + 1] = first_cand[~loop]
+    inner = np.arange(2, N)
+    D = group.arc_cost()
+    C = np.full((N, N), np.inf)
+    sub = D[leave[inner][:, None], enter[inner][None, :]]
+    C[2:, 2:] = np.minimum(sub, sub.T)
+    C[0, 2:] = C[2:, 0] = group.start_cost()[enter[inner]]
+    C[1, 2:] = C[2:, 1] = group.end_cost()[leave[inner]]     # 0: the path just ends
     np.fill_diagonal(C, np.inf)                 # no travel edge within a curve, nor S-E
     C[opened, opened + 1] = C[opened + 1, opened] = np.inf
     C[0, 1] = C[1, 0] = np.inf
@@ -130,7 +149,7 @@ def odd_sets(C: np.ndarray, deg: np.ndarray, free_end: bool):
         if int(deg[inside].sum()) % 2 == 1:
             masks.append(inside)
     a = np.flatnonzero(mate > np.arange(len(mate)))
-    return bound / matching.UNITS_PER_MM, masks, (idx[a], idx[mate[a]])
+    return bound / matching.UNITS_PER_COST, masks, (idx[a], idx[mate[a]])
 
 
 #: (group, bound, odd sets) of the last ``matching_path``: its exact step reuses them

@@ -1,8 +1,12 @@
 """Travel as the reports measure it, on a parsed file (not the solver's model): every
 non-extruding XY move (straight or arc) from the first layer on, its time under the paper's
 T = L/F, and retractions (steps that pull filament back, and firmware retractions: a bare
-``G10``). ``gatesopt order``'s and ``gatesopt solve``'s reports and ``ordering.plot`` read them here,
-so their numbers agree.
+``G10``). Every report reads them here (``rewrite.figures``: ``solve``, ``order``, ``batch``,
+``compare``, the HTML report; ``ordering.plot``), so their numbers agree.
+
+Counts are of *paths*: consecutive travel moves are one travel, consecutive retracting moves one
+retraction, and motor lines between them (a gated file's instruction lines, which split a move in
+two) do not separate them, so gating a file never changes its counts.
 """
 from __future__ import annotations
 
@@ -21,21 +25,28 @@ def travel_mask(program: Program) -> np.ndarray:
             & (xy > 0))
 
 
+def runs(mask: np.ndarray, program: Program) -> int:
+    """How many runs of consecutive True rows ``mask`` has, motor-line rows skipped (a motor line
+    between two rows of a run does not end it)."""
+    keep = program.kind != Kind.MOTOR
+    m = np.asarray(mask, bool)[keep]
+    return int((m & ~np.concatenate(([False], m[:-1]))).sum())
+
+
 def travel_stats(program: Program) -> dict:
-    """Travel distance/time, travel moves and retractions from the first layer on."""
+    """Travel distance/time, travel paths and retractions from the first layer on."""
     d = program.delta_mm
     printing = program.layer >= 0
     travel = travel_mask(program)
     retract = printing & (d[:, 3] < 0)
     # a retraction spread over several wipe moves counts once
-    starts = retract & ~np.concatenate(([False], retract[:-1]))
-    n_retract = int(starts.sum()) + len(firmware_retraction_lines(program))
+    n_retract = runs(retract, program) + len(firmware_retraction_lines(program))
     return {"travel_mm": float(program.length_mm[travel].sum()),
             "travel_s": float(program.duration_s[travel].sum()),
             # everything from the first layer on (paper time model): extrusion is the same in
             # both files, so a change is travel, retractions and z-hops together
             "print_s": float(program.duration_s[printing].sum()),
-            "travels": int(travel.sum()), "retractions": n_retract}
+            "travels": runs(travel, program), "retractions": n_retract}
 
 
 def firmware_retraction_lines(program: Program) -> np.ndarray:

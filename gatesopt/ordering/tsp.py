@@ -16,29 +16,31 @@ import numpy as np
 
 from ..solvers import Status
 from . import greedy
-from .bounds import lower_bound_mm
+from .bounds import lower_bound
 from .cpsat import closed_tour
-from .problem import OPTIMAL_ABS_TOL_MM, Group, GroupSolution
+from .problem import OPTIMAL_ABS_TOL, Group, GroupSolution
 
 
 def cut_open(group: Group, tour: np.ndarray) -> np.ndarray:
-    """Best open path from the start point obtained by deleting one link of the closed tour."""
+    """Best open path from the start point obtained by deleting one link of the closed tour
+    (walked as it is, or reversed with every curve flipped)."""
     tour = np.asarray(tour, np.int64)
     n = len(tour)
-    ent, ext = group.cand_entry_xy[tour], group.cand_exit_xy[tour]
-    prev_ext = np.roll(ext, 1, axis=0)                    # exit of the curve before position j
-    link = np.hypot(*(ent - prev_ext).T)                  # link (j-1 -> j) of the tour
-    total = link.sum()
-    fwd = np.hypot(*(ent - group.start_xy).T) + total - link           # start at tour[j]
-    rev = np.hypot(*(prev_ext - group.start_xy).T) + total - link      # start at flip(tour[j-1]), backwards
-    if group.end_xy is not None:    # ... and travel on to the end point from the path's last exit
-        fwd = fwd + np.hypot(*(prev_ext - group.end_xy).T)
-        rev = rev + np.hypot(*(ent - group.end_xy).T)
+    if n == 1:
+        return tour
+    ds, de = group.start_cost(), group.end_cost()
+    prev = np.roll(tour, 1)                               # the curve before position j
+    link = group.link_cost(prev, tour)                    # link (j-1 -> j) of the tour
+    fwd = ds[tour] + link.sum() - link + de[prev]         # start at tour[j], end at tour[j-1]
+    # reversed: start at flip(tour[j-1]), walk backwards to flip(tour[j])
+    flip = group.cand_flip
+    back = group.link_cost(flip[tour], flip[prev])        # link flip(j) -> flip(j-1)
+    rev = ds[flip[prev]] + back.sum() - back + de[flip[tour]]
     j_f, j_r = int(np.argmin(fwd)), int(np.argmin(rev))
-    if n == 1 or fwd[j_f] <= rev[j_r]:
+    if fwd[j_f] <= rev[j_r]:
         return np.roll(tour, -j_f)
-    back = np.roll(tour, -j_r)[::-1]                      # tour[j-1], tour[j-2], ..., tour[j]
-    return group.cand_flip[back]
+    back_order = np.roll(tour, -j_r)[::-1]                # tour[j-1], tour[j-2], ..., tour[j]
+    return flip[back_order]
 
 
 def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
@@ -47,8 +49,8 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     n = group.n_curves
     if n <= 1:
         order = np.zeros(0, np.int64) if n == 0 else np.array(
-            [int(np.argmin(group.start_cost_mm() + group.end_cost_mm()))])
-        obj = group.path_cost_mm(order)
+            [int(np.argmin(group.start_cost() + group.end_cost()))])
+        obj = group.path_cost(order)
         return GroupSolution.make(order, obj, obj, Status.OPTIMAL, time.perf_counter() - t0, "tsp")
     tour = None
     if n <= exact_max_curves:
@@ -57,7 +59,7 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     if tour is None:
         tour = greedy.improve(group, greedy.nearest_neighbour(group), closed=True)
     order = cut_open(group, tour)
-    obj = group.path_cost_mm(order)
-    lb = lower_bound_mm(group)
-    status = Status.OPTIMAL if obj - lb <= OPTIMAL_ABS_TOL_MM else Status.FEASIBLE
+    obj = group.path_cost(order)
+    lb = lower_bound(group)
+    status = Status.OPTIMAL if obj - lb <= OPTIMAL_ABS_TOL else Status.FEASIBLE
     return GroupSolution.make(order, obj, lb, status, time.perf_counter() - t0, "tsp")

@@ -2,8 +2,9 @@
 re-parse -> verify -> report (``order_program``; ``reorder`` stops before the verification, which
 ``rewrite.pipeline.run`` does on the gated output).
 
-Travel numbers in the report are measured on the two parsed files (``ordering.travel``), not the
-solver's model.
+Travel and print time in the report are the figures every report gives (``rewrite.figures``:
+travel measured on the two parsed files, print time under the planner model); the solver's own
+model travel is there too, as ``model_travel_*_mm``.
 """
 from __future__ import annotations
 
@@ -18,10 +19,11 @@ from ..ordering.emitter import emit
 from ..ordering.groups import build
 from ..ordering.layers import model_travel_mm, solve
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
-from ..ordering.travel_stats import travel_stats
 from ..parse import parse
+from ..planner import plan
 from ..program import Program
 from ..verify.ordering import check
+from .figures import figures
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,16 +48,31 @@ class OrderResult:
 GUARD_PASSES = 6
 
 
-def layer_times_s(program: Program) -> np.ndarray:
-    """Per layer (0..n_layers-1), the time of every step in it (paper time model)."""
+#: a layer counts as slower re-ordered only by more than this (s): the planner's look-ahead runs
+#: across layers, so a layer whose own text did not change can differ by a hair where a moved
+#: neighbour meets it
+GUARD_TOL_S = 1e-3
+
+
+def step_times_s(program: Program) -> np.ndarray:
+    """Per step, its time under the planner model (``planner.plan``: acceleration, junction
+    speeds, the file's machine limits): what the time guard and the report's print time use."""
+    return plan(program).duration_s
+
+
+def layer_times_s(program: Program, durations_s: np.ndarray | None = None) -> np.ndarray:
+    """Per layer (0..n_layers-1), the time of every step in it (planner model, or the
+    ``durations_s`` given)."""
+    d = step_times_s(program) if durations_s is None else durations_s
     m = program.layer >= 0
-    return np.bincount(program.layer[m], weights=program.duration_s[m], minlength=program.n_layers)
+    return np.bincount(program.layer[m], weights=d[m], minlength=program.n_layers)
 
 
 def keep_layers(problem: OrderingProblem, solution: OrderingSolution, layers) -> OrderingSolution:
     """``solution`` with the curves of ``layers`` back in the slicer's order and direction.
     A layer's curves are one contiguous block of the print order, and curve numbers grow with
     the layer, so sorting the positions they hold restores each block."""
+    problem = problem.program_problem
     order = solution.curve_order.copy()
     at = np.isin(problem.curve_layer[order], np.asarray(layers, np.int64))
     order[at] = np.sort(order[at])
@@ -63,7 +80,8 @@ def keep_layers(problem: OrderingProblem, solution: OrderingSolution, layers) ->
     rev[order[at]] = False
     seam[order[at]] = 0
     return dataclasses.replace(solution, curve_order=order, curve_reversed=rev, curve_seam=seam,
-                               travel_after_mm=model_travel_mm(problem, order, rev, seam))
+                               travel_after_mm=model_travel_mm(problem, order, rev, seam),
+                               cost_after=problem.order_cost(order, rev, seam))
 
 
 def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingSolution,
@@ -79,9 +97,9 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     kept = np.zeros(0, np.int64)
     if not time_guard or out.n_layers != program.n_layers:
         return solution, text, out, kept
-    # the objective is travel distance (Fleming et al.); the emitter rebuilds each travel in the
-    # slicer's style and retracts (and hops) where it is long or crosses a wall, so a slicer that
-    # combed inside walls on longer paths without retracting can be faster. A layer put back
+    # a safety net: the time objective prices each travel as emitted (cost.py), but only its
+    # moves, each from and to its junction speed, not how the planner joins them to the curves
+    # around them (nor, under the travel objective, retractions at all). A layer put back
     # changes where the next one starts, which can make that one slower: a few passes
     before = layer_times_s(program)
     best = None                         # the tried state with the shortest print: (time, state)
@@ -89,7 +107,7 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
         after = layer_times_s(out)
         if best is None or after.sum() < best[0]:
             best = (after.sum(), (solution, text, out, kept))
-        slower = np.flatnonzero(after > before + 1e-6)
+        slower = np.flatnonzero(after > before + GUARD_TOL_S)
         # a layer already in the slicer's order and still slower pays for a neighbour: the
         # travel between them is rebuilt (with a retraction where the slicer combed) because the
         # layer before it, re-ordered, ends elsewhere, or the layer after it starts elsewhere (a
@@ -101,7 +119,7 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
         by = np.concatenate((still, still))
         ok = (near >= 0) & (near < program.n_layers)
         near, by = near[ok], by[ok]
-        pays = after[near] + after[by] > before[near] + before[by] + 1e-6
+        pays = after[near] + after[by] > before[near] + before[by] + GUARD_TOL_S
         slower = np.setdiff1d(np.union1d(slower, near[pays]), kept)
         if not len(slower):
             break
@@ -110,7 +128,7 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
             # a chain of one layer per pass, slic3r13_torus free, whose last pass was 0.008 s
             # slower than the slicer's). The tried state with the shortest print is returned; if
             # even that one is slower than the slicer's, every layer keeps the slicer's order
-            if best[0] <= before.sum() + 1e-6:
+            if best[0] <= before.sum() + GUARD_TOL_S:
                 return best[1]
             kept = np.arange(program.n_layers)
             solution = keep_layers(problem, solution, kept)
@@ -123,9 +141,8 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
 
 def kept_slower_note(n_layers: int) -> str:
     """The report's line for layers the time guard put back (``emit_guarded``)."""
-    return (f"{n_layers} layers keep the slicer's order: re-ordered they took longer (rebuilt "
-            "travels retract and hop where the slicer combed inside walls; the solver's objective "
-            "is travel distance)")
+    return (f"{n_layers} layers keep the slicer's order: re-ordered they took longer under the "
+            "planner model (the time guard)")
 
 
 #: seconds per input line that the work after the solve takes (emit with the time guard's passes,
@@ -184,8 +201,8 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     ``budget_s``: about how long the whole run may take, from ``started_s`` (a
     ``time.perf_counter()`` reading, e.g. taken before the file was parsed; default: now) to the
     verified result; the solve gets what ``solve_budget_s`` leaves it.
-    ``time_guard``: a layer whose re-ordered print takes longer than the slicer's (paper time
-    model: its rebuilt travels retract and hop more often) keeps the slicer's order.
+    ``time_guard``: a layer whose re-ordered print takes longer than the slicer's (planner
+    model) keeps the slicer's order.
     ``progress``: passed to ``ordering.layers.solve`` (called after each group)."""
     program.check_rewritable()
     t0 = time.perf_counter() if started_s is None else started_s
@@ -201,15 +218,30 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     return OrderResult(program, problem, solution, text, out, findings, summary)
 
 
+#: why a layer keeps the slicer's order (the report's per-layer ``kept_why``)
+KEPT_SLOWER = "re-ordered it printed slower (planner model): kept by the time guard"
+KEPT_NOTHING = "nothing to re-order (walls, ordered fills, one-curve groups keep their order)"
+KEPT_BEST = "the slicer's order was the best found"
+
+
 def _solve_counts(problem: OrderingProblem, solution: OrderingSolution, slower_layers):
     """(per-layer rows, group status counts, layer status counts, decided groups): how each group
     and layer was solved. A layer the time guard put back, or with nothing in it to re-order, is
-    "kept"."""
+    "kept"; each kept layer's row says why (``kept_why``), and every row whether its order, a
+    curve's direction or a seam changed (``changed``)."""
     layers = solution.layer_summary(problem)
     put_back = set(slower_layers.tolist())
+    lay = problem.layout
+    order = np.asarray(solution.curve_order, np.int64)
+    turned = np.asarray(solution.curve_reversed, bool) | (np.asarray(solution.curve_seam) != 0)
+    moved = np.zeros(problem.n_curves, bool)
+    moved[order] = order != np.arange(problem.n_curves)
+    changed_layers = set(np.unique(problem.curve_layer[moved | turned]).tolist())
     for row in layers:
+        row["changed"] = row["layer"] in changed_layers
         if row["layer"] in put_back:
             row["status"] = "kept"          # re-ordered it took longer: the slicer's order
+            row["kept_why"] = KEPT_SLOWER
     reorderable = problem.group_reorderable
     decided = [(g, gs) for g, gs in enumerate(solution.groups) if reorderable[g]]
     counts = {"optimal": 0, "feasible": 0, "fallback": 0}
@@ -220,57 +252,67 @@ def _solve_counts(problem: OrderingProblem, solution: OrderingSolution, slower_l
     # a layer with a curve printed from its other end or another seam changed too, even with no
     # group of >= 2 curves (the counts above leave one-curve groups out; their choice is exact:
     # both ways compared). Fixed groups keep the slicer's direction, so this adds only those
-    turned = np.asarray(solution.curve_reversed, bool) | (np.asarray(solution.curve_seam) != 0)
     decided_layers.update(np.unique(problem.curve_layer[turned]).tolist())
+    # and a layer whose islands moved as blocks (safe mode, ordering/blocks.py)
+    decided_layers.update(np.unique(problem.curve_layer[moved]).tolist())
     for row in layers:
         if row["layer"] in decided_layers:
             lay_counts[row["status"] if row["status"] in lay_counts else "fallback"] += 1
+            if row["status"] != "kept" and not row["changed"]:
+                row["kept_why"] = KEPT_BEST
         else:
             # nothing in it to re-order (walls, monotonic fill, a kept first layer): the slicer's
             # order, as the counts say (its fixed groups are trivially "optimal" for the solver)
             row["status"] = "kept"
             lay_counts["kept"] += 1
+            why = ""
+            if lay is not None and row["layer"] < len(lay.layer_why) and lay.layer_keep[row["layer"]]:
+                why = lay.layer_why[row["layer"]]
+            row["kept_why"] = why or KEPT_NOTHING
+    # layers with a group of >= 2 curves to decide, or whose islands moved as blocks
+    lay_counts["reorderable"] = len({int(problem.group_layer[g]) for g, _ in decided}
+                                    | set(np.unique(problem.curve_layer[moved]).tolist()))
     return layers, counts, lay_counts, decided
 
 
-def _slower_notes(before: dict, after: dict, slower_layers) -> list[str]:
+def _slower_notes(fig: dict | None, slower_layers) -> list[str]:
     """The report's lines on a re-ordered print that is slower (or layers kept because they were)."""
     slower = []
     if len(slower_layers):
         slower.append(kept_slower_note(len(slower_layers)))
-    if after["print_s"] > before["print_s"] + 1e-6:
-        slower.append(f"the re-ordered print takes {after['print_s'] - before['print_s']:.1f} s "
-                      f"longer (paper time model): its travels retract {after['retractions']:,} "
-                      f"times instead of {before['retractions']:,}; the objective counts travel "
-                      "distance only")
+    if fig is not None and fig["print_time_after_s"] > fig["print_time_before_s"] + GUARD_TOL_S:
+        slower.append(f"the re-ordered print takes {fig['print_time_after_s'] - fig['print_time_before_s']:.1f} s "
+                      f"longer (planner model): its travels retract {fig['retractions_after']:,} "
+                      f"times instead of {fig['retractions_before']:,}")
     return slower
 
 
 def order_summary(program: Program, out: Program, problem: OrderingProblem,
                   solution: OrderingSolution, options: OrderingOptions, slower_layers,
                   findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
-                  solve_budget_s: float | None, workers: int, wall_s: float) -> dict:
-    """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` adds its travel
-    and group keys): travel, travel and print time, travels and retractions measured on the
-    parsed input and output, how each group and layer was solved."""
-    before, after = travel_stats(program), travel_stats(out)
+                  solve_budget_s: float | None, workers: int, wall_s: float,
+                  with_figures: bool = True) -> dict:
+    """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` has it under
+    ``"ordering"``): the figures of the input and the output (``rewrite.figures``: travel,
+    travels and retractions measured on the parsed files, print time under the planner model;
+    ``with_figures`` False leaves them to the caller, whose own output they would describe), the
+    solver's model travel, how each group and layer was solved."""
+    fig = figures(program, out) if with_figures else None
     layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
     sizes = np.diff(problem.group_curve_start)
-
-    def pct(a, b):
-        return 100.0 * (a / b - 1.0) if b else 0.0
-
-    slower = _slower_notes(before, after, slower_layers)
+    slower = _slower_notes(fig, slower_layers)
+    time_obj = problem.cost_unit == "ms"
     return {
+        "objective": options.objective,
+        # the objective the solver optimised: the travels' time as emitted (time) or their length
+        "model_travel_time_before_s": solution.cost_before / 1000.0 if time_obj else None,
+        "model_travel_time_after_s": solution.cost_after / 1000.0 if time_obj else None,
+        "layers_reorderable": lay_counts["reorderable"],
         "source": program.source, "formulation": formulation, "order_mode": options.mode,
         "move_seams": options.move_seams, "time_limit_s": time_limit_s, "budget_s": budget_s,
         "solve_budget_s": solve_budget_s, "workers": workers,
-        "travel_before_mm": before["travel_mm"], "travel_after_mm": after["travel_mm"],
-        "travel_change_pct": pct(after["travel_mm"], before["travel_mm"]),
-        "travel_time_before_s": before["travel_s"], "travel_time_after_s": after["travel_s"],
-        "print_time_before_s": before["print_s"], "print_time_after_s": after["print_s"],
-        "travels_before": before["travels"], "travels_after": after["travels"],
-        "retractions_before": before["retractions"], "retractions_after": after["retractions"],
+        **(fig or {}),
+        # the solver's objective: straight links between curve ends from the origin on
         "model_travel_before_mm": solution.travel_before_mm,
         "model_travel_after_mm": solution.travel_after_mm,
         "curves": problem.n_curves, "groups": problem.n_groups,
@@ -278,6 +320,13 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         "largest_group": int(max((sizes[g] for g, _ in decided), default=0)),
         "groups_optimal": counts["optimal"], "groups_feasible": counts["feasible"],
         "groups_fallback": counts["fallback"],
+        # safe mode's blocks (ordering/blocks.py): segments of >= 3 islands, how many moved, how
+        # many block orders were proven optimal (the slicer's order kept counts if it was proven)
+        "block_segments": int(problem.block_report.get("segments", 0)),
+        "block_islands": int(problem.block_report.get("blocks", 0)),
+        "block_segments_moved": int(problem.block_report.get("segments_moved", 0)),
+        "block_layers_moved": int(problem.block_report.get("layers_moved", 0)),
+        "block_orders_optimal": int(problem.block_report.get("proven", 0)),
         "layers_optimal": lay_counts["optimal"], "layers_feasible": lay_counts["feasible"],
         "layers_fallback": lay_counts["fallback"], "layers_kept": lay_counts["kept"],
         "layers_kept_slower": int(len(slower_layers)),

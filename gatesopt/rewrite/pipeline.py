@@ -4,14 +4,27 @@
 ``gatesopt solve``, ``gatesopt compare``, ``gatesopt batch`` and ``bench/gating.py`` are thin
 layers over ``run``. Nothing is written to disk here; the caller writes ``RunResult.text`` only if
 ``report.ok``. Nothing is swallowed either: an error in the ordering (a missing backend, a bug) is
-the caller's to see; only Ctrl-C during the ordering keeps the slicer's order, with a note.
+the caller's to see.
+
+Time: every stage is timed (``RunResult.times``) and the solve time a report gives is all of it:
+the curve ordering's solve and both gating solves (the rotation search over every candidate
+angle, and the solve again on the rotated text). ``time_limit_s`` bounds the gating solves
+together, warm starts and model building included; ``budget_s`` is the whole run's, from
+``started_s`` (the caller's clock reading before it read the file) to the verified output: the
+ordering's solve gets what the rest is estimated to leave (``budget.ordering_budget_s``).
+
+Ctrl-C (``solvers.stop_scope``): the first one stops whatever solver is running, which answers
+with the best it has; a stop during the curve ordering keeps the slicer's order; the gating
+solves after it return their warm start; the run then emits and verifies as usual, and the notes
+and the status say what happened. A second Ctrl-C raises ``KeyboardInterrupt``.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from .. import slicers
 from ..gating.emit import EmitResult, emit_result, render
@@ -23,18 +36,21 @@ from ..gating.solve import solve
 from ..ordering.problem import OrderingOptions
 from ..parse import parse
 from ..program import Program
-from ..solvers import Status
+from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
 from ..verify import VerifyReport, check_ordering, check_positions, energy_of, verify
+from .budget import no_time_note, ordering_budget_s, slowdown_factor
+from .figures import figures
 from .order import kept_slower_note, order_summary, reorder
 from .printer import FirmwareChoice, choose
 
-#: the keys of the ordering's report that ``gatesopt solve --json`` carries (issue 4: "--json as
-#: for gating, keys travel_before_mm, travel_after_mm added"); the rest of that report is under
-#: ``"ordering"``
-ORDER_KEYS = ("travel_before_mm", "travel_after_mm", "travel_change_pct", "travel_time_before_s",
-              "travel_time_after_s", "travels_before", "travels_after", "retractions_before",
-              "retractions_after", "groups_optimal", "groups_feasible", "groups_fallback",
-              "layers_optimal", "layers_feasible", "layers_fallback", "layers_kept", "worst_gap")
+#: the keys of the ordering's report that ``gatesopt solve --json`` carries at its top level (the
+#: travel figures are the run's own, ``figures``: measured on the input and the final output);
+#: the rest of that report is under ``"ordering"``
+ORDER_KEYS = ("groups_optimal", "groups_feasible", "groups_fallback", "layers_optimal",
+              "layers_feasible", "layers_fallback", "layers_kept", "worst_gap")
+#: the first gating solve (over every rotation candidate) gets this share of ``time_limit_s``
+#: when more than one angle is a candidate; the solve again on the rotated text the rest
+ROTATION_SEARCH_SHARE = 0.75
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,20 +64,35 @@ class RunResult:
     report: VerifyReport
     ordered: bool
     notes: tuple
-    wall_s: float
+    wall_s: float                       # from ``started_s`` (the caller's read) to the verified output
     order_problem: object = None        # the OrderingProblem, when curves were ordered
     order_summary: dict | None = None   # the ordering's report (``rewrite.order.order_summary``)
     choice: FirmwareChoice | None = None    # the firmware chosen for the file (``printer.choose``)
     rotation: dict | None = None        # how the rotation was chosen (``rotation_report``)
+    times: dict = field(default_factory=dict)   # seconds per stage (``Stages``)
+    stopped: str = ""                   # "interrupted (Ctrl-C)" when a stop was requested
+    figures: dict = field(default_factory=dict)  # print time and travel (``rewrite.figures``)
+    slowdown: float = 1.0               # wall / CPU seconds before the ordering (``budget.slowdown_factor``)
+
+    @property
+    def solve_s(self) -> float:
+        """Every solver's time: the curve ordering's solve and both gating solves."""
+        return self.times.get("ordering_solve_s", 0.0) + self.times.get("gating_solve_s", 0.0)
 
     def summary(self) -> dict:
-        """The report keys of ``gatesopt solve --json`` (issue 3)."""
+        """The report keys of ``gatesopt solve --json`` (issue 3): energy (3DGates model over
+        the paper's times), the one print time (planner model) and travel (measured on the
+        files), ``figures``; every time spent, ``times``."""
         r, s = self.report, self.solution
         d = {
             "source": self.original.source, "firmware": r.firmware, "verified": r.ok,
             "findings": [str(f) for f in r.findings],
             "energy_before_j": r.energy_before_j, "energy_after_j": r.energy_j,
-            "saving_pct": r.saving_pct, "time_before_s": r.time_before_s, "time_after_s": r.time_s,
+            "saving_pct": r.saving_pct,
+            **(self.figures or figures(self.original, self.output, r.firmware)),
+            # the energy model's time (paper T = L/F, firmware stalls included): what the
+            # energies integrate over, and what --max-added-time-pct is a share of
+            "paper_time_before_s": r.time_before_s, "paper_time_after_s": r.time_s,
             "added_time_pct": 100.0 * (r.time_s / r.time_before_s - 1.0) if r.time_before_s else 0.0,
             "lines_before": r.lines_before, "lines_after": r.lines_after,
             "lines_added": r.lines_after - r.lines_before,
@@ -69,17 +100,21 @@ class RunResult:
             "size_change_pct": 100.0 * (r.bytes_after / r.bytes_before - 1.0) if r.bytes_before else 0.0,
             "rotation_deg": r.rotate_deg, "center_xy": list(r.center_mm), "ordered": self.ordered,
             "formulation": s.formulation if s else None, "status": s.status if s else "skipped",
+            "stopped": str(s.stopped) if s else self.stopped,
             "objective_j": s.energy_j if s else None,
             "objective_time_s": s.time_after_s if s else None,
             "bound": (None if s is None or math.isnan(s.bound_j) else s.bound_j),
             "gap": (None if s is None or math.isnan(s.gap) else s.gap),
-            "solve_s": s.solve_s if s else 0.0,
+            "solve_s": self.solve_s,
+            "gating_solve_s": self.times.get("gating_solve_s", 0.0),
+            "ordering_solve_s": self.times.get("ordering_solve_s", 0.0),
             "instruction_lines": self.emitted.instruction_lines if self.emitted else 0,
             "splits": self.emitted.splits if self.emitted else 0,
             "max_snap_mm": float(self.emitted.max_snap_mm) if self.emitted else 0.0,
             "off_time_s": s.off_time_s() if s else {},
             "message": s.message if s else "",
-            "notes": list(self.notes), "wall_s": self.wall_s,
+            "notes": list(self.notes), "wall_s": self.wall_s, "times": dict(self.times),
+            "slowdown": self.slowdown,
             "firmware_line": self.choice.line if self.choice else f"{r.firmware} (given)",
             "firmware_choice": self.choice.summary() if self.choice else None,
             "rotation_line": (self.rotation or {}).get("line", "none"),
@@ -92,20 +127,46 @@ class RunResult:
         return d
 
 
+class Stages:
+    """Seconds per stage of a run, as ``RunResult.times`` reports them (``add``: a stage's time,
+    summed where it runs twice; ``stage``: a timed block)."""
+
+    def __init__(self):
+        self.s: dict = {}
+
+    def add(self, name: str, seconds: float) -> None:
+        self.s[name] = self.s.get(name, 0.0) + float(seconds)
+
+    @contextlib.contextmanager
+    def stage(self, name: str):
+        t = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.add(name, time.perf_counter() - t)
+
+
 def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
                   budget_s: float | None = None, progress=None, options=None,
-                  formulation: str = "auto"):
+                  formulation: str = "auto", started_s: float | None = None):
     """Re-order curves (``rewrite.order.reorder``): (program, ordered?, note, problem,
-    ``summarize(findings)``: the ordering's report, given the findings of its checks). Ctrl-C
-    keeps the slicer's order (a valid answer) with a note; every other exception propagates."""
-    t0 = time.perf_counter()      # the budget covers the ordering: build, solve, emit
+    ``summarize(findings)``: the ordering's report, given the findings of its checks, solve
+    seconds). A stop request (Ctrl-C) keeps the slicer's order (a valid answer) with a note; every
+    other exception propagates."""
+    t0 = time.perf_counter()      # the ordering's own clock (its report's wall_s)
     options = options or OrderingOptions()
     try:
         problem, solve_budget, solution, _, out, slower = reorder(
             program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
-            workers=workers, progress=progress, started_s=t0)
-    except KeyboardInterrupt:   # Ctrl-C: the slicer's own order is a valid answer
-        return program, False, "curve ordering interrupted (Ctrl-C): the slicer's order kept", None, None
+            workers=workers, progress=progress, started_s=t0 if started_s is None else started_s)
+    except KeyboardInterrupt as exc:    # Ctrl-C: the slicer's own order is a valid answer
+        if not isinstance(exc, Interrupted):
+            if stop_requested():
+                raise           # a second Ctrl-C: the user wants out
+            request_stop()      # a first one outside our handler: the solves after it stop too
+        return (program, False, f"curve ordering interrupted (Ctrl-C) after "
+                f"{time.perf_counter() - t0:.1f} s: the slicer's order kept", None, None,
+                time.perf_counter() - t0)
     wall_s = time.perf_counter() - t0
     note = f"curve ordering: {kept_slower_note(len(slower))}" if len(slower) else ""
     out = dataclasses.replace(out, source=program.source)
@@ -113,75 +174,124 @@ def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
     def summarize(findings) -> dict:
         return order_summary(program, out, problem, solution, options, slower, findings,
                              formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
-                             solve_budget_s=solve_budget, workers=workers, wall_s=wall_s)
-    return out, True, note, problem, summarize
+                             solve_budget_s=solve_budget, workers=workers, wall_s=wall_s,
+                             with_figures=False)
+    return out, True, note, problem, summarize, solution.solve_s
 
 
 def _solve_interruptible(problem, formulation: str, time_limit_s, notes: list) -> GatingSolution:
-    """``solve``, but a Ctrl-C during an exact solve still gives an answer: dp's (linear time,
-    budgets repaired), marked "fallback" and said in the notes. (CP-SAT itself catches SIGINT and
-    returns its best solution, which the formulation reports as feasible or fallback.)"""
+    """``solve``; a ``KeyboardInterrupt`` that still reaches here (outside a ``stop_scope``, or
+    from Python code between two native calls) gives dp's answer (linear time, budgets
+    repaired), marked "fallback" and said in the notes. Inside a stop scope the exact
+    formulations stop on the first Ctrl-C by themselves, with their best answer."""
     try:
         return solve(problem, formulation, time_limit_s=time_limit_s)
     except KeyboardInterrupt:
-        if formulation == "dp":
-            raise
+        if formulation == "dp" or stop_requested():
+            raise               # a second Ctrl-C: the user wants out
+        request_stop()          # a first one outside our handler: the solves after it stop too
         sol = solve(problem, "dp")
         notes.append(f"{formulation} interrupted (Ctrl-C): dp's answer used instead")
-        return dataclasses.replace(sol, status=Status.FALLBACK,
+        return dataclasses.replace(sol, status=Status.FALLBACK, stopped=Stopped.INTERRUPTED,
                                    message=f"{formulation} interrupted; dp answer ({sol.status})")
 
 
-def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes: list, source: str):
+def _limit_left(time_limit_s, deadline: float | None, share: float = 1.0):
+    """What is left of a gating time limit at its ``deadline`` (None: no limit), times ``share``;
+    never below 10 ms (a formulation then answers with its warm start)."""
+    if time_limit_s is None or deadline is None:
+        return None
+    return max(share * (deadline - time.perf_counter()), 0.01)
+
+
+def _stop_note(sol: GatingSolution, what: str) -> str | None:
+    """A note for a gating solve that stopped before its gap: why, and what it gave."""
+    if not sol.stopped:
+        return None
+    gap = "" if math.isnan(sol.gap) else f", gap {100 * sol.gap:.4f} %"
+    return f"{what}: {sol.formulation} stopped by {sol.stopped} after {sol.solve_s:.2f} s ({sol.status}{gap})"
+
+
+def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes: list, source: str,
+          times: Stages):
     """Gate ``base``: (the program gating rewrote, solution, emitted). A rotation is its own
     rewrite first: the rotated text (a move whose rotated X or Y change is at most 1 um gets
     exactly the previous text on that axis, as long as the snaps do not drift the print by more
     than 1 um) is re-parsed, and gating is solved again on exactly that geometry, so that the
-    emitted times and energies are the ones the solver scored."""
-    problem = build(base, o)
+    emitted times and energies are the ones the solver scored. ``time_limit_s`` bounds both
+    solves together (``ROTATION_SEARCH_SHARE``); both count in ``times["gating_solve_s"]``."""
+    with times.stage("gating_build_s"):
+        problem = build(base, o)
     notes += list(problem.notes)
-    sol = _solve_interruptible(problem, formulation, time_limit_s, notes)
+    t = time.perf_counter()
+    deadline = None if time_limit_s is None else t + float(time_limit_s)
+    share = ROTATION_SEARCH_SHARE if problem.n_angles > 1 else 1.0
+    sol = _solve_interruptible(problem, formulation, _limit_left(time_limit_s, deadline, share), notes)
+    first_s = time.perf_counter() - t
+    times.add("gating_solve_s", first_s)
+    first = sol
     deg = sol.rotation_deg
     rotation = rotation_report(base, problem, deg, sol.formulation)
+    if deg % 360.0 != 0.0:
+        times.add("rotation_search_s", first_s)     # the solve that chose the rotation
     max_snap = 0.0
     if deg % 360.0 != 0.0:
-        rot = render(base, [], firmware=o.firmware, rotation_deg=deg,
-                     center_mm=tuple(float(v) for v in sol.center_mm),
-                     rotate_rows=(problem.rotate_lo, problem.rotate_hi))
-        rbase = parse(rot.text, source=source)
-        ro = o.replace(rotate="none")
-        rproblem = build(rbase, ro)
+        with times.stage("rotate_s"):
+            rot = render(base, [], firmware=o.firmware, rotation_deg=deg,
+                         center_mm=tuple(float(v) for v in sol.center_mm),
+                         rotate_rows=(problem.rotate_lo, problem.rotate_hi))
+            rbase = parse(rot.text, source=source)
+        with times.stage("gating_build_s"):
+            ro = o.replace(rotate="none")
+            rproblem = build(rbase, ro)
         if o.max_added_time_pct is not None and rproblem.time_before_s > problem.time_before_s > 0:
             # the rotated text can take a little longer itself (0.15 s of 1175 s on a PrusaSlicer
             # file): the budget is on the print as sliced, so the stalls get what is left of it
             left = (1.0 + o.max_added_time_pct / 100.0) * problem.time_before_s / rproblem.time_before_s
             rproblem = dataclasses.replace(      # the budget enters only through max_added_time_s
                 rproblem, options=ro.replace(max_added_time_pct=max(0.0, 100.0 * (left - 1.0))))
-        rsol = _solve_interruptible(rproblem, formulation, time_limit_s, notes)
+        check = rotation["how"] == "auto" and o.min_rotation_gain_pct > 0
+        t = time.perf_counter()
+        rsol = _solve_interruptible(rproblem, formulation,
+                                    _limit_left(time_limit_s, deadline, 0.5 if check else 1.0), notes)
+        times.add("gating_solve_s", time.perf_counter() - t)
+        times.add("resolve_s", time.perf_counter() - t)
         kept = None
-        if rotation["how"] == "auto" and o.min_rotation_gain_pct > 0:
-            kept = _unrotated_if_better(base, o, formulation, time_limit_s, notes, rsol, deg, rotation)
+        if check:
+            kept = _unrotated_if_better(base, o, formulation, _limit_left(time_limit_s, deadline), notes,
+                                        rsol, deg, rotation, times)
         if kept is None:
             notes += list(rot.notes)
             max_snap = rot.max_snap_mm
             base, sol = rbase, rsol
         else:
             sol, deg = kept, 0.0
-    em = emit_result(base, sol, firmware=o.firmware)
+    for n in (_stop_note(first, "rotation search") if first is not sol else None,
+              _stop_note(sol, "gating")):
+        if n:
+            notes.append(n)
+    with times.stage("emit_s"):
+        em = emit_result(base, sol, firmware=o.firmware)
     em = dataclasses.replace(em, max_snap_mm=max(em.max_snap_mm, max_snap), rotation_deg=deg)
     notes += list(em.notes)
     return base, sol, em, rotation
 
 
 def _unrotated_if_better(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes: list,
-                         rotated: GatingSolution, deg: float, rotation: dict) -> GatingSolution | None:
+                         rotated: GatingSolution, deg: float, rotation: dict,
+                         times: Stages) -> GatingSolution | None:
     """The 0 deg solution of ``base`` where the rotated print's (``rotated``, solved on the
     rotated text) saves less than ``o.min_rotation_gain_pct`` more energy, else None; updates the
     ``rotation`` report (its line says why the print stays). A turned print for next to nothing is
-    a surprise (89.9965 deg for 0.013 % on a SuperSlicer file), and the angle is chosen on the
-    unrotated moves' prediction, which the rotated text (coordinates as written) may not reach:
-    a PrusaSlicer file turned 45 deg saved 3.96 % where 0 deg saves 4.99 % (issue 37's check)."""
-    sol0 = _solve_interruptible(build(base, o.replace(rotate="none")), formulation, time_limit_s, notes)
+    a surprise (89.9965 deg for 0.013 % on a SuperSlicer file), and the angle can lose to 0 deg
+    once rotated: ``dp`` picks it on the separable optimum before it repairs a time budget
+    (holes__prusa_mk3s, stock 1 % budget: 3.88 % at 45 deg, 4.91 % at 0 deg; issue 37's check)."""
+    with times.stage("gating_build_s"):
+        problem0 = build(base, o.replace(rotate="none"))
+    t = time.perf_counter()
+    sol0 = _solve_interruptible(problem0, formulation, time_limit_s, notes)
+    times.add("gating_solve_s", time.perf_counter() - t)
+    times.add("rotation_check_s", time.perf_counter() - t)
     gain_pct = 100.0 * (sol0.energy_j - rotated.energy_j) / sol0.energy_j if sol0.energy_j else 0.0
     rotation["gain_pct"] = gain_pct
     if gain_pct >= o.min_rotation_gain_pct:
@@ -241,7 +351,8 @@ def _verify_run(program: Program, ordered_base: Program, out: Program, o: Gating
     """(the report, the ordering checks' findings when gating ran on a re-ordered print)."""
     claimed = (sol.energy_j, sol.time_after_s) if sol is not None else None
     rep = verify(program, out, firmware=o.firmware, start_ahead_s=o.start_ahead_s,
-                 end_late_s=o.end_late_s, claimed=claimed, profile=o.profile, reordered=ordered)
+                 end_late_s=o.end_late_s, claimed=claimed, profile=o.profile, reordered=ordered,
+                 printer=o.printer)
     extra = ()
     if ordered and sol is not None:
         # the ordering's own checks, on the re-ordered print before gating split any move
@@ -259,7 +370,9 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         time_limit_s: float | None = None, order: bool = True, gating: bool = True,
         order_time_limit_s: float = 2.0, order_workers: int = 1,
         order_budget_s: float | None = None, order_progress=None, order_options=None,
-        order_formulation: str = "auto", choice: FirmwareChoice | None = None) -> RunResult:
+        order_formulation: str = "auto", choice: FirmwareChoice | None = None,
+        budget_s: float | None = None, started_s: float | None = None,
+        cpu_started_s: float | None = None) -> RunResult:
     """Rewrite ``program`` as ``gatesopt solve`` does: optional curve ordering, then power gating
     (a chosen rotation applied, the rotated print parsed and solved again); verify the result.
     ``options``: the gating options; None: what fits the file's printer (``printer.choose``:
@@ -267,41 +380,69 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     or ``choice.options`` where a ``choice`` is given (``printer.choose``, as the CLI makes it).
     ``order_options``: an ``ordering.OrderingOptions`` (mode, seams; default safe, seams kept);
     ``order_formulation``: the ordering's formulation (``auto``, ``milp``, ``cpsat``, ``greedy``,
-    ``tsp``); ``order_progress``: called after each ordering group (``ordering.layers.solve``)."""
+    ``tsp``); ``order_progress``: called after each ordering group (``ordering.layers.solve``).
+    ``time_limit_s``: the gating solves together (module docstring); ``budget_s``: the whole
+    run from ``started_s`` (a ``time.perf_counter()`` reading, default now), the ordering's solve
+    getting what the rest leaves (estimated at the rates of the machine as loaded: the wall / CPU
+    seconds since ``started_s`` and ``cpu_started_s``, a ``time.process_time()`` reading taken
+    with it, ``budget.slowdown_factor``); ``order_budget_s``: the ordering stage alone (build, solve,
+    emit), if given instead."""
     program.check_rewritable()
-    t0 = time.perf_counter()
+    t0 = time.perf_counter() if started_s is None else started_s
     if options is None:
         choice = choice if choice is not None else choose(program)
         options = choice.options
         gating = gating and options is not None
     o = options or GatingOptions()
     notes = []
-    base, ordered, order_problem, summarize = program, False, None, None
-    if order:
-        base, ordered, note, order_problem, summarize = _order_curves(
-            program, order_time_limit_s, order_workers, order_budget_s, order_progress,
-            order_options, order_formulation)
-        if note:
-            notes.append(note)
-    ordered_base = base
-    if ordered and o.bed is None and o.bed_size_mm is None:
-        # the re-ordered copy has other line numbers: the rotation line cites the user's file
-        o = o.replace(bed=slicers.read_bed(program.data))
-    sol = em = rotation = None
-    if gating:
-        base, sol, em, rotation = _gate(base, o, formulation, time_limit_s, notes, program.source)
-        text = em.text
-    else:
-        text = base.to_gcode()
-    out = parse(text, source=(program.source + " (output)"))
-    rep, extra = _verify_run(program, ordered_base, out, o, sol, ordered)
-    order_report = None
-    if summarize is not None:
-        # without gating ``verify`` above ran the ordering checks itself: its findings are theirs
-        order_report = summarize(extra if sol is not None else rep.findings)
+    times = Stages()
+    times.add("read_s", time.perf_counter() - t0)
+    slow = 1.0
+    with stop_scope():
+        base, ordered, order_problem, summarize = program, False, None, None
+        ob = order_budget_s
+        if order and budget_s is not None:
+            slow = slowdown_factor(t0, cpu_started_s)
+            ob = ordering_budget_s(budget_s, program, o, formulation, gating,
+                                   time.perf_counter() - t0, time_limit_s, slow)
+            if ob <= 0.0:
+                # the rest alone is estimated to take the whole budget: the slicer's order (a
+                # re-ordering costs its build, a pass over every group and its emit even at no
+                # time to search: seconds on a large file), said so
+                order = False
+                notes.append(no_time_note(budget_s, time.perf_counter() - t0, slow))
+        if order:
+            with times.stage("ordering_s"):
+                base, ordered, note, order_problem, summarize, order_solve_s = _order_curves(
+                    program, order_time_limit_s, order_workers, ob, order_progress,
+                    order_options, order_formulation)
+            times.add("ordering_solve_s", order_solve_s)
+            if note:
+                notes.append(note)
+        ordered_base = base
+        if ordered and o.bed is None and o.bed_size_mm is None:
+            # the re-ordered copy has other line numbers: the rotation line cites the user's file
+            o = o.replace(bed=slicers.read_bed(program.data))
+        sol = em = rotation = None
+        if gating:
+            base, sol, em, rotation = _gate(base, o, formulation, time_limit_s, notes, program.source, times)
+            text = em.text
+        else:
+            text = base.to_gcode()
+        stopped = str(Stopped.INTERRUPTED) if stop_requested() else ""
+    with times.stage("verify_s"):
+        out = parse(text, source=(program.source + " (output)"))
+        rep, extra = _verify_run(program, ordered_base, out, o, sol, ordered)
+    with times.stage("report_s"):
+        figs = figures(program, out, o.firmware if sol is not None else None)
+        order_report = None
+        if summarize is not None:
+            # without gating ``verify`` above ran the ordering checks itself: its findings are theirs
+            order_report = summarize(extra if sol is not None else rep.findings)
     return RunResult(program, base, sol, em, text, out, rep, ordered, tuple(notes),
                      time.perf_counter() - t0, order_problem=order_problem,
-                     order_summary=order_report, choice=choice, rotation=rotation)
+                     order_summary=order_report, choice=choice, rotation=rotation, times=times.s,
+                     stopped=stopped, figures=figs, slowdown=slow)
 
 
 def energy_time(program: Program, firmware: str = "3dgates", profile: str = "paper"):

@@ -81,7 +81,7 @@ def _stalls(name: str) -> bool:
 
 def _dialect_words(name: str) -> str:
     fw = fwmod.get(name)
-    on = f"/{fw.on_word}" if fw.on_word else ""
+    on = f"/{fw.on_word}" if fw.on_word and fw.on_word != fw.off_word else ""
     return f"{fw.off_word}{on} lines"
 
 
@@ -144,6 +144,8 @@ def choose(program, requested: str = "auto", *, force: bool = False, max_added_t
     if default_budget and max_added_time_pct is not None:
         budget_words += " (the default for stock firmware; --max-added-time-pct P or none to change)"
     said += f"; {_dialect_words(name)}, {budget_words}"
+    if fw.note:
+        said += f"; {fw.note}"
     if name == "klipper" and "klipper-gating" in fwmod.PRESETS:
         said += ("; with gatesopt's Klipper module installed (integrations/klipper), --firmware "
                  "klipper-gating switches motors without stalls")

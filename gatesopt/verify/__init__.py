@@ -30,6 +30,10 @@ read the two Programs (``gatesopt.parse`` of the original and of the output) and
    Klipper, which turns every stepper off, no ``S0`` for stock firmware, which does not know it),
    on a motor it may gate (``allowed_motors``: RepRapFirmware's ``M18 X`` unhomes X) and keeping
    the axis homed (``homing_kept``), all read from ``gatesopt.firmware``.
+4c. ``schedule`` (instead of ``timing``, for a firmware that times its own switches,
+   ``Firmware.schedule``: klipper-gating): which added line switches which motor off when, derived
+   from the lines with the firmware's protocol on the dialect's time model (``schedule.timeline_s``);
+   a line the firmware would skip is a finding, and ``energy`` prices exactly those intervals.
 5. ``energy``: energy and time of the output, recomputed from its text with the one energy model
    (``gatesopt.energy.step_energy_j``, stall times from ``gatesopt.firmware.stall_durations``),
    agree with what the solver claimed within ``claim_rel_tol``.
@@ -75,6 +79,7 @@ from .ordering import check as check_ordering
 from .ordering import check_barriers
 from .positions import check_positions
 from .rotation import read_rotation, undone_tol
+from .schedule import check_schedule, scheduled_lines, timeline_s
 from .timing import TIME_TOL_S, check_timing
 
 __all__ = ["verify", "VerifyReport", "Finding", "read_rotation", "energy_of", "check_geometry",
@@ -127,7 +132,7 @@ def _has_line(program: Program, prefix: str, within: int = HEADER_LINES) -> bool
 def verify(original: Program, output: Program, *, firmware="3dgates", start_ahead_s: float = 1.8e-3,
            end_late_s: float = 1.0e-3, claimed=None, profile="paper", reordered: bool | None = None,
            claim_rel_tol: float = CLAIM_REL_TOL, geometry_tol_mm: float = GEOMETRY_TOL_MM,
-           time_tol_s: float = TIME_TOL_S) -> VerifyReport:
+           time_tol_s: float = TIME_TOL_S, printer=None) -> VerifyReport:
     """Run every check of ``output`` against ``original``; ``ok`` only if all hold.
 
     ``claimed``: what the solver reported (a GatingSolution, a dict with ``energy_after_j`` /
@@ -136,6 +141,8 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     header, or original lines that are not all kept in order); then only heater/tool commands
     (and other fans) must keep their order, the part-fan duty per layer its filament, and the
     ordering checks (``gatesopt.verify.ordering``) run too.
+    ``printer``: the printer's Klipper config (``gatesopt.printer_config``) for a firmware that
+    times its own switches (``Firmware.schedule``: the input shaper's window, the module's options).
     """
     fw = fwmod.get(firmware)
     segments = segment_pair(original, output, geometry_tol_mm)
@@ -170,9 +177,23 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     # the firmware's own dialect first: timing read with the wrong firmware's rules means little
     findings += check_firmware(output, firmware=fw, original=original)
     checks.append("firmware")
-    findings += check_timing(output, firmware=fw, start_ahead_s=start_ahead_s, end_late_s=end_late_s,
-                             original=original, tol_s=time_tol_s)
-    checks.append("timing")
+    scheduled = dur_out = dur_orig = None
+    if fw.schedule(printer, start_ahead_s=start_ahead_s, end_late_s=end_late_s) is not None:
+        # the firmware's own options in the printer's config are what it switches with
+        own = fw.gating_defaults(printer)
+        start_ahead_s = own.get("start_ahead_s", start_ahead_s)
+        end_late_s = own.get("end_late_s", end_late_s)
+        # the firmware switches by itself: its protocol says which motor is off when, on the
+        # dialect's time model
+        dur_out, dur_orig = timeline_s(output, fw, printer), timeline_s(original, fw, printer)
+        scheduled = scheduled_lines(output, firmware=fw, start_ahead_s=start_ahead_s, end_late_s=end_late_s,
+                                    printer=printer, original=original, duration_s=dur_out)
+        findings += check_schedule(output, scheduled)
+        checks.append("timing(schedule)")
+    else:
+        findings += check_timing(output, firmware=fw, start_ahead_s=start_ahead_s, end_late_s=end_late_s,
+                                 original=original, tol_s=time_tol_s)
+        checks.append("timing")
     if reordered:
         bare = without_added_motor_lines(output, original)
         if deg % 360.0 == 0.0 and bare.n_lines == output.n_lines:
@@ -188,10 +209,12 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
                 original, bare,
                 snap_tol_mm=undone_tol(geometry_tol_mm, deg) if deg % 360.0 else 0.0))
             checks.append("ordering(barriers; moves: geometry)")
-    e_after, t_after, stall = energy_of(output, firmware=fw, profile=profile, original=original)
+    e_after, t_after, stall = energy_of(output, firmware=fw, profile=profile, original=original,
+                                        scheduled=scheduled, duration_s=dur_out)
     # the original's motor lines are all its own (a stall priced with the state they leave, as the
     # solver's ``energy_before_j`` does), not gating lines whose effect is undone
-    e_before, t_before, _ = energy_of(original, firmware=fw, profile=profile, original=original)
+    e_before, t_before, _ = energy_of(original, firmware=fw, profile=profile, original=original,
+                                      duration_s=dur_orig)
     cl = claimed_energy_time(claimed)
     if cl is not None:
         checks.append("energy")

@@ -9,6 +9,7 @@ from ..energy import load_profile, step_energy_j
 from ..program import Kind, Program
 from .finding import Finding
 from .motor_lines import read_motor_rows
+from .schedule import scheduled_energy
 
 CLAIM_REL_TOL = 1e-6
 
@@ -35,14 +36,22 @@ def _file_enable(program: Program, original: Program | None = None) -> np.ndarra
 
 
 def energy_of(program: Program, *, firmware="3dgates", profile="paper", duration_s=None,
-              original: Program | None = None):
+              original: Program | None = None, scheduled=None):
     """(energy J, time s, stall s) of ``program`` recomputed from its text with the one model.
 
     A firmware stall at a motor instruction is priced with the motors as the slicer's file has
     them (``_file_enable``; ``original`` tells the file's own motor lines from inserted ones): the
     whole printer keeps drawing power while the firmware drains its queue or dwells, and no gating
     credit is taken for it -- the convention of ``gatesopt.gating.problem`` (``stall_coeffs``
-    priced with ``enable0``)."""
+    priced with ``enable0``).
+
+    ``scheduled``: for a firmware that times its own switches, the (line, motor) pairs as it
+    carries them out (``schedule.scheduled_lines``): the motors are then off over those intervals
+    only, not from an added line to the motor's next step as the parsed state has them."""
+    if scheduled is not None:
+        stall = fwmod.stall_durations(program, firmware)
+        return (*scheduled_energy(program, scheduled, _file_enable(program, original), stall, profile=profile,
+                                  duration_s=duration_s), float(stall.sum()))
     prof = load_profile(profile)
     coeffs = prof.coefficients(program)
     stall = fwmod.stall_durations(program, firmware)

@@ -1,0 +1,263 @@
+"""Curve ordering priced as printed (issue 36, "Done when"): per file, safe and free mode, auto and
+greedy, the default budget, the print time under the planner model and the criteria of the issue.
+
+    python bench/ordering_as_printed.py run [--files GLOB] [--extra DIR] [--extra-files GLOB]
+        [--modes safe,free] [--formulations auto,greedy] [--budget 10] [--workers 1]
+        [--out bench/ordering-as-printed.jsonl]
+    python bench/ordering_as_printed.py report [--out ...] [--write docs/RESULTS.md]
+
+``run`` appends one JSON line per (file, mode, formulation): ``rewrite.order.order_program`` (build
+-> solve within the budget -> emit with the time guard -> re-parse -> verify), the whole run
+counted from before the parse as ``gatesopt order --budget`` counts it. Besides the report's keys
+it keeps the layers the time guard put back and how many groups proven optimal lay in them
+(a "proven optimal group reverted"). ``--extra DIR`` adds files from another folder (the fresh
+slices of bench/fresh_slices.py) under ``--extra-files``.
+
+``report`` writes the section "## Curve ordering priced as printed" of docs/RESULTS.md: per file
+and mode the print time before, after (auto) and greedy's, travel, layers kept slower of the
+re-orderable layers, proven groups reverted, safe mode's islands moved, groups proven, verified;
+then the criteria of issue 36 counted over the rows.
+"""
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import json
+import sys
+import time
+from pathlib import Path
+
+from _markdown import publish  # bench/_markdown.py
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+INSTANCES = ROOT.parent / "shared" / "instances"
+DEFAULT_OUT = ROOT / "bench" / "ordering-as-printed.jsonl"
+HEADING = "## Curve ordering priced as printed"
+#: issue 36: layers the time guard keeps because re-ordered they were slower, of re-orderable ones
+KEPT_SLOWER_MAX_SHARE = 0.02
+#: and the share of groups proven optimal under the budget
+PROVEN_MIN_SHARE = 0.90
+#: a print time counts as not longer up to this (s): the guard's own tolerance per layer
+TIME_TOL_S = 1e-3
+
+
+def _files(args) -> list[Path]:
+    names = sorted(p for p in INSTANCES.iterdir()
+                   if p.name.endswith((".gcode", ".gcode.gz")) and fnmatch.fnmatch(p.name, args.files))
+    if args.extra:
+        names += sorted(p for p in Path(args.extra).iterdir()
+                        if p.name.endswith((".gcode", ".gcode.gz"))
+                        and fnmatch.fnmatch(p.name, args.extra_files))
+    return names
+
+
+def _row(res, path: Path, form: str, parse_s: float, run_s: float) -> dict:
+    from gatesopt.rewrite.order import KEPT_SLOWER
+    s = dict(res.summary)
+    kept = sorted(r["layer"] for r in s["per_layer"] if r.get("kept_why") == KEPT_SLOWER)
+    problem, sol = res.problem, res.solution
+    reorderable = problem.group_reorderable
+    kept_set = set(kept)
+    reverted = sum(1 for g, gs in enumerate(sol.groups)
+                   if reorderable[g] and gs.status == "optimal"
+                   and int(problem.group_layer[g]) in kept_set)
+    s.pop("per_layer", None)
+    s.update(file=path.name, folder=path.parent.name, formulation=form, parse_s=parse_s,
+             run_s=run_s, kept_slower_layers=kept, optimal_reverted=reverted)
+    return s
+
+
+def run(args) -> None:
+    import gatesopt
+    from gatesopt.ordering import OrderingOptions
+    from gatesopt.rewrite.order import order_program
+    out = Path(args.out)
+    for path in _files(args):
+        t = time.perf_counter()
+        prog = gatesopt.parse(path)
+        parse_s = time.perf_counter() - t
+        for mode in args.modes.split(","):
+            for form in args.formulations.split(","):
+                t = time.perf_counter() - parse_s
+                try:
+                    res = order_program(prog, OrderingOptions(mode=mode), formulation=form,
+                                        time_limit_s=args.time_limit, budget_s=args.budget,
+                                        workers=args.workers, started_s=t)
+                except Exception as e:  # noqa: BLE001 -- a bench row says what failed
+                    row = {"file": path.name, "folder": path.parent.name, "order_mode": mode,
+                           "formulation": form, "error": f"{type(e).__name__}: {e}"}
+                else:
+                    row = _row(res, path, form, parse_s, time.perf_counter() - t)
+                with open(out, "a") as f:
+                    f.write(json.dumps(row, default=float) + "\n")
+                if "error" in row:
+                    print(f"{path.name} {mode} {form}: ERROR {row['error']}", flush=True)
+                    continue
+                print(f"{path.name} {mode} {form}: print {row['print_time_before_s']:.1f} -> "
+                      f"{row['print_time_after_s']:.1f} s "
+                      f"({row['print_time_change_pct']:+.2f} %), travel "
+                      f"{row['travel_change_pct']:+.1f} %, kept slower "
+                      f"{row['layers_kept_slower']}/{row['layers_reorderable']}, optimal "
+                      f"{row['groups_optimal']}/{row['groups_reordered']}, blocks moved "
+                      f"{row.get('block_segments_moved', 0)}/{row.get('block_segments', 0)}, run "
+                      f"{row['run_s']:.1f} s, verified {row['verified']}", flush=True)
+
+
+def _load(path: Path) -> dict:
+    rows = {}
+    for line in path.read_text().splitlines():
+        r = json.loads(line)
+        for old in ("before_s", "after_s", "change_pct"):
+            # rows written before the report's keys were renamed (one print-time figure: G3)
+            if f"print_time_planner_{old}" in r:
+                r[f"print_time_{old}"] = r.pop(f"print_time_planner_{old}")
+        rows[(r["folder"], r["file"], r["order_mode"], r["formulation"])] = r  # the last run wins
+    return rows
+
+
+def _pct(a, b) -> str:
+    return f"{100.0 * (a / b - 1.0):+.2f} %" if b else "n/a"
+
+
+def changed_layers(r: dict) -> int:
+    """Layers with something decided in them: a group of >= 2 curves, islands moved, or a
+    one-curve group turned (those count as decided layers in the report; a layer the time guard
+    put back changed first, so it is one of them)."""
+    decided = (r["layers_optimal"] + r["layers_feasible"] + r["layers_fallback"]
+               + r["layers_kept_slower"])
+    return max(decided, r["layers_reorderable"])
+
+
+def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], dict]:
+    lines = [f"| file | print s before | auto after | greedy after | travel auto | travel greedy | "
+             f"kept slower / re-orderable layers | optimal reverted | groups optimal | worst gap | "
+             f"islands moved (runs, layers) | free-mode print | run s | verified |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+    tally = {"files": 0, "not_faster_than_before": [], "slower_than_greedy": [], "kept": 0,
+             "reorderable": 0, "reverted": 0, "optimal": 0, "groups": 0, "unverified": [],
+             "errors": [], "block_files": 0, "block_moved_files": 0}
+    for name in files:
+        a = rows.get((folder, name, mode, "auto"))
+        g = rows.get((folder, name, mode, "greedy"))
+        fr = rows.get((folder, name, "free", "auto"))
+        if a is None:
+            continue
+        if "error" in a:
+            tally["errors"].append(name)
+            lines.append(f"| {name} | error: {a['error'][:80]} |" + " |" * 12)
+            continue
+        tally["files"] += 1
+        b, after = a["print_time_before_s"], a["print_time_after_s"]
+        gafter = g["print_time_after_s"] if g and "error" not in g else None
+        if after > b + TIME_TOL_S:
+            tally["not_faster_than_before"].append(name)
+        if gafter is not None and after > gafter + TIME_TOL_S:
+            tally["slower_than_greedy"].append(name)
+        tally["kept"] += a["layers_kept_slower"]
+        tally["reorderable"] += changed_layers(a)
+        tally["reverted"] += a["optimal_reverted"]
+        tally["optimal"] += a["groups_optimal"] + a.get("block_orders_optimal", 0)
+        tally["groups"] += a["groups_reordered"] + a.get("block_segments", 0)
+        if not a["verified"] or (g and not g.get("verified", False)):
+            tally["unverified"].append(name)
+        if a.get("block_segments"):
+            tally["block_files"] += 1
+            tally["block_moved_files"] += bool(a.get("block_segments_moved"))
+        n_groups = a["groups_reordered"] + a.get("block_segments", 0)
+        n_opt = a["groups_optimal"] + a.get("block_orders_optimal", 0)
+        islands = (f"{a['block_segments_moved']}/{a['block_segments']}, {a['block_layers_moved']}"
+                   if a.get("block_segments") else "-")
+        free = (f"{fr['print_time_after_s']:,.1f} ({_pct(fr['print_time_after_s'], b)})"
+                if mode == "safe" and fr and "error" not in fr else "")
+        lines.append(
+            f"| {name} | {b:,.1f} | {after:,.1f} ({_pct(after, b)}) | "
+            + (f"{gafter:,.1f} ({_pct(gafter, b)})" if gafter is not None else "-") + " | "
+            f"{a['travel_change_pct']:+.1f} % | "
+            + (f"{g['travel_change_pct']:+.1f} %" if gafter is not None else "-") + " | "
+            f"{a['layers_kept_slower']} / {changed_layers(a)} | {a['optimal_reverted']} | "
+            f"{n_opt} / {n_groups} | {100 * a['worst_gap']:.2f} % | {islands} | {free} | {a['run_s']:.1f} | "
+            f"{'yes' if a['verified'] else 'NO'}"
+            + ("" if not g or g.get("verified", True) else " (greedy: NO)") + " |")
+    return lines, tally
+
+
+def _criteria(mode: str, t: dict) -> list[str]:
+    share = t["kept"] / t["reorderable"] if t["reorderable"] else 0.0
+    proven = t["optimal"] / t["groups"] if t["groups"] else 1.0
+
+    def names(xs):
+        return ", ".join(xs) if xs else "none"
+    out = [f"- {mode} mode, {t['files']} files: print time after > before: "
+           f"{len(t['not_faster_than_before'])} ({names(t['not_faster_than_before'])}); "
+           f"after > greedy's: {len(t['slower_than_greedy'])} ({names(t['slower_than_greedy'])}); "
+           f"layers kept slower {t['kept']:,} of {t['reorderable']:,} re-orderable = "
+           f"{100 * share:.2f} % (target <= {100 * KEPT_SLOWER_MAX_SHARE:.0f} %: "
+           f"{'met' if share <= KEPT_SLOWER_MAX_SHARE else 'NOT met'}); proven optimal groups "
+           f"reverted: {t['reverted']}; groups proven optimal {t['optimal']:,} of {t['groups']:,} = "
+           f"{100 * proven:.1f} % (target >= {100 * PROVEN_MIN_SHARE:.0f} %: "
+           f"{'met' if proven >= PROVEN_MIN_SHARE else 'NOT met'}); not verified: "
+           f"{names(t['unverified'])}; errors: {names(t['errors'])}"]
+    if mode == "safe":
+        out[-1] += (f"; files with runs of >= 3 islands: {t['block_files']}, islands re-ordered in "
+                    f"{t['block_moved_files']}")
+    return out
+
+
+def report(args) -> None:
+    rows = _load(Path(args.out))
+    folders: dict = {}
+    for (folder, name, _, _) in rows:
+        folders.setdefault(folder, set()).add(name)
+    cmd = args.command_line or "python bench/ordering_as_printed.py run"
+    sec = [HEADING, "",
+           "Command (from the repository root, one process, 2 cores shared with other jobs):", "",
+           "```", cmd, "python bench/ordering_as_printed.py report --write docs/RESULTS.md", "```", "",
+           "Print time = the planner model (`planner.plan`: acceleration, junction speeds, the "
+           "file's limits) from the first layer on, measured on the parsed input and the parsed, "
+           "verified output; objective: time (the default). *auto after* / *greedy after*: the "
+           "same run with `--formulation auto` / `greedy` (the block order of safe mode is "
+           "chosen by auto in both). *kept slower*: layers the time guard put back because "
+           "re-ordered they printed slower, of the layers with something decided (a group of >= 2 "
+           "curves, islands moved, or a single curve printed from its other end). *optimal "
+           "reverted*: groups proven optimal lying in such a layer. *groups optimal*: groups of "
+           ">= 2 curves proven optimal, plus safe mode's block orders proven optimal, of all "
+           "of them. *islands moved*: safe mode's runs of >= 3 islands whose order changed, of all "
+           "such runs, and in how many layers. *free-mode print*: the same file in free mode "
+           "(auto), against the slicer's print time. *run s*: parse to verified output.", ""]
+    crit = []
+    for folder in sorted(folders):
+        files = sorted(folders[folder])
+        for mode in ("safe", "free"):
+            lines, tally = _table(rows, folder, files, mode)
+            if tally["files"] == 0 and not tally["errors"]:
+                continue
+            sec += [f"### {folder}, {mode} mode", ""] + lines + [""]
+            crit += [f"{folder}:"] + _criteria(mode, tally)
+    sec += ["### Issue 36 criteria, counted over the rows above", ""] + crit + [""]
+    publish("\n".join(sec), args.write)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("--files", default="*")
+    r.add_argument("--extra", default=None)
+    r.add_argument("--extra-files", default="*")
+    r.add_argument("--modes", default="safe,free")
+    r.add_argument("--formulations", default="auto,greedy")
+    r.add_argument("--time-limit", type=float, default=2.0)
+    r.add_argument("--budget", type=float, default=10.0)
+    r.add_argument("--workers", type=int, default=1)
+    r.add_argument("--out", default=str(DEFAULT_OUT))
+    p = sub.add_parser("report")
+    p.add_argument("--out", default=str(DEFAULT_OUT))
+    p.add_argument("--write", default=None)
+    p.add_argument("--command-line", default=None, help="the run command to print in the section")
+    args = ap.parse_args()
+    run(args) if args.cmd == "run" else report(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,116 @@
+"""The ``klipper-gating`` dialect: Klipper with gatesopt's extras module (issue 34).
+
+integrations/klipper/gatesopt_gating.py (its protocol: integrations/klipper/README.md) switches a
+stepper's enable pin at print time, with no flush and no dwell. gatesopt writes one line per idle
+moment, right after the last move that steps the motors before their idle intervals::
+
+    GATESOPT_GATE STEPPERS=stepper_x[,stepper_y]
+
+No move is split and no "on" line exists: for each named stepper S the module switches the pin
+off at ``t_end + off_delay`` (``t_end``: the end of the moves queued before the line) and on at
+``t_next - on_lead`` (``t_next``: the start of the next move that steps S), where
+
+    off_delay = post + end_late + 1 us        on_lead = pre + start_ahead + 25 us + 1 us
+
+(``pre``/``post``: S's step window, the input shaper's, ``gatesopt.shaper``; 25 us: Klipper's
+``MAX_STEPCOMPRESS_ERROR``; 1 us: clock rounding) -- if rule A and rule B hold, with ``gap`` the sum
+of the moves' ``min_move_t`` (distance over speed, klippy/toolhead.py ``Move``) between the line
+and the activating move, and ``min_sched`` = 0.1 s (the MCU's ``min_schedule_time``):
+
+- rule A: ``gap >= off_delay + on_lead + max(min_off_time, min_sched)``;
+- rule B: ``min_sched`` between the previous "on" of S and this "off": ``on_lead_prev + (the
+  min_move_t from the move that ended S's previous gated interval to the line) + off_delay >=
+  min_sched``.
+
+What this module declares to the gating model (``Schedule``; ``gatesopt.gating`` honours it, the
+verifier derives the intervals from the lines with its own code): the firmware's own delay and lead
+per motor, rule A's floor ``min_off_s`` = max(min_off_time, min_sched), rule B's spacing
+``min_sched``, the lower bound of ``min_move_t`` (``planner.min_move_time_s``: L / F, arcs as
+Klipper's chords), no more than ``MAX_OFF_DELAY_S`` of delay, and the planner time model with
+Klipper's rules and the printer's limits (``--printer-config``), so that reported times and
+off-times are what Klipper plans.
+
+Klipper's own lines still do what they do on stock Klipper (the ``klipper`` dialect): a file's
+``SET_STEPPER_ENABLE``, ``M18``, ``M84`` dwell 0.22 s; ``GATESOPT_GATE`` never stalls and never
+drains the queue. Steppers: those of a cartesian printer (stepper_x moves X alone, and so on);
+the module refuses an extruder, so E is not gated.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from . import ExtendedMotorCommand, Firmware, FirmwareError, Schedule
+from .klipper import KLIPPER_STALL_S, PLANNER, STEPPER_NAMES
+
+# the module's constants (integrations/klipper/gatesopt_gating.py)
+CLOCK_SLACK_S = 1e-6          # pin and step times are MCU clocks: rounding
+STEP_EARLY_S = 25e-6          # stepcompress may send a step this much early (MAX_STEPCOMPRESS_ERROR)
+MIN_SCHEDULE_S = 0.100        # the MCU's min_schedule_time(): between two events of one pin
+MAX_OFF_DELAY_S = 0.050       # the module skips an interval whose off would come later than this
+GATEABLE = ("X", "Y", "Z")    # kinematic steppers of a cartesian printer
+AXIS_OF = {"X": "x", "Y": "y", "Z": "z"}   # which shaped axis each stepper is active on (cartesian)
+
+# every stepper name is read (an extruder too, which the module refuses: the verifier then names it)
+GATESOPT_GATE = ExtendedMotorCommand(
+    "GATESOPT_GATE", "STEPPERS", tuple((STEPPER_NAMES[m], m) for m in STEPPER_NAMES),
+    enable_param="", default_enable=0, lists=True)
+
+
+@dataclass(frozen=True)
+class KlipperGating(Firmware):
+    """One ``GATESOPT_GATE`` line per moment, motors merged; no on line."""
+
+    def _lines(self, word: str, motors, enable: int) -> list[str]:
+        if enable:
+            return []
+        return [f"{word} STEPPERS={','.join(STEPPER_NAMES[m] for m in motors)}"]
+
+    def gating_defaults(self, printer=None) -> dict:
+        """The module's own options from the printer's ``[gatesopt_gating]`` section (start-ahead,
+        end-late, the steppers it may gate), for ``GatingOptions.for_firmware``."""
+        if printer is None or printer.gating is None:
+            return {}
+        sec = printer.gating
+        letters = {v: k for k, v in STEPPER_NAMES.items()}
+        unknown = [s for s in sec.steppers if letters.get(s) not in GATEABLE]
+        if unknown:
+            raise FirmwareError(f"{printer.source}: [gatesopt_gating] steppers: {', '.join(unknown)} "
+                                f"cannot be gated (gatesopt gates {', '.join(STEPPER_NAMES[m] for m in GATEABLE)})")
+        return dict(start_ahead_s=sec.start_ahead_s, end_late_s=sec.end_late_s,
+                    gateable=tuple(letters[s] for s in sec.steppers))
+
+    def schedule(self, printer=None, *, start_ahead_s: float, end_late_s: float) -> Schedule:
+        if printer is not None and printer.kinematics not in (None, "cartesian"):
+            raise FirmwareError(f"{printer.source}: kinematics {printer.kinematics!r}: klipper-gating "
+                                "models cartesian printers (each of stepper_x, stepper_y, stepper_z "
+                                "moves one axis alone)")
+        pre, post = [0.0] * 4, [0.0] * 4
+        if printer is not None:
+            for i, m in enumerate("XYZ"):
+                pre[i], post[i] = printer.window_s(AXIS_OF[m])
+        off_extra = tuple(p + CLOCK_SLACK_S for p in post)
+        on_extra = tuple(p + STEP_EARLY_S + CLOCK_SLACK_S for p in pre)
+        worst = max(off_extra[:3]) + end_late_s
+        if worst > MAX_OFF_DELAY_S:
+            raise FirmwareError(f"the input shaper's window after a move ({max(post):.4f} s) plus end-late "
+                                f"({end_late_s:.4f} s) is {worst:.4f} s, more than the module's "
+                                f"{MAX_OFF_DELAY_S} s: it would gate nothing")
+        min_off = max(printer.gating.min_off_time_s if printer is not None and printer.gating else 0.0,
+                      MIN_SCHEDULE_S)
+        arc = printer.arc_resolution_mm if printer is not None and printer.arc_resolution_mm else 1.0
+        return Schedule(off_delay_s=off_extra, on_lead_s=on_extra, min_off_s=min_off,
+                        min_spacing_s=MIN_SCHEDULE_S, arc_segment_mm=arc)
+
+
+DIALECT = KlipperGating(
+    name="klipper-gating", off_word="GATESOPT_GATE", on_word=None, merge_motors=True,
+    stall_off_s=0.0, stall_on_s=0.0, reenable="scheduled", homing_kept=True,
+    allowed_motors=frozenset(GATEABLE),
+    executes=frozenset({"GATESOPT_GATE", "SET_STEPPER_ENABLE", "M18", "M84"}),
+    refused_note="the module switches kinematic steppers only (an extruder is refused)",
+    description="Klipper with gatesopt's module: GATESOPT_GATE after the last move, no stall",
+    rank=4, detect_words=("GATESOPT_GATE",), detect_rank=5,
+    motor_commands=(GATESOPT_GATE,), no_drain_words=frozenset({"GATESOPT_GATE"}),
+    word_stalls=(("SET_STEPPER_ENABLE", KLIPPER_STALL_S, KLIPPER_STALL_S),
+                 ("M18", KLIPPER_STALL_S, KLIPPER_STALL_S), ("M84", KLIPPER_STALL_S, KLIPPER_STALL_S)),
+    time_model="planner", planner=PLANNER)

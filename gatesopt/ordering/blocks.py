@@ -1,0 +1,245 @@
+"""Safe mode's blocks (issue 36; formulations/ordering.md, "Blocks"): whole islands of a layer
+re-ordered as units, each keeping the slicer's order inside (walls before infill, its seams, its
+directions).
+
+Safe mode keeps each run of one feature in place, so a layer of many small islands (a pin plate:
+per pin two wall loops and a little infill) is a chain of one-curve groups in which nothing can
+move, although the slicer chose the islands' order greedily. Here, per *segment* of a layer (the
+curves between two hard breaks: a layer change, any barrier line), the curves are assigned to
+islands by the layer's geometry -- an island is the outermost wall loop that covers a curve's
+middle vertex (shapely: ``STRtree.query(..., predicate="covered_by")``), curves no loop covers
+(support, say) pin the segment -- and the islands' order is one more curve-ordering problem: a
+``Group`` whose "curves" are the blocks, each with one candidate (entered where its first curve
+starts, left where its last curve ends), the links priced as every other link
+(``cost.TimePricer``: the slicer's own gap where a block follows the block it followed, else a
+rebuilt travel), solved by ``auto``. The first block of each segment stays first: its gap holds
+the layer change. The problem is then permuted to the new block order (``OrderingProblem.
+curve_source``, ``base``) and solved as usual: inside each block, its re-orderable groups (infill)
+are decided by the same chain of groups.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..program import Program
+from ..solvers import Status
+from .problem import Anchor, Group, LinkCosts, OrderingProblem, group_starts
+
+#: the time limit of one segment's block order, and of all of a file's together (beyond it the
+#: greedy path and local search only): islands repeat layer after layer (a cache takes those)
+BLOCK_TIME_LIMIT_S = 0.2
+BLOCKS_BUDGET_S = 1.0
+#: loops smaller than this (mm^2) outline no island
+MIN_ISLAND_AREA_MM2 = 1e-3
+
+
+@dataclass(frozen=True, eq=False)
+class CurveGroups:
+    """What ``groups.build`` decided per curve (program order), to group a permuted problem the
+    same way: the gap before each curve is a group boundary; each curve's group key (feature,
+    fixed) and fixed flag; the label of a group it would start; whether it is a wall loop."""
+
+    boundary: np.ndarray
+    key: np.ndarray
+    fixed: np.ndarray
+    labels: tuple
+    wall_like: np.ndarray
+
+
+def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) -> OrderingProblem:
+    """``problem`` with each segment's islands in the order the block problem chose (see module
+    docstring), or ``problem`` itself if no segment has three islands or none moved."""
+    lay = problem.layout
+    n = problem.n_curves
+    if n < 3 or lay is None:
+        return problem
+    perm = np.arange(n)
+    report = {"segments": 0, "blocks": 0, "segments_moved": 0, "proven": 0, "solve_s": 0.0,
+              "layers_moved": 0}
+    moved_layers = set()
+    cache: dict = {}
+    t_end = time.perf_counter() + BLOCKS_BUDGET_S
+    for seg in segments(problem):
+        blocks = island_blocks(problem, seg, cg.wall_like)
+        if len(blocks) < 3:
+            continue
+        report["segments"] += 1
+        report["blocks"] += len(blocks)
+        limit = max(0.0, min(BLOCK_TIME_LIMIT_S, t_end - time.perf_counter()))
+        order, proven, took = _solve(problem, blocks, seg, limit, cache)
+        report["solve_s"] += took
+        report["proven"] += proven
+        if not np.array_equal(order, np.arange(len(blocks))):
+            report["segments_moved"] += 1
+            moved_layers.add(int(problem.curve_layer[seg[0]]))
+            perm[seg[0]:seg[-1] + 1] = np.concatenate([blocks[i] for i in order])
+    report["layers_moved"] = len(moved_layers)
+    if np.array_equal(perm, np.arange(n)):
+        return dataclasses.replace(problem, block_report=report)
+    return permuted(problem, perm, cg, report)
+
+
+def segments(problem: OrderingProblem) -> list[np.ndarray]:
+    """Runs of consecutive curves of one layer that is not kept, with no hard break (a barrier
+    line, the layer change: ``Layout.gap_boundary``) between them."""
+    lay = problem.layout
+    n = problem.n_curves
+    layer = problem.curve_layer
+    keep = np.asarray(lay.layer_keep, bool)
+    brk = np.ones(n, bool)
+    brk[1:] = lay.gap_boundary[1:] | (layer[1:] != layer[:-1])
+    starts = np.concatenate((np.flatnonzero(brk), [n]))
+    out = []
+    for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()):
+        lay_c = int(layer[a])
+        if b - a >= 3 and not (lay_c < len(keep) and keep[lay_c]):
+            out.append(np.arange(a, b))
+    return out
+
+
+def island_blocks(problem: OrderingProblem, seg: np.ndarray, wall_like: np.ndarray) -> list[np.ndarray]:
+    """The blocks of a segment: per island (the outermost wall loop covering a curve's middle
+    vertex), its curves in the slicer's order, islands in the order the slicer began them. A
+    curve no loop covers pins the segment: blocks are formed between such curves only, and those
+    curves stay where they are (then fewer than 3 blocks come back)."""
+    import shapely
+    pts, pstart = problem.points_xy, problem.curve_point_start
+    loops = [c for c in seg.tolist() if wall_like[c] and pstart[c + 1] - pstart[c] >= 4]
+    if len(loops) < 2:
+        return []
+    polys = []
+    for c in loops:
+        ring = pts[pstart[c]:pstart[c + 1]]
+        poly = shapely.make_valid(shapely.Polygon(ring))
+        polys.append(poly)
+    area = shapely.area(np.asarray(polys, object))
+    ok = area >= MIN_ISLAND_AREA_MM2
+    polys = [p for p, good in zip(polys, ok) if good]
+    area = area[ok]
+    if len(polys) < 2:
+        return []
+    mid = pts[pstart[seg] + (pstart[seg + 1] - pstart[seg] - 1) // 2]
+    tree = shapely.STRtree(polys)
+    which, poly = tree.query(shapely.points(mid), predicate="covered_by")
+    island = np.full(len(seg), -1, np.int64)
+    best = np.full(len(seg), -1.0)
+    for i, p in zip(which.tolist(), poly.tolist()):
+        if area[p] > best[i]:
+            best[i], island[i] = area[p], p
+    if (island < 0).any():
+        return []               # a curve outside every island (support, a skirt): keep the order
+    firsts = {}
+    for i, isl in enumerate(island.tolist()):
+        firsts.setdefault(isl, i)
+    order = sorted(firsts, key=firsts.get)
+    return [seg[island == isl] for isl in order]
+
+
+def _solve(problem: OrderingProblem, blocks: list, seg: np.ndarray, limit: float, cache: dict):
+    """(block order, proven optimal?, seconds) for one segment: the first block stays first, the
+    others are one candidate each of a group solved by ``auto``; kept as the slicer had them
+    unless the solved order costs less."""
+    from . import auto
+    t0 = time.perf_counter()
+    first = [int(b[0]) for b in blocks]
+    last = [int(b[-1]) for b in blocks]
+    k = len(blocks) - 1
+    entry = problem.curve_start_xy[first[1:]]
+    exit_ = problem.curve_end_xy[last[1:]]
+    start = Anchor(problem.curve_end_xy[last[0]].copy(), last[0], False)
+    after = int(seg[-1]) + 1
+    end = (Anchor(problem.curve_start_xy[after].copy(), after, False)
+           if after < problem.n_curves and problem.curve_layer[after] == problem.curve_layer[seg[0]]
+           else None)
+    grp = Group(start.xy.copy(), np.arange(k), entry, exit_, np.arange(k), k,
+                int(problem.curve_layer[seg[0]]), "blocks", np.zeros(k, bool),
+                np.zeros(k, np.int64), None if end is None else end.xy.copy())
+    grp = dataclasses.replace(grp, costs=_block_costs(problem, first[1:], last[1:], start, end))
+    key = grp.key()
+    got = cache.get(key)
+    if got is None:
+        if limit > 0:
+            gs = auto.solve(grp, time_limit_s=limit)
+        else:
+            from .greedy import solve as greedy_solve
+            gs = greedy_solve(grp)
+        ident = np.arange(k)
+        if grp.path_cost(gs.order) < grp.path_cost(ident) - 1e-9:
+            got = (gs.order, gs.status == Status.OPTIMAL)
+        else:
+            got = (ident, gs.status == Status.OPTIMAL and
+                   grp.path_cost(ident) <= gs.objective + 1e-9)
+        cache[key] = got
+    order, proven = got
+    return np.concatenate(([0], np.asarray(order) + 1)), bool(proven), time.perf_counter() - t0
+
+
+def _block_costs(problem: OrderingProblem, first, last, start: Anchor, end) -> LinkCosts:
+    """Link costs between blocks: from block u's last curve to block v's first, both as the
+    slicer printed them (time: ``TimePricer``, the slicer's own gap where v followed u)."""
+    first, last = np.asarray(first, np.int64), np.asarray(last, np.int64)
+    k = len(first)
+    u, v = np.divmod(np.arange(k * k), k)
+    entry, exit_ = problem.curve_start_xy[first], problem.curve_end_xy[last]
+    pr = problem.pricer
+    if pr is None:
+        arc = np.hypot(*(exit_[u] - entry[v]).T)
+        s = np.hypot(*(entry - start.xy).T)
+        e = np.zeros(k) if end is None else np.hypot(*(exit_ - end.xy).T)
+    else:
+        no = np.zeros(k, bool)
+        arc = pr.links_ms(last[u], False, exit_[u], first[v], False, entry[v])
+        s = pr.links_ms(start.curve, False, start.xy, first, no, entry)
+        e = (np.zeros(k) if end is None else
+             pr.links_ms(last, no, exit_, end.curve, False, end.xy))
+    arc = np.asarray(arc, float).reshape(k, k)
+    np.fill_diagonal(arc, np.inf)
+    return LinkCosts(arc, np.asarray(s, float), np.asarray(e, float))
+
+
+def permuted(problem: OrderingProblem, perm: np.ndarray, cg: CurveGroups,
+             report: dict) -> OrderingProblem:
+    """``problem`` with its curves in the order ``perm`` (program curves), grouped as
+    ``groups.build`` groups them: a group never spans a jump between curves that were not
+    neighbours in the program."""
+    n = len(perm)
+    pstart = problem.curve_point_start
+    counts = pstart[perm + 1] - pstart[perm]
+    new_pstart = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+    idx = np.concatenate([np.arange(pstart[c], pstart[c + 1]) for c in perm.tolist()])
+    boundary = cg.boundary[perm].copy()
+    boundary[1:] |= perm[1:] != perm[:-1] + 1
+    key = cg.key[perm]
+    gstart = group_starts(boundary, key)
+    heads = perm[gstart[:-1]]
+    layer = problem.curve_layer[perm]
+    # the problem in the program's order, grouped as the permuted one is: each permuted group is
+    # a run of consecutive program curves, so its first curve starts a group there too. The
+    # emitter and the pricer read group boundaries from it (a link entering a group from outside
+    # consumes the gap before the group's first curve: with the old groups, a group split across
+    # two islands had its boundary gap, a layer change, written twice: real_orca230_arcs)
+    heads_prog = perm[gstart[:-1]]
+    by = np.argsort(heads_prog, kind="stable")
+    bstart = np.concatenate((heads_prog[by], [n])).astype(np.int64)
+    if not np.array_equal(np.diff(bstart), np.diff(gstart)[by]):
+        raise AssertionError("blocks.permuted: a permuted group is not a run of program curves")
+    heads = bstart[:-1]
+    base = dataclasses.replace(
+        problem, group_curve_start=bstart, group_layer=problem.curve_layer[heads],
+        group_fixed=cg.fixed[heads], group_label=tuple(cg.labels[c] for c in heads.tolist()),
+        pricer=None)
+    heads = perm[gstart[:-1]]
+    notes = problem.notes + (f"safe mode: islands re-ordered as blocks in "
+                             f"{report['segments_moved']} of {report['segments']} segments",)
+    return dataclasses.replace(
+        problem, curve_start_xy=problem.curve_start_xy[perm], curve_end_xy=problem.curve_end_xy[perm],
+        curve_closed=problem.curve_closed[perm], curve_layer=layer, points_xy=problem.points_xy[idx],
+        curve_point_start=new_pstart, group_curve_start=gstart, group_layer=layer[gstart[:-1]],
+        group_fixed=cg.fixed[heads], group_label=tuple(cg.labels[c] for c in heads.tolist()),
+        curve_step_start=problem.curve_step_start[perm], curve_step_stop=problem.curve_step_stop[perm],
+        notes=notes, curve_source=perm.astype(np.int64), base=base, block_report=report,
+        pricer=None)

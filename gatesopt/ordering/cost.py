@@ -1,0 +1,520 @@
+"""Travel priced as printed (issue 36; formulations/ordering.md, "Cost model"): the time the travel
+between two curves takes as ``emitter.emit`` writes it.
+
+A link from curve u (left at its exit) to curve v (entered at its entry) is emitted one of two ways:
+
+- *copied*: v is the curve the slicer printed after u and both are printed as the slicer printed
+  them, so the slicer's own gap is copied (its wipe, retraction, z-hop, combing path): the link
+  costs that gap's time, ``TimePricer.copy_ms[v]``;
+- *rebuilt* (``gaps.rebuilt_gap``): retract (if ``travel.TravelRule.retracts`` says so), lift,
+  one straight travel, lower, unretract, plus the net E of the slicer's gaps it consumes (a prime
+  the slicer added). Its time is the sum of those moves' times.
+
+Every move is priced by ``MoveTimes``: a trapezoidal velocity profile (the planner model's move,
+``planner.py``: accelerate at a, cruise, decelerate) between two junction speeds, with the
+acceleration, speed caps and junction speed of its kind (XY travel, extruder-only, Z-only, a
+wipe) from the file's machine limits (``limits.machine_limits``). A link's cost is therefore a
+sum of move times, the same function that prices the moves of an emitted gap
+(``MoveTimes.steps_s``), so the cost the solver optimises is what the emitted travels cost under
+that model (tests/test_ordering_cost.py checks it on emitted files). The costs are in ms.
+
+The cost is asymmetric: a copied gap is priced one way only, and a rebuilt link's E moves depend on
+the gaps of the curve it enters. It breaks the triangle inequality where a long link retracts and
+two short ones do not. formulations/ordering.md says which bounds rely on what.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from ..limits import MachineLimits
+from ..program import MOTION_KINDS, Program
+from .layout import LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, Layout
+from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
+from .travel import TravelRule, cross_one
+
+#: below this a length is no move (the writer skips axes that change by less than 1e-9 mm)
+MOVE_EPS_MM = 1e-9
+MS_PER_S = 1000.0
+#: the speed a Marlin 2 (junction deviation) move starts from rest at: MINIMUM_PLANNER_SPEED
+#: (Marlin planner.h; ``planner.py`` uses the same)
+REST_SPEED_MM_S = 0.05
+
+
+@dataclass(frozen=True)
+class MoveTimes:
+    """Per move kind: acceleration (mm/s^2), speed cap (mm/s) and the junction speed a move
+    starts and ends at (mm/s). A move of length L at nominal speed v takes the trapezoid
+    ``trapezoid_s`` from and to that junction speed.
+
+    The junction speed: under classic jerk (Marlin ``CLASSIC_JERK``, Prusa firmware) a move may
+    start from rest at its axis jerk (the planner's "safe speed", ``planner.py``); under junction
+    deviation and Klipper's square corner velocity a move started from rest starts at ~0 (and
+    Klipper starts and ends extruder-only moves at rest)."""
+
+    xy_accel_mm_s2: float = 1000.0
+    xy_cap_mm_s: float = np.inf
+    xy_junction_mm_s: float = 0.0
+    wipe_accel_mm_s2: float = 1000.0      # a move with E steps (a wipe): the print acceleration
+    e_accel_mm_s2: float = 1000.0
+    e_cap_mm_s: float = np.inf
+    e_junction_mm_s: float = 0.0
+    z_accel_mm_s2: float = 100.0
+    z_cap_mm_s: float = np.inf
+    z_junction_mm_s: float = 0.0
+
+    @staticmethod
+    def from_limits(lim: MachineLimits) -> "MoveTimes":
+        """The limits in force at the file's first motion step (``limits.machine_limits``)."""
+        acc, feed, jerk = lim.max_accel_mm_s2, lim.max_feed_mm_s, lim.jerk_mm_s
+
+        def finite_min(*v):
+            v = [float(x) for x in v if np.isfinite(x) and x > 0]
+            return min(v) if v else np.inf
+
+        def junction(*axes):
+            if lim.junction == "deviation":
+                return REST_SPEED_MM_S
+            if lim.junction != "jerk":
+                return 0.0
+            v = [float(jerk[a]) for a in axes if np.isfinite(jerk[a])]
+            return min(v) if v else 0.0
+        v_cap = lim.max_velocity_mm_s
+        return MoveTimes(
+            xy_accel_mm_s2=finite_min(lim.accel_travel_mm_s2, acc[0], acc[1]),
+            xy_cap_mm_s=finite_min(feed[0], feed[1], v_cap),
+            xy_junction_mm_s=junction(0, 1),
+            wipe_accel_mm_s2=finite_min(lim.accel_print_mm_s2, acc[0], acc[1]),
+            e_accel_mm_s2=finite_min(lim.accel_retract_mm_s2, acc[3]),
+            e_cap_mm_s=finite_min(feed[3]),
+            e_junction_mm_s=0.0 if lim.firmware == "klipper" else junction(3),
+            z_accel_mm_s2=finite_min(lim.accel_travel_mm_s2, acc[2]),
+            z_cap_mm_s=finite_min(feed[2], v_cap),
+            z_junction_mm_s=junction(2))
+
+    def xy_s(self, length_mm, feed_mm_s):
+        return trapezoid_s(length_mm, np.minimum(feed_mm_s, self.xy_cap_mm_s), self.xy_accel_mm_s2,
+                           self.xy_junction_mm_s)
+
+    def e_s(self, length_mm, feed_mm_s):
+        return trapezoid_s(length_mm, np.minimum(feed_mm_s, self.e_cap_mm_s), self.e_accel_mm_s2,
+                           self.e_junction_mm_s)
+
+    def z_s(self, length_mm, feed_mm_s):
+        return trapezoid_s(length_mm, np.minimum(feed_mm_s, self.z_cap_mm_s), self.z_accel_mm_s2,
+                           self.z_junction_mm_s)
+
+    def steps_s(self, program: Program, steps) -> np.ndarray:
+        """Time of each of ``steps`` (non-extruding moves: a gap's travel, retraction, z-hop,
+        wipe) under this model; 0 for steps that are not motion."""
+        steps = np.asarray(steps, np.int64)
+        d = program.end_mm[steps] - program.start_mm[steps]
+        xy = np.hypot(d[:, 0], d[:, 1])
+        feed = program.feed_mm_s[steps]
+        kind = program.kind[steps]
+        length = program.length_mm[steps]
+        out = np.zeros(len(steps))
+        motion = np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype))
+        e_only = motion & (xy <= MOVE_EPS_MM) & (np.abs(d[:, 2]) <= MOVE_EPS_MM)
+        z_only = motion & (xy <= MOVE_EPS_MM) & ~e_only
+        planar = motion & ~e_only & ~z_only
+        wipe = planar & (np.abs(d[:, 3]) > 0)
+        travel = planar & ~wipe
+        out[e_only] = self.e_s(np.abs(d[e_only, 3]), feed[e_only])
+        out[z_only] = self.z_s(np.abs(d[z_only, 2]), feed[z_only])
+        out[travel] = self.xy_s(length[travel], feed[travel])
+        out[wipe] = trapezoid_s(length[wipe], np.minimum(feed[wipe], self.xy_cap_mm_s),
+                                self.wipe_accel_mm_s2, self.xy_junction_mm_s)
+        return out
+
+    def vector(self) -> np.ndarray:
+        """The parameters in field order (for the compiled kernels)."""
+        return np.array([self.xy_accel_mm_s2, self.xy_cap_mm_s, self.xy_junction_mm_s,
+                         self.wipe_accel_mm_s2, self.e_accel_mm_s2, self.e_cap_mm_s,
+                         self.e_junction_mm_s, self.z_accel_mm_s2, self.z_cap_mm_s,
+                         self.z_junction_mm_s], float)
+
+
+def trapezoid_s(length_mm, speed_mm_s, accel_mm_s2, junction_mm_s):
+    """Time (s) of a move of ``length_mm`` that starts and ends at ``junction_mm_s`` and may
+    reach ``speed_mm_s`` accelerating at ``accel_mm_s2``: a trapezoid, or a triangle where it is
+    too short to reach that speed (planner.py; Marlin ``calculate_trapezoid_for_block``)."""
+    L = np.asarray(length_mm, float)
+    shape = np.broadcast_shapes(L.shape, np.shape(speed_mm_s))
+    L = np.ascontiguousarray(np.broadcast_to(L, shape)).ravel()
+    v = np.ascontiguousarray(np.broadcast_to(np.asarray(speed_mm_s, float), shape)).ravel()
+    out = _trapezoids(L, v, float(accel_mm_s2), float(junction_mm_s)).reshape(shape)
+    return out if out.ndim else float(out)
+
+
+@numba.njit(cache=True)
+def _trapezoids(L, v, a, vj):
+    out = np.empty(len(L))
+    for i in range(len(L)):
+        out[i] = _trapezoid(L[i], v[i], a, vj)
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _trapezoid(L, v, a, vj):
+    if L <= 0.0 or v <= 0.0:
+        return 0.0
+    if not np.isfinite(a) or a <= 0.0:
+        return L / v
+    v0 = min(vj, v)
+    d_acc = (v * v - v0 * v0) / (2.0 * a)
+    if L >= 2.0 * d_acc:
+        return 2.0 * (v - v0) / a + (L - 2.0 * d_acc) / v
+    return 2.0 * (np.sqrt(v0 * v0 + a * L) - v0) / a
+
+
+@numba.njit(cache=True)
+def _rebuilt_s(dist, z0, z1, retract, use_fw, r, net, mt, style):
+    """Time (s) of a rebuilt travel (``gaps.rebuilt_gap``): retraction (E, at the retract feed),
+    lift by the z-hop if it retracts, the straight XY travel, lowering, and the unretraction that
+    brings the consumed gaps to their net E (or that net E alone). ``mt``: MoveTimes.vector();
+    ``style``: (retract feed, unretract feed, travel feed, z feed, hop)."""
+    v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
+    t = 0.0
+    if retract and not use_fw:
+        t += _trapezoid(r, min(v_r, mt[5]), mt[4], mt[6])
+        t += _trapezoid(abs(net + r), min(v_u, mt[5]), mt[4], mt[6])
+    elif abs(net) > MOVE_EPS_MM:
+        t += _trapezoid(abs(net), min(v_u, mt[5]), mt[4], mt[6])
+    z_up = max(z0, z1)
+    if retract and hop > 0.0:
+        z_up += hop
+    if z_up - z0 > MOVE_EPS_MM:
+        t += _trapezoid(z_up - z0, min(v_z, mt[8]), mt[7], mt[9])
+    if dist > MOVE_EPS_MM:
+        t += _trapezoid(dist, min(v_xy, mt[1]), mt[0], mt[2])
+    if abs(z_up - z1) > MOVE_EPS_MM:
+        t += _trapezoid(abs(z_up - z1), min(v_z, mt[8]), mt[7], mt[9])
+    return t
+
+
+@dataclass(frozen=True, eq=False)
+class GapFacts:
+    """What the slicer's gaps before each curve hold, as ``gaps.rebuilt_gap`` sums it: per curve
+    c the gap between curve c - 1 and c (``own_*``) and the boundary gap of c's group (the gap
+    before the group's first curve, ``bnd_*``, indexed by curve too)."""
+
+    net_e: np.ndarray           # (n,) net E of the gap's moves (mm of filament)
+    retract_mm: np.ndarray      # (n,) filament its moves pull back
+    fw_net: np.ndarray          # (n,) firmware unretractions minus retractions (G11 - G10)
+    fw_retracted: np.ndarray    # (n,) bool: a G10 in the gap
+
+    @staticmethod
+    def of(program: Program, lay: Layout) -> "GapFacts":
+        n = len(lay.curve_s0)
+        l1 = lay.curve_l1
+        g0 = np.concatenate(([0], l1[:-1] + 1)) if n else np.zeros(0, np.int64)    # gap lines [g0, g1)
+        g1 = lay.curve_l0
+        step = lay.step_of_line
+        has = step >= 0
+        s = np.where(has, step, 0)
+        de = np.where(has & (lay.line_class == LINE_MOTION), program.end_mm[s, 3] - program.start_mm[s, 3], 0.0)
+
+        def span(v):
+            c = np.concatenate(([0.0], np.cumsum(v)))
+            return c[g1] - c[g0]
+        return GapFacts(span(de), span(np.where(de < 0, -de, 0.0)),
+                        np.rint(span(lay.line_class == LINE_FW_UNRETRACT)
+                                - span(lay.line_class == LINE_FW_RETRACT)).astype(np.int64),
+                        span(lay.line_class == LINE_FW_RETRACT) > 0)
+
+
+def gap_times_ms(program: Program, move: MoveTimes, lay: Layout | None = None) -> np.ndarray:
+    """(n_curves - 1,) the time (ms) of each gap between two consecutive curves of ``program``
+    (``layout.layout``'s curves) under ``move``: what a re-ordered file's travels cost under the
+    time objective's model, measured on the file itself (tests/test_ordering_cost.py compares it
+    with the solver's cost of the order it emitted)."""
+    from .layout import layout
+    lay = lay or layout(program)
+    n = len(lay.curve_s0)
+    if n < 2:
+        return np.zeros(0)
+    a, b = lay.curve_s1[:-1], lay.curve_s0[1:]
+    steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())])
+    owner = np.repeat(np.arange(n - 1), b - a)
+    return np.bincount(owner, weights=move.steps_s(program, steps), minlength=n - 1) * MS_PER_S
+
+
+class TimePricer:
+    """The time objective's link costs for one Program-built problem (module docstring).
+
+    Arrays per problem curve: ``group_first`` (first curve of its group: a link into a curve of
+    another group consumes that group's boundary gap, as ``emitter`` does), ``z_entry`` /
+    ``z_exit``, ``layer``; the slicer's gaps (``GapFacts``) and ``copy_ms`` (each gap's time,
+    copied). ``rule``: when a rebuilt travel retracts (shared with the emitter)."""
+
+    def __init__(self, program: Program, lay: Layout, problem: OrderingProblem, rule: TravelRule,
+                 move: MoveTimes, step_s: np.ndarray | None = None):
+        """``step_s``: per step of ``program``, the time a copied gap's steps take (the
+        planner's, ``OrderingOptions.copied_gaps``); None: each move priced by ``move``."""
+        self.rule, self.move = rule, move
+        style = rule.style
+        self.style_vec = np.array([style.retract_feed_mm_s, style.unretract_feed_mm_s,
+                                   style.travel_feed_mm_s, style.z_feed_mm_s, style.hop_mm], float)
+        self.move_vec = move.vector()
+        n = problem.n_curves
+        gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
+        self.group_first = problem.group_curve_start[gidx].astype(np.int64)
+        self.layer = problem.curve_layer.astype(np.int64)
+        self.z_entry = program.start_mm[lay.curve_s0, 2].astype(float) if n else np.zeros(0)
+        self.z_exit = program.end_mm[lay.curve_s1 - 1, 2].astype(float) if n else np.zeros(0)
+        facts = GapFacts.of(program, lay)
+        self.own = facts
+        gf = self.group_first
+        self.bnd = GapFacts(facts.net_e[gf], facts.retract_mm[gf], facts.fw_net[gf],
+                            facts.fw_retracted[gf])
+        # each gap's time as the slicer wrote it (copied when both neighbours stay as they were)
+        copy = np.zeros(n)
+        if n > 1:
+            a, b = lay.curve_s1[:-1], lay.curve_s0[1:]
+            steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())]) \
+                if len(a) else np.zeros(0, np.int64)
+            owner = np.repeat(np.arange(1, n), b - a)
+            t = move.steps_s(program, steps) if step_s is None else np.asarray(step_s)[steps]
+            copy = np.bincount(owner, weights=t, minlength=n)
+        self.copy_ms = copy * MS_PER_S
+
+    # -- links ----------------------------------------------------------------------------------
+    def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
+        """Cost (ms) of each link prev[i] -> nxt[i] (problem curves; prev -1: the head comes from
+        no known curve) leaving at ``from_xy`` and entering at ``to_xy``."""
+        prev = np.asarray(prev, np.int64)
+        nxt = np.asarray(nxt, np.int64)
+        k = np.broadcast_shapes(prev.shape, nxt.shape)
+        prev, nxt = np.broadcast_to(prev, k).ravel(), np.broadcast_to(nxt, k).ravel()
+        prev_changed = np.broadcast_to(np.asarray(prev_changed, bool), k).ravel()
+        nxt_changed = np.broadcast_to(np.asarray(nxt_changed, bool), k).ravel()
+        from_xy = np.broadcast_to(np.asarray(from_xy, float), k + (2,)).reshape(-1, 2)
+        to_xy = np.broadcast_to(np.asarray(to_xy, float), k + (2,)).reshape(-1, 2)
+        z0 = np.where(prev >= 0, self.z_exit[np.maximum(prev, 0)], self.z_entry[nxt])
+        z1 = self.z_entry[nxt]
+        out = np.empty(len(nxt))
+        need = np.zeros(len(nxt), bool)
+        no_retract = np.empty(len(nxt))
+        _links(prev, prev_changed, nxt, nxt_changed, np.ascontiguousarray(from_xy),
+               np.ascontiguousarray(to_xy), z0, z1, self.group_first, self.own.net_e,
+               self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
+               self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
+               self.rule.vector(), self.style_vec, self.move_vec, out, need, no_retract)
+        self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
+        return out.reshape(k)
+
+    def _exempt(self, out, need, no_retract, nxt, from_xy, to_xy) -> None:
+        """Links that retract only because no combing test was made: those that cross no wall of
+        their layer go dry (``TravelRule``), at the cost ``no_retract``."""
+        idx = np.flatnonzero(need)
+        if not len(idx):
+            return
+        layers = self.layer[nxt[idx]]
+        for lay_i in np.unique(layers).tolist():
+            sel = idx[layers == lay_i]
+            dry = ~self.rule.walls.crosses_many(lay_i, from_xy[sel], to_xy[sel])
+            out[sel[dry]] = no_retract[sel[dry]]
+
+    def anchor_link(self, a: Anchor, b: Anchor) -> float:
+        """Cost (ms) of the travel from anchor ``a`` into anchor ``b`` (program curves)."""
+        return float(self.links_ms(a.curve, a.changed, a.xy, b.curve, b.changed, b.xy))
+
+    def order_cost(self, order, changed, entry_xy, exit_xy) -> float:
+        """Cost (ms) of the travels between consecutive curves of ``order`` (the file's prefix,
+        before its first curve, and its end, after the last, are copied whatever the order)."""
+        if len(order) < 2:
+            return 0.0
+        return float(self.links_ms(order[:-1], changed[:-1], exit_xy[:-1], order[1:], changed[1:],
+                                   entry_xy[1:]).sum())
+
+    # -- a group's costs --------------------------------------------------------------------------
+    def group_costs(self, curves, grp: Group, start: Anchor, end: Anchor | None) -> LinkCosts:
+        """The link costs of ``grp`` whose local curves are program curves ``curves`` (start and
+        end anchors in program curves too)."""
+        gc = np.asarray(curves, np.int64)[grp.cand_curve]
+        changed = np.asarray(grp.cand_reversed, bool) | (np.asarray(grp.cand_seam) != 0)
+        s = self.links_ms(start.curve, start.changed, start.xy, gc, changed, grp.cand_entry_xy)
+        if end is None:
+            e = np.zeros(grp.n_cands)
+            direct = 0.0
+        else:
+            e = self.links_ms(gc, changed, grp.cand_exit_xy, end.curve, end.changed, end.xy)
+            direct = float(self.links_ms(start.curve, start.changed, start.xy, end.curve,
+                                         end.changed, end.xy)) if end.curve >= 0 else 0.0
+        link = _GroupLinks(self, gc, changed, grp.cand_exit_xy, grp.cand_entry_xy)
+        arc = self.dense(grp, gc, changed) if grp.n_cands <= DENSE_MAX_CANDS else None
+        return LinkCosts(arc, s, e, link, direct)
+
+    def dense(self, grp: Group, gc, changed) -> np.ndarray:
+        """The group's (m, m) link matrix (``_dense``)."""
+        m = grp.n_cands
+        ent = np.ascontiguousarray(grp.cand_entry_xy, float)
+        ext = np.ascontiguousarray(grp.cand_exit_xy, float)
+        _, pid = np.unique(np.concatenate([ent, ext]), axis=0, return_inverse=True)
+        pid = pid.ravel().astype(np.int64)
+        grid = self.rule.walls.grid(int(self.layer[gc[0]])) if (
+            self.rule.comb_cap_mm > 0 and m) else None
+        if grid is None:
+            z2, zi = np.zeros((0, 2)), np.zeros(1, np.int64)
+            grid = (0.0, z2, z2, 0.0, 0.0, 1.0, 1, 1, np.zeros(2, np.int64), zi)
+        # a loop's two-way "exit" is its seam, as is its entry; a reversed curve's z comes from
+        # its other end (z is constant along a curve outside spiral-vase layers, which are kept)
+        return _dense(gc, np.asarray(changed, np.bool_), ent, ext,
+                      np.asarray(grp.cand_curve, np.int64), pid[:m], pid[m:], int(pid.max()) + 1 if m else 0,
+                      self.z_entry[gc], self.z_exit[gc], self.group_first, self.own.net_e,
+                      self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
+                      self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
+                      self.rule.vector(), self.style_vec, self.move_vec,
+                      self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid)
+
+
+class _GroupLinks:
+    """Links between candidates u -> v of one group (a group without a dense matrix prices the
+    links of its path with it)."""
+
+    def __init__(self, pricer: TimePricer, gc, changed, exit_xy, entry_xy):
+        self.pricer, self.gc, self.changed = pricer, gc, changed
+        self.exit_xy, self.entry_xy = exit_xy, entry_xy
+
+    def __call__(self, u, v):
+        u, v = np.asarray(u, np.int64), np.asarray(v, np.int64)
+        return self.pricer.links_ms(self.gc[u], self.changed[u], self.exit_xy[u], self.gc[v],
+                                    self.changed[v], self.entry_xy[v])
+
+
+@numba.njit(cache=True, inline="always")
+def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, own_net, own_r,
+              own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt):
+    """One link's cost (ms) as emitted, mirroring ``gaps.rebuilt_gap`` and ``travel.TravelRule``,
+    except the combing exemption: returns (cost, whether the exemption applies if the travel
+    crosses no wall, the cost then). ``rule``: TravelRule.vector()."""
+    if p >= 0 and p == c - 1 and not p_changed and not c_changed:
+        return copy_ms[c], False, 0.0                   # the slicer's own gap, copied
+    retract_mm, min_travel, fw_style, comb_cap = rule[0], rule[1], rule[2] > 0.5, rule[3]
+    crossing = p < 0 or group_first[c] != group_first[p]
+    own = c != group_first[c]
+    net = 0.0
+    r_b = 0.0
+    r_i = 0.0
+    fw_net = 0
+    fw_ret = False
+    fw_bnd = False
+    if crossing:
+        net += bnd_net[c]
+        r_b = bnd_r[c]
+        fw_net += bnd_fw_net[c]
+        fw_ret = bnd_fw[c]
+        fw_bnd = bnd_fw[c]
+    if own:
+        net += own_net[c]
+        r_i = own_r[c]
+        fw_net += own_fw_net[c]
+        fw_ret = fw_ret or own_fw[c]
+    use_fw = fw_net == 0 and (fw_ret or (fw_style and r_b <= 0.0 and r_i <= 0.0))
+    r = r_b if r_b > 0.0 else retract_mm
+    dx = tx - fx
+    dy = ty - fy
+    dist = np.sqrt(dx * dx + dy * dy)
+    dz = abs(z1 - z0)
+    moving = dist > MOVE_EPS_MM or dz > MOVE_EPS_MM
+    if use_fw:
+        retract = moving and (fw_bnd or (fw_style and dist >= min_travel))
+    else:
+        retract = moving and r > 0.0 and (r_b > 0.0 or (retract_mm > 0.0 and dist >= min_travel))
+    t = _rebuilt_s(dist, z0, z1, retract, use_fw, r, net, mt, style) * 1000.0
+    if retract and comb_cap > 0.0 and dist <= comb_cap and dz <= MOVE_EPS_MM:
+        return t, True, _rebuilt_s(dist, z0, z1, False, use_fw, r, net, mt, style) * 1000.0
+    return t, False, 0.0
+
+
+@numba.njit(cache=True)
+def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_first,
+           own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
+           rule, style, mt, out, need, no_retract):
+    """``_link_one`` per link; the wall test is the caller's (``need``, ``no_retract``)."""
+    for i in range(len(nxt)):
+        out[i], need[i], no_retract[i] = _link_one(
+            prev[i], prev_changed[i], nxt[i], nxt_changed[i], from_xy[i, 0], from_xy[i, 1],
+            to_xy[i, 0], to_xy[i, 1], z0[i], z1[i], group_first, own_net, own_r, own_fw_net,
+            own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt)
+
+
+@numba.njit(cache=True)
+def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
+           own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
+           rule, style, mt, has_walls, trim, a, b, x0, y0, h, nx, ny, start, items):
+    """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
+    (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
+    only: made once per candidate, and per link only the XY travel and the retraction rule
+    (``_link_one`` where the two ends lie at different heights). The wall test is made here: once
+    per pair of points (a travel and its reverse cross the same walls), memoized."""
+    m = len(gc)
+    out = np.empty((m, m))
+    memo = np.full((n_points, n_points), -1, np.int8)
+    stamp = np.full(max(len(a), 1), -1, np.int64)
+    tag = 0
+    retract_mm, min_travel, fw_style, comb_cap = rule[0], rule[1], rule[2] > 0.5, rule[3]
+    v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
+    # per entered candidate: (use_fw, E time retracting, E time dry), as _rebuilt_s sums them
+    use_fw = np.zeros(m, np.bool_)
+    e_wet = np.zeros(m)
+    e_dry = np.zeros(m)
+    for v in range(m):
+        c = gc[v]
+        net, r_i, fw_net, fw_ret = 0.0, 0.0, 0, False
+        if c != group_first[c]:
+            net, r_i, fw_net, fw_ret = own_net[c], own_r[c], own_fw_net[c], own_fw[c]
+        use_fw[v] = fw_net == 0 and (fw_ret or (fw_style and r_i <= 0.0))
+        e_dry[v] = _trapezoid(abs(net), min(v_u, mt[5]), mt[4], mt[6]) if abs(net) > MOVE_EPS_MM else 0.0
+        e_wet[v] = e_dry[v] if use_fw[v] else (_trapezoid(retract_mm, min(v_r, mt[5]), mt[4], mt[6])
+                                               + _trapezoid(abs(net + retract_mm), min(v_u, mt[5]), mt[4], mt[6]))
+    t_hop = 2.0 * _trapezoid(hop, min(v_z, mt[8]), mt[7], mt[9]) if hop > 0.0 else 0.0
+    v_xy_cap = min(v_xy, mt[1])
+    for u in range(m):
+        for v in range(m):
+            if local[u] == local[v]:
+                out[u, v] = np.inf
+                continue
+            p, c = gc[u], gc[v]
+            if p == c - 1 and not changed[u] and not changed[v]:
+                out[u, v] = copy_ms[c]
+                continue
+            if abs(z_ext[u] - z_ent[v]) > MOVE_EPS_MM or group_first[p] != group_first[c]:
+                t, need, dry = _link_one(p, changed[u], c, changed[v], ext[u, 0], ext[u, 1],
+                                         ent[v, 0], ent[v, 1], z_ext[u], z_ent[v], group_first,
+                                         own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r,
+                                         bnd_fw_net, bnd_fw, copy_ms, rule, style, mt)
+            else:
+                dx = ent[v, 0] - ext[u, 0]
+                dy = ent[v, 1] - ext[u, 1]
+                dist = np.sqrt(dx * dx + dy * dy)
+                moving = dist > MOVE_EPS_MM
+                if use_fw[v]:
+                    retract = moving and fw_style and dist >= min_travel
+                else:
+                    retract = moving and retract_mm > 0.0 and dist >= min_travel
+                t_xy = _trapezoid(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
+                dry = (t_xy + e_dry[v]) * 1000.0
+                if retract:
+                    t = (t_xy + e_wet[v] + t_hop) * 1000.0
+                    need = comb_cap > 0.0 and dist <= comb_cap
+                else:
+                    t = dry
+                    need = False
+            if need and has_walls:
+                i, j = pid_ext[u], pid_ent[v]
+                if memo[i, j] < 0:
+                    hit = cross_one(ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1], tag, stamp, trim,
+                                    a, b, x0, y0, h, nx, ny, start, items)
+                    tag += 1
+                    memo[i, j] = 1 if hit else 0
+                    memo[j, i] = memo[i, j]
+                if memo[i, j] == 0:
+                    t = dry
+            elif need:
+                t = dry
+            out[u, v] = t
+    return out

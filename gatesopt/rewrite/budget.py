@@ -1,0 +1,85 @@
+"""A whole run in a wall-clock budget (``gatesopt solve``'s default 10 s): what the curve
+ordering may spend is what the rest of the run is estimated to leave.
+
+A run is read -> order (build, solve, emit with the time guard) -> gate (build, solve, rotate:
+render and re-parse the rotated text, build and solve again, emit) -> parse the output -> verify ->
+report (planner times, travel). Everything but the ordering's solve takes time roughly in
+proportion to the file's lines, at rates measured on the corpus (docs/RESULTS.md, "Default
+solve: wall time"); the ordering's solve is the one stage that can use what is left, so the
+ordering gets ``budget - spent - estimate of the gating and checking stages`` and spends it as
+``gatesopt order --budget`` does (``rewrite.order.solve_budget_s``: its own build and emit out of
+it first). An exact gating formulation's own time limit (``--time-limit``) is not estimated:
+it is the user's to give.
+
+The rates are a quiet machine's. On a machine other work shares (a loaded 2-core machine gave
+this process a third of a core), every stage takes longer by about the share it does not get;
+the run measures that share on itself, before the ordering: ``slowdown`` = wall seconds / CPU
+seconds of the process so far (reading the file is single-threaded CPU work; start-up I/O makes
+it 1.0-1.3 on a quiet machine), and the estimate of the stages after the ordering, the
+ordering's own emit included, grows by that factor.
+"""
+from __future__ import annotations
+
+import time
+
+from ..program import Program
+from .order import FINISH_FIXED_S, FINISH_S_PER_LINE
+
+#: seconds per input line of the stages after the ordering, without a rotation: the gating
+#: problem's build and dp solve, the emit, parsing the output, the verifier and the report's
+#: planner times and travel (measured, docs/RESULTS.md "Default solve: wall time")
+AFTER_ORDER_S_PER_LINE = 16e-6
+#: and with a rotation: rendering the rotated text (``gating.emit.render``), parsing it, and
+#: building the gating problem again (``gating.rotation``: the rotated text is solved again)
+ROTATE_S_PER_LINE = 8e-6
+#: per file, whatever its size
+AFTER_ORDER_FIXED_S = 0.3
+#: the slowdown is measured only after this much wall time (less: too short to tell), and taken
+#: at most this large (beyond it the run cannot keep its budget anyway; the ordering keeps its
+#: minimum share, ``rewrite.order.MIN_SOLVE_SHARE``)
+SLOWDOWN_PROBE_S = 0.5
+MAX_SLOWDOWN = 4.0
+
+
+def after_order_s(n_lines: int, rotate: bool) -> float:
+    """Estimated seconds of a run after its ordering (module docstring)."""
+    return AFTER_ORDER_FIXED_S + n_lines * (AFTER_ORDER_S_PER_LINE + (ROTATE_S_PER_LINE if rotate else 0.0))
+
+
+def slowdown_factor(started_s: float, cpu_started_s: float | None, wall_now_s: float | None = None,
+             cpu_now_s: float | None = None) -> float:
+    """Wall seconds per CPU second of this process since ``started_s`` (``time.perf_counter()``)
+    / ``cpu_started_s`` (``time.process_time()`` at that moment; None: unknown, 1.0), clipped to
+    [1, ``MAX_SLOWDOWN``] (module docstring). ``wall_now_s`` / ``cpu_now_s``: the clocks' readings
+    now (default: read them)."""
+    if cpu_started_s is None:
+        return 1.0
+    wall = (time.perf_counter() if wall_now_s is None else wall_now_s) - started_s
+    cpu = (time.process_time() if cpu_now_s is None else cpu_now_s) - cpu_started_s
+    if wall < SLOWDOWN_PROBE_S or cpu <= 0.0:
+        return 1.0
+    return min(max(wall / cpu, 1.0), MAX_SLOWDOWN)
+
+
+def ordering_budget_s(budget_s: float, program: Program, options, formulation: str, gating: bool,
+                      spent_s: float, time_limit_s: float | None = None, slow: float = 1.0) -> float:
+    """What a whole-run ``budget_s`` leaves the curve ordering (build, solve, emit), ``spent_s``
+    (reading the file) already gone, the stages after it estimated ``slow`` times their quiet
+    rates (``slowdown_factor``). ``rewrite.order.solve_budget_s`` keeps at least a share of it for the
+    solve however little is left."""
+    n = max(int(program.n_lines), int(program.n_steps))
+    rotate = gating and options is not None and options.rotate != "none" and not (
+        not isinstance(options.rotate, str) and float(options.rotate) % 360.0 == 0.0)
+    rest = after_order_s(n, rotate) if gating else AFTER_ORDER_FIXED_S + n * AFTER_ORDER_S_PER_LINE / 2
+    # the ordering's own emit (``rewrite.order.solve_budget_s`` estimates it at quiet rates)
+    emit = FINISH_FIXED_S + FINISH_S_PER_LINE * int(program.n_lines)
+    return budget_s - spent_s - slow * rest - (slow - 1.0) * emit
+
+
+def no_time_note(budget_s: float, spent_s: float, slow: float) -> str:
+    """The note of a run whose budget left the curve ordering no time."""
+    load = (f"; the machine is loaded: this run got 1/{slow:.1f} of a core so far"
+            if slow > 1.5 else "")
+    return (f"curve ordering skipped: the {budget_s:g} s budget (--budget) leaves it no time after "
+            f"{spent_s:.1f} s of reading and the estimate of gating and checking{load}: the "
+            "slicer's order kept (a larger --budget re-orders)")

@@ -1,0 +1,87 @@
+"""The figures every report gives of a print, one of each, each named with its model, the same in
+``solve``, ``order``, ``batch``, ``compare``, the HTML report and the library's results:
+
+print time (``print_time_s``)
+    The planner model (``gatesopt.planner``: trapezoidal velocity profiles, junction speeds, the
+    machine limits the file sets; a line that drains the firmware's queue, Marlin's ``M18``,
+    Klipper's ``SET_STEPPER_ENABLE``, brings the head to rest) plus the firmware's dwells
+    (``firmware.stall_durations``: Klipper's 2 x 0.1 s; Marlin's full stop is the planner's
+    already). Measured against the slicers' own estimates it is within a few per cent
+    (PrusaSlicer files +3..+9 %, Cura's -15..+7 %, docs/RESULTS.md "Time model"), where the
+    paper's T = L / F is 20-27 % under PrusaSlicer's. It is the one print time a report shows.
+    The paper's T = L / F (3DGates Eq. 2) stays what the *energy* model integrates over (the
+    3DGates power tables were fitted on it, and the solver's budgets are shares of it): reports
+    name it "paper time" where they give it at all (``PAPER_TIME_WORDS``).
+travel (``travel``)
+    Measured on the parsed file as it is printed (``ordering.travel_stats``): every
+    non-extruding XY move from the first layer on, its count, and retractions. Never the
+    curve-ordering solver's model travel (straight links between curve ends, the origin first),
+    which the ordering's own report names ``model_travel_*_mm``.
+"""
+from __future__ import annotations
+
+from .. import firmware as fwmod
+from ..ordering.travel_stats import travel_stats
+from ..planner import durations
+from ..program import Program
+from .printer import choose
+
+#: the model of the print time the reports give, and how they say it
+PRINT_TIME_MODEL = "planner"
+PRINT_TIME_WORDS = "planner model: acceleration, junction speeds, firmware stops"
+#: the time the energy model integrates over (and the solver's time budget is a share of)
+PAPER_TIME_WORDS = "paper time T = L/F"
+ENERGY_WORDS = "3DGates model over the paper's T = L/F times, firmware stalls included"
+#: what "travel" is in every report
+TRAVEL_WORDS = "measured on the file: non-extruding XY moves from the first layer"
+
+
+def _no_stall(program: Program, row: int) -> float:
+    return 0.0      # the planner's durations already stop the head at a queue-draining line
+
+
+def print_time_s(program: Program, firmware: str = "3dgates") -> float:
+    """The print time of ``program`` under the planner model, firmware dwells included (module
+    docstring): every step of the file, heat-up waits and homing at their profile durations."""
+    planned = durations(program, "planner")
+    stall = fwmod.stall_durations(program, firmware, planner=_no_stall)
+    return float(planned.sum() + stall.sum())
+
+
+def travel(program: Program) -> dict:
+    """``travel_mm``, ``travels``, ``retractions`` of the file as printed (``travel_stats``)."""
+    t = travel_stats(program)
+    return {"travel_mm": t["travel_mm"], "travels": t["travels"], "retractions": t["retractions"]}
+
+
+def pct(after: float, before: float) -> float:
+    return 100.0 * (after / before - 1.0) if before else 0.0
+
+
+def file_firmware(program: Program) -> str:
+    """The dialect the file's own printer runs (``printer.choose``, "auto": what ``solve`` would
+    write for it), "3dgates" where gatesopt writes nothing for it: the firmware a file's print
+    time is figured under when no gating chose one (``order``, ``solve --no-gating``), so that
+    every command gives one print time for one file."""
+    try:
+        return choose(program).firmware or "3dgates"
+    except fwmod.FirmwareError:
+        return "3dgates"
+
+
+def figures(before: Program, after: Program, firmware: str | None = None) -> dict:
+    """The report keys of both files: ``print_time_before_s`` / ``_after_s`` / ``_change_pct``
+    with ``print_time_model``, and ``travel_before_mm`` / ``_after_mm`` / ``_change_pct``,
+    ``travels_*``, ``retractions_*``. ``firmware``: the dialect the output's motor lines are in
+    (None: the file's own, ``file_firmware``)."""
+    firmware = firmware or file_firmware(before)
+    tb, ta = print_time_s(before, firmware), print_time_s(after, firmware)
+    mb, ma = travel(before), travel(after)
+    return {
+        "print_time_before_s": tb, "print_time_after_s": ta, "print_time_change_pct": pct(ta, tb),
+        "print_time_model": PRINT_TIME_MODEL,
+        "travel_before_mm": mb["travel_mm"], "travel_after_mm": ma["travel_mm"],
+        "travel_change_pct": pct(ma["travel_mm"], mb["travel_mm"]),
+        "travels_before": mb["travels"], "travels_after": ma["travels"],
+        "retractions_before": mb["retractions"], "retractions_after": ma["retractions"],
+    }

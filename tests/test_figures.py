@@ -1,0 +1,76 @@
+"""One print time and one travel (issue 37): `solve`, `order`, `batch`, `compare`, the library's
+``rewrite.run`` and the HTML report give the same figures for one file, each named with its model
+(print time: the planner's; travel: measured on the files, never the ordering solver's model).
+Before, `solve` said 9,457.1 -> 9,111.2 mm where `batch` said 9,482.0 -> 9,252.2 mm for one file,
+the library's ``ordering.solve`` 8,868 mm, and a report showed two different times."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import gatesopt
+from gatesopt import rewrite
+from gatesopt.cli import main
+from gatesopt.rewrite.figures import PRINT_TIME_MODEL, figures, print_time_s, travel
+
+from conftest import PROJECT_INSTANCES
+
+SRC = PROJECT_INSTANCES / "star_lines_m82.gcode"
+FIGURES = ("print_time_before_s", "print_time_after_s", "travel_before_mm", "travel_after_mm",
+           "travels_before", "travels_after", "retractions_before", "retractions_after")
+
+
+def _close(a: dict, b: dict, keys, what: str) -> None:
+    for k in keys:
+        assert a[k] == pytest.approx(b[k], rel=1e-9, abs=1e-9), (what, k, a[k], b[k])
+
+
+def test_every_command_gives_the_same_print_time_and_travel(tmp_path, capsys):
+    program = gatesopt.parse(SRC)
+    # the library: the whole job, without re-ordering (deterministic), and its figures named
+    res = rewrite.run(program, order=False)
+    s_lib = res.summary()
+    assert s_lib["print_time_model"] == PRINT_TIME_MODEL == "planner"
+    assert s_lib["print_time_before_s"] == pytest.approx(print_time_s(program, s_lib["firmware"]))
+    assert s_lib["travel_before_mm"] == pytest.approx(travel(program)["travel_mm"])
+    # gating never changes the travel (a split move is one travel still)
+    _close({"a": s_lib["travel_after_mm"]}, {"a": s_lib["travel_before_mm"]}, ("a",), "gated travel")
+    assert s_lib["travels_after"] == s_lib["travels_before"]
+
+    # solve --no-order: the library's numbers
+    rj = tmp_path / "solve.json"
+    assert main(["solve", str(SRC), "-o", str(tmp_path / "s.gcode"), "--no-order", "--json", str(rj)]) == 0
+    text = capsys.readouterr().out
+    assert "print time" in text and "planner model" in text
+    s_cli = json.loads(rj.read_text())
+    _close(s_cli, s_lib, FIGURES, "solve vs library")
+
+    # batch: the same row (same defaults), travel included
+    bj = tmp_path / "b.json"
+    assert main(["batch", str(SRC), "--no-order", "--out", str(bj), "--quiet"]) == 0
+    capsys.readouterr()
+    rows = json.loads(bj.read_text())
+    rows = rows["rows"] if isinstance(rows, dict) else rows
+    assert len(rows) == 1 and rows[0]["verified"]
+    _close(rows[0], s_lib, FIGURES[:4], "batch vs library")
+    assert rows[0]["print_time_model"] == "planner"
+
+    # order (no gating): its "before" figures are the file's, as every command gives them; its
+    # "after" is the re-ordered file's, and `solve --no-gating` writes that same file
+    oj = tmp_path / "order.json"
+    assert main(["order", str(SRC), "-o", str(tmp_path / "o.gcode"), "--json", str(oj)]) == 0
+    capsys.readouterr()
+    o = json.loads(oj.read_text())
+    _close(o, s_lib, ("print_time_before_s", "travel_before_mm", "travels_before", "retractions_before"),
+           "order vs library")
+    assert o["print_time_model"] == "planner"
+    assert "model_travel_after_mm" in o        # the solver's own travel, named as such
+    ordered = gatesopt.parse(tmp_path / "o.gcode")
+    _close(o, figures(program, ordered), FIGURES, "order's report vs its file")
+
+    # the HTML report names the model of the time it shows
+    html = tmp_path / "r.html"
+    assert main(["report", str(bj), "-o", str(html)]) == 0
+    page = html.read_text()
+    assert "print time" in page and "(planner)" in page

@@ -1,0 +1,415 @@
+"""The klipper-gating dialect (issue 34): the gating model, the emitter, the verifier and the Klipper
+module agree on when each pin is off.
+
+- brute force over every subset of idle intervals, under the module's rules A and B (checked by
+  ``check_feasible``), equals dp == milp == cpsat, with and without an input shaper;
+- the dialect's constants are the module's (its own pure helpers, loaded from
+  integrations/klipper/gatesopt_gating.py);
+- the shaper windows are Klipper's (klippy/extras/shaper_defs.py from a checkout, when given);
+- solve -> emit -> verify: every line the module gates, none it skips; a line the module would
+  skip is reported;
+- a Klipper printer.cfg is read as Klipper reads it (includes, SAVE_CONFIG).
+"""
+from __future__ import annotations
+
+import importlib.util
+import itertools
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+from gatesopt import firmware as fwmod
+from gatesopt.gating import GatingOptions, check_feasible, from_moves, score, solve
+from gatesopt.parse import parse
+from gatesopt.printer_config import PrinterConfigError, read_printer_config
+from gatesopt.rewrite.pipeline import run
+from gatesopt.shaper import shaper
+from gatesopt.verify import verify
+from gatesopt.verify.schedule import scheduled_lines, timeline_s
+
+MODULE_PATH = REPO / "integrations" / "klipper" / "gatesopt_gating.py"
+EXACT = ("dp", "milp", "cpsat")
+
+MZV30_CFG = """
+[printer]
+kinematics: cartesian
+max_velocity: 300
+max_accel: 3000
+
+[stepper_x]
+[stepper_y]
+
+[input_shaper]
+shaper_type_x: mzv
+shaper_freq_x: 30
+shaper_type_y: mzv
+shaper_freq_y: 30
+
+[gatesopt_gating]
+"""
+
+
+def _load_module():
+    spec = importlib.util.spec_from_file_location("gatesopt_gating_for_dialect", MODULE_PATH)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def mzv30(tmp_path_factory):
+    p = tmp_path_factory.mktemp("cfg") / "printer.cfg"
+    p.write_text(MZV30_CFG)
+    return read_printer_config(p)
+
+
+def _options(printer=None, **kw):
+    return GatingOptions.for_firmware("klipper-gating", printer=printer, rotate="none", **kw)
+
+
+# ------------------------------------------------------------------------------------------------
+# the dialect's numbers are the module's
+@pytest.mark.parametrize("shaped", [False, True])
+def test_the_dialects_margins_and_rule_a_are_the_modules(shaped, mzv30):
+    gg = _load_module()
+    printer = mzv30 if shaped else None
+    o = _options(printer)
+    pre, post = printer.window_s("x") if shaped else (0.0, 0.0)
+    for m in (0, 1):
+        assert math.isclose(o.off_margin_s(m), gg.off_delay_s(post, o.end_late_s), rel_tol=0, abs_tol=1e-15)
+        assert math.isclose(o.on_margin_s(m), gg.on_lead_s(pre, o.start_ahead_s), rel_tol=0, abs_tol=1e-15)
+        need = o.off_margin_s(m) + o.on_margin_s(m) + o.schedule.min_off_s
+        assert math.isclose(need, gg.required_gap_s(pre, post, o.start_ahead_s, o.end_late_s, 0.0, 0.1),
+                            abs_tol=1e-15)
+    assert o.schedule.min_spacing_s == pytest.approx(0.1)
+    assert o.stall_off_s == o.stall_on_s == 0.0 and not o.on_line
+
+
+# ------------------------------------------------------------------------------------------------
+# brute force == dp == milp == cpsat under rules A and B
+def _random_moves(rng, n):
+    """A polyline of n axis-parallel or diagonal moves with durations around rule A's 0.1 s floor,
+    and a few extrude-only moves (they count towards an idle interval's length)."""
+    pts, durs = [(0.0, 0.0)], []
+    starts, ends = [], []
+    e = 0.0
+    x, y = 0.0, 0.0
+    for _ in range(n):
+        kind = rng.integers(4)
+        d = float(rng.choice([0.02, 0.04, 0.06, 0.09, 0.12, 0.2, 0.35]))
+        if kind == 3:           # extrude-only
+            starts.append((x, y, 0.2, e))
+            e -= 0.5
+            ends.append((x, y, 0.2, e))
+        else:
+            dx = float(rng.uniform(1, 5)) if kind in (0, 2) else 0.0
+            dy = float(rng.uniform(1, 5)) if kind in (1, 2) else 0.0
+            starts.append((x, y, 0.2, e))
+            x, y, e = x + dx, y + dy, e + 0.05
+            ends.append((x, y, 0.2, e))
+        durs.append(d)
+    return np.array(starts), np.array(ends), np.array(durs)
+
+
+def _brute_force(problem):
+    best = None
+    for k in range(problem.n_angles):
+        g = problem.idle_intervals_of(k)
+        assert len(g) <= 13, "instance too big for brute force"
+        for r in range(len(g) + 1):
+            for sub in itertools.combinations(g, r):
+                sub = np.array(sub, np.int64)
+                m, a, b = problem.idle_motor[sub], problem.idle_start_s[sub], problem.idle_end_s[sub]
+                if check_feasible(problem, k, m, a, b):
+                    continue
+                e = score(problem, m, a, b).energy_j
+                if best is None or e < best - 1e-9:
+                    best = e
+    return best
+
+
+@pytest.mark.parametrize("shaped", [False, True])
+@pytest.mark.parametrize("seed", range(8))
+def test_exact_solvers_equal_brute_force_under_the_modules_rules(seed, shaped, mzv30):
+    rng = np.random.default_rng(seed)
+    s, e, d = _random_moves(rng, 14)
+    p = from_moves(s, e, d, _options(mzv30 if shaped else None))
+    assert p.n_idle_intervals <= 13
+    best = _brute_force(p)
+    for f in EXACT:
+        sol = solve(p, f, time_limit_s=30)
+        assert sol.status == "optimal", (f, sol.status, sol.message)
+        assert check_feasible(p, sol.angle_index, sol.off_motor, sol.off_start_s, sol.off_end_s) == []
+        assert sol.energy_j == pytest.approx(best, rel=1e-9, abs=1e-9), f
+    g = solve(p, "greedy")
+    assert check_feasible(p, g.angle_index, g.off_motor, g.off_start_s, g.off_end_s) == []
+    assert g.energy_j >= best - 1e-9
+
+
+def test_rule_b_makes_the_optimum_skip_an_interval():
+    """X idle for 0.2 s, steps 0.02 s, idle 0.2 s again: the two offs are 0.02 s + margins apart,
+    less than 0.1 s: only one of them may be off, and every solver keeps exactly one."""
+    s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0)])
+    e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0), (4, 10, .2, 0)])
+    d = np.array([0.05, 0.2, 0.02, 0.3, 0.02, 0.05])
+    p = from_moves(s, e, d, _options())
+    x = np.flatnonzero(p.idle_motor == 0)
+    assert len(x) == 2
+    both = check_feasible(p, 0, p.idle_motor[x], p.idle_start_s[x], p.idle_end_s[x])
+    assert any("rule B" in v for v in both)
+    for f in EXACT + ("greedy",):
+        sol = solve(p, f)
+        assert int(np.sum(sol.off_motor == 0)) == 1, f
+
+
+def test_rule_a_leaves_short_intervals_out():
+    """An X idle interval of 0.09 s of moves is shorter than 0.1 s + margins: not an idle interval
+    of the problem; 0.11 s is."""
+    def problem(gap_s):
+        s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0)])
+        e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0)])
+        return from_moves(s, e, np.array([0.05, gap_s, 0.05]), _options(motors=("X",)))
+    assert problem(0.09).n_idle_intervals == 0
+    assert problem(0.11).n_idle_intervals == 1
+
+
+# ------------------------------------------------------------------------------------------------
+# solve -> emit -> verify, on G-code
+GCODE = """; tiny print for klipper-gating
+G28
+G1 Z0.2 F600
+G1 X10 Y10 F6000
+G1 X20 E1 F1200
+G1 Y30 E2 F1200
+G1 X21 E2.05 F1200
+G1 Y31 E2.1 F1200
+G1 X40 E3 F1200
+G1 E2 F2400
+G1 Y50 F1200
+G1 E3 F2400
+G1 X50 E4 F1200
+G1 Y50.5 E4.1 F600
+G1 X60 E5 F1200
+M84
+"""
+
+
+@pytest.mark.parametrize("formulation", ("greedy",) + EXACT)
+@pytest.mark.parametrize("shaped", [False, True])
+def test_every_emitted_line_is_gated_by_the_protocol(formulation, shaped, mzv30):
+    prog = parse(GCODE.encode(), source="tiny.gcode")
+    o = _options(mzv30 if shaped else None)
+    res = run(prog, o, formulation=formulation, order=False)
+    assert res.report.ok, res.report.findings
+    out = parse(res.text.encode(), source="out.gcode")
+    lines = scheduled_lines(out, firmware="klipper-gating", start_ahead_s=o.start_ahead_s,
+                            end_late_s=o.end_late_s, printer=o.printer, original=prog)
+    assert lines and all(s.gated for s in lines)
+    # the off time the verifier derives is the solution's, motor by motor
+    sol = res.solution
+    for m in (0, 1):
+        got = sum(s.on_s - s.off_s for s in lines if s.motor == m)
+        want = float(np.sum((sol.off_end_s - sol.off_start_s)[sol.off_motor == m]))
+        assert got == pytest.approx(want, abs=1e-9)
+    assert "GATESOPT_GATE" in res.text and "SET_STEPPER_ENABLE" not in res.text
+
+
+def test_a_line_the_module_would_skip_is_reported():
+    prog = parse(GCODE.encode(), source="tiny.gcode")
+    # after the X move of line 7 (1 mm at 20 mm/s = 0.05 s) X idles 1 mm of Y (0.05 s): too short
+    text = GCODE.replace("G1 X21 E2.05 F1200\n", "G1 X21 E2.05 F1200\nGATESOPT_GATE STEPPERS=stepper_x\n")
+    out = parse(text.encode(), source="bad.gcode")
+    rep = verify(prog, out, firmware="klipper-gating")
+    assert not rep.ok
+    assert any("skips this line for motor X (short)" in str(f) for f in rep.findings)
+    # a line for the extruder: the module refuses it
+    text = GCODE.replace("G1 X40 E3 F1200\n", "G1 X40 E3 F1200\nGATESOPT_GATE STEPPERS=extruder\n")
+    rep = verify(prog, parse(text.encode(), source="bad.gcode"), firmware="klipper-gating")
+    assert any(f.check == "firmware" for f in rep.findings)
+
+
+def test_the_claim_with_a_shaper_fails_without_the_printer_config(mzv30):
+    prog = parse(GCODE.encode(), source="tiny.gcode")
+    o = _options(mzv30)
+    res = run(prog, o, formulation="dp", order=False)
+    assert res.report.ok
+    out = parse(res.text.encode(), source="out.gcode")
+    claimed = (res.solution.energy_j, res.solution.time_after_s)
+    assert verify(prog, out, firmware="klipper-gating", claimed=claimed, printer=mzv30).ok
+    assert not verify(prog, out, firmware="klipper-gating", claimed=claimed).ok
+
+
+# ------------------------------------------------------------------------------------------------
+# printer.cfg and shaper windows
+def test_printer_config_reads_includes_and_save_config(tmp_path):
+    (tmp_path / "shaper.cfg").write_text("[input_shaper]\nshaper_freq_x: 40 ; a comment\nshaper_type: zv\n")
+    (tmp_path / "printer.cfg").write_text(
+        "[include shaper.cfg]\n[printer]\nkinematics: cartesian\nmax_velocity: 250\nmax_accel: 2000\n"
+        "[gatesopt_gating]\nsteppers: stepper_x\nstart_ahead: 0.002\n"
+        "#*# <---------------------- SAVE_CONFIG ---------------------->\n"
+        "#*# DO NOT EDIT THIS BLOCK OR BELOW. The contents are auto-generated.\n#*#\n"
+        "#*# [input_shaper]\n#*# shaper_freq_y = 50.0\n#*# shaper_type_y = mzv\n")
+    c = read_printer_config(tmp_path / "printer.cfg")
+    shaped = dict(c.shapers)
+    assert shaped["x"].name == "zv" and shaped["y"].name == "mzv"
+    assert c.window_s("y") == shaper("mzv", 50).window_s()
+    assert c.gating.steppers == ("stepper_x",) and c.gating.start_ahead_s == 0.002
+    o = GatingOptions.for_firmware("klipper-gating", printer=c, motors=("X",))
+    assert o.start_ahead_s == 0.002
+    with pytest.raises(fwmod.FirmwareError, match="gate X only"):
+        GatingOptions.for_firmware("klipper-gating", printer=c, motors=("X", "Y"))
+    (tmp_path / "bad.cfg").write_text("[printer]\nmax_velocity: fast\n")
+    with pytest.raises(PrinterConfigError, match="bad.cfg.*max_velocity"):
+        read_printer_config(tmp_path / "bad.cfg")
+
+
+def test_a_corexy_printer_is_refused(tmp_path):
+    (tmp_path / "p.cfg").write_text("[printer]\nkinematics: corexy\n")
+    with pytest.raises(fwmod.FirmwareError, match="cartesian"):
+        GatingOptions.for_firmware("klipper-gating", printer=read_printer_config(tmp_path / "p.cfg"))
+
+
+KLIPPER = os.environ.get("GATESOPT_KLIPPER")
+
+
+@pytest.mark.skipif(not KLIPPER or not (Path(KLIPPER or ".") / "klippy/extras/shaper_defs.py").exists(),
+                    reason="needs a Klipper checkout in $GATESOPT_KLIPPER (klippy/extras/shaper_defs.py)")
+@pytest.mark.parametrize("name", ["zv", "mzv", "zvd", "ei", "2hump_ei", "3hump_ei"])
+@pytest.mark.parametrize("freq, zeta", [(30.0, 0.1), (47.5, 0.05), (80.0, 0.15)])
+def test_shaper_windows_are_klippers(name, freq, zeta, monkeypatch):
+    monkeypatch.syspath_prepend(str(Path(KLIPPER) / "klippy"))      # shaper_defs imports mathutil
+    spec = importlib.util.spec_from_file_location("klipper_shaper_defs", Path(KLIPPER) / "klippy/extras/shaper_defs.py")
+    sd = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sd)
+    cfg = sd.get_shaper_cfg(name) if hasattr(sd, "get_shaper_cfg") else \
+        next(s for s in sd.INPUT_SHAPERS if s.name == name)
+    a, t = cfg.init_func(freq, zeta)
+    # klippy/chelper/kin_shaper.c init_shaper: reversed, normalised, shifted to a zero mean
+    n = len(a)
+    ra = [a[n - i - 1] / sum(a) for i in range(n)]
+    rt = [-t[n - i - 1] for i in range(n)]
+    ts = sum(x * y for x, y in zip(ra, rt))
+    rt = [x - ts for x in rt]
+    pre, post = rt[-1], -rt[0]      # shaper_note_generation_time
+    ours = shaper(name, freq, zeta).window_s()
+    assert ours == pytest.approx((pre, post), rel=1e-9, abs=1e-12)
+
+
+# ------------------------------------------------------------------------------------------------
+# through Klipper's own host with the module (bench/klipper_replay.py)
+def _replay_bench():
+    sys.path.insert(0, str(REPO / "bench"))
+    try:
+        import klipper_replay as kr
+    finally:
+        sys.path.pop(0)
+    return kr
+
+
+@pytest.mark.parametrize("shaped", [False, True])
+def test_klipper_with_the_module_gates_exactly_the_emitted_lines(shaped, tmp_path):
+    kr = _replay_bench()
+    host = kr.find_host()
+    if isinstance(host, str):
+        pytest.skip(f"no Klipper host for the replay: {host}")
+    shaper_spec = kr.parse_shaper("mzv:30" if shaped else "none")
+    cfg = kr.printer_config(shaper_spec, {})
+    (tmp_path / "printer.cfg").write_text(cfg)
+    printer = read_printer_config(tmp_path / "printer.cfg")
+    prog = parse(GCODE.encode(), source="tiny.gcode")
+    o = _options(printer)
+    res = run(prog, o, formulation="dp", order=False)
+    assert res.report.ok
+    lines = scheduled_lines(parse(res.text.encode()), firmware="klipper-gating", start_ahead_s=o.start_ahead_s,
+                            end_late_s=o.end_late_s, printer=printer, original=prog)
+    want = {name: sum(1 for s in lines if s.motor == m and s.gated)
+            for m, name in enumerate(("stepper_x", "stepper_y"))}
+    assert sum(want.values()) > 0
+    with kr.KlippyRunner(host, MODULE_PATH) as k:
+        rep = k.run(cfg, kr.replay_text(res.text)[0], kr.stepper_pins(cfg))
+    for name, n in want.items():
+        st = rep.steppers[name]
+        assert st.gated == n, name                       # the module gated every line, nothing else
+        assert st.gated_steps_while_off == 0, name
+        if n:
+            assert st.start_ahead_min_s >= o.start_ahead_s - 1e-6
+            assert st.end_late_min_s >= o.end_late_s - 1e-6
+
+
+def test_the_planner_time_model_plans_with_the_printer_configs_limits(tmp_path):
+    """``GatingOptions.time_model = "planner"`` (klipper-gating's): the problem's timeline is
+    ``planner.plan`` with Klipper's rules and the printer.cfg's limits, and the verifier's too."""
+    from gatesopt.gating import build
+    from gatesopt.limits import machine_limits
+    from gatesopt.planner import plan
+    prog = parse(GCODE.encode(), source="tiny.gcode")
+    totals = {}
+    for accel in (500, 3000):
+        (tmp_path / f"p{accel}.cfg").write_text(f"[printer]\nkinematics: cartesian\nmax_velocity: 300\n"
+                                                f"max_accel: {accel}\nminimum_cruise_ratio: 0.5\n")
+        printer = read_printer_config(tmp_path / f"p{accel}.cfg")
+        o = GatingOptions(rotate="none", time_model="planner", planner_family="klipper", printer=printer)
+        p = build(prog, o)
+        want = plan(prog, machine_limits(prog, family="klipper", printer=printer)).duration_s.sum()
+        assert p.total_s == pytest.approx(want, rel=1e-12)
+        assert timeline_s(prog, "klipper-gating", printer).sum() == pytest.approx(want, rel=1e-12)
+        totals[accel] = p.total_s
+    assert totals[500] > totals[3000] > prog.duration_s.sum()
+
+
+def test_the_command_line_solves_and_verifies_for_a_printer_config(tmp_path, capsys):
+    from gatesopt.cli import main
+    src, out, rep, cfg = (tmp_path / n for n in ("in.gcode", "out.gcode", "rep.json", "printer.cfg"))
+    src.write_text(GCODE)
+    cfg.write_text(MZV30_CFG)
+    assert main(["solve", str(src), "-o", str(out), "--firmware", "klipper-gating", "--printer-config", str(cfg),
+                 "--no-order", "--rotate", "none", "--json", str(rep)]) == 0
+    assert "GATESOPT_GATE STEPPERS=" in out.read_text()
+    assert main(["verify", str(src), str(out), "--claimed", str(rep), "--printer-config", str(cfg)]) == 0
+    capsys.readouterr()
+    # the same claim read without the shaper's window: the module would switch later and earlier
+    assert main(["verify", str(src), str(out), "--claimed", str(rep)]) == 1
+    assert "energy recomputed from the text" in capsys.readouterr().out
+    cfg.write_text("[printer]\nmax_accel: lots\n")
+    assert main(["solve", str(src), "-o", str(tmp_path / "o2.gcode"), "--firmware", "klipper-gating",
+                 "--printer-config", str(cfg)]) != 0
+    assert "max_accel" in capsys.readouterr().err
+
+
+def test_the_modules_start_ahead_in_printer_cfg_is_what_solve_and_verify_use(tmp_path):
+    from gatesopt.cli import main
+    src, out, rep, cfg = (tmp_path / n for n in ("in.gcode", "out.gcode", "rep.json", "printer.cfg"))
+    src.write_text(GCODE)
+    cfg.write_text(MZV30_CFG + "start_ahead: 0.004\nend_late: 0.002\n")
+    assert main(["solve", str(src), "-o", str(out), "--firmware", "klipper-gating", "--printer-config", str(cfg),
+                 "--no-order", "--rotate", "none", "--json", str(rep)]) == 0
+    import json
+    report = json.loads(rep.read_text())
+    printer = read_printer_config(cfg)
+    lines = scheduled_lines(parse(out.read_text().encode()), firmware="klipper-gating", start_ahead_s=0.004,
+                            end_late_s=0.002, printer=printer, original=parse(GCODE.encode()))
+    assert lines and all(s.gated for s in lines)
+    assert sum(s.on_s - s.off_s for s in lines) == pytest.approx(sum(report["off_time_s"].values()), abs=1e-9)
+    assert main(["verify", str(src), str(out), "--claimed", str(rep), "--printer-config", str(cfg)]) == 0
+    # a command-line value that disagrees with the module's is refused
+    assert main(["solve", str(src), "-o", str(tmp_path / "o2.gcode"), "--firmware", "klipper-gating",
+                 "--printer-config", str(cfg), "--start-ahead-ms", "3"]) != 0
+
+
+def test_the_verifier_reads_repeated_and_early_lines_as_the_module_does():
+    """A second line for X before X steps again is the module's "repeated" (the first covers the
+    stretch); a line before homing is "motor_off" (Klipper has not enabled Y yet)."""
+    prog = parse(GCODE.encode(), source="tiny.gcode")
+    text = GCODE.replace("G1 X40 E3 F1200\n", "G1 X40 E3 F1200\nGATESOPT_GATE STEPPERS=stepper_x\n"
+                                              "GATESOPT_GATE STEPPERS=stepper_x\n")
+    text = text.replace("G28\n", "GATESOPT_GATE STEPPERS=stepper_y\nG28\n")
+    out = parse(text.encode(), source="hand.gcode")
+    got = [(s.motor, s.gated, s.reason) for s in
+           scheduled_lines(out, firmware="klipper-gating", start_ahead_s=1.8e-3, end_late_s=1e-3, original=prog)]
+    assert got == [(1, False, "motor_off"), (0, True, ""), (0, False, "repeated")]

@@ -1,0 +1,174 @@
+"""The stock ``klipper`` dialect (issue 34): an explicit ``SET_STEPPER_ENABLE ... ENABLE=1``
+start-ahead (plus an input shaper's lead) before the motor's next move, priced; no gating line
+splits an extrude-only move on a stock dialect, nor a dwell on any; Marlin's ``M18`` is refused
+for a Klipper file. The Klipper-host tests replay the dialect's output in Klipper's own planner
+(bench/klipper_replay.py) when a Klipper checkout is configured."""
+from __future__ import annotations
+
+import re
+import sys
+
+import numpy as np
+import pytest
+
+import gatesopt
+from conftest import REPO
+from gatesopt import firmware as fwmod
+from gatesopt.gating import GatingOptions
+from gatesopt.gating.timeline import whole_steps
+from gatesopt.program import Kind
+from gatesopt.rewrite import run
+from gatesopt.rewrite import printer
+
+sys.path.insert(0, str(REPO / "bench"))
+import klipper_replay as kr  # noqa: E402
+
+KLIPPER = fwmod.get("klipper")
+ON = re.compile(r"^SET_STEPPER_ENABLE STEPPER=stepper_(\w) ENABLE=1$", re.M)
+OFF = re.compile(r"^SET_STEPPER_ENABLE STEPPER=stepper_(\w) ENABLE=0$", re.M)
+
+
+def _gcode(middle: str) -> str:
+    return "G21\nG90\nM82\nG28\nG92 E0\nG1 Z0.3 F600\n" + middle + "M84\n"
+
+
+# X prints, retracts, Y travels a long way alone (X idle), X prints again after an unretract
+RETRACT = _gcode("G1 X10 Y10 F6000\nG1 X60 E2 F1200\nG1 E0 F300\nG1 Y180 F600\nG1 E2 F300\n"
+                 "G1 X10 E4 F1200\n")
+# X idle across a 2 s dwell only
+DWELL = _gcode("G1 X10 Y10 F6000\nG1 X60 E2 F1200\nG4 P2000\nG1 X10 E4 F1200\n")
+
+
+def _e_only_moves(text: str) -> int:
+    return kr.count_extrude_only_moves(text)
+
+
+def _run(text: str, fw: str, **kw):
+    opts = GatingOptions.for_firmware(fw, motors=("X",), rotate="none", **kw)
+    res = run(gatesopt.parse(text), opts, order=False)
+    assert res.report.ok, [str(f) for f in res.report.findings]
+    # the claim is what the verifier recomputes from the text
+    assert res.solution.energy_j == pytest.approx(res.report.energy_j, rel=1e-8)
+    assert res.solution.time_after_s == pytest.approx(res.report.time_s, rel=1e-8)
+    return res
+
+
+def test_klipper_writes_an_explicit_enable_start_ahead_plus_the_shaper_lead_before_the_next_move():
+    opts = GatingOptions.for_firmware("klipper")
+    assert opts.on_line and opts.stall_on_s == KLIPPER.stall_on_s > 0
+    assert opts.start_ahead_s == pytest.approx(1.8e-3 + 0.060)
+    res = _run(RETRACT, "klipper")
+    text = res.text
+    assert OFF.findall(text) == ["x"] and ON.findall(text) == ["x"]
+    out = gatesopt.parse(text)
+    t_end = np.cumsum(out.duration_s)
+    t_start = t_end - out.duration_s
+    on_row = int(np.flatnonzero((out.kind == Kind.MOTOR) & np.array(
+        ["ENABLE=1" in out.line_text(int(out.line[r])) for r in range(out.n_steps)]))[0])
+    steps_x = np.flatnonzero(out.steps_motor()[:, 0])
+    nxt = steps_x[steps_x > on_row][0]
+    # the motor is on 61.8 ms (start-ahead + the shaper lead) before the move that steps it
+    assert t_start[nxt] - t_start[on_row] >= 0.0618 - 1e-9
+    # priced: one disable (0.22 s) and one enable (a flush) line
+    assert res.solution.added_time_s == pytest.approx(KLIPPER.stall_off_s + KLIPPER.stall_on_s)
+
+
+def test_the_choice_says_what_klipper_cannot_honour():
+    choice = printer.choose(gatesopt.parse(RETRACT), "klipper")
+    assert "SET_STEPPER_ENABLE lines" in choice.line and "0.1 s" in choice.line
+    assert "60 ms" in choice.line
+
+
+@pytest.mark.parametrize("fw, splits", [("3dgates", True), ("marlin", False), ("klipper", False)])
+def test_a_gating_line_splits_an_extrude_only_move_only_where_the_dialect_allows(fw, splits):
+    # X's last step ends where the retraction starts: its off comes end-late (1 ms) into the
+    # retraction. The paper's model splits it there; Klipper plans each half from rest (a stop
+    # more), so the stock dialects put the line after the whole retraction
+    res = _run(RETRACT, fw)
+    assert res.solution.lines_added > 0
+    extra = _e_only_moves(res.text) - _e_only_moves(RETRACT)
+    assert (extra > 0) == splits, res.text
+
+
+def test_the_model_moves_an_off_out_of_an_extrude_only_move_to_its_end():
+    p = gatesopt.parse(RETRACT)
+    whole = whole_steps(p.steps_motor(), p.kind, "kinematic")
+    retract = int(np.flatnonzero((p.kind == Kind.RETRACT))[0])
+    assert whole[retract] and not whole_steps(p.steps_motor(), p.kind, "all")[retract]
+    assert not whole[retract + 1]          # the Y travel may be split
+    res = _run(RETRACT, "marlin")
+    end = np.cumsum(p.duration_s)
+    assert res.solution.off_start_s[0] == pytest.approx(end[retract])    # right after the retraction
+
+
+@pytest.mark.parametrize("fw", ["3dgates", "klipper"])
+def test_an_idle_interval_inside_a_dwell_is_not_priced_as_gated(fw):
+    # X's off comes end-late (1 ms) into the dwell, its on start-ahead before the X move right
+    # after it: both inside the dwell. Both go to the dwell's safe sides (the emitter cannot cut
+    # G4), so the interval is empty; the model used to price it as gated (a claim the text did
+    # not have: 0.66 s of stalls on a greedy klipper solve)
+    res = _run(DWELL, fw, max_added_time_pct=None)
+    p = gatesopt.parse(DWELL)
+    dwell = int(np.flatnonzero(p.kind == Kind.DWELL)[0])
+    end = np.cumsum(p.duration_s)
+    lo, hi = end[dwell] - p.duration_s[dwell], end[dwell]
+    sol = res.solution
+    assert not np.any((sol.off_start_s < hi) & (sol.off_end_s > lo)), (sol.off_start_s, sol.off_end_s)
+
+
+def test_marlin_m18_for_a_klipper_file_is_refused_by_default():
+    klipper_file = gatesopt.parse("; generated for Klipper\nSET_VELOCITY_LIMIT ACCEL=3000\n" + RETRACT)
+    with pytest.raises(fwmod.FirmwareError, match="stops the print"):
+        printer.choose(klipper_file, "marlin")
+    assert printer.choose(klipper_file, "auto").firmware == "klipper"
+
+
+# ------------------------------------------------------------------------------------------------
+HOST = kr.find_host()
+needs_klipper = pytest.mark.skipif(isinstance(HOST, str), reason=f"no Klipper host for the replay: {HOST}")
+
+
+@pytest.fixture(scope="module")
+def klippy():
+    with kr.KlippyRunner(HOST) as k:
+        yield k
+
+
+@needs_klipper
+def test_in_klipper_no_step_while_off_with_or_without_an_input_shaper(klippy):
+    res = _run(RETRACT, "klipper")
+    text = kr.replay_text(res.text)[0]
+    before = kr.replay_text(re.sub(ON, "", res.text))[0]     # the dialect before: no ENABLE=1
+    for shaper in (None, kr.parse_shaper("mzv:30")):
+        cfg = kr.printer_config(shaper)
+        x = klippy.run(cfg, text).steppers["stepper_x"]
+        assert x.gated == 1 and x.gated_steps_while_off == 0, shaper
+        # on 61.8 ms before the nominal move start; mzv 30 Hz steps 14.3 ms before it
+        assert x.start_ahead_min_s > 0.0618 - 0.0143 - 1e-3, shaper
+        assert x.end_late_min_s >= 0.1, shaper               # DISABLE_STALL_TIME: what it cannot honour
+        if shaper is not None:
+            assert klippy.run(cfg, before).steppers["stepper_x"].gated_steps_while_off > 0
+
+
+@needs_klipper
+def test_in_klipper_an_enable_line_costs_a_flush_and_no_dwell(klippy):
+    res = _run(RETRACT, "klipper")
+    cfg = kr.printer_config()
+    out = klippy.run(cfg, kr.replay_text(res.text)[0])
+    no_on = klippy.run(cfg, kr.replay_text(re.sub(ON, "", res.text))[0])
+    stripped = klippy.run(cfg, kr.replay_text(kr.strip_gating_lines(res.text, "klipper"))[0])
+    enable_s = out.end_s - no_on.end_s
+    disable_s = no_on.end_s - stripped.end_s
+    # 2 x SDS_CHECK_TIME plus a stop from 10 mm/s (the Y travel): a few ms, no 0.1 s dwell
+    assert 0.0015 < enable_s < KLIPPER.stall_on_s
+    assert 0.2 < disable_s < KLIPPER.stall_off_s + 0.01
+
+
+@needs_klipper
+def test_in_klipper_a_marlin_m18_stops_the_print(klippy):
+    # why M18 is refused for a Klipper file: Klipper's M18 turns every motor off and clears homing
+    opts = GatingOptions.for_firmware("marlin", motors=("X",), rotate="none")
+    res = run(gatesopt.parse(RETRACT), opts, order=False)
+    assert "M18 X" in res.text
+    with pytest.raises(kr.ReplayError, match="Must home axis first"):
+        klippy.run(kr.printer_config(), kr.replay_text(res.text)[0])

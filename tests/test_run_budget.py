@@ -1,0 +1,57 @@
+"""The whole run's budget (``rewrite.budget``, `gatesopt solve`'s default 10 s): the curve ordering
+gets what the rest is estimated to leave, and on a machine other work shares (the run measures its
+own wall / CPU seconds before the ordering) the rest is estimated that much slower, so the ordering
+gets less. Clocks are injected: nothing here is timed."""
+from __future__ import annotations
+
+import pytest
+
+import gatesopt
+from gatesopt.gating import GatingOptions
+from gatesopt.rewrite import budget, pipeline
+
+from conftest import PROJECT_INSTANCES
+
+
+def test_slowdown_is_wall_over_cpu_clipped():
+    f = budget.slowdown_factor
+    assert f(10.0, 2.0, wall_now_s=13.0, cpu_now_s=3.0) == pytest.approx(3.0)
+    assert f(10.0, 2.0, wall_now_s=13.0, cpu_now_s=5.0) == 1.0          # never below 1
+    assert f(0.0, 0.0, wall_now_s=100.0, cpu_now_s=1.0) == budget.MAX_SLOWDOWN
+    assert f(0.0, 0.0, wall_now_s=0.2, cpu_now_s=0.01) == 1.0           # too short to tell
+    assert f(0.0, None, wall_now_s=3.0, cpu_now_s=1.0) == 1.0           # no CPU reading: unknown
+
+
+def test_a_slower_machine_leaves_the_ordering_less():
+    program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
+    o = GatingOptions(rotate="none")
+    quiet = budget.ordering_budget_s(10.0, program, o, "dp", True, 1.0, None, 1.0)
+    loaded = budget.ordering_budget_s(10.0, program, o, "dp", True, 1.0, None, 3.0)
+    rest = budget.after_order_s(max(program.n_lines, program.n_steps), False)
+    assert quiet == pytest.approx(10.0 - 1.0 - rest)
+    assert loaded < quiet - 2.0 * rest + 1e-9       # the rest counted three times, its emit too
+
+
+def test_run_measures_the_slowdown_and_the_ordering_gets_the_smaller_budget(monkeypatch):
+    seen = {}
+    real = pipeline._order_curves
+
+    def spy(program, time_limit_s, workers=1, budget_s=None, *a, **kw):
+        seen["budget_s"] = budget_s
+        return real(program, time_limit_s, workers, budget_s, *a, **kw)
+    monkeypatch.setattr(pipeline, "_order_curves", spy)
+    monkeypatch.setattr(pipeline, "slowdown_factor", lambda started_s, cpu_started_s: 2.5)
+    program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
+    o = GatingOptions(rotate="none")
+    res = pipeline.run(program, o, budget_s=10.0, cpu_started_s=0.0)
+    assert res.report.ok and res.summary()["slowdown"] == 2.5
+    quiet = budget.ordering_budget_s(10.0, program, o, "dp", True, res.times["read_s"], None, 1.0)
+    assert seen["budget_s"] < quiet
+
+
+def test_no_time_left_keeps_the_slicers_order_and_says_so(monkeypatch):
+    monkeypatch.setattr(pipeline, "slowdown_factor", lambda started_s, cpu_started_s: budget.MAX_SLOWDOWN)
+    program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
+    res = pipeline.run(program, GatingOptions(rotate="none"), budget_s=0.5, cpu_started_s=0.0)
+    assert res.report.ok and not res.ordered and "ordering_s" not in res.times
+    assert any("curve ordering skipped" in n and "1/4.0 of a core" in n for n in res.notes)
