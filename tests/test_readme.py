@@ -45,3 +45,54 @@ def test_the_whole_job_verifies_a_rotated_prusaslicer_file(tmp_path):
     out = tmp_path / "star.gcode"
     out.write_text(res.text)
     assert main(["verify", str(src), str(out)]) == 0
+
+
+# -- the first hour: "For your printer" ------------------------------------------------------------
+FRESH = ROOT.parent / "fresh"
+
+
+def _printer_blocks() -> list[tuple[list[str], list[str]]]:
+    """(the command's words, the lines shown) of each ``$ gatesopt solve ...`` block of the
+    README's "For your printer" section."""
+    text = (ROOT / "README.md").read_text()
+    section = re.search(r"## For your printer\n(.*?)\n## ", text, re.S).group(1)
+    blocks = []
+    for body in re.findall(r"```\n(\$ gatesopt solve .*?)```", section, re.S):
+        first, *shown = body.rstrip("\n").splitlines()
+        blocks.append((first[2:].split(), shown))
+    return blocks
+
+
+def test_the_recipes_show_a_prusaslicer_a_cura_and_a_klipper_file():
+    names = [words[2] for words, _ in _printer_blocks()]
+    assert any(n.startswith("prusa25_") for n in names)
+    assert any(n.startswith("cura413_") for n in names)
+    assert any("orca" in n for n in names)
+    # the rotation is shown on and off, and the paper's firmware by name
+    assert any("--bed" in words for words, _ in _printer_blocks())
+    assert any(words[-2:] == ["--firmware", "3dgates"] for words, _ in _printer_blocks())
+
+
+@pytest.mark.parametrize("index", range(len(_printer_blocks())))
+def test_solve_prints_what_the_readme_says(index, tmp_path, capsys):
+    """The first-hour walk: each README recipe run as written on the file it names prints the
+    firmware, budget and rotation lines the README shows (a shown line ending in "..." is a
+    prefix: what follows depends on the ordering's wall-clock budget)."""
+    from gatesopt.cli import main
+    words, shown = _printer_blocks()[index]
+    name = words[2]
+    path = next((d / name for d in (SHARED_INSTANCES, FRESH) if (d / name).exists()), None)
+    if path is None:
+        pytest.skip(f"{name}: not in ../shared/instances or ../fresh")
+    args = [w if w != name else str(path) for w in words[1:]]
+    args[args.index("-o") + 1] = str(tmp_path / args[args.index("-o") + 1])
+    assert main(args) == 0
+    printed = {ln[:14].strip(): ln for ln in capsys.readouterr().out.splitlines()}
+    assert shown
+    for line in shown:
+        label = line[:14].strip()
+        assert label in printed, f"{name}: no {label!r} line printed"
+        if line.endswith("..."):
+            assert printed[label].startswith(line[:-3]), (line, printed[label])
+        else:
+            assert printed[label] == line

@@ -41,8 +41,13 @@ class GatingOptions:
     snap_mm: float = 1e-3               # other-axis displacement below this -> single-axis move
     bed_size_mm: tuple[float, float] | None = None   # None: the bed the file names (rotation.bed_of);
                                         # no bed known: no rotation (issue 37)
+    bed: object = None                  # a ``slicers.Bed`` read from the user's file, given by a caller
+                                        # that gates a rewritten copy (re-ordered: other line numbers)
     bed_margin_mm: float | None = None  # a rotated print's least distance to the bed's edges (None:
                                         # rotation.BED_MARGIN_MM, or less where the slicer kept less)
+    min_rotation_gain_pct: float = 0.5  # under rotate="auto" a rotation must save this much energy
+                                        # more than 0 deg (% of the 0 deg answer's), else the print
+                                        # stays as the slicer placed it (rewrite.run; issue 37)
     check_bed: bool = True              # False: rotations are not checked against a bed (a model
                                         # experiment, e.g. ``report.rotation_sweep``: nothing printed)
     profile: str = "paper"              # energy profile name or TOML path
@@ -77,7 +82,7 @@ class GatingOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise GatingOptionsError(f"{name} must be a finite number >= 0, not {v!r}")
-        for name in ("max_added_time_pct", "max_added_lines_pct", "bed_margin_mm"):
+        for name in ("max_added_time_pct", "max_added_lines_pct", "bed_margin_mm", "min_rotation_gain_pct"):
             v = getattr(self, name)
             if v is not None and not (math.isfinite(v) and v >= 0):
                 raise GatingOptionsError(f"{name} must be >= 0 or None, not {v!r}")

@@ -249,11 +249,14 @@ def rotation_center(program: Program, lo: int, hi: int) -> np.ndarray:
 # -- the bed -----------------------------------------------------------------------------------------
 def bed_of(program: Program, options) -> slicers.Bed | None:
     """The bed a rotated print must stay on: ``options.bed_size_mm`` (``--bed WxD``, from 0, 0),
-    else the one the file names (``slicers.read_bed``), else ``program.header["bed_size_mm"]``
-    (``gating.from_moves``), else None."""
+    else ``options.bed`` (the user's file's, where ``program`` is a rewritten copy whose line
+    numbers differ), else the one the file names (``slicers.read_bed``), else
+    ``program.header["bed_size_mm"]`` (``gating.from_moves``), else None."""
     if options.bed_size_mm is not None:
         w, d = options.bed_size_mm
         return slicers.rectangle_bed(0.0, 0.0, w, d, "--bed")
+    if options.bed is not None:
+        return options.bed
     bed = slicers.read_bed(program.data) if len(program.data) else None
     if bed is None and program.header.get("bed_size_mm") is not None:
         w, d = (float(v) for v in program.header["bed_size_mm"])
