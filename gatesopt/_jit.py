@@ -1,7 +1,8 @@
 """How long this process spent compiling numba kernels (numba's ``numba:compile`` events), a
 note the moment a long compile starts, and a clock kernels can read.
 
-The kernels are compiled on first use and cached (``cache=True``) beside their modules, so only
+The kernels are compiled on first use and cached (``cache=True``, one directory per version of
+the sources: ``use_versioned_cache``), so only
 the first run after an install or an update pays for it: measured ~37 s on this project's 2-core
 machine for a budgeted ``gatesopt order`` (parser ~15 s, ordering kernels ~22 s), 115 s for a
 default ``gatesopt solve`` at a load of ~4 (scan 23 s, the ordering's matching 33 s, ILS 16 s,
@@ -22,10 +23,43 @@ import sys
 import threading
 import time
 
+import hashlib
+import os
+from pathlib import Path
+
+import numba
 from llvmlite import ir
 from numba import njit, types
 from numba.core import cgutils, event
 from numba.extending import intrinsic
+
+
+def source_digest(package_dir: Path) -> str:
+    """A digest of every module of the package (path and bytes)."""
+    h = hashlib.sha1()
+    for path in sorted(package_dir.rglob("*.py")):
+        h.update(str(path.relative_to(package_dir)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def use_versioned_cache(package_dir: Path) -> None:
+    """Cache the kernels under ``<package>/__pycache__/numba-<digest of the sources>``.
+
+    numba keys a cached kernel on its own file's time stamp and size only (caching.py
+    ``_SourceFileBackedLocatorMixin.get_source_stamp``): a kernel that inlines a kernel or reads a
+    constant of another module keeps its old machine code when only that other module changes.
+    After an update this crashed the test suite with "Floating point exception" until the caches
+    were deleted by hand. A directory per version of the sources makes every update compile
+    afresh (the first run's note says so). Where the directory cannot be written numba falls back
+    to its own locations (``from_function`` returns None on OSError); a NUMBA_CACHE_DIR the user
+    set is left alone."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return
+    numba.config.CACHE_DIR = str(package_dir / "__pycache__" / f"numba-{source_digest(package_dir)}")
+
+
+use_versioned_cache(Path(__file__).resolve().parent)
 
 #: below this many seconds of compiling, nothing is said
 NOTE_MIN_S = 1.0
