@@ -28,6 +28,13 @@ from .problem import OPTIMAL_ABS_TOL, Group, GroupSolution, trivial_solution
 
 _OPT = highspy.HighsModelStatus.kOptimal
 
+#: largest group (candidates) the directed model takes on after the symmetric model stopped
+#: without a proof. Small groups close at once (square_grid's 20-candidate groups: 1 -> 9 of 9
+#: proven); on real_kirimoto30's groups of up to 288 candidates the directed loop ran past the
+#: group's time limit (12.2 s of HiGHS for 3 groups with 2 s each, cProfile of `gatesopt order
+#: --budget 8`): HiGHS overshoots its time limit there, so large groups keep the symmetric answer.
+DIRECTED_AFTER_SYMMETRIC_MAX_CANDS = 60
+
 
 class _Model:
     """Column layout: first[k] (m) | last[k] (m) | x[u,v] (A) | y[k] (m)."""
@@ -190,7 +197,8 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
         order, obj, lp_bound, proven = symmetric.solve(group, best, t0 + time_limit_s)
         group.check_order(order)
         bound = max(bound, lp_bound)
-        if proven or obj - bound <= OPTIMAL_ABS_TOL or time.perf_counter() >= t0 + time_limit_s:
+        if (proven or obj - bound <= OPTIMAL_ABS_TOL or time.perf_counter() >= t0 + time_limit_s
+                or group.n_cands > DIRECTED_AFTER_SYMMETRIC_MAX_CANDS):
             status = Status.OPTIMAL if proven or obj - bound <= OPTIMAL_ABS_TOL else Status.FEASIBLE
             return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "milp")
         # Not proven: on the time objective the copied slicer gaps make the costs asymmetric and
