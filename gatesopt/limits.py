@@ -276,6 +276,115 @@ def _printer_profile(data: bytes, firmware: str) -> tuple[str, str]:
     return firmware, f"stock {firmware} configuration"
 
 
+def _line_sets(m, rules, mm_min: bool, legacy_m204: bool, printer) -> tuple[list[tuple[str, float]], bool]:
+    """What one limit line of the file sets: ``(key, value)`` pairs in this module's units, and
+    whether it set a junction deviation (``M205 J``). Each firmware's reading: Klipper's
+    SET_VELOCITY_LIMIT and M204 (S, else min(P, T)), Marlin's legacy and current M204, M203 in
+    mm/min where the firmware says so, RepRapFirmware's M566 jerk in mm/min."""
+    cmd = m.group(1).upper()
+    sets: list[tuple[str, float]] = []
+    sets_jd = False
+    if cmd == b"SET_VELOCITY_LIMIT":
+        p = {k.upper(): float(x) for k, x in _KLIPPER_PARAM_RE.findall(m.group(2))}
+        if b"ACCEL" in p:
+            sets += [("accel_print", p[b"ACCEL"]), ("accel_travel", p[b"ACCEL"]),
+                     ("accel_retract", p[b"ACCEL"])]
+        if b"ACCEL_TO_DECEL" in p and printer is None:
+            sets.append(("accel_to_decel", p[b"ACCEL_TO_DECEL"]))
+        if b"MINIMUM_CRUISE_RATIO" in p:
+            sets.append(("min_cruise_ratio", p[b"MINIMUM_CRUISE_RATIO"]))
+        if b"SQUARE_CORNER_VELOCITY" in p:
+            sets.append(("square_corner_velocity", p[b"SQUARE_CORNER_VELOCITY"]))
+        if b"VELOCITY" in p:
+            sets.append(("max_velocity", p[b"VELOCITY"]))
+    else:
+        w = {k.upper(): float(x) for k, x in _WORD_RE.findall(m.group(2))}
+        if cmd == b"M201":
+            sets += [(f"max_accel_{a.lower()}", w[a.encode()]) for a in "XYZE" if a.encode() in w]
+        elif cmd == b"M203":
+            f = 1 / 60 if mm_min else 1.0
+            sets += [(f"max_feed_{a.lower()}", w[a.encode()] * f) for a in "XYZE" if a.encode() in w]
+        elif cmd == b"M566":
+            sets += [(f"jerk_{a.lower()}", w[a.encode()] / 60) for a in "XYZE" if a.encode() in w]
+        elif cmd == b"M204":
+            if rules.m204 == "klipper":
+                # Klipper's M204: S sets max_accel; else min(P, T)
+                acc = w.get(b"S", min(w.get(b"P", INF), w.get(b"T", INF)))
+                if acc < INF:
+                    sets += [("accel_print", acc), ("accel_travel", acc), ("accel_retract", acc)]
+            elif b"S" in w:
+                # legacy format (Marlin 1 / Prusa firmware): S print (and travel), T retract
+                sets += [("accel_print", w[b"S"]), ("accel_travel", w[b"S"])]
+                if b"T" in w:
+                    sets.append(("accel_retract" if legacy_m204 or b"P" not in w else "accel_travel", w[b"T"]))
+            else:
+                if b"P" in w:
+                    sets.append(("accel_print", w[b"P"]))
+                if b"R" in w:
+                    sets.append(("accel_retract", w[b"R"]))
+                if b"T" in w:
+                    sets.append(("accel_travel", w[b"T"]))
+        elif cmd == b"M205":
+            if b"X" in w:   # Marlin: X sets both X and Y jerk
+                sets += [("jerk_x", w[b"X"]), ("jerk_y", w[b"X"])]
+            if b"Y" in w:
+                sets.append(("jerk_y", w[b"Y"]))
+            if b"Z" in w:
+                sets.append(("jerk_z", w[b"Z"]))
+            if b"E" in w:
+                sets.append(("jerk_e", w[b"E"]))
+            if b"S" in w:
+                sets.append(("min_feed", w[b"S"]))
+            if b"T" in w:
+                sets.append(("min_travel_feed", w[b"T"]))
+            if b"B" in w:
+                sets.append(("min_segment_time", w[b"B"] * 1e-6))
+            if b"J" in w:
+                sets.append(("junction_deviation", w[b"J"]))
+                sets_jd = True
+    return sets, sets_jd
+
+
+def _apply_config(config: dict, v: np.ndarray, source: dict[str, str], rules, junction: str) -> str:
+    """The slicer's config block over the defaults (``v`` and ``source`` updated in place);
+    returns the junction model it implies (classic jerk or junction deviation, where the
+    firmware's rules let the config choose)."""
+    usage = config.get("machine_limits_usage", "").strip()
+    if usage != "ignore":
+        for key, name in _CONFIG_MAP.items():
+            if key in config:
+                x = _first_number(config[key])
+                if x is None:
+                    continue
+                if name == "accel_travel" and x == 0:   # 0: "same as extruding" (PrusaSlicer)
+                    continue
+                if name == "junction_deviation" and x <= 0:
+                    continue
+                v[K[name]] = x
+                source[name] = f"config: {key}"
+        if _KISS_ACCEL in config:
+            x = _first_number(config[_KISS_ACCEL])
+            if x and x > 0:
+                for name in ("accel_print", "accel_travel"):
+                    v[K[name]] = x
+                    source[name] = f"config: {_KISS_ACCEL}"
+        if rules.jerk_is_scv and "machine_max_jerk_x" in config:
+            # OrcaSlicer writes a Klipper printer's jerk as SET_VELOCITY_LIMIT SQUARE_CORNER_VELOCITY
+            x = _first_number(config["machine_max_jerk_x"])
+            if x:
+                v[K["square_corner_velocity"]] = x
+                source["square_corner_velocity"] = "config: machine_max_jerk_x (Klipper SCV)"
+        if rules.config_picks_junction and any(k.startswith("machine_max_jerk") for k in config):
+            junction = "jerk"
+            source["junction"] = "config: machine_max_jerk_* (classic jerk)"
+        if rules.config_picks_junction and "machine_max_junction_deviation" in config:
+            x = _first_number(config["machine_max_junction_deviation"])
+            if x and x > 0:
+                junction = "deviation"
+                source["junction"] = "config: machine_max_junction_deviation"
+    return junction
+
+
 def machine_limits(program: Program, profile: str | None = None, *, family: str | None = None,
                    printer=None) -> MachineLimits:
     """Planner limits for ``program``: file lines, then the slicer's config block, then defaults.
@@ -337,39 +446,7 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
 
     # --- 2: the slicer's config block ----------------------------------------------------------
     config = _config(data) if printer is None else {}
-    usage = config.get("machine_limits_usage", "").strip()
-    if usage != "ignore":
-        for key, name in _CONFIG_MAP.items():
-            if key in config:
-                x = _first_number(config[key])
-                if x is None:
-                    continue
-                if name == "accel_travel" and x == 0:   # 0: "same as extruding" (PrusaSlicer)
-                    continue
-                if name == "junction_deviation" and x <= 0:
-                    continue
-                v[K[name]] = x
-                source[name] = f"config: {key}"
-        if _KISS_ACCEL in config:
-            x = _first_number(config[_KISS_ACCEL])
-            if x and x > 0:
-                for name in ("accel_print", "accel_travel"):
-                    v[K[name]] = x
-                    source[name] = f"config: {_KISS_ACCEL}"
-        if rules.jerk_is_scv and "machine_max_jerk_x" in config:
-            # OrcaSlicer writes a Klipper printer's jerk as SET_VELOCITY_LIMIT SQUARE_CORNER_VELOCITY
-            x = _first_number(config["machine_max_jerk_x"])
-            if x:
-                v[K["square_corner_velocity"]] = x
-                source["square_corner_velocity"] = "config: machine_max_jerk_x (Klipper SCV)"
-        if rules.config_picks_junction and any(k.startswith("machine_max_jerk") for k in config):
-            junction = "jerk"
-            source["junction"] = "config: machine_max_jerk_* (classic jerk)"
-        if rules.config_picks_junction and "machine_max_junction_deviation" in config:
-            x = _first_number(config["machine_max_junction_deviation"])
-            if x and x > 0:
-                junction = "deviation"
-                source["junction"] = "config: machine_max_junction_deviation"
+    junction = _apply_config(config, v, source, rules, junction)
     if rules.one_accel:
         # one acceleration for every move on Klipper (toolhead.py max_accel)
         v[K["accel_travel"]] = v[K["accel_retract"]] = v[K["accel_print"]]
@@ -387,66 +464,8 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
     changes: list[tuple[int, str, float]] = []
     jd_from_line = False
     for line, m in cmds:
-        cmd = m.group(1).upper()
-        sets: list[tuple[str, float]] = []
-        if cmd == b"SET_VELOCITY_LIMIT":
-            p = {k.upper(): float(x) for k, x in _KLIPPER_PARAM_RE.findall(m.group(2))}
-            if b"ACCEL" in p:
-                sets += [("accel_print", p[b"ACCEL"]), ("accel_travel", p[b"ACCEL"]),
-                         ("accel_retract", p[b"ACCEL"])]
-            if b"ACCEL_TO_DECEL" in p and printer is None:
-                sets.append(("accel_to_decel", p[b"ACCEL_TO_DECEL"]))
-            if b"MINIMUM_CRUISE_RATIO" in p:
-                sets.append(("min_cruise_ratio", p[b"MINIMUM_CRUISE_RATIO"]))
-            if b"SQUARE_CORNER_VELOCITY" in p:
-                sets.append(("square_corner_velocity", p[b"SQUARE_CORNER_VELOCITY"]))
-            if b"VELOCITY" in p:
-                sets.append(("max_velocity", p[b"VELOCITY"]))
-        else:
-            w = {k.upper(): float(x) for k, x in _WORD_RE.findall(m.group(2))}
-            if cmd == b"M201":
-                sets += [(f"max_accel_{a.lower()}", w[a.encode()]) for a in "XYZE" if a.encode() in w]
-            elif cmd == b"M203":
-                f = 1 / 60 if mm_min else 1.0
-                sets += [(f"max_feed_{a.lower()}", w[a.encode()] * f) for a in "XYZE" if a.encode() in w]
-            elif cmd == b"M566":
-                sets += [(f"jerk_{a.lower()}", w[a.encode()] / 60) for a in "XYZE" if a.encode() in w]
-            elif cmd == b"M204":
-                if rules.m204 == "klipper":
-                    # Klipper's M204: S sets max_accel; else min(P, T)
-                    acc = w.get(b"S", min(w.get(b"P", INF), w.get(b"T", INF)))
-                    if acc < INF:
-                        sets += [("accel_print", acc), ("accel_travel", acc), ("accel_retract", acc)]
-                elif b"S" in w:
-                    # legacy format (Marlin 1 / Prusa firmware): S print (and travel), T retract
-                    sets += [("accel_print", w[b"S"]), ("accel_travel", w[b"S"])]
-                    if b"T" in w:
-                        sets.append(("accel_retract" if legacy_m204 or b"P" not in w else "accel_travel", w[b"T"]))
-                else:
-                    if b"P" in w:
-                        sets.append(("accel_print", w[b"P"]))
-                    if b"R" in w:
-                        sets.append(("accel_retract", w[b"R"]))
-                    if b"T" in w:
-                        sets.append(("accel_travel", w[b"T"]))
-            elif cmd == b"M205":
-                if b"X" in w:   # Marlin: X sets both X and Y jerk
-                    sets += [("jerk_x", w[b"X"]), ("jerk_y", w[b"X"])]
-                if b"Y" in w:
-                    sets.append(("jerk_y", w[b"Y"]))
-                if b"Z" in w:
-                    sets.append(("jerk_z", w[b"Z"]))
-                if b"E" in w:
-                    sets.append(("jerk_e", w[b"E"]))
-                if b"S" in w:
-                    sets.append(("min_feed", w[b"S"]))
-                if b"T" in w:
-                    sets.append(("min_travel_feed", w[b"T"]))
-                if b"B" in w:
-                    sets.append(("min_segment_time", w[b"B"] * 1e-6))
-                if b"J" in w:
-                    sets.append(("junction_deviation", w[b"J"]))
-                    jd_from_line = True
+        sets, jd = _line_sets(m, rules, mm_min, legacy_m204, printer)
+        jd_from_line |= jd
         text = m.group(0).decode("utf-8", "replace").strip()
         for key, x in sets:
             if key in caps and caps[key] > 0:
