@@ -48,10 +48,10 @@ def use_versioned_cache(package_dir: Path) -> None:
 
     numba keys a cached kernel on its own file's time stamp and size only (caching.py
     ``_SourceFileBackedLocatorMixin.get_source_stamp``): a kernel that inlines a kernel or reads a
-    constant of another module keeps its old machine code when only that other module changes.
-    After an update this crashed the test suite with "Floating point exception" until the caches
-    were deleted by hand. A directory per version of the sources makes every update compile
-    afresh (the first run's note says so). Where the directory cannot be written numba falls back
+    constant of another module keeps its old machine code when only that other module changes
+    (e.g. ``DECIMALS_SPLIT`` read by the emit kernels, an ``inline="always"`` helper). A
+    directory per version of the sources makes every update compile afresh (the first run's
+    note says so). Where the directory cannot be written numba falls back
     to its own locations (``from_function`` returns None on OSError); a NUMBA_CACHE_DIR the user
     set is left alone."""
     if os.environ.get("NUMBA_CACHE_DIR"):

@@ -108,7 +108,9 @@ def _value_end(buf, j, end):
 
 @njit(cache=True)
 def _scan_decimal(buf, a, b):
-    """The number text buf[a:b] as (mantissa, decimals), exact; (0, -1) beyond 17 digits."""
+    """The number text buf[a:b] as (mantissa, decimals), exact; (0, -1) beyond 17 digits or
+    beyond the 18 decimals ``IPOW10`` holds (``E0.00000000000000000001``: one digit, 20 decimals;
+    read past the table, the power was garbage and the division by it a SIGFPE)."""
     neg = buf[a] == _MINUS
     if buf[a] == _MINUS or buf[a] == _PLUS:
         a += 1
@@ -131,6 +133,8 @@ def _scan_decimal(buf, a, b):
             dec += 1
         if nd > 17:
             return np.int64(0), -1
+    if dec > len(IPOW10) - 1:
+        return np.int64(0), -1
     return (-mant if neg else mant), dec
 
 
