@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from ..solvers import Status
 from .bounds import lower_bound
-from .greedy_xy import local_search_xy, orient_dp_xy, path_cost_xy
+from .greedy_xy import local_search_xy, move_run, orient_dp_xy, path_cost_xy
 from .problem import OPTIMAL_ABS_TOL, Group, GroupSolution
 
 #: a move must lower the path's cost by more than this to be taken: float noise is no improvement
@@ -267,15 +267,7 @@ def _local_search(seq, D, ds, de, flip, closed, max_passes):
                     if dr < best_delta:
                         best_delta, best_a, best_rev = dr, a, True
                 if best_a != -2:
-                    seg = seq[i:k + 1].copy()
-                    if best_rev:
-                        seg2 = np.empty_like(seg)
-                        for t in range(L):
-                            seg2[t] = flip[seg[L - 1 - t]]
-                        seg = seg2
-                    rest = np.concatenate((seq[:i], seq[k + 1:]))
-                    pos = best_a + 1 if best_a < i else best_a + 1 - L
-                    seq = np.concatenate((rest[:pos], seg, rest[pos:]))
+                    seq = move_run(seq, flip, i, k, best_a, best_rev)
                     improved = True
                 i += 1
         if not improved:

@@ -150,20 +150,29 @@ def local_search_xy(seq, ent, ext, flip, sx, sy, closed, max_passes, has_end=Fal
                     if dr < best_delta:
                         best_delta, best_a, best_rev = dr, a, True
                 if best_a != -2:
-                    seg = seq[i:k + 1].copy()
-                    if best_rev:
-                        seg2 = np.empty_like(seg)
-                        for t in range(L):
-                            seg2[t] = flip[seg[L - 1 - t]]
-                        seg = seg2
-                    rest = np.concatenate((seq[:i], seq[k + 1:]))
-                    pos = best_a + 1 if best_a < i else best_a + 1 - L
-                    seq = np.concatenate((rest[:pos], seg, rest[pos:]))
+                    seq = move_run(seq, flip, i, k, best_a, best_rev)
                     improved = True
                 i += 1
         if not improved:
             break
     return seq
+
+
+@numba.njit(cache=True)
+def move_run(seq, flip, i, k, after, reverse):
+    """Or-opt's move, shared by the XY and the matrix kernels (``greedy``): the run seq[i..k]
+    taken out and put back after position ``after`` of the sequence without it (-1: first),
+    reversed with each curve flipped where ``reverse``."""
+    L = k - i + 1
+    seg = seq[i:k + 1].copy()
+    if reverse:
+        seg2 = np.empty_like(seg)
+        for t in range(L):
+            seg2[t] = flip[seg[L - 1 - t]]
+        seg = seg2
+    rest = np.concatenate((seq[:i], seq[k + 1:]))
+    pos = after + 1 if after < i else after + 1 - L
+    return np.concatenate((rest[:pos], seg, rest[pos:]))
 
 
 @numba.njit(cache=True)
