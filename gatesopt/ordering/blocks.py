@@ -16,6 +16,15 @@ rebuilt travel), solved by ``auto``. The first block of each segment stays first
 the layer change. The problem is then permuted to the new block order (``OrderingProblem.
 curve_source``, ``base``) and solved as usual: inside each block, its re-orderable groups (infill)
 are decided by the same chain of groups.
+
+Labelled objects (``slicers.OBJECT_LABELS``: ``; printing object``, M486, EXCLUDE_OBJECT, Cura's
+``;MESH:``) are blocks too (``object_runs``): a *run* is the curves between two gaps holding
+label lines (``layout.LINE_LABEL``), an object's moves of one layer; consecutive runs of one layer
+that each open an object's labels in the gap before them and close them in the gap after, with
+no barrier line inside or between them, are re-ordered as islands are (the first stays first),
+after the islands inside each run. The emitter writes each run's labels around it
+(``emitter._closing``), so a firmware's object cancel still skips exactly that object's moves. A
+run that cannot move says why (``OBJECT_KEPT_WHY``, in the problem's notes).
 """
 from __future__ import annotations
 
@@ -26,7 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..program import Program
+from ..slicers import LABEL_CLOSE, LABEL_OPEN, LABEL_OUTSIDE
 from ..solvers import Status
+from .layout import LINE_BARRIER, LINE_FATAL, LINE_LABEL
 from .problem import Anchor, Group, LinkCosts, OrderingProblem, group_starts
 
 #: the time limit of one segment's block order, and of all of a file's together (beyond it the
@@ -35,6 +46,14 @@ BLOCK_TIME_LIMIT_S = 0.2
 BLOCKS_BUDGET_S = 1.0
 #: loops smaller than this (mm^2) outline no island
 MIN_ISLAND_AREA_MM2 = 1e-3
+#: why a labelled object's run of a layer keeps its place (``object_runs``)
+OBJECT_KEPT_WHY = {
+    "barrier": "a barrier line inside the object (heater, fan other than the part fan, dwell, "
+               "tool or an unknown command)",
+    "nest": "its labels do not nest (an object opened before the one before it closed, or not "
+            "closed after it)",
+    "layers": "its labels span a layer change",
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,7 +78,8 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
         return problem
     perm = np.arange(n)
     report = {"segments": 0, "blocks": 0, "segments_moved": 0, "proven": 0, "solve_s": 0.0,
-              "layers_moved": 0}
+              "layers_moved": 0, "object_runs": 0, "objects": 0, "object_runs_moved": 0,
+              "objects_proven": 0, "objects_kept": {}}
     moved_layers = set()
     cache: dict = {}
     t_end = time.perf_counter() + BLOCKS_BUDGET_S
@@ -77,10 +97,109 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
             report["segments_moved"] += 1
             moved_layers.add(int(problem.curve_layer[seg[0]]))
             perm[seg[0]:seg[-1] + 1] = np.concatenate([blocks[i] for i in order])
+    runs, kept = object_runs(problem)
+    report["objects_kept"] = kept
+    for objs in runs:
+        # each object's curves in the order the islands pass left them (it never crosses a
+        # label gap, so an object's positions in ``perm`` hold exactly its curves)
+        blocks = [perm[a:b + 1].copy() for a, b in objs]
+        seg = np.arange(objs[0][0], objs[-1][1] + 1)
+        report["object_runs"] += 1
+        report["objects"] += len(blocks)
+        limit = max(0.0, min(BLOCK_TIME_LIMIT_S, t_end - time.perf_counter()))
+        order, proven, took = _solve(problem, blocks, seg, limit, cache)
+        report["solve_s"] += took
+        report["objects_proven"] += proven
+        if not np.array_equal(order, np.arange(len(blocks))):
+            report["object_runs_moved"] += 1
+            moved_layers.add(int(problem.curve_layer[seg[0]]))
+            perm[seg[0]:seg[-1] + 1] = np.concatenate([blocks[i] for i in order])
     report["layers_moved"] = len(moved_layers)
     if np.array_equal(perm, np.arange(n)):
         return dataclasses.replace(problem, block_report=report)
     return permuted(problem, perm, cg, report)
+
+
+def object_runs(problem: OrderingProblem) -> tuple[list[list[tuple[int, int]]], dict]:
+    """Labelled objects that may move, and why others may not (module docstring): per layer
+    not kept, each sequence of >= 3 consecutive movable object runs as ``(first, last)`` curves;
+    and ``{OBJECT_KEPT_WHY key: [runs, first line (1-based)]}`` of the object runs that keep their
+    place."""
+    lay = problem.layout
+    n = problem.n_curves
+    kept: dict = {}
+    if lay is None or not lay.labels or n < 3:
+        return [], kept
+    cls = lay.line_class
+    l0, l1 = lay.curve_l0, lay.curve_l1
+    n_lines = len(cls)
+    lab = np.concatenate(([0], np.cumsum(cls == LINE_LABEL)))
+    bar = np.concatenate(([0], np.cumsum((cls == LINE_BARRIER) | (cls == LINE_FATAL))))
+    gap0 = np.concatenate(([0], l1[:-1] + 1))             # gap before curve c: [gap0[c], l0[c])
+    starts = np.ones(n, bool)
+    starts[1:] = lab[l0[1:]] - lab[gap0[1:]] > 0
+    first = np.flatnonzero(starts)
+    last = np.concatenate((first[1:] - 1, [n - 1]))
+    layer = problem.curve_layer
+    keep = np.asarray(lay.layer_keep, bool)
+    label_at = sorted(lay.labels)
+
+    def gap_labels(a: int, b: int) -> list:
+        lo = np.searchsorted(label_at, a)
+        hi = np.searchsorted(label_at, b)
+        return [lay.labels[i] for i in label_at[lo:hi]]
+
+    def why_not(a: int, b: int) -> str:
+        """'' if the run of curves a..b is a movable object, else the OBJECT_KEPT_WHY key."""
+        if layer[a] != layer[b]:
+            return "layers"
+        if bar[l1[b] + 1] - bar[l0[a]] > 0:
+            return "barrier"
+        after = l0[b + 1] if b + 1 < n else n_lines
+        entry, exit_ = gap_labels(gap0[a], l0[a]), gap_labels(l1[b] + 1, after)
+        opened = set()
+        for fam, kind, _ in entry:
+            if kind in (LABEL_CLOSE, LABEL_OUTSIDE) and fam not in opened:
+                continue                    # the region before it ending
+            if kind != LABEL_OPEN or fam in opened:
+                return "nest"               # opened twice, or closed after it opened
+            opened.add(fam)
+        if not opened:
+            return "nest"
+        ended = set()
+        for fam, kind, _ in exit_:
+            if fam in opened and kind in (LABEL_CLOSE, LABEL_OPEN, LABEL_OUTSIDE):
+                ended.add(fam)
+        return "" if ended == opened else "nest"
+
+    runs = []
+    cur: list = []
+
+    def flush():
+        if len(cur) >= 3:
+            runs.append(list(cur))
+        cur.clear()
+
+    for a, b in zip(first.tolist(), last.tolist()):
+        la = int(layer[a])
+        if la < len(keep) and keep[la]:
+            flush()
+            continue
+        if not any(kind == LABEL_OPEN for _, kind, _ in gap_labels(gap0[a], l0[a])):
+            flush()                         # moves of no object (skirt, NONMESH): they pin
+            continue
+        why = why_not(a, b)
+        if why:
+            row = kept.setdefault(why, [0, int(l0[a]) + 1])
+            row[0] += 1
+            flush()
+            continue
+        if cur and (layer[cur[-1][0]] != layer[a] or bar[l0[a]] - bar[gap0[a]] > 0):
+            flush()                         # a new layer, or a barrier line before it: it
+                                            # starts a new sequence (and stays its first)
+        cur.append((a, b))
+    flush()
+    return runs, kept
 
 
 def segments(problem: OrderingProblem) -> list[np.ndarray]:
@@ -235,6 +354,9 @@ def permuted(problem: OrderingProblem, perm: np.ndarray, cg: CurveGroups,
     heads = perm[gstart[:-1]]
     notes = problem.notes + (f"safe mode: islands re-ordered as blocks in "
                              f"{report['segments_moved']} of {report['segments']} segments",)
+    if report.get("object_runs"):
+        notes += (f"safe mode: labelled objects re-ordered as blocks in "
+                  f"{report['object_runs_moved']} of {report['object_runs']} runs of >= 3 objects",)
     return dataclasses.replace(
         problem, curve_start_xy=problem.curve_start_xy[perm], curve_end_xy=problem.curve_end_xy[perm],
         curve_closed=problem.curve_closed[perm], curve_layer=layer, points_xy=problem.points_xy[idx],

@@ -22,6 +22,13 @@ Rules (formulations/ordering.md, "Emit"; ``layout`` explains the line classes):
   that curve saw in the original is re-issued with the original line (``writer.Writer``).
 - An E-only G92 travels with the next curve (E after it continues from it: E is numbered from the
   output's own running total and the offset each copied G92 sets); a G92 with X/Y/Z is a barrier.
+- Object labels (``layout.LINE_LABEL``): a *run* is the curves between two gaps that hold labels.
+  A run's opening labels lie in the gap before its first curve and are written where that gap is
+  consumed (entering the run); its closing labels (``; stop printing object``, ``M486 S-1``,
+  ``EXCLUDE_OBJECT_END``) are written where the output leaves the run: in place when the gap that
+  holds them is the one consumed, else right after the run's last curve, and dropped from any
+  other gap (safe mode moves whole runs: ``blocks.py``). So each run's moves stay inside its own
+  labels, whichever runs are printed before and after it.
 """
 from __future__ import annotations
 
@@ -32,7 +39,8 @@ import numpy as np
 from ..headers import ORDER_HEADER
 from ..program import Program
 from .gaps import rebuilt_gap
-from .layout import Layout, layout
+from .layout import LINE_LABEL, Layout, layout
+from ..slicers import LABEL_CLOSE
 from .problem import OrderingProblem, OrderingSolution
 from .travel import TravelRule
 from .writer import F_WORD, Writer, gcode_number, required_state, states_at
@@ -97,11 +105,18 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
             prev = _emit_curve(plan, w, k, prev)
         if key is not None:
             memo[key[:-1]] = (key[-1], w.out[start:], w.snapshot())
-    # state the remainder of the file expects, then the remainder verbatim
+    # state the remainder of the file expects, then the remainder verbatim (the last run's
+    # closing labels where the output left another run last: see _closing)
     last = plan.l1[n - 1]
     w.reissue(states_at(plan.req, [last + 1]), 0)
+    skip = frozenset()
+    if plan.run[prev] != plan.run[n - 1]:
+        for i in plan.closes[plan.run[prev]]:
+            w.copy_line(i)
+        skip = plan.close_set
     for i in range(last + 1, p.n_lines):
-        w.copy_line(i)
+        if i not in skip:
+            w.copy_line(i)
     text = "".join(w.out)
     if p.n_lines and not p.data.endswith(b"\n") and text.endswith(w.nl):
         # the file ends without a line ending (FullControl's closing "M84 ; disable steppers"):
@@ -139,7 +154,7 @@ class _Plan:
         self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
         self.changed = (rev | (seam != 0)).tolist()
         (self.group_first, self.layer, self.l0, self.l1, self.feature, self.req,
-         self.curve_state, self.block) = per_curve
+         self.curve_state, self.block, self.run, self.closes, self.close_set) = per_curve
 
     @staticmethod
     def per_curve(p: Program, problem: OrderingProblem, lay: Layout) -> tuple:
@@ -157,13 +172,52 @@ class _Plan:
                  & (l1 + 1 < p.n_lines)).tolist()
         block = [(b0, b1) if ok else None for ok, b0, b1 in
                  zip(whole, p.line_start[l0].tolist(), p.line_start[l1 + 1].tolist())]
+        run, closes, close_set = _runs(p, lay)
         return (problem.group_curve_start[gidx].tolist(), problem.curve_layer.tolist(),
                 l0.tolist(), l1.tolist(), p.feature[lay.curve_s0].tolist(), req, curve_state,
-                block)
+                block, run, closes, close_set)
 
     def gap_lines(self, c: int) -> range:
         """The original lines between curve c - 1 and curve c."""
         return range(self.l1[c - 1] + 1 if c > 0 else 0, self.l0[c])
+
+
+def _runs(p: Program, lay: Layout) -> tuple[list, list, frozenset]:
+    """Per curve its run (the curves between two gaps that hold object labels), per run its
+    closing label lines (in the gap after its last curve, or after the last curve of the file),
+    and all closing label lines."""
+    n = len(lay.curve_l0)
+    lab = np.zeros(p.n_lines + 1, np.int64)
+    close = sorted(i for i, (_, kind, _) in lay.labels.items() if kind == LABEL_CLOSE)
+    lab[1:] = np.cumsum(lay.line_class == LINE_LABEL)
+    l0, l1 = lay.curve_l0, lay.curve_l1
+    starts = np.ones(n, bool)
+    if n > 1:
+        starts[1:] = lab[l0[1:]] - lab[l1[:-1] + 1] > 0
+    run = (np.cumsum(starts) - 1).tolist()
+    ends = np.concatenate((np.flatnonzero(starts)[1:] - 1, [n - 1])).astype(np.int64)
+    gap_end = np.where(ends + 1 < n, l0[np.minimum(ends + 1, n - 1)], p.n_lines)
+    arr = np.asarray(close, np.int64)
+    a = np.searchsorted(arr, l1[ends] + 1)
+    b = np.searchsorted(arr, gap_end)
+    closes = [arr[x:y].tolist() for x, y in zip(a.tolist(), b.tolist())]
+    return run, closes, frozenset(close)
+
+
+def _closing(plan: _Plan, w: Writer, prev: int, c: int, lines: list) -> list:
+    """The gaps ``lines`` (``(lines, boundary)`` pairs) the rebuilt travel from ``prev`` into
+    ``c`` consumes, without closing labels other than those of ``prev``'s run where the output
+    leaves it here; those are written first unless a consumed gap holds them (module docstring)."""
+    if not plan.close_set:
+        return lines
+    r = plan.run[prev]
+    mine = frozenset(plan.closes[r]) if plan.run[c] != r else frozenset()
+    if mine and not any(i in mine for rng, _ in lines for i in rng):
+        for i in plan.closes[r]:
+            w.copy_line(i)
+        mine = frozenset()
+    close = plan.close_set
+    return [([i for i in rng if i not in close or i in mine], b) for rng, b in lines]
 
 
 def _emit_curve(plan: _Plan, w: Writer, k: int, prev: int) -> int:
@@ -183,6 +237,7 @@ def _emit_curve(plan: _Plan, w: Writer, k: int, prev: int) -> int:
                     lines.append((plan.gap_lines(c), False))
             elif c != first:
                 lines.append((plan.gap_lines(c), False))
+            lines = _closing(plan, w, prev, c, lines)
             rebuilt_gap(w, p, lay, plan.rule, lines, c,
                         _entry_mm(p, lay, c, plan.rev[c], plan.seam[c]), plan.layer[c])
     w.reissue(plan.curve_state, c)      # state the curve saw in the original

@@ -17,8 +17,13 @@ slicer's travel (retract, wipe, z-hop, travel, unretract) plus any other lines. 
   the original; the first line of each state is also a barrier (before it the value is the
   firmware's, which emit cannot re-issue);
 - *E reset*: an E-only ``G92 E..``; it ends a curve and travels with the next one;
-- *barrier*: anything else (heaters, other fans, G92 with X/Y/Z, modal switches, object labels M486 / EXCLUDE_OBJECT /
-  ``; printing object`` / ``;MESH:``, dwells, unknown commands): no curve crosses it;
+- *label*: an object label that opens or closes an object's moves (``slicers.OBJECT_LABELS``:
+  ``; printing object`` / ``; stop printing object``, ``M486 S<id>`` / ``M486 S-1``,
+  ``EXCLUDE_OBJECT_START`` / ``_END``, Cura's ``;MESH:``): a boundary like a barrier, but safe mode
+  may move a whole object's run of a layer, labels and all, past another (``blocks.py``);
+- *barrier*: anything else (heaters, other fans, G92 with X/Y/Z, modal switches, other object
+  lines such as ``M486 T4`` or ``EXCLUDE_OBJECT_DEFINE``, dwells, unknown commands): no curve
+  crosses it;
 - *fatal*: tool changes (T), filament change (M600...), homing: the layer keeps its order (so does
   a layer with an X/Y motor switched off between its curves: an already gated file).
 
@@ -36,10 +41,12 @@ import numpy as np
 from .._text import code_words
 from ..firmware import xy_disable_rows
 from ..program import Kind, Program
+from ..slicers import LABEL_OTHER, OBJECT_LABEL_WORDS, object_label
 
 LINE_MOTION, LINE_NEUTRAL, LINE_STATE, LINE_BARRIER, LINE_FATAL, LINE_CURVE = range(6)
 LINE_FW_RETRACT, LINE_FW_UNRETRACT = 6, 7
 LINE_E_RESET = 8
+LINE_LABEL = 9
 
 #: state commands by M number; the part-cooling fan (M106 / M107 without P or with P0, the fan
 #: ``Program.fan`` follows) is state too: verify checks the fan duty every extrusion sees. Other
@@ -51,10 +58,6 @@ STATE_M = (201, 203, 204, 205, 220, 221, 900)
 NEUTRAL_M = (73, 117)
 FATAL_M = (0, 1, 25, 125, 600, 601, 602, 701, 702)
 STATE_EXT = (b"SET_VELOCITY_LIMIT", b"SET_PRESSURE_ADVANCE", b"M204")
-#: what marks a line as an object label (anywhere in it, in any case): ``; printing object``,
-#: ``; stop printing object``, Cura's ``;MESH:``, EXCLUDE_OBJECT, M486. Found with ``bytes.find``
-#: in the lower-cased text: a case-insensitive regex took 0.27 s on a 6 MB file, this 0.02 s
-OBJECT_LABEL_WORDS = (b"printing object", b";mesh:", b"exclude_object", b"m486")
 FEATURE_LINE = re.compile(rb"\n(;[ \t]*(?:TYPE:|FEATURE:|feature )[ \t]*)([^\r\n]*)")
 MOTION_KINDS = (Kind.TRAVEL, Kind.RETRACT, Kind.UNRETRACT, Kind.Z_ONLY, Kind.ARC, Kind.EXTRUDE)
 
@@ -76,6 +79,8 @@ class Layout:
     feature_prefix: str = ";TYPE:"
     state_key: dict = field(default_factory=dict)     # line -> state key
     notes: tuple = ()
+    #: line -> (family, kind, object name) of each LINE_LABEL line (``slicers.object_label``)
+    labels: dict = field(default_factory=dict)
 
 
 def _line_text_bytes(program: Program, i: int) -> bytes:
@@ -117,7 +122,7 @@ def layout(program: Program) -> Layout:
     """Classify every line and find the curves (see module docstring)."""
     step_of_line = np.full(program.n_lines, -1, np.int64)
     step_of_line[program.line] = np.arange(program.n_steps)
-    cls, g92_xyz = _line_classes(program, step_of_line)
+    cls, g92_xyz, labels = _line_classes(program, step_of_line)
     skey = {int(i): state_key_of(program, int(i)) for i in np.flatnonzero(cls == LINE_STATE)}
     # the first line of each state key is a barrier as well: before it the file sets no value
     # (the firmware's default, unknown here), which emit could not re-issue to a curve moved
@@ -128,7 +133,8 @@ def layout(program: Program) -> Layout:
     cls[list(first_of_key.values())] = LINE_BARRIER
     s0, s1, l0, l1 = _curves(program, cls)
     n = len(s0)
-    barrier_count = np.concatenate(([0], np.cumsum((cls == LINE_BARRIER) | (cls == LINE_FATAL))))
+    barrier_count = np.concatenate(([0], np.cumsum((cls == LINE_BARRIER) | (cls == LINE_FATAL)
+                                                   | (cls == LINE_LABEL))))
     gap_boundary = np.ones(n, bool)
     if n > 1:
         gl0, gl1 = l1[:-1] + 1, l0[1:]                         # gap lines [gl0, gl1)
@@ -139,12 +145,13 @@ def layout(program: Program) -> Layout:
     prefix = fm.group(1).decode() if fm else ";TYPE:"
     return Layout(cls, step_of_line, s0.astype(np.int64), s1.astype(np.int64), l0.astype(np.int64),
                   l1.astype(np.int64), gap_boundary, layer_fatal, layer_keep, tuple(why), prefix,
-                  skey, tuple(notes))
+                  skey, tuple(notes), labels)
 
 
-def _line_classes(program: Program, step_of_line: np.ndarray) -> tuple[np.ndarray, list[int]]:
-    """LINE_* of every line before the curves are found (module docstring), and the lines of
-    G92 with X, Y or Z (each keeps its layer's order: ``_kept_layers``)."""
+def _line_classes(program: Program, step_of_line: np.ndarray) -> tuple[np.ndarray, list[int], dict]:
+    """LINE_* of every line before the curves are found (module docstring), the lines of
+    G92 with X, Y or Z (each keeps its layer's order: ``_kept_layers``) and the object labels
+    (``Layout.labels``)."""
     n_lines = program.n_lines
     letter, number = program.line_letter, program.line_number
     cls = np.full(n_lines, LINE_BARRIER, np.int8)
@@ -179,10 +186,18 @@ def _line_classes(program: Program, step_of_line: np.ndarray) -> tuple[np.ndarra
         head = words[0] if words else b""
         if head in STATE_EXT:
             cls[i] = LINE_STATE
-    # object labels written as comments are barriers (M486 / EXCLUDE_OBJECT are barriers already)
-    lab = object_label_lines(program)
-    lab = lab[cls[lab] == LINE_NEUTRAL]
-    cls[lab] = LINE_BARRIER
+    # object labels that open or close an object's moves are labels; other object lines
+    # (M486 T4, EXCLUDE_OBJECT_DEFINE, a label the table does not read) are barriers
+    labels = {}
+    for i in object_label_lines(program).tolist():
+        if cls[i] not in (LINE_NEUTRAL, LINE_BARRIER) or step_of_line[i] >= 0:
+            continue
+        got = object_label(program.line_text(i))
+        if got is None or got[0].kind == LABEL_OTHER:
+            cls[i] = LINE_BARRIER
+        else:
+            cls[i] = LINE_LABEL
+            labels[i] = (got[0].family, got[0].kind, got[1])
     kind = program.kind
     steps = np.flatnonzero(is_step)
     sk = kind[step_of_line[steps]]
@@ -190,12 +205,13 @@ def _line_classes(program: Program, step_of_line: np.ndarray) -> tuple[np.ndarra
     cls[steps[motion]] = LINE_MOTION
     cls[steps[~motion]] = LINE_BARRIER           # dwell, heat wait, homing handled as FATAL above
     cls[steps[sk == Kind.HOME]] = LINE_FATAL
-    return cls, g92_xyz
+    return cls, g92_xyz, labels
 
 
 def object_label_lines(program: Program) -> np.ndarray:
-    """Lines that carry an object label (``OBJECT_LABEL_WORDS`` anywhere in them, any case):
-    M486, EXCLUDE_OBJECT_*, ``; printing object``, ``; stop printing object``, ``;MESH:``."""
+    """Lines that may carry an object label (``slicers.OBJECT_LABEL_WORDS`` anywhere in them,
+    any case): M486, EXCLUDE_OBJECT_*, ``; printing object``, ``; stop printing object``,
+    ``;MESH:``."""
     at = []
     low = program.data.lower()
     for word in OBJECT_LABEL_WORDS:

@@ -76,7 +76,7 @@ from .geometry import (GEOMETRY_TOL_MM, PARTITION_MAX_PIECES, SHORT_MM, check_ge
                        segment_pair)
 from .motor_lines import without_added_motor_lines
 from .ordering import check as check_ordering
-from .ordering import check_barriers
+from .ordering import check_barriers, check_objects
 from .positions import check_positions
 from .rotation import read_rotation, undone_tol
 from .schedule import check_schedule, scheduled_lines, timeline_s
@@ -84,7 +84,7 @@ from .timing import TIME_TOL_S, check_timing
 
 __all__ = ["verify", "VerifyReport", "Finding", "read_rotation", "energy_of", "check_geometry",
            "check_extrusion", "check_positions", "check_commands", "check_timing", "check_firmware",
-           "check_ordering", "check_barriers", "check_bounds", "firmware_problem", "detect_firmware", "fan_duty_s",
+           "check_ordering", "check_barriers", "check_objects", "check_bounds", "firmware_problem", "detect_firmware", "fan_duty_s",
            "GEOMETRY_TOL_MM", "SHORT_MM", "PARTITION_MAX_PIECES", "E_REL_TOL", "TIME_TOL_S",
            "CLAIM_REL_TOL", "CONTROL_COMMANDS", "ROTATE_PREFIX", "ORDER_PREFIX"]
 
@@ -205,10 +205,10 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
             # splits joined). What a move-free comparison can still see holds for any output:
             # no extrusion crossed a barrier (per-bin sums of E and path length, with the
             # gating lines taken out and a rotation's snap allowed per move)
-            findings += list(check_barriers(
-                original, bare,
-                snap_tol_mm=undone_tol(geometry_tol_mm, deg) if deg % 360.0 else 0.0))
-            checks.append("ordering(barriers; moves: geometry)")
+            snap = undone_tol(geometry_tol_mm, deg) if deg % 360.0 else 0.0
+            findings += list(check_barriers(original, bare, snap_tol_mm=snap))
+            findings += list(check_objects(original, bare, snap_tol_mm=snap))
+            checks.append("ordering(barriers, objects; moves: geometry)")
     e_after, t_after, stall = energy_of(output, firmware=fw, profile=profile, original=original,
                                         scheduled=scheduled, duration_s=dur_out)
     # the original's motor lines are all its own (a stall priced with the state they leave, as the

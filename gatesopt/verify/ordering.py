@@ -7,16 +7,22 @@ A move is its two end points (ordered), arc centre and turning sense, and its E.
 (``verify.extrusion``, ``verify.commands``): E per layer equal, heater/tool commands (and fans other
 than the part-cooling fan) in the same order; ``fan``: every extruded move sees the part-cooling fan
 duty it saw in the original (emit re-issues M106 / M107); and
-``barriers``: between two consecutive barrier lines (heaters, G92, object labels, tool
-changes, see ``gatesopt.ordering.layout``) each layer extrudes the same filament over the same
-path length in both files — so no extrusion moved across a barrier.
+``barriers``: between two consecutive barrier lines (heaters, G92, tool changes, see
+``gatesopt.ordering.layout``) each layer extrudes the same filament over the same path length in
+both files — so no extrusion moved across a barrier. ``objects``: object labels
+(``slicers.OBJECT_LABELS``; safe mode moves a labelled object's moves of a layer with its labels,
+``ordering/blocks.py``) are not barriers but the regions they open: each layer extrudes the same
+filament over the same path length inside each object's labels in both files (an extruded move's
+object is, per label family, the one the last label line before it opened), and each layer has
+the same label lines (a label line counts to the layer of the last extrusion before it).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..ordering.layout import LINE_BARRIER, LINE_FATAL, layout
+from ..ordering.layout import LINE_BARRIER, LINE_FATAL, Layout, layout
 from ..program import Kind, Program
+from ..slicers import LABEL_OPEN
 from .commands import check_commands, fan_duty_s
 from .extrusion import check_extrusion
 from .finding import Finding
@@ -69,6 +75,73 @@ def check_barriers(original: Program, output: Program, *, rel_tol: float = 1e-4,
     for i in np.flatnonzero(bad)[:5].tolist():
         out.append(Finding("barriers", None,
                            f"layer {keys[i, 0]}, after barrier line #{keys[i, 1]}: extruded E "
+                           f"{e_b[i]:.5f} mm over {s_b[i]:.3f} mm, original {e_a[i]:.5f} mm over "
+                           f"{s_a[i]:.3f} mm"))
+    return out
+
+
+def _object_bins(program: Program, lay: Layout, names: dict):
+    """Per extruding row its object key (an int: ``names`` maps each label family's open
+    object names, as met, to ids, combined over the families), and the label lines as
+    (layer of the last extrusion before it, text)."""
+    rows = np.flatnonzero(program.extruding)
+    row_line = program.line[rows]
+    key = np.zeros(len(rows), np.int64)
+    fams = sorted({fam for fam, _, _ in lay.labels.values()})
+    for f, fam in enumerate(fams):
+        at = sorted(i for i, lab in lay.labels.items() if lab[0] == fam)
+        ids = [names.setdefault((fam, lab[2]), len(names) + 1) if lab[1] == LABEL_OPEN else 0
+               for lab in (lay.labels[i] for i in at)]
+        k = np.searchsorted(np.asarray(at, np.int64), row_line, side="right") - 1
+        state = np.where(k >= 0, np.asarray([0] + ids, np.int64)[k + 1], 0)
+        key = key * 1_000_003 + state + f
+    lines = np.asarray(sorted(lay.labels), np.int64)
+    j = np.searchsorted(row_line, lines, side="left") - 1
+    lab_layer = np.where(j >= 0, program.layer[rows[np.maximum(j, 0)]], -1)
+    texts = sorted((int(L), program.line_text(int(i)).strip()) for L, i in zip(lab_layer, lines))
+    return rows, key, texts
+
+
+def check_objects(original: Program, output: Program, *, rel_tol: float = 1e-4,
+                  snap_tol_mm: float = 0.0) -> list[Finding]:
+    """Each layer extrudes the same filament over the same path length inside each object's
+    labels, and has the same label lines, in both files (module docstring)."""
+    lay_a, lay_b = layout(original), layout(output)
+    if not lay_a.labels and not lay_b.labels:
+        return []
+    names: dict = {}
+    ra, ka, ta = _object_bins(original, lay_a, names)
+    rb, kb, tb = _object_bins(output, lay_b, names)
+    out = []
+    if ta != tb:
+        la = {}
+        for L, t in ta:
+            la[(L, t)] = la.get((L, t), 0) + 1
+        for L, t in tb:
+            la[(L, t)] = la.get((L, t), 0) - 1
+        bad = sorted(k for k, v in la.items() if v)[:3]
+        for L, t in bad:
+            out.append(Finding("objects", None, f"layer {L}: object label '{t}' {la[(L, t)]:+d} "
+                                                "times in the original than in the output"))
+    key = np.concatenate([original.layer[ra].astype(np.int64), output.layer[rb].astype(np.int64)])
+    obj = np.concatenate([ka, kb])
+    pair, inv = np.unique(np.column_stack([key, obj]), axis=0, return_inverse=True)
+    inv = np.ravel(inv)
+    m = len(pair)
+    ia, ib = inv[:len(ra)], inv[len(ra):]
+    ea = original.end_mm[ra, 3] - original.start_mm[ra, 3]
+    eb = output.end_mm[rb, 3] - output.start_mm[rb, 3]
+    e_a, e_b = np.bincount(ia, ea, m), np.bincount(ib, eb, m)
+    s_a, s_b = np.bincount(ia, original.length_mm[ra], m), np.bincount(ib, output.length_mm[rb], m)
+    n_arc = np.bincount(ia, (original.kind[ra] == Kind.ARC).astype(float), m)
+    n_moves = np.bincount(ia, minlength=m) + np.bincount(ib, minlength=m)
+    len_tol = (rel_tol * np.maximum(s_a, s_b) + 1e-3 + ARC_LENGTH_TOL_MM * n_arc
+               + snap_tol_mm * n_moves)
+    bad = ((np.abs(e_a - e_b) > rel_tol * np.maximum(np.abs(e_a), np.abs(e_b)) + 1e-6)
+           | (np.abs(s_a - s_b) > len_tol))
+    for i in np.flatnonzero(bad)[:5].tolist():
+        out.append(Finding("objects", None,
+                           f"layer {pair[i, 0]}, inside object labels #{pair[i, 1]}: extruded E "
                            f"{e_b[i]:.5f} mm over {s_b[i]:.3f} mm, original {e_a[i]:.5f} mm over "
                            f"{s_a[i]:.3f} mm"))
     return out
@@ -194,4 +267,5 @@ def check(original: Program, output: Program) -> list[Finding]:
             # the fan move by move (check_fan) implies the per-layer filament by fan duty that
             # check_commands would check too: one finding per fault, the stricter one
             + check_commands(original, output, reordered=True, fan_duty=False)
-            + check_fan(original, output, keys=keys) + check_barriers(original, output))
+            + check_fan(original, output, keys=keys) + check_barriers(original, output)
+            + check_objects(original, output))
