@@ -37,12 +37,21 @@ def ordering_result_lines(s: dict) -> list[str]:
 
 
 def _block_lines(s: dict) -> list[str]:
-    """Safe mode's islands re-ordered as blocks (``ordering/blocks.py``), when a layer had some."""
-    if not s.get("block_segments"):
-        return []
-    return [f"islands       {s['block_islands']:,} islands in {s['block_segments']:,} runs of >= 3; "
-            f"re-ordered as blocks in {s['block_segments_moved']:,} runs ({s['block_layers_moved']:,} "
-            f"layers); block order proven optimal in {s['block_orders_optimal']:,}"]
+    """Safe mode's islands and labelled objects re-ordered as blocks (``ordering/blocks.py``),
+    when a layer had some, and the objects that kept their place."""
+    out = []
+    if s.get("block_segments"):
+        out.append(f"islands       {s['block_islands']:,} islands in {s['block_segments']:,} runs of >= 3; "
+                   f"re-ordered as blocks in {s['block_segments_moved']:,} runs ({s['block_layers_moved']:,} "
+                   f"layers); block order proven optimal in {s['block_orders_optimal']:,}")
+    if s.get("object_runs"):
+        out.append(f"objects       {s['object_count']:,} labelled objects in {s['object_runs']:,} runs of >= 3; "
+                   f"re-ordered as blocks in {s['object_runs_moved']:,} runs; "
+                   f"order proven optimal in {s['object_orders_optimal']:,}")
+    kept = s.get("objects_kept") or {}
+    if kept:
+        out.append("objects kept  " + "; ".join(f"{n:,} ({why})" for why, n in sorted(kept.items())))
+    return out
 
 
 def _kept_lines(s: dict) -> list[str]:

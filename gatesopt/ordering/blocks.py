@@ -115,9 +115,17 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
             moved_layers.add(int(problem.curve_layer[seg[0]]))
             perm[seg[0]:seg[-1] + 1] = np.concatenate([blocks[i] for i in order])
     report["layers_moved"] = len(moved_layers)
+    problem = dataclasses.replace(problem, notes=problem.notes + kept_notes(kept))
     if np.array_equal(perm, np.arange(n)):
         return dataclasses.replace(problem, block_report=report)
     return permuted(problem, perm, cg, report)
+
+
+def kept_notes(kept: dict) -> tuple:
+    """One note per reason a labelled object kept its place (``object_runs``)."""
+    return tuple(f"safe mode: {count} labelled object run(s) kept in place as barriers: "
+                 f"{OBJECT_KEPT_WHY[why]} (first at line {line})"
+                 for why, (count, line) in sorted(kept.items()))
 
 
 def object_runs(problem: OrderingProblem) -> tuple[list[list[tuple[int, int]]], dict]:
