@@ -135,6 +135,12 @@ class ObjectLabel:
 #: object labels, the first matching row decides (the close rows before the open rows that their
 #: text contains: ``; stop printing object`` holds ``printing object``)
 OBJECT_LABELS = (
+    # SuperSlicer 2.3 writes each label twice: '; INIT ...' before the retraction and lift, the
+    # plain one after them, before the travel (a family of its own: both nest)
+    ObjectLabel("comment-init", LABEL_CLOSE, b"printing object",
+                r";\s*INIT stop printing object\s*(?P<name>.*)", "; INIT stop printing object cube_1 id:0 copy 0"),
+    ObjectLabel("comment-init", LABEL_OPEN, b"printing object",
+                r";\s*INIT printing object\s*(?P<name>.*)", "; INIT printing object cube_1 id:0 copy 0"),
     # PrusaSlicer, SuperSlicer, OrcaSlicer: around each object's moves of a layer
     ObjectLabel("comment", LABEL_CLOSE, b"printing object", r";\s*stop printing object\s*(?P<name>.*)",
                 "; stop printing object cube_1 id:0 copy 0"),

@@ -130,7 +130,7 @@ def test_an_object_with_a_heater_line_inside_stays_a_barrier():
     assert res.ok, res.findings[:3]
     kept = res.problem.block_report["objects_kept"]
     assert kept["barrier"][0] == 2                  # object 3 in layers 1 and 2
-    assert any("a barrier line inside the object" in n for n in res.problem.notes)
+    assert any("kept in place as barriers: a barrier line inside the object" in n for n in res.problem.notes)
     before, after = _objects_per_layer(prog.data.decode()), _objects_per_layer(res.text)
     for b, a in zip(before, after):
         names_b, names_a = [k for k, _ in b], [k for k, _ in a]

@@ -83,7 +83,8 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
     moved_layers = set()
     cache: dict = {}
     t_end = time.perf_counter() + BLOCKS_BUDGET_S
-    for seg in segments(problem):
+    # islands in safe mode only: free mode's groups span a segment's islands already
+    for seg in segments(problem) if problem.options.mode == "safe" else ():
         blocks = island_blocks(problem, seg, cg.wall_like)
         if len(blocks) < 3:
             continue
@@ -123,7 +124,7 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
 
 def kept_notes(kept: dict) -> tuple:
     """One note per reason a labelled object kept its place (``object_runs``)."""
-    return tuple(f"safe mode: {count} labelled object run(s) kept in place as barriers: "
+    return tuple(f"{count} labelled object run(s) kept in place as barriers: "
                  f"{OBJECT_KEPT_WHY[why]} (first at line {line})"
                  for why, (count, line) in sorted(kept.items()))
 
@@ -363,7 +364,7 @@ def permuted(problem: OrderingProblem, perm: np.ndarray, cg: CurveGroups,
     notes = problem.notes + (f"safe mode: islands re-ordered as blocks in "
                              f"{report['segments_moved']} of {report['segments']} segments",)
     if report.get("object_runs"):
-        notes += (f"safe mode: labelled objects re-ordered as blocks in "
+        notes += (f"labelled objects re-ordered as blocks in "
                   f"{report['object_runs_moved']} of {report['object_runs']} runs of >= 3 objects",)
     return dataclasses.replace(
         problem, curve_start_xy=problem.curve_start_xy[perm], curve_end_xy=problem.curve_end_xy[perm],

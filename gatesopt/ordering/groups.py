@@ -140,7 +140,9 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
     if options.objective == "time":
         step_s = plan(program).duration_s if options.copied_gaps == "planner" else None
         problem = with_pricer(program, problem, step_s)
-    if options.mode == "safe" and options.blocks:
+    if options.blocks and (options.mode == "safe" or lay.labels):
+        # safe mode's islands, and in both modes the labelled objects (free mode's groups end
+        # at their labels too)
         problem = order_blocks(program, problem, CurveGroups(boundary, key, fixed, tuple(labels),
                                                              wall_like))
         if problem.base is not None and options.objective == "time":
