@@ -17,6 +17,14 @@ slices of bench/fresh_slices.py) under ``--extra-files``.
 and mode the print time before, after (auto) and greedy's, travel, layers kept slower of the
 re-orderable layers, proven groups reverted, safe mode's islands moved, groups proven, verified;
 then the criteria of issue 36 counted over the rows.
+
+    python bench/ordering_as_printed.py objects --before BEFORE.jsonl --after AFTER.jsonl
+        [--write docs/RESULTS.md]
+
+``objects`` writes the section "## Labelled objects re-ordered as blocks": the files whose
+layers hold runs of >= 3 labelled objects (``AFTER``'s rows), per file and mode the slicer's
+print time and travel, then auto's and greedy's before (``BEFORE``: a run of the code where
+objects were barriers) and after, and the objects' runs moved.
 """
 from __future__ import annotations
 
@@ -100,7 +108,8 @@ def run(args) -> None:
                       f"{row['travel_change_pct']:+.1f} %, kept slower "
                       f"{row['layers_kept_slower']}/{row['layers_reorderable']}, optimal "
                       f"{row['groups_optimal']}/{row['groups_reordered']}, blocks moved "
-                      f"{row.get('block_segments_moved', 0)}/{row.get('block_segments', 0)}, run "
+                      f"{row.get('block_segments_moved', 0)}/{row.get('block_segments', 0)}, objects "
+                      f"moved {row.get('object_runs_moved', 0)}/{row.get('object_runs', 0)}, run "
                       f"{row['run_s']:.1f} s, verified {row['verified']}", flush=True)
 
 
@@ -238,6 +247,50 @@ def report(args) -> None:
     publish("\n".join(sec), args.write)
 
 
+OBJECTS_HEADING = "## Labelled objects re-ordered as blocks"
+
+
+def objects(args) -> None:
+    """The section OBJECTS_HEADING (module docstring)."""
+    before, after = _load(Path(args.before)), _load(Path(args.after))
+    files = sorted({(f, n) for (f, n, m, _), r in after.items() if r.get("object_runs")})
+    cmd = args.command_line or "bench/ordering_as_printed.py run ... --out AFTER.jsonl"
+    sec = [OBJECTS_HEADING, "",
+           "Commands (from the repository root, one process at nice 10, 2 cores shared with 6 "
+           "other jobs; BEFORE: the same runs of the code before objects moved, where labels "
+           "were barriers):", "", "```", cmd,
+           f"python bench/ordering_as_printed.py objects --before BEFORE.jsonl --after AFTER.jsonl "
+           f"--write docs/RESULTS.md", "```", "",
+           "Files whose layers hold runs of >= 3 labelled objects (`; printing object`, M486, "
+           "EXCLUDE_OBJECT, `;MESH:`), default budget 10 s, objective time. Print time: the "
+           "planner model of the parsed, verified output, against the slicer's order (*slicer*). "
+           "*objects moved*: runs of >= 3 objects whose order changed, of all such runs; the "
+           "first object of each run stays first. Every row verified (`check_objects`: each "
+           "object's extrusion inside its own labels, the label lines of each layer kept).", "",
+           "| file | mode | slicer print s | auto before | auto after | greedy before | greedy after "
+           "| travel auto before / after | objects moved | verified |",
+           "|---|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for folder, name in files:
+        for mode in ("safe", "free"):
+            a, g = after.get((folder, name, mode, "auto")), after.get((folder, name, mode, "greedy"))
+            ab, gb = before.get((folder, name, mode, "auto")), before.get((folder, name, mode, "greedy"))
+            if a is None or "error" in a:
+                continue
+            t0 = a["print_time_before_s"]
+
+            def cell(r):
+                if r is None or "error" in r:
+                    return "-"
+                return f"{r['print_time_after_s']:,.1f} ({_pct(r['print_time_after_s'], t0)})"
+            tb = f"{ab['travel_change_pct']:+.1f} %" if ab and "error" not in ab else "-"
+            ok = a["verified"] and (g is None or g.get("verified", False))
+            sec.append(f"| {name} | {mode} | {t0:,.1f} | {cell(ab)} | {cell(a)} | {cell(gb)} | {cell(g)} | "
+                       f"{tb} / {a['travel_change_pct']:+.1f} % | "
+                       f"{a.get('object_runs_moved', 0)}/{a.get('object_runs', 0)} | "
+                       f"{'yes' if ok else 'NO'} |")
+    publish("\n".join(sec + [""]), args.write)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -255,8 +308,13 @@ def main() -> None:
     p.add_argument("--out", default=str(DEFAULT_OUT))
     p.add_argument("--write", default=None)
     p.add_argument("--command-line", default=None, help="the run command to print in the section")
+    o = sub.add_parser("objects")
+    o.add_argument("--before", required=True)
+    o.add_argument("--after", required=True)
+    o.add_argument("--write", default=None)
+    o.add_argument("--command-line", default=None, help="the run commands to print in the section")
     args = ap.parse_args()
-    run(args) if args.cmd == "run" else report(args)
+    {"run": run, "report": report, "objects": objects}[args.cmd](args)
 
 
 if __name__ == "__main__":

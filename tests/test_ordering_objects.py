@@ -88,7 +88,7 @@ def _objects_per_layer(text: str) -> list[list[tuple[str, float]]]:
             current = None
             continue
         e = re.search(r"\bE([-\d.]+)", s)
-        if layers and s.startswith("G1") and "X" in s and e and float(e.group(1)) > 0:
+        if layers and s.startswith("G1") and ("X" in s or "Y" in s) and e and float(e.group(1)) > 0:
             row = layers[-1]
             if not row or row[-1][0] != current:
                 row.append([current, 0.0])

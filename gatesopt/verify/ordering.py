@@ -28,8 +28,8 @@ from .extrusion import check_extrusion
 from .finding import Finding
 
 
-def _barrier_bins(program: Program):
-    lay = layout(program)
+def _barrier_bins(program: Program, lay: Layout | None = None):
+    lay = lay or layout(program)
     is_b = (lay.line_class == LINE_BARRIER) | (lay.line_class == LINE_FATAL)
     count = np.concatenate(([0], np.cumsum(is_b)))
     ext = program.extruding
@@ -48,11 +48,13 @@ ARC_LENGTH_TOL_MM = 0.01
 
 
 def check_barriers(original: Program, output: Program, *, rel_tol: float = 1e-4,
-                   snap_tol_mm: float = 0.0) -> list[Finding]:
+                   snap_tol_mm: float = 0.0, lays: tuple | None = None) -> list[Finding]:
     """``snap_tol_mm``: how far a rotated output's snap may have moved each end point of a move
-    (``gatesopt.verify.rotation.undone_tol``): each move's length may differ by twice that."""
-    na, la, ba, ea, sa, arc_a = _barrier_bins(original)
-    nb, lb, bb, eb, sb, arc_b = _barrier_bins(output)
+    (``gatesopt.verify.rotation.undone_tol``): each move's length may differ by twice that.
+    ``lays``: both files' layouts, if made already."""
+    lays = lays or (None, None)
+    na, la, ba, ea, sa, arc_a = _barrier_bins(original, lays[0])
+    nb, lb, bb, eb, sb, arc_b = _barrier_bins(output, lays[1])
     if na != nb:
         return [Finding("barriers", None, f"{nb} barrier lines in the output, {na} in the original")]
     out = []
@@ -103,10 +105,11 @@ def _object_bins(program: Program, lay: Layout, names: dict):
 
 
 def check_objects(original: Program, output: Program, *, rel_tol: float = 1e-4,
-                  snap_tol_mm: float = 0.0) -> list[Finding]:
+                  snap_tol_mm: float = 0.0, lays: tuple | None = None) -> list[Finding]:
     """Each layer extrudes the same filament over the same path length inside each object's
-    labels, and has the same label lines, in both files (module docstring)."""
-    lay_a, lay_b = layout(original), layout(output)
+    labels, and has the same label lines, in both files (module docstring). ``lays``: as for
+    ``check_barriers``."""
+    lay_a, lay_b = lays or (layout(original), layout(output))
     if not lay_a.labels and not lay_b.labels:
         return []
     names: dict = {}
@@ -263,9 +266,10 @@ def check_fan(original: Program, output: Program, *, max_findings: int = 3,
 def check(original: Program, output: Program) -> list[Finding]:
     """All findings for a re-ordered output (empty list: it prints what the original printed)."""
     keys = (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
+    lays = (layout(original), layout(output))
     return (check_geometry(original, output, keys=keys) + check_extrusion(original, output)
             # the fan move by move (check_fan) implies the per-layer filament by fan duty that
             # check_commands would check too: one finding per fault, the stricter one
             + check_commands(original, output, reordered=True, fan_duty=False)
-            + check_fan(original, output, keys=keys) + check_barriers(original, output)
-            + check_objects(original, output))
+            + check_fan(original, output, keys=keys) + check_barriers(original, output, lays=lays)
+            + check_objects(original, output, lays=lays))
