@@ -738,7 +738,7 @@ def test_standalone_verify_checks_barriers_of_reordered_and_gated_output(rotate)
     assert (out.kind == Kind.MOTOR).sum() > (prog.kind == Kind.MOTOR).sum()      # gated
     rep = verify(prog, out)
     assert rep.ok, [str(f) for f in rep.findings]
-    assert "ordering(barriers; moves: geometry)" in rep.checks
+    assert "ordering(barriers, objects; moves: geometry)" in rep.checks
     # move the layer-1 fan barrier back over the extrusion that precedes it
     fan = lines.index("M106 S128")
     ext = max(i for i in range(fan) if " E" in lines[i] and lines[i].startswith(("G1 X", "G1 Y", "G2", "G3")))
