@@ -166,12 +166,12 @@ def test_each_object_label_row_reads_its_example(row):
     assert row.word in row.example.lower().encode()
 
 
-def test_free_mode_moves_objects_with_their_labels_too():
+
+def test_free_mode_keeps_objects_in_place():
+    # free mode's groups choose their own entry, which the block order does not see: objects stay
     prog = gatesopt.parse(object_plate(4, "m486"))
     res = order_program(prog, OrderingOptions(mode="free"), time_limit_s=1.0)
     assert res.ok, res.findings[:3]
-    assert res.problem.block_report["object_runs_moved"] >= 1
+    assert not res.problem.block_report.get("object_runs_moved")
     before, after = _objects_per_layer(prog.data.decode()), _objects_per_layer(res.text)
-    for b, a in zip(before, after):
-        assert all(k is not None for k, _ in a) and sorted(a) == sorted(b)
-    assert sorted(_label_lines(res.text)) == sorted(_label_lines(prog.data.decode()))
+    assert [[k for k, _ in a] for a in after] == [[k for k, _ in b] for b in before]

@@ -83,8 +83,7 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
     moved_layers = set()
     cache: dict = {}
     t_end = time.perf_counter() + BLOCKS_BUDGET_S
-    # islands in safe mode only: free mode's groups span a segment's islands already
-    for seg in segments(problem) if problem.options.mode == "safe" else ():
+    for seg in segments(problem):
         blocks = island_blocks(problem, seg, cg.wall_like)
         if len(blocks) < 3:
             continue

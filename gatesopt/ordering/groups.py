@@ -140,9 +140,10 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
     if options.objective == "time":
         step_s = plan(program).duration_s if options.copied_gaps == "planner" else None
         problem = with_pricer(program, problem, step_s)
-    if options.blocks and (options.mode == "safe" or lay.labels):
-        # safe mode's islands, and in both modes the labelled objects (free mode's groups end
-        # at their labels too)
+    if options.mode == "safe" and options.blocks:
+        # islands and labelled objects. Not in free mode: its groups choose their own entry, which
+        # a block order fixed on the slicer's first and last curves does not see (moving the
+        # objects measured worse there: plate__cura_mk3 free -4.16 % -> -3.75 %, docs/RESULTS.md)
         problem = order_blocks(program, problem, CurveGroups(boundary, key, fixed, tuple(labels),
                                                              wall_like))
         if problem.base is not None and options.objective == "time":

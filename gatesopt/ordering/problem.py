@@ -59,8 +59,7 @@ class OrderingOptions:
     #: time the travel takes as emitted (its moves under ``cost.MoveTimes``, retraction, z-hop and
     #: the slicer's own copied gaps included; in ms), or "travel", its length (mm, Fleming Eq. 1)
     objective: str = "time"
-    #: re-order whole islands (safe mode) and labelled objects (both modes) of a layer as
-    #: blocks (``blocks.py``)
+    #: safe mode: re-order whole islands and labelled objects of a layer as blocks (``blocks.py``)
     blocks: bool = True
     #: the time objective's price of a slicer's gap copied as it was (formulations/ordering.md,
     #: "Cost model"): "planner", its steps' time under ``planner.plan`` of the input (the curves
