@@ -19,6 +19,7 @@ from ..ordering.emitter import emit
 from ..ordering.groups import build
 from ..ordering.layers import model_travel_mm, solve
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
+from ..ordering.runner import OUT_OF_TIME
 from ..parse import parse
 from ..planner import plan
 from ..program import Program
@@ -137,6 +138,21 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
         solution = keep_layers(problem, solution, kept)
         text, out = emitted(solution)
     return solution, text, out, kept
+
+
+def out_of_time_groups(problem: OrderingProblem, solution: OrderingSolution) -> int:
+    """Re-orderable groups the budget left no time for (``runner.OUT_OF_TIME``: the slicer's
+    order, unsearched)."""
+    reorderable = problem.group_reorderable
+    return sum(bool(reorderable[g]) and gs.formulation.startswith(OUT_OF_TIME)
+               for g, gs in enumerate(solution.groups))
+
+
+def out_of_time_note(n_groups: int, n_decided: int, solve_budget_s) -> str:
+    """The report's line for groups the budget left no time for (``out_of_time_groups``)."""
+    of = f" of the {solve_budget_s:.2f} s the budget left the solve" if solve_budget_s else ""
+    return (f"curve ordering ran out of time{of}: {n_groups:,} of {n_decided:,} re-orderable groups "
+            f"keep the slicer's order unsearched (status fallback; a larger --budget searches them)")
 
 
 def kept_slower_note(n_layers: int) -> str:
@@ -301,6 +317,9 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
     layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
     sizes = np.diff(problem.group_curve_start)
     slower = _slower_notes(fig, slower_layers)
+    late = out_of_time_groups(problem, solution)
+    if late:
+        slower.append(out_of_time_note(late, len(decided), solve_budget_s))
     time_obj = problem.cost_unit == "ms"
     return {
         "objective": options.objective,
@@ -320,6 +339,8 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         "largest_group": int(max((sizes[g] for g, _ in decided), default=0)),
         "groups_optimal": counts["optimal"], "groups_feasible": counts["feasible"],
         "groups_fallback": counts["fallback"],
+        # of the fallback groups, those the budget left no time for: the slicer's order, unsearched
+        "groups_out_of_time": late,
         # safe mode's blocks (ordering/blocks.py): segments of >= 3 islands, how many moved, how
         # many block orders were proven optimal (the slicer's order kept counts if it was proven)
         "block_segments": int(problem.block_report.get("segments", 0)),

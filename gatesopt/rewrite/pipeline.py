@@ -26,6 +26,8 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from .. import slicers
 from ..gating.emit import EmitResult, emit_result, render
 from ..gating.options import GatingOptions
@@ -40,7 +42,7 @@ from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested
 from ..verify import VerifyReport, check_ordering, check_positions, energy_of, verify
 from .budget import no_time_note, ordering_budget_s, slowdown_factor
 from .figures import figures
-from .order import kept_slower_note, order_summary, reorder
+from .order import kept_slower_note, order_summary, out_of_time_groups, out_of_time_note, reorder
 from .printer import FirmwareChoice, choose
 
 #: the keys of the ordering's report that ``gatesopt solve --json`` carries at its top level (the
@@ -168,7 +170,12 @@ def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
                 f"{time.perf_counter() - t0:.1f} s: the slicer's order kept", None, None,
                 time.perf_counter() - t0)
     wall_s = time.perf_counter() - t0
-    note = f"curve ordering: {kept_slower_note(len(slower))}" if len(slower) else ""
+    notes = [f"curve ordering: {kept_slower_note(len(slower))}"] if len(slower) else []
+    late = out_of_time_groups(problem, solution)
+    if late:
+        notes.append(out_of_time_note(late, int(np.count_nonzero(problem.group_reorderable)),
+                                      solve_budget))
+    note = "; ".join(notes)
     out = dataclasses.replace(out, source=program.source)
 
     def summarize(findings) -> dict:
