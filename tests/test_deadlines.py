@@ -223,3 +223,22 @@ def test_run_highs_gives_highs_the_time_left_to_the_deadline():
     h2 = _FakeHighs(run_time_s=5.0)
     assert not run_highs(h2, time.perf_counter() - 0.1)
     assert h2.runs == 0 and "time_limit" not in h2.options
+
+
+def test_a_budget_below_the_ordering_floor_skips_the_ordering(monkeypatch):
+    """A budget that leaves the ordering some time, but less than its build, group pass and emit
+    take with no search at all (``stage_floor_s``), keeps the slicer's order without building
+    anything, and says why: running it would end the run late by the difference."""
+    import gatesopt
+    from gatesopt.gating import GatingOptions
+    from gatesopt.rewrite import order as rorder, pipeline
+
+    from conftest import PROJECT_INSTANCES
+    program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
+    floor = rorder.stage_floor_s(program)
+    assert floor > 0 and rorder.stage_floor_s(program, 3.0) > floor     # slower machine, more
+    monkeypatch.setattr(pipeline, "ordering_budget_s", lambda *a, **k: 0.9 * floor)
+    monkeypatch.setattr(pipeline, "_order_curves", lambda *a, **k: _never(None, time_limit_s=0))
+    res = pipeline.run(program, GatingOptions(rotate="none"), budget_s=10.0)
+    assert res.report.ok and not res.ordered and "ordering_s" not in res.times
+    assert any("curve ordering skipped" in n and f"{floor:.1f} s its build" in n for n in res.notes)

@@ -19,7 +19,9 @@ from ..ordering.emitter import emit
 from ..ordering.groups import build
 from ..ordering.layers import model_travel_mm, solve
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
+from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
 from ..ordering.runner import OUT_OF_TIME
+from ..ordering.travel_stats import runs, travel_mask
 from ..parse import parse
 from ..planner import plan
 from ..program import Program
@@ -173,20 +175,35 @@ def kept_slower_note(n_layers: int) -> str:
 FINISH_S_PER_LINE = 15e-6
 #: and per file, whatever its size (imports on first use, the report)
 FINISH_FIXED_S = 0.15
-#: the solve keeps at least this share of a whole-run budget however large the file: a budget too
-#: small for the file's emit gives a late answer rather than none
-MIN_SOLVE_SHARE = 0.25
+#: building the ordering problem (``ordering.groups.build``), per input line: ``reorder`` measures
+#: it, ``stage_floor_s`` estimates it before (the Cura bunny: 1.28 s for 204,404 lines, quiet)
+BUILD_S_PER_LINE = 7e-6
 
 
 def solve_budget_s(budget_s: float | None, n_lines: int, spent_s: float) -> float | None:
     """What a budget for the whole run leaves the solve: ``budget_s`` less what is spent
     (``spent_s``: parse, build) and an estimate of what is to come after the solve
-    (``FINISH_S_PER_LINE`` per line of the file, ``FINISH_FIXED_S``), at least
-    ``MIN_SOLVE_SHARE`` of it. None (no budget) stays None."""
+    (``FINISH_S_PER_LINE`` per line of the file, ``FINISH_FIXED_S``), never below 0: with
+    nothing left every group keeps the slicer's order (``runner.OUT_OF_TIME``). (It once kept
+    a quarter of the budget however little was left: a late answer by design.) None (no budget)
+    stays None."""
     if budget_s is None:
         return None
     left = budget_s - spent_s - FINISH_FIXED_S - FINISH_S_PER_LINE * n_lines
-    return max(MIN_SOLVE_SHARE * budget_s, left)
+    return max(0.0, left)
+
+
+def stage_floor_s(program: Program, slow: float = 1.0) -> float:
+    """What the ordering stage takes with no time to search at all: building the problem, passing
+    every group (``runner.GroupRunner``'s priors per curve, the curves estimated by the file's
+    travels: one per curve on the corpus, 67,775 for the Cura bunny's 67,356 curves) and the
+    emit; building and passing at ``slow`` times their quiet rates (``budget.slowdown_factor``).
+    A whole-run budget that leaves the ordering less keeps the slicer's order without building
+    anything (``rewrite.pipeline.run``)."""
+    curves = runs(travel_mask(program), program)
+    return (slow * (BUILD_S_PER_LINE * program.n_lines
+                    + (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * curves)
+            + FINISH_FIXED_S + FINISH_S_PER_LINE * program.n_lines)
 
 
 def reorder(program: Program, options: OrderingOptions | None = None, *,

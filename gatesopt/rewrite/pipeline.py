@@ -42,7 +42,8 @@ from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested
 from ..verify import VerifyReport, check_ordering, check_positions, energy_of, verify
 from .budget import no_time_note, ordering_budget_s, slowdown_factor
 from .figures import figures
-from .order import kept_slower_note, order_summary, out_of_time_groups, out_of_time_note, reorder
+from .order import (kept_slower_note, order_summary, out_of_time_groups, out_of_time_note, reorder,
+                    stage_floor_s)
 from .printer import FirmwareChoice, choose
 
 #: the keys of the ordering's report that ``gatesopt solve --json`` carries at its top level (the
@@ -412,12 +413,13 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             slow = slowdown_factor(t0, cpu_started_s)
             ob = ordering_budget_s(budget_s, program, o, formulation, gating,
                                    time.perf_counter() - t0, time_limit_s, slow)
-            if ob <= 0.0:
-                # the rest alone is estimated to take the whole budget: the slicer's order (a
-                # re-ordering costs its build, a pass over every group and its emit even at no
-                # time to search: seconds on a large file), said so
+            floor = stage_floor_s(program, slow)
+            if ob <= floor:
+                # what the rest leaves the ordering would not pay for its build, a pass over
+                # every group and its emit even with no time to search (seconds on a large file:
+                # the run would end late by the difference): the slicer's order, said so
                 order = False
-                notes.append(no_time_note(budget_s, time.perf_counter() - t0, slow))
+                notes.append(no_time_note(budget_s, time.perf_counter() - t0, slow, max(ob, 0.0), floor))
         if order:
             with times.stage("ordering_s"):
                 base, ordered, note, order_problem, summarize, order_solve_s = _order_curves(
