@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import slicers
+from .. import _jit, slicers
 from ..gating.emit import EmitResult, emit_result, render
 from ..gating.options import GatingOptions
 from ..gating.problem import build
@@ -411,15 +411,16 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         ob = order_budget_s
         if order and budget_s is not None:
             slow = slowdown_factor(t0, cpu_started_s)
-            ob = ordering_budget_s(budget_s, program, o, formulation, gating,
-                                   time.perf_counter() - t0, time_limit_s, slow)
+            # compiling numba kernels (a first run) is not charged to the budget (cli.progress)
+            spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
+            ob = ordering_budget_s(budget_s, program, o, formulation, gating, spent_s, time_limit_s, slow)
             floor = stage_floor_s(program, slow)
             if ob <= floor:
                 # what the rest leaves the ordering would not pay for its build, a pass over
                 # every group and its emit even with no time to search (seconds on a large file:
                 # the run would end late by the difference): the slicer's order, said so
                 order = False
-                notes.append(no_time_note(budget_s, time.perf_counter() - t0, slow, max(ob, 0.0), floor))
+                notes.append(no_time_note(budget_s, spent_s, slow, max(ob, 0.0), floor))
         if order:
             with times.stage("ordering_s"):
                 base, ordered, note, order_problem, summarize, order_solve_s = _order_curves(
