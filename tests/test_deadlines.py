@@ -242,3 +242,24 @@ def test_a_budget_below_the_ordering_floor_skips_the_ordering(monkeypatch):
     res = pipeline.run(program, GatingOptions(rotate="none"), budget_s=10.0)
     assert res.report.ok and not res.ordered and "ordering_s" not in res.times
     assert any("curve ordering skipped" in n and f"{floor:.1f} s its build" in n for n in res.notes)
+
+
+def test_a_solve_budget_below_the_group_pass_skips_the_solve_after_the_build(monkeypatch):
+    """Once the problem is built its size is known: where the solve's budget would not pay for
+    passing its groups (every group out of time, the run late by the pass and the emit), the
+    ordering stops there and keeps the slicer's order, said so; ``gatesopt order`` (no ``slow``)
+    still solves."""
+    import gatesopt
+    from gatesopt.gating import GatingOptions
+    from gatesopt.rewrite import order as rorder, pipeline
+
+    from conftest import PROJECT_INSTANCES
+    program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
+    monkeypatch.setattr(pipeline, "stage_floor_s", lambda program, slow=1.0: 0.0)
+    monkeypatch.setattr(rorder, "OVERHEAD_S_PER_CURVE", 1e3)       # passing a group: "1000 s"
+    monkeypatch.setattr(rorder, "solve", lambda *a, **k: _never(None, time_limit_s=0))
+    res = pipeline.run(program, GatingOptions(rotate="none"), budget_s=10.0)
+    assert res.report.ok and not res.ordered
+    assert any("curve ordering skipped after its build" in n for n in res.notes), res.notes
+    with pytest.raises(AssertionError, match="after the budget ended"):     # no slow: it solves
+        rorder.reorder(program, budget_s=10.0)

@@ -206,19 +206,37 @@ def stage_floor_s(program: Program, slow: float = 1.0) -> float:
             + FINISH_FIXED_S + FINISH_S_PER_LINE * program.n_lines)
 
 
+class NoTimeToOrder(Exception):
+    """The solve's budget, once the problem is built, would not pay for passing its groups
+    (``reorder`` with ``slow``): searching nothing, the solve and its emit would still end the
+    run late."""
+
+    def __init__(self, solve_budget_s: float, pass_s: float, n_groups: int):
+        super().__init__(f"the {solve_budget_s:.2f} s the budget left the solve would not pay for "
+                         f"passing its {n_groups:,} groups ({pass_s:.2f} s)")
+        self.solve_budget_s, self.pass_s, self.n_groups = solve_budget_s, pass_s, n_groups
+
+
 def reorder(program: Program, options: OrderingOptions | None = None, *,
             formulation: str = "auto", time_limit_s: float = 2.0,
             budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
-            progress=None, started_s: float | None = None):
+            progress=None, started_s: float | None = None, slow: float | None = None):
     """build -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
     ``started_s``, default now) -> ``emit_guarded``, without verifying (``order_program`` does;
     ``rewrite.pipeline.run`` verifies its own output). Returns (problem, the solve's budget, solution,
-    text, parsed output, layers the time guard put back)."""
+    text, parsed output, layers the time guard put back). ``slow`` (``budget.slowdown_factor``;
+    None: never): raise ``NoTimeToOrder`` after the build where the solve's budget would not pay
+    for passing the groups at ``slow`` times the runner's priors (every group would keep the
+    slicer's order, late)."""
     t0 = time.perf_counter() if started_s is None else started_s
     problem = build(program, options or OrderingOptions())
     # compiling numba kernels (a first run) is not the run's to budget: it counts no time
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
     solve_budget = solve_budget_s(budget_s, program.n_lines, spent)
+    if slow is not None and solve_budget is not None:
+        pass_s = slow * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
+        if solve_budget < pass_s:
+            raise NoTimeToOrder(solve_budget, pass_s, problem.n_groups)
     solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=solve_budget,
                      workers=workers, progress=progress)
     solution, text, out, kept = emit_guarded(program, problem, solution, time_guard)

@@ -42,8 +42,8 @@ from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested
 from ..verify import VerifyReport, check_ordering, check_positions, energy_of, verify
 from .budget import no_time_note, ordering_budget_s, slowdown_factor
 from .figures import figures
-from .order import (kept_slower_note, order_summary, out_of_time_groups, out_of_time_note, reorder,
-                    stage_floor_s)
+from .order import (NoTimeToOrder, kept_slower_note, order_summary, out_of_time_groups,
+                    out_of_time_note, reorder, stage_floor_s)
 from .printer import FirmwareChoice, choose
 
 #: the keys of the ordering's report that ``gatesopt solve --json`` carries at its top level (the
@@ -151,17 +151,23 @@ class Stages:
 
 def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
                   budget_s: float | None = None, progress=None, options=None,
-                  formulation: str = "auto", started_s: float | None = None):
+                  formulation: str = "auto", started_s: float | None = None,
+                  slow: float | None = None):
     """Re-order curves (``rewrite.order.reorder``): (program, ordered?, note, problem,
     ``summarize(findings)``: the ordering's report, given the findings of its checks, solve
-    seconds). A stop request (Ctrl-C) keeps the slicer's order (a valid answer) with a note; every
-    other exception propagates."""
+    seconds). A stop request (Ctrl-C) keeps the slicer's order (a valid answer) with a note, as
+    does a budget that once the problem is built leaves its solve too little to pass its groups
+    (``slow``: ``reorder``'s ``NoTimeToOrder``); every other exception propagates."""
     t0 = time.perf_counter()      # the ordering's own clock (its report's wall_s)
     options = options or OrderingOptions()
     try:
         problem, solve_budget, solution, _, out, slower = reorder(
             program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
-            workers=workers, progress=progress, started_s=t0 if started_s is None else started_s)
+            workers=workers, progress=progress, started_s=t0 if started_s is None else started_s,
+            slow=slow)
+    except NoTimeToOrder as exc:
+        return (program, False, f"curve ordering skipped after its build: {exc}: the slicer's order "
+                "kept (a larger --budget re-orders)", None, None, 0.0)
     except KeyboardInterrupt as exc:    # Ctrl-C: the slicer's own order is a valid answer
         if not isinstance(exc, Interrupted):
             if stop_requested():
@@ -425,7 +431,8 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             with times.stage("ordering_s"):
                 base, ordered, note, order_problem, summarize, order_solve_s = _order_curves(
                     program, order_time_limit_s, order_workers, ob, order_progress,
-                    order_options, order_formulation)
+                    order_options, order_formulation,
+                    slow=slow if budget_s is not None else None)
             times.add("ordering_solve_s", order_solve_s)
             if note:
                 notes.append(note)
