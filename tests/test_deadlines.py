@@ -263,3 +263,48 @@ def test_a_solve_budget_below_the_group_pass_skips_the_solve_after_the_build(mon
     assert any("curve ordering skipped after its build" in n for n in res.notes), res.notes
     with pytest.raises(AssertionError, match="after the budget ended"):     # no slow: it solves
         rorder.reorder(program, budget_s=10.0)
+
+
+def _gating_problem():
+    import gatesopt
+    from gatesopt import gating
+    from gatesopt.gating import GatingOptions
+
+    from conftest import PROJECT_INSTANCES
+    program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
+    return gating.build(program, GatingOptions.for_firmware("marlin", rotate="none", max_added_time_pct=2.0))
+
+
+def test_cpsat_model_build_stops_on_ctrl_c(monkeypatch):
+    """CP-SAT's model is built in Python (~2 s on a 217k-line file, which a Ctrl-C used to wait
+    for): a stop request that arrives during the build ends it, and the warm start comes back
+    marked interrupted, never "optimal" by a search that did not run."""
+    from gatesopt.gating import cpsat
+    from gatesopt.solvers import Stopped, request_stop, stop_scope
+    problem = _gating_problem()
+    real = cpsat._add_share_cuts
+    monkeypatch.setattr(cpsat, "_add_share_cuts", lambda *a: (request_stop(), real(*a)))
+    with stop_scope():
+        sol = cpsat.solve(problem, time_limit_s=60.0)
+    assert sol.stopped == Stopped.INTERRUPTED or sol.status == Status.OPTIMAL
+    assert "not searched" in sol.message
+
+
+def test_cpsat_past_its_deadline_after_the_build_does_not_search(monkeypatch):
+    """The time limit is for the whole call: where the warm start and the build used it up,
+    CP-SAT is not started (it once got a fresh 10 ms), and the answer says time limit."""
+    from gatesopt.gating import cpsat
+    from gatesopt.solvers import Stopped
+    problem = _gating_problem()
+    clock = FakeClock()
+    monkeypatch.setattr(cpsat, "time", clock.module())
+    real = cpsat._add_share_cuts
+
+    def slow_cuts(*a):                  # the build "takes" 100 s
+        clock.now += 100.0
+        return real(*a)
+    monkeypatch.setattr(cpsat, "_add_share_cuts", slow_cuts)
+    monkeypatch.setattr(cpsat, "run_native", lambda *a, **k: _never(None, time_limit_s=0))
+    sol = cpsat.solve(problem, time_limit_s=5.0)
+    assert "not searched" in sol.message
+    assert sol.status == Status.OPTIMAL or sol.stopped == Stopped.TIME_LIMIT
