@@ -68,6 +68,8 @@ def test_limits_come_out_of_what_is_left_and_stop_at_the_budget(monkeypatch):
     the groups after the budget ran the greedy path at limit 0, seconds past it on a large file."""
     clock = FakeClock()
     monkeypatch.setattr(runner, "time", clock.module())
+    # (compiling spans are real-clock readings: none on the fake one)
+    monkeypatch.setattr(runner._jit, "compile_s_since", lambda t: 0.0)
     prob = from_polylines(_layers_of([40] * 12, seed=2), options=OrderingOptions(mode="free"))
     given = []
 
@@ -95,6 +97,7 @@ def test_the_time_between_groups_is_measured_and_reserved(monkeypatch):
     measured per curve and reserved for the groups still to come, from the prior on."""
     clock = FakeClock()
     monkeypatch.setattr(runner, "time", clock.module())
+    monkeypatch.setattr(runner._jit, "compile_s_since", lambda t: 0.0)
     prob = from_polylines(_layers_of([20, 20, 20], seed=3), options=OrderingOptions(mode="free"))
     r = GroupRunner(prob, _never, 2.0, 100.0, clock.now, {})
     prior = r.rest_s(0)
