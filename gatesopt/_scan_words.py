@@ -45,15 +45,6 @@ def match_text(buf, i, end, text, a, b, fold):
     return True
 
 
-@njit(cache=True)
-def _find(buf, i, end, text, a, b):
-    """First position >= i of text[a:b] in buf[:end], or -1."""
-    for j in range(i, end - (b - a) + 1):
-        if match_text(buf, j, end, text, a, b, False):
-            return j
-    return -1
-
-
 @njit(cache=True, inline="always")     # on the hot path: inlined, as the code it replaced was
 def scan_number(buf, j, end):
     """[+-]digits[.digits] at j: (value, digits read, position after it).
