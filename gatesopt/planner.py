@@ -307,8 +307,11 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
     if m and (rules.smoothed_lookahead if rules is not None else limits.junction == "scv"):
         # Klipper's smoothed look-ahead, where the file sets ACCEL_TO_DECEL below ACCEL
         # (newer Klipper: minimum_cruise_ratio, the pseudo acceleration max_accel * (1 - ratio))
+        # the pseudo acceleration is the toolhead's max_accel times (1 - ratio), whatever lowered
+        # the move's own (Z, extruder caps): toolhead.py Move.mcr_delta_v2 = min(2 d
+        # mcr_pseudo_accel, delta_v2), so a Z or extrude-only move is not smoothed below its accel
         a_smooth = np.minimum(np.minimum(table[regime, _k.C_ACCEL_TO_DECEL], acc),
-                              acc * (1.0 - table[regime, _k.C_MIN_CRUISE_RATIO]))
+                              table[regime, _k.C_ACCEL_PRINT] * (1.0 - table[regime, _k.C_MIN_CRUISE_RATIO]))
         if np.any(a_smooth < acc):
             vnom = _k.klipper_cruise_cap(L, acc, a_smooth, vnom, vj, stop_before)
 

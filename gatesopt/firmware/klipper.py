@@ -43,6 +43,10 @@ stall. ``M18``/``M84`` go to ``motor_off()``, which disables *all* steppers and 
 Planner rules: klippy/toolhead.py -- one ``max_accel`` for every move (M204 S sets it, else
 min(P, T)), junctions by ``square_corner_velocity`` (default 5), ``max_velocity`` caps every move
 (it and ``max_accel`` have no default there; we use a common 300 mm/s, 3000 mm/s^2), the
+Z caps of the kinematics (``max_z_velocity`` / ``max_z_accel`` scaled by move_d / |dz|,
+kinematics/cartesian.py ``check_move``), the extruder's ``max_extrude_only_velocity`` /
+``max_extrude_only_accel`` on extrude-only moves, Z-with-E moves and retractions (defaults from a
+0.4 mm nozzle and 1.75 mm filament: 79.8 mm/s, 798 mm/s^2; kinematics/extruder.py), the
 "smoothed" look-ahead of ``max_accel_to_decel`` / ``minimum_cruise_ratio``; a slicer writes a
 Klipper printer's square corner velocity as ``machine_max_jerk_x`` (OrcaSlicer).
 """
@@ -70,6 +74,15 @@ KLIPPER_ENABLE_STALL_S = round(KLIPPER_STOP_S + 2 * SDS_CHECK_TIME_S, 4)
 #: (klippy/extras/shaper_defs.py) at 20 Hz, 3hump_ei's 58.3 ms, rounded up
 SHAPER_LEAD_S = 0.060
 INF = math.inf
+#: klippy/kinematics/extruder.py PrinterExtruder: without ``max_extrude_only_velocity`` /
+#: ``_accel`` in [extruder], max_velocity and max_accel times ``4 nozzle^2 / filament area``
+#: (the default cross-section over the filament's); 0.4 mm nozzle, 1.75 mm filament here
+KLIPPER_NOZZLE_MM, KLIPPER_FILAMENT_MM = 0.4, 1.75
+
+
+def default_extrude_ratio(nozzle_mm: float = KLIPPER_NOZZLE_MM, filament_mm: float = KLIPPER_FILAMENT_MM) -> float:
+    """Klipper's ``def_max_extrude_ratio`` (extruder.py): 4 nozzle^2 / (pi (filament / 2)^2)."""
+    return 4.0 * nozzle_mm ** 2 / (math.pi * (filament_mm / 2.0) ** 2)
 
 #: Klipper's stepper names of the axes on a cartesian printer (printer.cfg sections)
 STEPPER_NAMES = {"X": "stepper_x", "Y": "stepper_y", "Z": "stepper_z", "E": "extruder"}
@@ -78,8 +91,9 @@ PLANNER = PlannerRules(
     family="klipper", junction="scv", junction_fixed=True,
     junction_note="Klipper: square_corner_velocity", jerk_is_scv=True, one_accel=True,
     m204="klipper", smoothed_lookahead=True, disable_dwell_s=KLIPPER_ENABLE_DWELL_S,
-    defaults=dict(max_accel_x=INF, max_accel_y=INF, max_accel_z=100, max_accel_e=INF,
-                  max_feed_x=INF, max_feed_y=INF, max_feed_z=15, max_feed_e=INF,
+    defaults=dict(max_accel_x=INF, max_accel_y=INF, max_accel_z=100,
+                  max_accel_e=3000 * default_extrude_ratio(),
+                  max_feed_x=INF, max_feed_y=INF, max_feed_z=15, max_feed_e=300 * default_extrude_ratio(),
                   jerk_x=math.nan, jerk_y=math.nan, jerk_z=math.nan, jerk_e=math.nan,
                   accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
                   junction_deviation=math.nan, square_corner_velocity=5.0, max_velocity=300,
