@@ -242,6 +242,12 @@ class Firmware:
         the moment they are written (every stock dialect)."""
         return None
 
+    def start_lead(self, printer=None) -> float:
+        """What is counted on top of the start-ahead on a printer described by ``printer``
+        (``gatesopt.printer_config.PrinterConfig`` or None): ``start_lead_s`` unless the dialect
+        reads it from the printer (Klipper: its input shaper)."""
+        return self.start_lead_s
+
     def gating_defaults(self, printer=None) -> dict:
         """Gating options the printer's config fixes for this dialect (``GatingOptions`` field
         names, and ``gateable``: the motors it may gate there); none for a stock dialect."""

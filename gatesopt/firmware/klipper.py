@@ -73,6 +73,9 @@ KLIPPER_ENABLE_STALL_S = round(KLIPPER_STOP_S + 2 * SDS_CHECK_TIME_S, 4)
 #: counted on top of the start-ahead: the longest pre-active time of Klipper's input shapers
 #: (klippy/extras/shaper_defs.py) at 20 Hz, 3hump_ei's 58.3 ms, rounded up
 SHAPER_LEAD_S = 0.060
+#: on top of a printer's own pre-active time (``Klipper.start_lead``): stepcompress may send a step
+#: 25 us early (klippy/chelper/stepcompress.c, MAX_STEPCOMPRESS_ERROR), and MCU clock rounding
+SHAPER_LEAD_SLACK_S = 25e-6 + 1e-6
 INF = math.inf
 #: klippy/kinematics/extruder.py PrinterExtruder: without ``max_extrude_only_velocity`` /
 #: ``_accel`` in [extruder], max_velocity and max_accel times ``4 nozzle^2 / filament area``
@@ -115,6 +118,17 @@ class Klipper(Firmware):
     def _lines(self, word: str, motors, enable: int) -> list[str]:
         return [f"SET_STEPPER_ENABLE STEPPER={STEPPER_NAMES[m]} ENABLE={enable}" for m in motors]
 
+    def start_lead(self, printer=None) -> float:
+        """``SHAPER_LEAD_S`` (any of Klipper's shapers at 20 Hz or more) without a printer config;
+        with one, its own input shaper's pre-active time: the largest of the shaped axes' (a
+        cartesian stepper moves one axis; ``PrinterConfig.window_s``, Klipper's shaper_defs
+        pulses time-centred as klippy/chelper/kin_shaper.c does), 0 without ``[input_shaper]``,
+        plus ``SHAPER_LEAD_SLACK_S`` (stepcompress may send a step early; MCU clock rounding)."""
+        if printer is None:
+            return self.start_lead_s
+        pre = max(printer.window_s(a)[0] for a in "xyz")
+        return pre + SHAPER_LEAD_SLACK_S if pre > 0 else 0.0
+
 
 DIALECT = Klipper(
     name="klipper", off_word="SET_STEPPER_ENABLE", on_word="SET_STEPPER_ENABLE", merge_motors=False,
@@ -124,7 +138,8 @@ DIALECT = Klipper(
     description="Klipper: SET_STEPPER_ENABLE per stepper, ~0.22 s stall off, ~0.02 s on",
     start_lead_s=SHAPER_LEAD_S, split_moves="kinematic",
     note=(f"klipper: each motor switched on {SHAPER_LEAD_S * 1e3:g} ms more than the start-ahead "
-          "before its next move (an input shaper's steps start before the move); each "
+          "before its next move (an input shaper's steps start before the move; with "
+          "--printer-config: that printer's shaper pre-active time); each "
           "SET_STEPPER_ENABLE stops the print head (ENABLE=0 also dwells 2 x 0.1 s, so a motor "
           "goes off >= 0.1 s after its last step whatever the end-late); with an input shaper "
           "every such line costs 2 x its pre-active time more than priced"),
