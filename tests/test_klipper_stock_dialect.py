@@ -14,6 +14,7 @@ import pytest
 import gatesopt
 from conftest import REPO
 from gatesopt import firmware as fwmod
+from gatesopt.firmware import klipper as kl
 from gatesopt.gating import GatingOptions
 from gatesopt.gating.timeline import whole_steps
 from gatesopt.program import Kind
@@ -69,8 +70,23 @@ def test_klipper_writes_an_explicit_enable_start_ahead_plus_the_shaper_lead_befo
     nxt = steps_x[steps_x > on_row][0]
     # the motor is on 61.8 ms (start-ahead + the shaper lead) before the move that steps it
     assert t_start[nxt] - t_start[on_row] >= 0.0618 - 1e-9
-    # priced: one disable (0.22 s) and one enable (a flush) line
-    assert res.solution.added_time_s == pytest.approx(KLIPPER.stall_off_s + KLIPPER.stall_on_s)
+    # priced: one disable (0.22 s) and one enable line: its flush stops the head before the
+    # unretract, an extrude-only move Klipper starts from rest anyway (toolhead.py
+    # Move.calc_junction), so only the restart 2 x SDS_CHECK_TIME is left
+    assert res.solution.added_time_s == pytest.approx(KLIPPER.stall_off_s + 2 * kl.SDS_CHECK_TIME_S)
+
+
+# X prints, Y travels a long way alone at 100 mm/s without a retraction, X prints again
+TRAVEL = _gcode("G1 X10 Y10 F6000\nG1 X60 E2 F1200\nG1 Y180 F6000\nG1 X10 E4 F1200\n")
+
+
+def test_klipper_enable_priced_by_the_speed_it_stops():
+    # the enable line lands inside the Y travel (start-ahead + lead before the X move): the flush
+    # stops the head from its 100 mm/s there and it accelerates again at Klipper's 3000 mm/s^2:
+    # 100 / (2 * 3000) + 100 / (2 * 3000) = 33.3 ms over passing at 100 mm/s, plus the 2 ms restart
+    res = _run(TRAVEL, "klipper")
+    assert ON.findall(res.text) == ["x"]
+    assert res.solution.added_time_s == pytest.approx(KLIPPER.stall_off_s + 100 / 3000 + 2 * kl.SDS_CHECK_TIME_S)
 
 
 def test_the_choice_says_what_klipper_cannot_honour():

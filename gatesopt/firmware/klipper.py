@@ -137,6 +137,7 @@ DIALECT = Klipper(
     executes=frozenset({"SET_STEPPER_ENABLE", "M18", "M84"}),
     description="Klipper: SET_STEPPER_ENABLE per stepper, ~0.22 s stall off, ~0.02 s on",
     start_lead_s=SHAPER_LEAD_S, split_moves="kinematic",
+    enable_is_stop=True, enable_restart_s=2 * SDS_CHECK_TIME_S,
     note=(f"klipper: each motor switched on {SHAPER_LEAD_S * 1e3:g} ms more than the start-ahead "
           "before its next move (an input shaper's steps start before the move; with "
           "--printer-config: that printer's shaper pre-active time); each "
