@@ -26,7 +26,11 @@ the printer's motion planner does instead (``plan``):
   (M205 B) where the file sets one (Marlin applies it only while its queue runs low, SLOWDOWN;
   here it applies to every move -- an upper bound; Klipper has none); acceleration = print
   (M204 P) for moves with E steps, travel (M204 T) without, retract (M204 R) for extruder-only
-  moves, each capped per axis by M201;
+  moves, each capped per axis by M201. Klipper: one max_accel, the Z caps scaled by move_d / |dz|
+  (kinematics/cartesian.py ``check_move``), the extruder's max_extrude_only_velocity / _accel
+  on extrude-only moves (which keep their requested speed over max_velocity), Z-with-E moves and
+  retractions only (kinematics/extruder.py ``check_move``), the junction deviation of the
+  toolhead's max_accel times each move's own acceleration (toolhead.py ``Move.calc_junction``);
 * arcs (G2/G3) are one step here but the firmware cuts them into ~1 mm segments: their nominal
   speed is capped by the junction speed between two such segments (turn angle s / R);
 * non-motion steps keep ``program.duration_s``; dwells, heat waits, homing and the motor

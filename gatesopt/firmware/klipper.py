@@ -23,9 +23,11 @@ the moves between line and step are the start-ahead; the flush's stop only delay
 
 A flush brings the head to rest at the line: inside a move from its cruising speed (v / a, 50 ms
 at 150 mm/s and 3000 mm/s^2), between two moves from their junction speed, which is 0 next to a
-retraction (an extrude-only move starts and ends at rest, ``Move.calc_junction``). The price here
-is one stop at 50 mm/s; the real one depends on the speed where the line stands (measured per
-line in docs/RESULTS.md). No line of this dialect splits an extrude-only move (``split_moves``
+retraction (an extrude-only move starts and ends at rest, ``Move.calc_junction``). So an enable
+line is priced per move (``enable_is_stop``): ``planner.stop_restart_s`` -- v / (2 a) to stop
+from the speed v the head passes the line at and as much to get back to it, 0 next to an
+extrude-only move -- plus the restart ``2 * SDS_CHECK_TIME``, in the gating problem and in the
+verifier alike (where no planner prices it, ``KLIPPER_ENABLE_STALL_S``: a stop at 50 mm/s). No line of this dialect splits an extrude-only move (``split_moves``
 "kinematic": Klipper plans each half from rest to rest); splitting no move at all ("none") was
 tried and gated next to nothing: most idle intervals worth a 0.22 s stall lie inside one long
 single-axis move.
