@@ -183,6 +183,9 @@ class Firmware:
                                   # has a planner (``stall_durations(enable_price=...)``): then
                                   # ``enable_restart_s`` + the stop, instead of ``stall_on_s``
     enable_restart_s: float = 0.0  # what an enable line costs on top of its stop (Klipper's restart)
+    disable_is_stop: bool = False  # the same for a disable line: ``disable_fixed_s`` + the stop,
+                                   # instead of ``stall_off_s``, where the caller has a planner
+    disable_fixed_s: float = 0.0   # what a disable line costs on top of its stop (Klipper's dwells)
     start_lead_s: float = 0.0     # counted on top of the start-ahead: the firmware steps this much
                                   # before a move's nominal start (Klipper's input shaper)
     note: str = ""                # what gating in this dialect cannot honour (said with the choice)
@@ -446,7 +449,8 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     so the stop is not counted twice; Klipper's two 0.1 s dwells stay. ``enable_price``, if given,
     is a callable ``enable_price(program, rows) -> seconds`` (one per row: the full stop at that
     line, ``planner.stop_restart_s``) used for a dialect whose enable line is a stop
-    (``enable_is_stop``: Klipper's ``ENABLE=1`` flush), plus its ``enable_restart_s``.
+    (``enable_is_stop``: Klipper's ``ENABLE=1`` flush), plus its ``enable_restart_s``, and whose
+    disable line is one (``disable_is_stop``: Klipper's ``ENABLE=0``), plus its ``disable_fixed_s``.
     """
     fw = get(firmware)
     out = np.zeros(program.n_steps)
@@ -479,6 +483,9 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     if enable_price is not None and fw.enable_is_stop and np.any(ok & on):
         r_on = rows[ok & on]
         out[r_on] = fw.enable_restart_s + np.asarray(enable_price(program, r_on), float)
+    if enable_price is not None and fw.disable_is_stop and np.any(ok & ~on):
+        r_off = rows[ok & ~on]
+        out[r_off] = fw.disable_fixed_s + np.asarray(enable_price(program, r_off), float)
     return out
 
 

@@ -27,7 +27,9 @@ retraction (an extrude-only move starts and ends at rest, ``Move.calc_junction``
 line is priced per move (``enable_is_stop``): ``planner.stop_restart_s`` -- v / (2 a) to stop
 from the speed v the head passes the line at and as much to get back to it, 0 next to an
 extrude-only move -- plus the restart ``2 * SDS_CHECK_TIME``, in the gating problem and in the
-verifier alike (where no planner prices it, ``KLIPPER_ENABLE_STALL_S``: a stop at 50 mm/s). No line of this dialect splits an extrude-only move (``split_moves``
+verifier alike (where no planner prices it, ``KLIPPER_ENABLE_STALL_S``: a stop at 50 mm/s). A
+disable line likewise (``disable_is_stop``): its flush's stop, the two 0.1 s dwells and the
+restart (``KLIPPER_STALL_S``, 0.22 s, where no planner prices it; 203-241 ms measured). No line of this dialect splits an extrude-only move (``split_moves``
 "kinematic": Klipper plans each half from rest to rest); splitting no move at all ("none") was
 tried and gated next to nothing: most idle intervals worth a 0.22 s stall lie inside one long
 single-axis move.
@@ -140,6 +142,7 @@ DIALECT = Klipper(
     description="Klipper: SET_STEPPER_ENABLE per stepper, ~0.22 s stall off, ~0.02 s on",
     start_lead_s=SHAPER_LEAD_S, split_moves="kinematic",
     enable_is_stop=True, enable_restart_s=2 * SDS_CHECK_TIME_S,
+    disable_is_stop=True, disable_fixed_s=KLIPPER_ENABLE_DWELL_S + 2 * SDS_CHECK_TIME_S,
     note=(f"klipper: each motor switched on {SHAPER_LEAD_S * 1e3:g} ms more than the start-ahead "
           "before its next move (an input shaper's steps start before the move; with "
           "--printer-config: that printer's shaper pre-active time); each "
