@@ -480,4 +480,10 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
         source["junction"] = "M205 J (junction deviation)"
     if junction == "jerk" and np.isnan(v[K["jerk_x"]]):
         junction = "deviation"
+    if junction == "scv" and np.isnan(v[K["square_corner_velocity"]]):
+        # a printer profile without one (Cura's definitions) planned by Klipper's rules: Klipper's
+        # own default (klippy/toolhead.py square_corner_velocity 5.0); NaN would leave every
+        # junction speed undefined
+        v[K["square_corner_velocity"]] = rules.defaults.get("square_corner_velocity", 5.0)
+        source["square_corner_velocity"] = f"default: {family} (the {profile} profile has none)"
     return _from_vector(v, family, junction, source, changes, profile)

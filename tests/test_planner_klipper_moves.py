@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 import pytest
 
 from gatesopt import planner
@@ -151,3 +153,15 @@ def test_printer_config_extruder_limits(tmp_path):
     pl = planner.plan(prog, machine_limits(prog, printer=pc))
     k = pl.move_step[0]
     assert pl.duration_s[k] == pytest.approx(2 * math.sqrt(1500.0) / 1500.0, rel=1e-12)
+
+
+def test_klipper_rules_on_a_profile_without_square_corner_velocity():
+    # a Cura file (fdmprinter defaults: no square corner velocity) planned by Klipper's rules gets
+    # Klipper's default 5 mm/s: a 90 degree corner at exactly 5 mm/s, not an undefined junction
+    from gatesopt.limits import machine_limits
+    prog = parse(";FLAVOR:Marlin\nG90\nG1 X50 F3000\nG1 X50 Y50 F3000\n", source="c.gcode")
+    lim = machine_limits(prog, family="klipper")
+    assert lim.profile == "cura_fdmprinter" and lim.square_corner_velocity_mm_s == 5.0
+    pl = planner.plan(prog, lim)
+    ms = pl.move_step
+    assert pl.exit_mm_s[ms[0]] == pytest.approx(5.0) and np.isfinite(pl._vj_free).all()
