@@ -165,3 +165,14 @@ def test_klipper_rules_on_a_profile_without_square_corner_velocity():
     pl = planner.plan(prog, lim)
     ms = pl.move_step
     assert pl.exit_mm_s[ms[0]] == pytest.approx(5.0) and np.isfinite(pl._vj_free).all()
+
+
+def test_klipper_m204_needs_s_or_both_p_and_t():
+    # klippy/toolhead.py cmd_M204: S, else min(P, T) when both are given; "M204 P800" alone is
+    # refused ('Invalid M204 command') and the acceleration stays (PrusaSlicer writes it per feature)
+    from gatesopt.limits import machine_limits
+    prog = parse("SET_VELOCITY_LIMIT ACCEL=3000\nM204 P1250 R1250 T1400\nG90\nG1 X10 F3000\nM204 P800\n"
+                 "G1 X20 F3000\nM204 S900\nG1 X30 F3000\n", source="m204.gcode")
+    pl = planner.plan(prog, machine_limits(prog))
+    assert pl.firmware == "klipper"
+    assert [float(pl.accel_mm_s2[k]) for k in pl.move_step] == [1250.0, 1250.0, 900.0]
