@@ -308,8 +308,10 @@ def _line_sets(m, rules, mm_min: bool, legacy_m204: bool, printer) -> tuple[list
             sets += [(f"jerk_{a.lower()}", w[a.encode()] / 60) for a in "XYZE" if a.encode() in w]
         elif cmd == b"M204":
             if rules.m204 == "klipper":
-                # Klipper's M204: S sets max_accel; else min(P, T)
-                acc = w.get(b"S", min(w.get(b"P", INF), w.get(b"T", INF)))
+                # Klipper's M204: S sets max_accel; else min(P, T) when both are given; P or T
+                # alone is answered 'Invalid M204 command' and changes nothing (klippy/toolhead.py
+                # ToolHeadCommandHelper.cmd_M204): PrusaSlicer's per-feature "M204 P800" lines
+                acc = w.get(b"S", min(w[b"P"], w[b"T"]) if b"P" in w and b"T" in w else INF)
                 if acc < INF:
                     sets += [("accel_print", acc), ("accel_travel", acc), ("accel_retract", acc)]
             elif b"S" in w:
@@ -480,4 +482,10 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
         source["junction"] = "M205 J (junction deviation)"
     if junction == "jerk" and np.isnan(v[K["jerk_x"]]):
         junction = "deviation"
+    if junction == "scv" and np.isnan(v[K["square_corner_velocity"]]):
+        # a printer profile without one (Cura's definitions) planned by Klipper's rules: Klipper's
+        # own default (klippy/toolhead.py square_corner_velocity 5.0); NaN would leave every
+        # junction speed undefined
+        v[K["square_corner_velocity"]] = rules.defaults.get("square_corner_velocity", 5.0)
+        source["square_corner_velocity"] = f"default: {family} (the {profile} profile has none)"
     return _from_vector(v, family, junction, source, changes, profile)

@@ -184,7 +184,7 @@ class GatingOptions:
                                            f"{printer.source} ({v:g}), which the firmware uses")
         kw.update(defaults)
         kw.update({k: v for k, v in changes.items() if v is not None})
-        kw["start_ahead_s"] = kw.get("start_ahead_s", cls.start_ahead_s) + fw.start_lead_s
+        kw["start_ahead_s"] = kw.get("start_ahead_s", cls.start_ahead_s) + fw.start_lead(printer)
         opts = cls(**kw)
         fw.check_motors(opts.motors)
         if gateable is not None and not set(opts.motors) <= set(gateable):

@@ -37,7 +37,7 @@ from ..gating.solution import GatingSolution
 from ..gating.solve import solve
 from ..ordering.problem import OrderingOptions
 from ..parse import parse
-from ..program import Program
+from ..program import Kind, Program
 from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
 from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
 from .budget import no_time_note, ordering_budget_s, slowdown_factor
@@ -115,6 +115,10 @@ class RunResult:
             "splits": self.emitted.splits if self.emitted else 0,
             "max_snap_mm": float(self.emitted.max_snap_mm) if self.emitted else 0.0,
             "off_time_s": s.off_time_s() if s else {},
+            # of which during heat-up waits (M109 / M190 / TEMPERATURE_WAIT): their length is the
+            # energy profile's heating assumption, and a host that skips them (klippy's batch
+            # mode) sees the rest only
+            "off_time_waits_s": s.off_time_in_s(self.base.kind == Kind.WAIT) if s else {},
             "message": s.message if s else "",
             "notes": list(self.notes), "wall_s": self.wall_s, "times": dict(self.times),
             "slowdown": self.slowdown,
