@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from .. import _planner_kernel as pk
 from ..limits import MachineLimits
 from ..program import MOTION_KINDS, Program
 from .layout import LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, Layout
@@ -64,6 +65,11 @@ class MoveTimes:
     z_accel_mm_s2: float = 100.0
     z_cap_mm_s: float = np.inf
     z_junction_mm_s: float = 0.0
+    #: the planner's junction rule (``_planner_kernel.JUNCTION_CODE``) and the limits in force
+    #: (``limits.KEYS`` order): a rebuilt travel's moves are then planned together, as the
+    #: planner plans them (``_plan_moves_s``); -1: each move alone, from and to its junction speed
+    junction_code: int = -1
+    limits_row: tuple = ()
 
     @staticmethod
     def from_limits(lim: MachineLimits) -> "MoveTimes":
@@ -92,7 +98,9 @@ class MoveTimes:
             e_junction_mm_s=0.0 if lim.firmware == "klipper" else junction(3),
             z_accel_mm_s2=finite_min(lim.accel_travel_mm_s2, acc[2]),
             z_cap_mm_s=finite_min(feed[2], v_cap),
-            z_junction_mm_s=junction(2))
+            z_junction_mm_s=junction(2),
+            junction_code=pk.JUNCTION_CODE.get(lim.junction, -1),
+            limits_row=tuple(float(x) for x in lim.vector()))
 
     def xy_s(self, length_mm, feed_mm_s):
         return trapezoid_s(length_mm, np.minimum(feed_mm_s, self.xy_cap_mm_s), self.xy_accel_mm_s2,
@@ -129,12 +137,32 @@ class MoveTimes:
                                 self.wipe_accel_mm_s2, self.xy_junction_mm_s)
         return out
 
+    def gaps_s(self, program: Program, a, b) -> np.ndarray:
+        """Time (s) of each gap ``steps a[i]:b[i]`` of ``program`` (its motion steps: travel,
+        retraction, z-hop, wipe): with the file's limits planned together as the planner plans
+        them (``_plan_moves_s``, from and to rest: the curves around a gap are not part of it),
+        the way a rebuilt travel is priced; else each move alone (``steps_s``)."""
+        a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+        if self.junction_code < 0:
+            steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())]
+                                   + [np.zeros(0, np.int64)])
+            owner = np.repeat(np.arange(len(a)), b - a)
+            return np.bincount(owner, weights=self.steps_s(program, steps), minlength=len(a))
+        kind = program.kind
+        motion = (np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype))
+                  & (program.length_mm > MOVE_EPS_MM))
+        d = np.ascontiguousarray(program.end_mm - program.start_mm)
+        return _gaps_planned(a, b, motion, d, np.ascontiguousarray(program.length_mm, float),
+                             np.ascontiguousarray(program.feed_mm_s, float), self.junction_code,
+                             np.asarray(self.limits_row, float))
+
     def vector(self) -> np.ndarray:
-        """The parameters in field order (for the compiled kernels)."""
+        """The parameters in field order (for the compiled kernels): the ten per-kind values,
+        the junction code, then the limits row (``MT_ROW`` on)."""
         return np.array([self.xy_accel_mm_s2, self.xy_cap_mm_s, self.xy_junction_mm_s,
                          self.wipe_accel_mm_s2, self.e_accel_mm_s2, self.e_cap_mm_s,
                          self.e_junction_mm_s, self.z_accel_mm_s2, self.z_cap_mm_s,
-                         self.z_junction_mm_s], float)
+                         self.z_junction_mm_s, float(self.junction_code), *self.limits_row], float)
 
 
 def trapezoid_s(length_mm, speed_mm_s, accel_mm_s2, junction_mm_s):
@@ -170,22 +198,54 @@ def _trapezoid(L, v, a, vj):
     return 2.0 * (np.sqrt(v0 * v0 + a * L) - v0) / a
 
 
+#: where ``MoveTimes.vector()`` holds the junction code and the limits row
+MT_CODE, MT_ROW = 10, 11
+#: sin(theta/2) / (1 - sin(theta/2)) of junction deviation at a right angle (``junction_speed``)
+R_JD_RIGHT_ANGLE = float(np.sqrt(0.5) / (1.0 - np.sqrt(0.5)))
+
+
 @numba.njit(cache=True)
-def _rebuilt_s(dist, z0, z1, retract, use_fw, r, net, mt, style):
+def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style):
     """Time (s) of a rebuilt travel (``gaps.rebuilt_gap``): retraction (E, at the retract feed),
-    lift by the z-hop if it retracts, the straight XY travel, lowering, and the unretraction that
-    brings the consumed gaps to their net E (or that net E alone). ``mt``: MoveTimes.vector();
-    ``style``: (retract feed, unretract feed, travel feed, z feed, hop)."""
+    lift by the z-hop if it retracts, the straight XY travel (dx, dy), lowering, and the
+    unretraction that brings the consumed gaps to their net E (or that net E alone). ``mt``:
+    MoveTimes.vector(); ``style``: (retract feed, unretract feed, travel feed, z feed, hop).
+    With the file's limits (``mt[MT_CODE] >= 0``) the moves are planned together, as the planner
+    plans them (``_plan_moves_s``); else each alone from and to its kind's junction speed."""
     v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
-    t = 0.0
-    if retract and not use_fw:
-        t += _trapezoid(r, min(v_r, mt[5]), mt[4], mt[6])
-        t += _trapezoid(abs(net + r), min(v_u, mt[5]), mt[4], mt[6])
-    elif abs(net) > MOVE_EPS_MM:
-        t += _trapezoid(abs(net), min(v_u, mt[5]), mt[4], mt[6])
+    dist = np.sqrt(dx * dx + dy * dy)
     z_up = max(z0, z1)
     if retract and hop > 0.0:
         z_up += hop
+    e_r = r if retract and not use_fw else 0.0
+    e_u = abs(net + r) if retract and not use_fw else abs(net)
+    e_u_sign = 1.0 if (net + r if retract and not use_fw else net) >= 0.0 else -1.0
+    if mt[MT_CODE] >= 0.0:
+        d = np.zeros((5, 4))
+        L = np.zeros(5)
+        F = np.zeros(5)
+        n = 0
+        if e_r > MOVE_EPS_MM:
+            d[n, 3], L[n], F[n] = -e_r, e_r, v_r
+            n += 1
+        if z_up - z0 > MOVE_EPS_MM:
+            d[n, 2], L[n], F[n] = z_up - z0, z_up - z0, v_z
+            n += 1
+        if dist > MOVE_EPS_MM:
+            d[n, 0], d[n, 1], L[n], F[n] = dx, dy, dist, v_xy
+            n += 1
+        if abs(z_up - z1) > MOVE_EPS_MM:
+            d[n, 2], L[n], F[n] = z1 - z_up, abs(z_up - z1), v_z
+            n += 1
+        if e_u > MOVE_EPS_MM:
+            d[n, 3], L[n], F[n] = e_u_sign * e_u, e_u, v_u
+            n += 1
+        return _plan_moves_s(d, L, F, n, int(mt[MT_CODE]), mt[MT_ROW:])
+    t = 0.0
+    if e_r > MOVE_EPS_MM:
+        t += _trapezoid(e_r, min(v_r, mt[5]), mt[4], mt[6])
+    if e_u > MOVE_EPS_MM:
+        t += _trapezoid(e_u, min(v_u, mt[5]), mt[4], mt[6])
     if z_up - z0 > MOVE_EPS_MM:
         t += _trapezoid(z_up - z0, min(v_z, mt[8]), mt[7], mt[9])
     if dist > MOVE_EPS_MM:
@@ -193,6 +253,114 @@ def _rebuilt_s(dist, z0, z1, retract, use_fw, r, net, mt, style):
     if abs(z_up - z1) > MOVE_EPS_MM:
         t += _trapezoid(abs(z_up - z1), min(v_z, mt[8]), mt[7], mt[9])
     return t
+
+
+@numba.njit(cache=True)
+def _plan_moves_s(d, L, F, n, code, row):
+    """Time (s) of moves 0..n-1 (displacement ``d`` X Y Z E, length ``L``: XYZ, or |E| for an
+    extruder-only move; feed ``F``) planned as ``planner.plan`` plans them: each move's nominal
+    speed and acceleration by its kind and the per-axis caps (``_planner_kernel.prepare_moves``),
+    the junction speeds between them by the firmware's rule (``junction_speed``), look-ahead
+    passes, trapezoids; from and to the first and last move's safe speed (a rebuilt travel's
+    neighbours are curves whose junction with it is not known here)."""
+    if n == 0:
+        return 0.0
+    u = np.zeros((n, 4))
+    vnom = np.zeros(n)
+    acc = np.zeros(n)
+    safe = np.zeros(n)
+    vj = np.zeros(n)
+    for k in range(n):
+        for ax in range(4):
+            u[k, ax] = d[k, ax] / L[k]
+        has_e = d[k, 3] != 0.0
+        e_only = d[k, 0] == 0.0 and d[k, 1] == 0.0 and d[k, 2] == 0.0
+        f = F[k]
+        fmin = row[pk.C_MIN_FEED] if has_e else row[pk.C_MIN_TRAVEL_FEED]
+        if f < fmin:
+            f = fmin
+        for ax in range(4):
+            ua = abs(u[k, ax])
+            if ua > 0.0 and f * ua > row[pk.C_MAX_FEED + ax]:
+                f = row[pk.C_MAX_FEED + ax] / ua
+        if f > row[pk.C_MAX_VELOCITY]:
+            f = row[pk.C_MAX_VELOCITY]
+        mst = row[pk.C_MIN_SEGMENT_TIME]
+        if mst > 0.0 and f * mst > L[k]:
+            f = L[k] / mst
+        if e_only:
+            a = row[pk.C_ACCEL_RETRACT]
+        elif has_e:
+            a = row[pk.C_ACCEL_PRINT]
+        else:
+            a = row[pk.C_ACCEL_TRAVEL]
+        for ax in range(4):
+            ua = abs(u[k, ax])
+            if ua > 0.0 and a * ua > row[pk.C_MAX_ACCEL + ax]:
+                a = row[pk.C_MAX_ACCEL + ax] / ua
+        vnom[k], acc[k] = f, a
+        safe[k] = pk.safe_speed(code, u[k], f, row)
+        if k > 0:
+            vj[k] = pk.junction_speed(code, u[k - 1], u[k], vnom[k - 1], f, acc[k - 1], a,
+                                      L[k - 1], L[k], safe[k - 1], safe[k], row)
+    # the junctions with the curves around: at the first and last move's safe speed, except under
+    # junction deviation, where a junction with an extruder-only move is a right angle whatever
+    # the curve's direction (Marlin: its unit vector is along E), v^2 = a JD sin(45)/(1 - sin(45)),
+    # a the entered move's acceleration (the print acceleration for the curve after); a dry
+    # travel's first or last move is taken at that angle too
+    last = safe[n - 1]
+    vj[0] = safe[0]
+    if code == pk.DEVIATION and row[pk.C_JD] > 0.0:
+        vj[0] = max(vj[0], min(np.sqrt(acc[0] * row[pk.C_JD] * R_JD_RIGHT_ANGLE), vnom[0]))
+        last = max(last, min(np.sqrt(row[pk.C_ACCEL_PRINT] * row[pk.C_JD] * R_JD_RIGHT_ANGLE),
+                             vnom[n - 1]))
+    entry = np.zeros(n)
+    nxt = last
+    for k in range(n - 1, -1, -1):          # backward: each entry can brake to the next
+        v = np.sqrt(nxt * nxt + 2.0 * acc[k] * L[k])
+        entry[k] = min(vj[k], v)
+        nxt = entry[k]
+    for k in range(1, n):                   # forward: each entry reachable from the one before
+        v = np.sqrt(entry[k - 1] * entry[k - 1] + 2.0 * acc[k - 1] * L[k - 1])
+        entry[k] = min(entry[k], v)
+    t = 0.0
+    for k in range(n):
+        ex = entry[k + 1] if k + 1 < n else last
+        v0 = min(entry[k], vnom[k])
+        v1 = min(ex, np.sqrt(entry[k] * entry[k] + 2.0 * acc[k] * L[k]), vnom[k])
+        vc, a = vnom[k], acc[k]
+        d_acc = (vc * vc - v0 * v0) / (2.0 * a)
+        d_dec = (vc * vc - v1 * v1) / (2.0 * a)
+        if d_acc + d_dec <= L[k]:
+            t += (vc - v0) / a + (vc - v1) / a + (L[k] - d_acc - d_dec) / vc
+        else:
+            vp = max(np.sqrt(a * L[k] + 0.5 * (v0 * v0 + v1 * v1)), v0, v1)
+            t += (vp - v0) / a + (vp - v1) / a
+    return t
+
+
+@numba.njit(cache=True)
+def _gaps_planned(a, b, motion, d_all, L_all, F_all, code, row):
+    """``MoveTimes.gaps_s`` with the limits: per gap its motion steps planned together."""
+    out = np.zeros(len(a))
+    for i in range(len(a)):
+        n = 0
+        for s in range(a[i], b[i]):
+            n += motion[s]
+        if n == 0:
+            continue
+        d = np.zeros((n, 4))
+        L = np.zeros(n)
+        F = np.zeros(n)
+        k = 0
+        for s in range(a[i], b[i]):
+            if motion[s]:
+                for ax in range(4):
+                    d[k, ax] = d_all[s, ax]
+                L[k], F[k] = L_all[s], F_all[s]
+                k += 1
+        out[i] = _plan_moves_s(d, L, F, n, code, row)
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -236,10 +404,7 @@ def gap_times_ms(program: Program, move: MoveTimes, lay: Layout | None = None) -
     n = len(lay.curve_s0)
     if n < 2:
         return np.zeros(0)
-    a, b = lay.curve_s1[:-1], lay.curve_s0[1:]
-    steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())])
-    owner = np.repeat(np.arange(n - 1), b - a)
-    return np.bincount(owner, weights=move.steps_s(program, steps), minlength=n - 1) * MS_PER_S
+    return move.gaps_s(program, lay.curve_s1[:-1], lay.curve_s0[1:]) * MS_PER_S
 
 
 class TimePricer:
@@ -274,11 +439,12 @@ class TimePricer:
         copy = np.zeros(n)
         if n > 1:
             a, b = lay.curve_s1[:-1], lay.curve_s0[1:]
-            steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())]) \
-                if len(a) else np.zeros(0, np.int64)
-            owner = np.repeat(np.arange(1, n), b - a)
-            t = move.steps_s(program, steps) if step_s is None else np.asarray(step_s)[steps]
-            copy = np.bincount(owner, weights=t, minlength=n)
+            if step_s is None:
+                copy[1:] = move.gaps_s(program, a, b)
+            else:
+                steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())])
+                owner = np.repeat(np.arange(1, n), b - a)
+                copy = np.bincount(owner, weights=np.asarray(step_s)[steps], minlength=n)
         self.copy_ms = copy * MS_PER_S
 
     # -- links ----------------------------------------------------------------------------------
@@ -424,9 +590,9 @@ def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, o
         retract = moving and (fw_bnd or (fw_style and dist >= min_travel))
     else:
         retract = moving and r > 0.0 and (r_b > 0.0 or (retract_mm > 0.0 and dist >= min_travel))
-    t = _rebuilt_s(dist, z0, z1, retract, use_fw, r, net, mt, style) * 1000.0
+    t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style) * 1000.0
     if retract and comb_cap > 0.0 and dist <= comb_cap and dz <= MOVE_EPS_MM:
-        return t, True, _rebuilt_s(dist, z0, z1, False, use_fw, r, net, mt, style) * 1000.0
+        return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style) * 1000.0
     return t, False, 0.0
 
 
@@ -462,11 +628,14 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
     use_fw = np.zeros(m, np.bool_)
     e_wet = np.zeros(m)
     e_dry = np.zeros(m)
+    net_v = np.zeros(m)
+    planned = mt[MT_CODE] >= 0.0       # the moves planned together (``_rebuilt_s``), per link
     for v in range(m):
         c = gc[v]
         net, r_i, fw_net, fw_ret = 0.0, 0.0, 0, False
         if c != group_first[c]:
             net, r_i, fw_net, fw_ret = own_net[c], own_r[c], own_fw_net[c], own_fw[c]
+        net_v[v] = net
         use_fw[v] = fw_net == 0 and (fw_ret or (fw_style and r_i <= 0.0))
         e_dry[v] = _trapezoid(abs(net), min(v_u, mt[5]), mt[4], mt[6]) if abs(net) > MOVE_EPS_MM else 0.0
         e_wet[v] = e_dry[v] if use_fw[v] else (_trapezoid(retract_mm, min(v_r, mt[5]), mt[4], mt[6])
@@ -496,14 +665,17 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                     retract = moving and fw_style and dist >= min_travel
                 else:
                     retract = moving and retract_mm > 0.0 and dist >= min_travel
-                t_xy = _trapezoid(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
-                dry = (t_xy + e_dry[v]) * 1000.0
-                if retract:
-                    t = (t_xy + e_wet[v] + t_hop) * 1000.0
-                    need = comb_cap > 0.0 and dist <= comb_cap
+                need = retract and comb_cap > 0.0 and dist <= comb_cap
+                if planned:
+                    z = z_ent[v]
+                    t = _rebuilt_s(dx, dy, z, z, retract, use_fw[v], retract_mm, net_v[v], mt,
+                                   style) * 1000.0
+                    dry = t if not need else _rebuilt_s(dx, dy, z, z, False, use_fw[v],
+                                                        retract_mm, net_v[v], mt, style) * 1000.0
                 else:
-                    t = dry
-                    need = False
+                    t_xy = _trapezoid(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
+                    dry = (t_xy + e_dry[v]) * 1000.0
+                    t = (t_xy + e_wet[v] + t_hop) * 1000.0 if retract else dry
             if need and has_walls:
                 i, j = pid_ext[u], pid_ent[v]
                 if memo[i, j] < 0:
