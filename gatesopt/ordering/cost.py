@@ -205,13 +205,14 @@ R_JD_RIGHT_ANGLE = float(np.sqrt(0.5) / (1.0 - np.sqrt(0.5)))
 
 
 @numba.njit(cache=True)
-def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style):
+def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
     """Time (s) of a rebuilt travel (``gaps.rebuilt_gap``): retraction (E, at the retract feed),
     lift by the z-hop if it retracts, the straight XY travel (dx, dy), lowering, and the
     unretraction that brings the consumed gaps to their net E (or that net E alone). ``mt``:
     MoveTimes.vector(); ``style``: (retract feed, unretract feed, travel feed, z feed, hop).
     With the file's limits (``mt[MT_CODE] >= 0``) the moves are planned together, as the planner
-    plans them (``_plan_moves_s``); else each alone from and to its kind's junction speed."""
+    plans them (``_plan_moves_s``, in the work array ``w``: ``work_array()``); else each alone
+    from and to its kind's junction speed."""
     v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
     dist = np.sqrt(dx * dx + dy * dy)
     z_up = max(z0, z1)
@@ -221,26 +222,24 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style):
     e_u = abs(net + r) if retract and not use_fw else abs(net)
     e_u_sign = 1.0 if (net + r if retract and not use_fw else net) >= 0.0 else -1.0
     if mt[MT_CODE] >= 0.0:
-        d = np.zeros((5, 4))
-        L = np.zeros(5)
-        F = np.zeros(5)
+        w[:, :] = 0.0
         n = 0
         if e_r > MOVE_EPS_MM:
-            d[n, 3], L[n], F[n] = -e_r, e_r, v_r
+            w[n, 3], w[n, W_L], w[n, W_F] = -e_r, e_r, v_r
             n += 1
         if z_up - z0 > MOVE_EPS_MM:
-            d[n, 2], L[n], F[n] = z_up - z0, z_up - z0, v_z
+            w[n, 2], w[n, W_L], w[n, W_F] = z_up - z0, z_up - z0, v_z
             n += 1
         if dist > MOVE_EPS_MM:
-            d[n, 0], d[n, 1], L[n], F[n] = dx, dy, dist, v_xy
+            w[n, 0], w[n, 1], w[n, W_L], w[n, W_F] = dx, dy, dist, v_xy
             n += 1
         if abs(z_up - z1) > MOVE_EPS_MM:
-            d[n, 2], L[n], F[n] = z1 - z_up, abs(z_up - z1), v_z
+            w[n, 2], w[n, W_L], w[n, W_F] = z1 - z_up, abs(z_up - z1), v_z
             n += 1
         if e_u > MOVE_EPS_MM:
-            d[n, 3], L[n], F[n] = e_u_sign * e_u, e_u, v_u
+            w[n, 3], w[n, W_L], w[n, W_F] = e_u_sign * e_u, e_u, v_u
             n += 1
-        return _plan_moves_s(d, L, F, n, int(mt[MT_CODE]), mt[MT_ROW:])
+        return _plan_moves_s(w, n, int(mt[MT_CODE]), mt[MT_ROW:])
     t = 0.0
     if e_r > MOVE_EPS_MM:
         t += _trapezoid(e_r, min(v_r, mt[5]), mt[4], mt[6])
@@ -256,87 +255,111 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style):
 
 
 @numba.njit(cache=True)
-def _plan_moves_s(d, L, F, n, code, row):
-    """Time (s) of moves 0..n-1 (displacement ``d`` X Y Z E, length ``L``: XYZ, or |E| for an
-    extruder-only move; feed ``F``) planned as ``planner.plan`` plans them: each move's nominal
-    speed and acceleration by its kind and the per-axis caps (``_planner_kernel.prepare_moves``),
-    the junction speeds between them by the firmware's rule (``junction_speed``), look-ahead
-    passes, trapezoids; from and to the first and last move's safe speed (a rebuilt travel's
-    neighbours are curves whose junction with it is not known here)."""
+def _prep_move(w, k, code, row):
+    """Row k of the work array: unit vector, nominal speed and acceleration by the move's kind
+    and the per-axis caps (``_planner_kernel.prepare_moves``), safe speed; marked ready."""
+    Lk = w[k, W_L]
+    for ax in range(4):
+        w[k, W_U + ax] = w[k, ax] / Lk
+    has_e = w[k, 3] != 0.0
+    e_only = w[k, 0] == 0.0 and w[k, 1] == 0.0 and w[k, 2] == 0.0
+    f = w[k, W_F]
+    fmin = row[pk.C_MIN_FEED] if has_e else row[pk.C_MIN_TRAVEL_FEED]
+    if f < fmin:
+        f = fmin
+    for ax in range(4):
+        ua = abs(w[k, W_U + ax])
+        if ua > 0.0 and f * ua > row[pk.C_MAX_FEED + ax]:
+            f = row[pk.C_MAX_FEED + ax] / ua
+    if f > row[pk.C_MAX_VELOCITY]:
+        f = row[pk.C_MAX_VELOCITY]
+    mst = row[pk.C_MIN_SEGMENT_TIME]
+    if mst > 0.0 and f * mst > Lk:
+        f = Lk / mst
+    if e_only:
+        a = row[pk.C_ACCEL_RETRACT]
+    elif has_e:
+        a = row[pk.C_ACCEL_PRINT]
+    else:
+        a = row[pk.C_ACCEL_TRAVEL]
+    for ax in range(4):
+        ua = abs(w[k, W_U + ax])
+        if ua > 0.0 and a * ua > row[pk.C_MAX_ACCEL + ax]:
+            a = row[pk.C_MAX_ACCEL + ax] / ua
+    w[k, W_V], w[k, W_A] = f, a
+    w[k, W_SAFE] = pk.safe_speed(code, w[k, W_U:W_U + 4], f, row)
+    w[k, W_READY] = 1.0
+
+
+@numba.njit(cache=True)
+def _junction(w, k, code, row):
+    """The planner's junction speed from work row k - 1 into row k (both ready)."""
+    return pk.junction_speed(code, w[k - 1, W_U:W_U + 4], w[k, W_U:W_U + 4], w[k - 1, W_V],
+                             w[k, W_V], w[k - 1, W_A], w[k, W_A], w[k - 1, W_L], w[k, W_L],
+                             w[k - 1, W_SAFE], w[k, W_SAFE], row)
+
+
+@numba.njit(cache=True)
+def _plan_moves_s(w, n, code, row):
+    """Time (s) of moves 0..n-1 planned as ``planner.plan`` plans them: each move's nominal speed
+    and acceleration by its kind and the per-axis caps (``_prep_move``), the junction speeds
+    between them by the firmware's rule (``junction_speed``), look-ahead passes, trapezoids.
+    ``w`` (``work_array``): per move its displacement X Y Z E (columns 0-3), length ``W_L`` (XYZ,
+    or |E| for an extruder-only move) and feed ``W_F``; a row marked ``W_READY`` (and a junction
+    marked ``W_JREADY``) was prepared by the caller, the rest is written here."""
     if n == 0:
         return 0.0
-    u = np.zeros((n, 4))
-    vnom = np.zeros(n)
-    acc = np.zeros(n)
-    safe = np.zeros(n)
-    vj = np.zeros(n)
     for k in range(n):
-        for ax in range(4):
-            u[k, ax] = d[k, ax] / L[k]
-        has_e = d[k, 3] != 0.0
-        e_only = d[k, 0] == 0.0 and d[k, 1] == 0.0 and d[k, 2] == 0.0
-        f = F[k]
-        fmin = row[pk.C_MIN_FEED] if has_e else row[pk.C_MIN_TRAVEL_FEED]
-        if f < fmin:
-            f = fmin
-        for ax in range(4):
-            ua = abs(u[k, ax])
-            if ua > 0.0 and f * ua > row[pk.C_MAX_FEED + ax]:
-                f = row[pk.C_MAX_FEED + ax] / ua
-        if f > row[pk.C_MAX_VELOCITY]:
-            f = row[pk.C_MAX_VELOCITY]
-        mst = row[pk.C_MIN_SEGMENT_TIME]
-        if mst > 0.0 and f * mst > L[k]:
-            f = L[k] / mst
-        if e_only:
-            a = row[pk.C_ACCEL_RETRACT]
-        elif has_e:
-            a = row[pk.C_ACCEL_PRINT]
-        else:
-            a = row[pk.C_ACCEL_TRAVEL]
-        for ax in range(4):
-            ua = abs(u[k, ax])
-            if ua > 0.0 and a * ua > row[pk.C_MAX_ACCEL + ax]:
-                a = row[pk.C_MAX_ACCEL + ax] / ua
-        vnom[k], acc[k] = f, a
-        safe[k] = pk.safe_speed(code, u[k], f, row)
-        if k > 0:
-            vj[k] = pk.junction_speed(code, u[k - 1], u[k], vnom[k - 1], f, acc[k - 1], a,
-                                      L[k - 1], L[k], safe[k - 1], safe[k], row)
+        if w[k, W_READY] == 0.0:
+            _prep_move(w, k, code, row)
+    for k in range(1, n):
+        if w[k, W_JREADY] == 0.0:
+            w[k, W_J] = _junction(w, k, code, row)
     # the junctions with the curves around: at the first and last move's safe speed, except under
     # junction deviation, where a junction with an extruder-only move is a right angle whatever
     # the curve's direction (Marlin: its unit vector is along E), v^2 = a JD sin(45)/(1 - sin(45)),
     # a the entered move's acceleration (the print acceleration for the curve after); a dry
     # travel's first or last move is taken at that angle too
-    last = safe[n - 1]
-    vj[0] = safe[0]
+    last = w[n - 1, W_SAFE]
+    w[0, W_J] = w[0, W_SAFE]
     if code == pk.DEVIATION and row[pk.C_JD] > 0.0:
-        vj[0] = max(vj[0], min(np.sqrt(acc[0] * row[pk.C_JD] * R_JD_RIGHT_ANGLE), vnom[0]))
+        w[0, W_J] = max(w[0, W_J], min(np.sqrt(w[0, W_A] * row[pk.C_JD] * R_JD_RIGHT_ANGLE),
+                                       w[0, W_V]))
         last = max(last, min(np.sqrt(row[pk.C_ACCEL_PRINT] * row[pk.C_JD] * R_JD_RIGHT_ANGLE),
-                             vnom[n - 1]))
-    entry = np.zeros(n)
+                             w[n - 1, W_V]))
     nxt = last
     for k in range(n - 1, -1, -1):          # backward: each entry can brake to the next
-        v = np.sqrt(nxt * nxt + 2.0 * acc[k] * L[k])
-        entry[k] = min(vj[k], v)
-        nxt = entry[k]
+        v = np.sqrt(nxt * nxt + 2.0 * w[k, W_A] * w[k, W_L])
+        w[k, W_E] = min(w[k, W_J], v)
+        nxt = w[k, W_E]
     for k in range(1, n):                   # forward: each entry reachable from the one before
-        v = np.sqrt(entry[k - 1] * entry[k - 1] + 2.0 * acc[k - 1] * L[k - 1])
-        entry[k] = min(entry[k], v)
+        v = np.sqrt(w[k - 1, W_E] * w[k - 1, W_E] + 2.0 * w[k - 1, W_A] * w[k - 1, W_L])
+        w[k, W_E] = min(w[k, W_E], v)
     t = 0.0
     for k in range(n):
-        ex = entry[k + 1] if k + 1 < n else last
-        v0 = min(entry[k], vnom[k])
-        v1 = min(ex, np.sqrt(entry[k] * entry[k] + 2.0 * acc[k] * L[k]), vnom[k])
-        vc, a = vnom[k], acc[k]
+        e0, vc, a, Lk = w[k, W_E], w[k, W_V], w[k, W_A], w[k, W_L]
+        ex = w[k + 1, W_E] if k + 1 < n else last
+        v0 = min(e0, vc)
+        v1 = min(ex, np.sqrt(e0 * e0 + 2.0 * a * Lk), vc)
         d_acc = (vc * vc - v0 * v0) / (2.0 * a)
         d_dec = (vc * vc - v1 * v1) / (2.0 * a)
-        if d_acc + d_dec <= L[k]:
-            t += (vc - v0) / a + (vc - v1) / a + (L[k] - d_acc - d_dec) / vc
+        if d_acc + d_dec <= Lk:
+            t += (vc - v0) / a + (vc - v1) / a + (Lk - d_acc - d_dec) / vc
         else:
-            vp = max(np.sqrt(a * L[k] + 0.5 * (v0 * v0 + v1 * v1)), v0, v1)
+            vp = max(np.sqrt(a * Lk + 0.5 * (v0 * v0 + v1 * v1)), v0, v1)
             t += (vp - v0) / a + (vp - v1) / a
     return t
+
+
+#: ``_plan_moves_s``'s work array: columns per move (a rebuilt travel has at most 5 moves)
+W_L, W_F, W_U, W_V, W_A, W_SAFE, W_J, W_E, W_READY, W_JREADY, W_COLS = (
+    4, 5, 6, 10, 11, 12, 13, 14, 15, 16, 17)
+REBUILT_MAX_MOVES = 5
+
+
+def work_array(n: int = REBUILT_MAX_MOVES) -> np.ndarray:
+    """A work array for ``_plan_moves_s`` (and ``_rebuilt_s``) of ``n`` moves."""
+    return np.zeros((n, W_COLS))
 
 
 @numba.njit(cache=True)
@@ -349,17 +372,15 @@ def _gaps_planned(a, b, motion, d_all, L_all, F_all, code, row):
             n += motion[s]
         if n == 0:
             continue
-        d = np.zeros((n, 4))
-        L = np.zeros(n)
-        F = np.zeros(n)
+        w = np.zeros((n, W_COLS))
         k = 0
         for s in range(a[i], b[i]):
             if motion[s]:
                 for ax in range(4):
-                    d[k, ax] = d_all[s, ax]
-                L[k], F[k] = L_all[s], F_all[s]
+                    w[k, ax] = d_all[s, ax]
+                w[k, W_L], w[k, W_F] = L_all[s], F_all[s]
                 k += 1
-        out[i] = _plan_moves_s(d, L, F, n, code, row)
+        out[i] = _plan_moves_s(w, n, code, row)
     return out
 
 
@@ -553,10 +574,10 @@ class _GroupLinks:
 
 @numba.njit(cache=True, inline="always")
 def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, own_net, own_r,
-              own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt):
+              own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt, w):
     """One link's cost (ms) as emitted, mirroring ``gaps.rebuilt_gap`` and ``travel.TravelRule``,
     except the combing exemption: returns (cost, whether the exemption applies if the travel
-    crosses no wall, the cost then). ``rule``: TravelRule.vector()."""
+    crosses no wall, the cost then). ``rule``: TravelRule.vector(); ``w``: ``work_array()``."""
     if p >= 0 and p == c - 1 and not p_changed and not c_changed:
         return copy_ms[c], False, 0.0                   # the slicer's own gap, copied
     retract_mm, min_travel, fw_style, comb_cap = rule[0], rule[1], rule[2] > 0.5, rule[3]
@@ -590,9 +611,9 @@ def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, o
         retract = moving and (fw_bnd or (fw_style and dist >= min_travel))
     else:
         retract = moving and r > 0.0 and (r_b > 0.0 or (retract_mm > 0.0 and dist >= min_travel))
-    t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style) * 1000.0
+    t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w) * 1000.0
     if retract and comb_cap > 0.0 and dist <= comb_cap and dz <= MOVE_EPS_MM:
-        return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style) * 1000.0
+        return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style, w) * 1000.0
     return t, False, 0.0
 
 
@@ -601,11 +622,48 @@ def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_f
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
            rule, style, mt, out, need, no_retract):
     """``_link_one`` per link; the wall test is the caller's (``need``, ``no_retract``)."""
+    w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
     for i in range(len(nxt)):
         out[i], need[i], no_retract[i] = _link_one(
             prev[i], prev_changed[i], nxt[i], nxt_changed[i], from_xy[i, 0], from_xy[i, 1],
             to_xy[i, 0], to_xy[i, 1], z0[i], z1[i], group_first, own_net, own_r, own_fw_net,
-            own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt)
+            own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt, w)
+
+
+@numba.njit(cache=True)
+def _e_row(w, k, e_mm, feed, code, row):
+    """Work row k: an extruder-only move of ``e_mm`` (signed) at ``feed``, prepared."""
+    w[k, :] = 0.0
+    w[k, 3], w[k, W_L], w[k, W_F] = e_mm, abs(e_mm), feed
+    _prep_move(w, k, code, row)
+
+
+@numba.njit(cache=True)
+def _same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v, has_u, w, code, row, v_xy):
+    """``_rebuilt_s`` for a link at one height inside a group (``_dense``), from prepared rows:
+    ``pre`` the retraction, lift and lowering (the lift's junction from the retraction made),
+    ``u_rows[0 / 1, v]`` the unretraction into candidate v retracting / dry (with, retracting,
+    its junction from the lowering); per link only the travel and its two junctions are made."""
+    n = 0
+    if retract and with_e:
+        w[n, :] = pre[0]
+        n += 1
+    if retract and hop_on:
+        w[n, :] = pre[1]
+        n += 1
+    if dist > MOVE_EPS_MM:
+        w[n, :] = 0.0
+        w[n, 0], w[n, 1], w[n, W_L], w[n, W_F] = dx, dy, dist, v_xy
+        n += 1
+    if retract and hop_on:
+        w[n, :] = pre[2]
+        n += 1
+    if has_u:
+        w[n, :] = u_rows[0 if retract else 1, v]
+        if not (retract and hop_on):
+            w[n, W_JREADY] = 0.0
+        n += 1
+    return _plan_moves_s(w, n, code, row)
 
 
 @numba.njit(cache=True)
@@ -619,6 +677,7 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
     per pair of points (a travel and its reverse cross the same walls), memoized."""
     m = len(gc)
     out = np.empty((m, m))
+    w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
     memo = np.full((n_points, n_points), -1, np.int8)
     stamp = np.full(max(len(a), 1), -1, np.int64)
     tag = 0
@@ -642,6 +701,34 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                                                + _trapezoid(abs(net + retract_mm), min(v_u, mt[5]), mt[4], mt[6]))
     t_hop = 2.0 * _trapezoid(hop, min(v_z, mt[8]), mt[7], mt[9]) if hop > 0.0 else 0.0
     v_xy_cap = min(v_xy, mt[1])
+    # planned: the moves that do not depend on the link, prepared once (``_same_z_s``)
+    code = int(mt[MT_CODE])
+    lim_row = mt[MT_ROW:]
+    hop_on = hop > MOVE_EPS_MM
+    pre = np.zeros((3, W_COLS))
+    u_rows = np.zeros((2, m, W_COLS))
+    has_u = np.zeros((2, m), np.bool_)
+    if planned:
+        if retract_mm > MOVE_EPS_MM:
+            _e_row(pre, 0, -retract_mm, v_r, code, lim_row)
+        for k, dz_k in ((1, hop), (2, -hop)):
+            pre[k, 2], pre[k, W_L], pre[k, W_F] = dz_k, abs(dz_k), v_z
+            if hop_on:
+                _prep_move(pre, k, code, lim_row)
+        if hop_on and retract_mm > MOVE_EPS_MM:
+            pre[1, W_J] = _junction(pre, 1, code, lim_row)
+            pre[1, W_JREADY] = 1.0
+        for v in range(m):
+            wet = net_v[v] if use_fw[v] else net_v[v] + retract_mm
+            for j, e in ((0, wet), (1, net_v[v])):
+                has_u[j, v] = abs(e) > MOVE_EPS_MM
+                if has_u[j, v]:
+                    _e_row(u_rows[j], v, e, v_u, code, lim_row)
+            if hop_on and has_u[0, v]:
+                w[0, :] = pre[2]
+                w[1, :] = u_rows[0, v]
+                u_rows[0, v, W_J] = _junction(w, 1, code, lim_row)
+                u_rows[0, v, W_JREADY] = 1.0
     for u in range(m):
         for v in range(m):
             if local[u] == local[v]:
@@ -655,7 +742,7 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                 t, need, dry = _link_one(p, changed[u], c, changed[v], ext[u, 0], ext[u, 1],
                                          ent[v, 0], ent[v, 1], z_ext[u], z_ent[v], group_first,
                                          own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r,
-                                         bnd_fw_net, bnd_fw, copy_ms, rule, style, mt)
+                                         bnd_fw_net, bnd_fw, copy_ms, rule, style, mt, w)
             else:
                 dx = ent[v, 0] - ext[u, 0]
                 dy = ent[v, 1] - ext[u, 1]
@@ -667,11 +754,10 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                     retract = moving and retract_mm > 0.0 and dist >= min_travel
                 need = retract and comb_cap > 0.0 and dist <= comb_cap
                 if planned:
-                    z = z_ent[v]
-                    t = _rebuilt_s(dx, dy, z, z, retract, use_fw[v], retract_mm, net_v[v], mt,
-                                   style) * 1000.0
-                    dry = t if not need else _rebuilt_s(dx, dy, z, z, False, use_fw[v],
-                                                        retract_mm, net_v[v], mt, style) * 1000.0
+                    with_e = not use_fw[v] and retract_mm > MOVE_EPS_MM
+                    t = _same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v,
+                                  has_u[0 if retract else 1, v], w, code, lim_row, v_xy) * 1000.0
+                    dry = -1.0          # made below where the link goes dry (no wall crossed)
                 else:
                     t_xy = _trapezoid(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
                     dry = (t_xy + e_dry[v]) * 1000.0
@@ -688,5 +774,9 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                     t = dry
             elif need:
                 t = dry
+            if t < 0.0:
+                t = _same_z_s(dx, dy, dist, False, not use_fw[v] and retract_mm > MOVE_EPS_MM,
+                              hop_on, pre, u_rows, v, has_u[1, v], w, code, lim_row,
+                              v_xy) * 1000.0
             out[u, v] = t
     return out
