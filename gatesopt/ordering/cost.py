@@ -32,12 +32,12 @@ import numpy as np
 from .. import _planner_kernel as pk
 from ..limits import MachineLimits
 from ..program import MOTION_KINDS, Program
+from .gap_plan import (MOVE_EPS_MM, REBUILT_MAX_MOVES, W_COLS, W_F, W_J, W_JREADY, W_L,
+                       e_row, gaps_planned, junction, plan_moves_s, prep_move, same_z_s)
 from .layout import LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, Layout
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
 
-#: below this a length is no move (the writer skips axes that change by less than 1e-9 mm)
-MOVE_EPS_MM = 1e-9
 MS_PER_S = 1000.0
 #: the speed a Marlin 2 (junction deviation) move starts from rest at: MINIMUM_PLANNER_SPEED
 #: (Marlin planner.h; ``planner.py`` uses the same)
@@ -67,7 +67,7 @@ class MoveTimes:
     z_junction_mm_s: float = 0.0
     #: the planner's junction rule (``_planner_kernel.JUNCTION_CODE``) and the limits in force
     #: (``limits.KEYS`` order): a rebuilt travel's moves are then planned together, as the
-    #: planner plans them (``_plan_moves_s``); -1: each move alone, from and to its junction speed
+    #: planner plans them (``plan_moves_s``); -1: each move alone, from and to its junction speed
     junction_code: int = -1
     limits_row: tuple = ()
 
@@ -140,7 +140,7 @@ class MoveTimes:
     def gaps_s(self, program: Program, a, b) -> np.ndarray:
         """Time (s) of each gap ``steps a[i]:b[i]`` of ``program`` (its motion steps: travel,
         retraction, z-hop, wipe): with the file's limits planned together as the planner plans
-        them (``_plan_moves_s``, from and to rest: the curves around a gap are not part of it),
+        them (``plan_moves_s``, from and to rest: the curves around a gap are not part of it),
         the way a rebuilt travel is priced; else each move alone (``steps_s``)."""
         a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
         if self.junction_code < 0:
@@ -152,7 +152,7 @@ class MoveTimes:
         motion = (np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype))
                   & (program.length_mm > MOVE_EPS_MM))
         d = np.ascontiguousarray(program.end_mm - program.start_mm)
-        return _gaps_planned(a, b, motion, d, np.ascontiguousarray(program.length_mm, float),
+        return gaps_planned(a, b, motion, d, np.ascontiguousarray(program.length_mm, float),
                              np.ascontiguousarray(program.feed_mm_s, float), self.junction_code,
                              np.asarray(self.limits_row, float))
 
@@ -200,8 +200,6 @@ def _trapezoid(L, v, a, vj):
 
 #: where ``MoveTimes.vector()`` holds the junction code and the limits row
 MT_CODE, MT_ROW = 10, 11
-#: sin(theta/2) / (1 - sin(theta/2)) of junction deviation at a right angle (``junction_speed``)
-R_JD_RIGHT_ANGLE = float(np.sqrt(0.5) / (1.0 - np.sqrt(0.5)))
 
 
 @numba.njit(cache=True)
@@ -211,7 +209,7 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
     unretraction that brings the consumed gaps to their net E (or that net E alone). ``mt``:
     MoveTimes.vector(); ``style``: (retract feed, unretract feed, travel feed, z feed, hop).
     With the file's limits (``mt[MT_CODE] >= 0``) the moves are planned together, as the planner
-    plans them (``_plan_moves_s``, in the work array ``w``: ``work_array()``); else each alone
+    plans them (``plan_moves_s``, in the work array ``w``: ``work_array()``); else each alone
     from and to its kind's junction speed."""
     v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
     dist = np.sqrt(dx * dx + dy * dy)
@@ -239,7 +237,7 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
         if e_u > MOVE_EPS_MM:
             w[n, 3], w[n, W_L], w[n, W_F] = e_u_sign * e_u, e_u, v_u
             n += 1
-        return _plan_moves_s(w, n, int(mt[MT_CODE]), mt[MT_ROW:])
+        return plan_moves_s(w, n, int(mt[MT_CODE]), mt[MT_ROW:])
     t = 0.0
     if e_r > MOVE_EPS_MM:
         t += _trapezoid(e_r, min(v_r, mt[5]), mt[4], mt[6])
@@ -252,136 +250,6 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
     if abs(z_up - z1) > MOVE_EPS_MM:
         t += _trapezoid(abs(z_up - z1), min(v_z, mt[8]), mt[7], mt[9])
     return t
-
-
-@numba.njit(cache=True)
-def _prep_move(w, k, code, row):
-    """Row k of the work array: unit vector, nominal speed and acceleration by the move's kind
-    and the per-axis caps (``_planner_kernel.prepare_moves``), safe speed; marked ready."""
-    Lk = w[k, W_L]
-    for ax in range(4):
-        w[k, W_U + ax] = w[k, ax] / Lk
-    has_e = w[k, 3] != 0.0
-    e_only = w[k, 0] == 0.0 and w[k, 1] == 0.0 and w[k, 2] == 0.0
-    f = w[k, W_F]
-    fmin = row[pk.C_MIN_FEED] if has_e else row[pk.C_MIN_TRAVEL_FEED]
-    if f < fmin:
-        f = fmin
-    for ax in range(4):
-        ua = abs(w[k, W_U + ax])
-        if ua > 0.0 and f * ua > row[pk.C_MAX_FEED + ax]:
-            f = row[pk.C_MAX_FEED + ax] / ua
-    if f > row[pk.C_MAX_VELOCITY]:
-        f = row[pk.C_MAX_VELOCITY]
-    mst = row[pk.C_MIN_SEGMENT_TIME]
-    if mst > 0.0 and f * mst > Lk:
-        f = Lk / mst
-    if e_only:
-        a = row[pk.C_ACCEL_RETRACT]
-    elif has_e:
-        a = row[pk.C_ACCEL_PRINT]
-    else:
-        a = row[pk.C_ACCEL_TRAVEL]
-    for ax in range(4):
-        ua = abs(w[k, W_U + ax])
-        if ua > 0.0 and a * ua > row[pk.C_MAX_ACCEL + ax]:
-            a = row[pk.C_MAX_ACCEL + ax] / ua
-    w[k, W_V], w[k, W_A] = f, a
-    w[k, W_SAFE] = pk.safe_speed(code, w[k, W_U:W_U + 4], f, row)
-    w[k, W_READY] = 1.0
-
-
-@numba.njit(cache=True)
-def _junction(w, k, code, row):
-    """The planner's junction speed from work row k - 1 into row k (both ready)."""
-    return pk.junction_speed(code, w[k - 1, W_U:W_U + 4], w[k, W_U:W_U + 4], w[k - 1, W_V],
-                             w[k, W_V], w[k - 1, W_A], w[k, W_A], w[k - 1, W_L], w[k, W_L],
-                             w[k - 1, W_SAFE], w[k, W_SAFE], row)
-
-
-@numba.njit(cache=True)
-def _plan_moves_s(w, n, code, row):
-    """Time (s) of moves 0..n-1 planned as ``planner.plan`` plans them: each move's nominal speed
-    and acceleration by its kind and the per-axis caps (``_prep_move``), the junction speeds
-    between them by the firmware's rule (``junction_speed``), look-ahead passes, trapezoids.
-    ``w`` (``work_array``): per move its displacement X Y Z E (columns 0-3), length ``W_L`` (XYZ,
-    or |E| for an extruder-only move) and feed ``W_F``; a row marked ``W_READY`` (and a junction
-    marked ``W_JREADY``) was prepared by the caller, the rest is written here."""
-    if n == 0:
-        return 0.0
-    for k in range(n):
-        if w[k, W_READY] == 0.0:
-            _prep_move(w, k, code, row)
-    for k in range(1, n):
-        if w[k, W_JREADY] == 0.0:
-            w[k, W_J] = _junction(w, k, code, row)
-    # the junctions with the curves around: at the first and last move's safe speed, except under
-    # junction deviation, where a junction with an extruder-only move is a right angle whatever
-    # the curve's direction (Marlin: its unit vector is along E), v^2 = a JD sin(45)/(1 - sin(45)),
-    # a the entered move's acceleration (the print acceleration for the curve after); a dry
-    # travel's first or last move is taken at that angle too
-    last = w[n - 1, W_SAFE]
-    w[0, W_J] = w[0, W_SAFE]
-    if code == pk.DEVIATION and row[pk.C_JD] > 0.0:
-        w[0, W_J] = max(w[0, W_J], min(np.sqrt(w[0, W_A] * row[pk.C_JD] * R_JD_RIGHT_ANGLE),
-                                       w[0, W_V]))
-        last = max(last, min(np.sqrt(row[pk.C_ACCEL_PRINT] * row[pk.C_JD] * R_JD_RIGHT_ANGLE),
-                             w[n - 1, W_V]))
-    nxt = last
-    for k in range(n - 1, -1, -1):          # backward: each entry can brake to the next
-        v = np.sqrt(nxt * nxt + 2.0 * w[k, W_A] * w[k, W_L])
-        w[k, W_E] = min(w[k, W_J], v)
-        nxt = w[k, W_E]
-    for k in range(1, n):                   # forward: each entry reachable from the one before
-        v = np.sqrt(w[k - 1, W_E] * w[k - 1, W_E] + 2.0 * w[k - 1, W_A] * w[k - 1, W_L])
-        w[k, W_E] = min(w[k, W_E], v)
-    t = 0.0
-    for k in range(n):
-        e0, vc, a, Lk = w[k, W_E], w[k, W_V], w[k, W_A], w[k, W_L]
-        ex = w[k + 1, W_E] if k + 1 < n else last
-        v0 = min(e0, vc)
-        v1 = min(ex, np.sqrt(e0 * e0 + 2.0 * a * Lk), vc)
-        d_acc = (vc * vc - v0 * v0) / (2.0 * a)
-        d_dec = (vc * vc - v1 * v1) / (2.0 * a)
-        if d_acc + d_dec <= Lk:
-            t += (vc - v0) / a + (vc - v1) / a + (Lk - d_acc - d_dec) / vc
-        else:
-            vp = max(np.sqrt(a * Lk + 0.5 * (v0 * v0 + v1 * v1)), v0, v1)
-            t += (vp - v0) / a + (vp - v1) / a
-    return t
-
-
-#: ``_plan_moves_s``'s work array: columns per move (a rebuilt travel has at most 5 moves)
-W_L, W_F, W_U, W_V, W_A, W_SAFE, W_J, W_E, W_READY, W_JREADY, W_COLS = (
-    4, 5, 6, 10, 11, 12, 13, 14, 15, 16, 17)
-REBUILT_MAX_MOVES = 5
-
-
-def work_array(n: int = REBUILT_MAX_MOVES) -> np.ndarray:
-    """A work array for ``_plan_moves_s`` (and ``_rebuilt_s``) of ``n`` moves."""
-    return np.zeros((n, W_COLS))
-
-
-@numba.njit(cache=True)
-def _gaps_planned(a, b, motion, d_all, L_all, F_all, code, row):
-    """``MoveTimes.gaps_s`` with the limits: per gap its motion steps planned together."""
-    out = np.zeros(len(a))
-    for i in range(len(a)):
-        n = 0
-        for s in range(a[i], b[i]):
-            n += motion[s]
-        if n == 0:
-            continue
-        w = np.zeros((n, W_COLS))
-        k = 0
-        for s in range(a[i], b[i]):
-            if motion[s]:
-                for ax in range(4):
-                    w[k, ax] = d_all[s, ax]
-                w[k, W_L], w[k, W_F] = L_all[s], F_all[s]
-                k += 1
-        out[i] = _plan_moves_s(w, n, code, row)
-    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -631,42 +499,6 @@ def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_f
 
 
 @numba.njit(cache=True)
-def _e_row(w, k, e_mm, feed, code, row):
-    """Work row k: an extruder-only move of ``e_mm`` (signed) at ``feed``, prepared."""
-    w[k, :] = 0.0
-    w[k, 3], w[k, W_L], w[k, W_F] = e_mm, abs(e_mm), feed
-    _prep_move(w, k, code, row)
-
-
-@numba.njit(cache=True)
-def _same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v, has_u, w, code, row, v_xy):
-    """``_rebuilt_s`` for a link at one height inside a group (``_dense``), from prepared rows:
-    ``pre`` the retraction, lift and lowering (the lift's junction from the retraction made),
-    ``u_rows[0 / 1, v]`` the unretraction into candidate v retracting / dry (with, retracting,
-    its junction from the lowering); per link only the travel and its two junctions are made."""
-    n = 0
-    if retract and with_e:
-        w[n, :] = pre[0]
-        n += 1
-    if retract and hop_on:
-        w[n, :] = pre[1]
-        n += 1
-    if dist > MOVE_EPS_MM:
-        w[n, :] = 0.0
-        w[n, 0], w[n, 1], w[n, W_L], w[n, W_F] = dx, dy, dist, v_xy
-        n += 1
-    if retract and hop_on:
-        w[n, :] = pre[2]
-        n += 1
-    if has_u:
-        w[n, :] = u_rows[0 if retract else 1, v]
-        if not (retract and hop_on):
-            w[n, W_JREADY] = 0.0
-        n += 1
-    return _plan_moves_s(w, n, code, row)
-
-
-@numba.njit(cache=True)
 def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
            rule, style, mt, has_walls, trim, a, b, x0, y0, h, nx, ny, start, items):
@@ -701,7 +533,7 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                                                + _trapezoid(abs(net + retract_mm), min(v_u, mt[5]), mt[4], mt[6]))
     t_hop = 2.0 * _trapezoid(hop, min(v_z, mt[8]), mt[7], mt[9]) if hop > 0.0 else 0.0
     v_xy_cap = min(v_xy, mt[1])
-    # planned: the moves that do not depend on the link, prepared once (``_same_z_s``)
+    # planned: the moves that do not depend on the link, prepared once (``same_z_s``)
     code = int(mt[MT_CODE])
     lim_row = mt[MT_ROW:]
     hop_on = hop > MOVE_EPS_MM
@@ -710,24 +542,24 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
     has_u = np.zeros((2, m), np.bool_)
     if planned:
         if retract_mm > MOVE_EPS_MM:
-            _e_row(pre, 0, -retract_mm, v_r, code, lim_row)
+            e_row(pre, 0, -retract_mm, v_r, code, lim_row)
         for k, dz_k in ((1, hop), (2, -hop)):
             pre[k, 2], pre[k, W_L], pre[k, W_F] = dz_k, abs(dz_k), v_z
             if hop_on:
-                _prep_move(pre, k, code, lim_row)
+                prep_move(pre, k, code, lim_row)
         if hop_on and retract_mm > MOVE_EPS_MM:
-            pre[1, W_J] = _junction(pre, 1, code, lim_row)
+            pre[1, W_J] = junction(pre, 1, code, lim_row)
             pre[1, W_JREADY] = 1.0
         for v in range(m):
             wet = net_v[v] if use_fw[v] else net_v[v] + retract_mm
             for j, e in ((0, wet), (1, net_v[v])):
                 has_u[j, v] = abs(e) > MOVE_EPS_MM
                 if has_u[j, v]:
-                    _e_row(u_rows[j], v, e, v_u, code, lim_row)
+                    e_row(u_rows[j], v, e, v_u, code, lim_row)
             if hop_on and has_u[0, v]:
                 w[0, :] = pre[2]
                 w[1, :] = u_rows[0, v]
-                u_rows[0, v, W_J] = _junction(w, 1, code, lim_row)
+                u_rows[0, v, W_J] = junction(w, 1, code, lim_row)
                 u_rows[0, v, W_JREADY] = 1.0
     for u in range(m):
         for v in range(m):
@@ -755,7 +587,7 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                 need = retract and comb_cap > 0.0 and dist <= comb_cap
                 if planned:
                     with_e = not use_fw[v] and retract_mm > MOVE_EPS_MM
-                    t = _same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v,
+                    t = same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v,
                                   has_u[0 if retract else 1, v], w, code, lim_row, v_xy) * 1000.0
                     dry = -1.0          # made below where the link goes dry (no wall crossed)
                 else:
@@ -775,7 +607,7 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
             elif need:
                 t = dry
             if t < 0.0:
-                t = _same_z_s(dx, dy, dist, False, not use_fw[v] and retract_mm > MOVE_EPS_MM,
+                t = same_z_s(dx, dy, dist, False, not use_fw[v] and retract_mm > MOVE_EPS_MM,
                               hop_on, pre, u_rows, v, has_u[1, v], w, code, lim_row,
                               v_xy) * 1000.0
             out[u, v] = t
