@@ -45,6 +45,21 @@ class OrderResult:
         return not self.findings
 
 
+def out_of_time_groups(problem: OrderingProblem, solution: OrderingSolution) -> int:
+    """Re-orderable groups the budget left no time for (``runner.OUT_OF_TIME``: the slicer's
+    order, unsearched)."""
+    reorderable = problem.group_reorderable
+    return sum(bool(reorderable[g]) and gs.formulation.startswith(OUT_OF_TIME)
+               for g, gs in enumerate(solution.groups))
+
+
+def out_of_time_note(n_groups: int, n_decided: int, solve_budget_s) -> str:
+    """The report's line for groups the budget left no time for (``out_of_time_groups``)."""
+    of = f" of the {solve_budget_s:.2f} s the budget left the solve" if solve_budget_s else ""
+    return (f"curve ordering ran out of time{of}: {n_groups:,} of {n_decided:,} re-orderable groups "
+            f"keep the slicer's order unsearched (status fallback; a larger --budget searches them)")
+
+
 def kept_slower_note(n_layers: int) -> str:
     """The report's line for layers the time guard put back (``emit_guarded``)."""
     return (f"{n_layers} layers keep the slicer's order: re-ordered they took longer under the "
