@@ -8,7 +8,6 @@ model travel is there too, as ``model_travel_*_mm``.
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass
 
