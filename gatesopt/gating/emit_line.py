@@ -33,7 +33,7 @@ SPLITTABLE_INT = frozenset(int(k) for k in SPLITTABLE)
 _ARC = int(Kind.ARC)
 
 # a word's value: a number, or an unexpanded slicer placeholder ("Y{machine_depth}"), which the
-# parser drops as the firmware does (``_scan._parse_words``) and ``MotionLine.value`` reads as absent
+# parser drops as the firmware does (``_scan_words.parse_words``) and ``MotionLine.value`` reads as absent
 _WORD = re.compile(r"([A-Za-z])\s*(\{[^}]*\}?|[-+]?(?:\d+\.?\d*|\.\d+)?)")
 
 

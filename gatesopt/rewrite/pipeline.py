@@ -39,7 +39,7 @@ from ..ordering.problem import OrderingOptions
 from ..parse import parse
 from ..program import Program
 from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
-from ..verify import VerifyReport, check_ordering, check_positions, energy_of, verify
+from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
 from .budget import no_time_note, ordering_budget_s, slowdown_factor
 from .figures import figures
 from .order import (NoTimeToOrder, kept_slower_note, order_summary, out_of_time_groups,
@@ -371,11 +371,17 @@ def _verify_run(program: Program, ordered_base: Program, out: Program, o: Gating
     if ordered and sol is not None:
         # the ordering's own checks, on the re-ordered print before gating split any move
         extra = tuple(check_ordering(program, ordered_base))
+        # the report has ``verify``'s extrusion and commands findings on the output itself: the
+        # same faults seen on the re-ordered print are not added twice (the ordering's summary
+        # below counts them all)
+        own = tuple(f for f in extra if f.check not in SHARED_CHECKS)
         # and the positions check ``verify`` skips for a re-ordering, on what gating rewrote: the
         # re-ordered print against the output (rotation and gating keep its moves in order)
         pos = check_positions(ordered_base, out)
-        if extra or pos:
-            rep = dataclasses.replace(rep, ok=False, findings=rep.findings + extra + tuple(pos))
+        if own or pos:
+            rep = dataclasses.replace(rep, ok=False, findings=rep.findings + own + tuple(pos))
+        elif extra:
+            rep = dataclasses.replace(rep, ok=False)
         rep = dataclasses.replace(rep, checks=rep.checks + ("ordering", "positions"))
     return rep, extra
 
