@@ -30,6 +30,7 @@ import numpy as np
 
 from . import firmware
 from .errors import GatesoptError
+from .headers import PREFIX as GATESOPT_PREFIX
 from .program import MOTION_KINDS, Program
 
 # The flat parameter vector: one name per scalar limit. ``MachineLimits`` exposes them as typed
@@ -261,6 +262,12 @@ def _flavor(data: bytes) -> str:
 def _printer_profile(data: bytes, firmware: str) -> tuple[str, str]:
     """(PRINTER_DEFAULTS key, why) for the values the file does not give."""
     head = data[:20000]
+    while head.startswith(GATESOPT_PREFIX.encode()):
+        # gatesopt's own header lines on a file it rewrote: the slicer's header follows (a
+        # CuraEngine file starts with ";FLAVOR:"; re-ordered, it got Marlin's stock junction
+        # deviation instead of Cura's classic jerk, so its print time before and after were
+        # planned under different rules)
+        head = head.split(b"\n", 1)[1] if b"\n" in head else b""
     if b";Generated with Cura" in head or head.startswith(b";FLAVOR:"):
         m = _CURA_MACHINE_RE.search(head)
         if m is not None:       # the Cura front-end names the machine definition it evaluated

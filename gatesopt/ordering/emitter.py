@@ -46,7 +46,7 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     """G-code text with the curves of ``problem`` in the order of ``solution``.
 
     ``memo``: a dict kept between calls on the same program and problem (the time guard emits
-    again after putting a few layers back, ``pipeline.emit_guarded``). A layer whose curves, in
+    again after putting a few layers back, ``rewrite.guard.emit_guarded``). A layer whose curves, in
     the same order and directions, are entered from the same state (previous curve, position,
     feedrate, state lines, feature, E up to ``MEMO_E_TOL_MM``) gets the text it got before; E
     words differ from a fresh emit by at most that tolerance, where rounding tips a last digit."""
