@@ -91,6 +91,77 @@ def test_the_dialects_margins_and_rule_a_are_the_modules(shaped, mzv30):
     assert o.stall_off_s == o.stall_on_s == 0.0 and not o.on_line
 
 
+def test_the_pin_spacing_default_and_range_are_the_modules(tmp_path):
+    """One number for the least time between two changes of a pin: the module's default and range,
+    the dialect's default, the printer.cfg reader's default and range."""
+    from gatesopt.firmware import klipper_gating
+    from gatesopt.printer_config import GatingSection
+    gg = _load_module()
+    assert gg.DEFAULT_PIN_SPACING_S == klipper_gating.PIN_SPACING_S == GatingSection().min_pin_spacing_s == 0.1
+    assert _options().schedule.min_spacing_s == gg.DEFAULT_PIN_SPACING_S
+    for value, ok in ((gg.MIN_PIN_SPACING_S, True), (gg.MAX_PIN_SPACING_S, True),
+                      (gg.MIN_PIN_SPACING_S * 0.99, False), (gg.MAX_PIN_SPACING_S * 1.01, False)):
+        cfg = tmp_path / "p.cfg"
+        cfg.write_text(MZV30_CFG + f"min_pin_spacing: {value!r}\n")
+        if ok:
+            assert read_printer_config(cfg).gating.min_pin_spacing_s == value
+        else:
+            with pytest.raises(PrinterConfigError, match="min_pin_spacing"):
+                read_printer_config(cfg)
+
+
+def test_min_pin_spacing_in_printer_cfg_sets_rules_a_and_b(tmp_path):
+    """``min_pin_spacing: 0.05`` in [gatesopt_gating]: rule A's floor and rule B's spacing are 0.05 s
+    in the gating problem (a 0.09 s idle stretch becomes an idle interval, two offs 0.06 s apart are
+    both allowed), as the module applies them."""
+    cfg = tmp_path / "p.cfg"
+    cfg.write_text("[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n"
+                   "[gatesopt_gating]\nmin_pin_spacing: 0.05\n")
+    fast = read_printer_config(cfg)
+    o = _options(fast)
+    assert (o.schedule.min_off_s, o.schedule.min_spacing_s) == (0.05, 0.05)
+    s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0)])
+    e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0)])
+    short = lambda opts: from_moves(s, e, np.array([0.05, 0.09, 0.05]), opts).n_idle_intervals
+    assert short(_options(motors=("X",))) == 0 and short(_options(fast, motors=("X",))) == 1
+    # rule B: X idle 0.2 s, steps 0.06 s, idle 0.2 s: both off only with the smaller spacing
+    s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0)])
+    e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0), (4, 10, .2, 0)])
+    d = np.array([0.05, 0.2, 0.06, 0.3, 0.02, 0.05])
+    for opts, both in ((_options(), 1), (o, 2)):
+        sol = solve(from_moves(s, e, d, opts), "dp")
+        assert int(np.sum(sol.off_motor == 0)) == both
+
+
+def test_the_pin_spacing_of_printer_cfg_is_what_solve_and_verify_use(tmp_path):
+    """A file solved for ``min_pin_spacing: 0.025`` gates more than one for the default, the
+    verifier derives exactly the report's off time with that printer.cfg, and without it (the
+    module's default 0.1 s) finds lines the module would skip."""
+    from gatesopt.cli import main
+    import json
+    src, cfg = tmp_path / "in.gcode", tmp_path / "printer.cfg"
+    src.write_text(GCODE)
+    base = "[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n[gatesopt_gating]\n"
+    off = {}
+    for name, extra in (("default", ""), ("fast", "min_pin_spacing: 0.025\n")):
+        cfg.write_text(base + extra)
+        out, rep = tmp_path / f"{name}.gcode", tmp_path / f"{name}.json"
+        assert main(["solve", str(src), "-o", str(out), "--firmware", "klipper-gating", "--printer-config",
+                     str(cfg), "--no-order", "--rotate", "none", "--json", str(rep)]) == 0
+        report = json.loads(rep.read_text())
+        lines = scheduled_lines(parse(out.read_text().encode()), firmware="klipper-gating",
+                                start_ahead_s=0.0018, end_late_s=0.001, printer=read_printer_config(cfg),
+                                original=parse(GCODE.encode()))
+        assert lines and all(s.gated for s in lines)
+        off[name] = sum(report["off_time_s"].values())
+        assert sum(s.on_s - s.off_s for s in lines) == pytest.approx(off[name], abs=1e-9)
+        assert main(["verify", str(src), str(out), "--claimed", str(rep), "--printer-config", str(cfg)]) == 0
+    assert off["fast"] > off["default"]
+    rep = verify(parse(GCODE.encode()), parse((tmp_path / "fast.gcode").read_text().encode()),
+                 firmware="klipper-gating")
+    assert not rep.ok and any("skips this line" in str(f) for f in rep.findings)
+
+
 # ------------------------------------------------------------------------------------------------
 # brute force == dp == milp == cpsat under rules A and B
 def _random_moves(rng, n):
