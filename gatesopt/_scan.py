@@ -420,6 +420,7 @@ FLAG_REPEATED = 16
 FLAG_HEX = 32
 
 STATE_SIZE = 21   # pos[4], G92 offset[4], enable[4], G91, M83, G20, feed, fan, hotend, bed, reached x2
+STATE_RELATIVE_E = 13   # the M83 slot of the state above
 
 
 def initial_state(ambient_c: float, default_feed_mm_s: float) -> np.ndarray:
