@@ -484,3 +484,65 @@ def test_the_verifier_reads_repeated_and_early_lines_as_the_module_does():
     got = [(s.motor, s.gated, s.reason) for s in
            scheduled_lines(out, firmware="klipper-gating", start_ahead_s=1.8e-3, end_late_s=1e-3, original=prog)]
     assert got == [(1, False, "motor_off"), (0, True, ""), (0, False, "repeated")]
+
+
+# ------------------------------------------------------------------------------------------------
+# the rotation adds no planned time beyond issue 34's 0.05 %
+def test_auto_rotation_that_lengthens_the_planned_print_is_refused():
+    """A 45 deg turn that saves energy but lengthens the travel out of the print (to an absolute
+    park point the rotation does not move) by far more than 0.05 % of the planned print: --rotate
+    auto keeps 0 deg for klipper-gating and says why; without the limit it turns the print."""
+    import gatesopt
+    from gatesopt.firmware import klipper_gating
+    from test_rotation_policy import diagonal_part
+    text = diagonal_part().replace("G1 X0 Y200 F6000", "G1 X70 Y70 F6000\nG1 X0 Y200 F6000")
+    prog = gatesopt.parse(text)
+    o = GatingOptions.for_firmware("klipper-gating", bed_size_mm=(235, 235))
+    assert o.max_rotation_added_time_pct == klipper_gating.MAX_ROTATION_ADDED_TIME_PCT == 0.05
+    res = run(prog, o, order=False)
+    s = res.summary()
+    assert res.report.ok and s["rotation_deg"] == 0.0
+    assert s["rotation_line"].startswith("none: 45 deg, the best of ")
+    assert "to the planned print, more than the 0.05 % allowed (--rotate 45 to take it)" in s["rotation_line"]
+    free = run(prog, o.replace(max_rotation_added_time_pct=None), order=False)
+    assert free.report.ok and free.summary()["rotation_deg"] == 45.0
+    assert res.report.energy_j > free.report.energy_j      # the refusal costs energy, not time
+
+
+def _arc_turns(text: str) -> list[float]:
+    """Klipper's turn of every G2/G3 with I/J in ``text`` (absolute XY, no offsets)."""
+    from gatesopt.gating.emit_line import klipper_arc_turn
+    cur, out = [0.0, 0.0], []
+    for line in text.splitlines():
+        w = line.split(";")[0].split()
+        if not w or w[0] not in ("G0", "G1", "G2", "G3"):
+            continue
+        d = {x[0]: x[1:] for x in w[1:]}
+        tgt = [float(d["X"]) if "X" in d else cur[0], float(d["Y"]) if "Y" in d else cur[1]]
+        if w[0] in ("G2", "G3") and "I" in d:
+            out.append(klipper_arc_turn(cur, tgt, (float(d["I"]), float(d["J"])), w[0] == "G2"))
+        cur = tgt
+    return out
+
+
+def test_a_rotated_spiral_lift_turns_in_klipper_as_the_original():
+    """Orca's spiral lift ``G3 Z.. I.. J.. P1`` (target = start): Klipper's planArc makes it a full
+    circle only if its float sums give exactly 0, a null arc for a hair more. Turned 45 deg and
+    rounded, such arcs flipped (+4.6 s on real_orca230_arcs in Klipper); the rotated I/J keep every
+    one as Klipper turned the original."""
+    rng = np.random.default_rng(7)
+    out = ["G21", "G90", "M83", "G28", "G1 Z0.2 F600"]
+    for k in range(80):
+        x, y = (float(v) for v in np.round(rng.uniform(60, 140, 2), 3))
+        out += [f";LAYER:{k}", f"G1 X{x:.3f} Y{y:.3f} F6000", f"G1 X{x + 20:.3f} Y{y:.3f} E1 F1800",
+                f"G3 Z{0.4 + 0.2 * k:.1f} I{rng.uniform(-1.2, 1.2):.3f} J{rng.choice([-1, 1]) * 1.1:.3f} P1 F30000",
+                f"G1 Z{0.2 + 0.2 * k:.1f}", f"G1 X{x + 20:.3f} Y{y + 20:.3f} E1 F1800"]
+    out += ["G1 X0 Y200 F6000"]
+    prog = parse("\n".join(out).encode() + b"\n", source="lift.gcode")
+    o = GatingOptions.for_firmware("klipper-gating", bed_size_mm=(235, 235), rotate=45.0)
+    res = run(prog, o, order=False)
+    assert res.report.ok, res.report.findings
+    before, after = _arc_turns("\n".join(out)), _arc_turns(res.text)
+    assert len(before) == len(after) == 80
+    assert sum(abs(a) > math.pi for a in before) not in (0, 80)       # both kinds among the originals
+    assert all(abs(a - b) < math.pi for a, b in zip(before, after))

@@ -48,6 +48,10 @@ CLOCK_SLACK_S = 1e-6          # pin and step times are MCU clocks: rounding
 STEP_EARLY_S = 25e-6          # stepcompress may send a step this much early (MAX_STEPCOMPRESS_ERROR)
 PIN_SPACING_S = 0.100         # the module's DEFAULT_PIN_SPACING_S: between two changes of one pin
 MAX_OFF_DELAY_S = 0.050       # the module skips an interval whose off would come later than this
+#: issue 34: the module adds no time (no flush, no dwell, no split move), so what a rotation adds to
+#: the planned print is all klipper-gating adds; --rotate auto keeps 0 deg where the planner says a
+#: rotation adds more than this (a travel into or out of the turned print, priced by the planner)
+MAX_ROTATION_ADDED_TIME_PCT = 0.05
 GATEABLE = ("X", "Y", "Z")    # kinematic steppers of a cartesian printer
 AXIS_OF = {"X": "x", "Y": "y", "Z": "z"}   # which shaped axis each stepper is active on (cartesian)
 
@@ -115,4 +119,4 @@ DIALECT = KlipperGating(
     motor_commands=(GATESOPT_GATE,), no_drain_words=frozenset({"GATESOPT_GATE"}),
     word_stalls=(("SET_STEPPER_ENABLE", KLIPPER_STALL_S, KLIPPER_STALL_S),
                  ("M18", KLIPPER_STALL_S, KLIPPER_STALL_S), ("M84", KLIPPER_STALL_S, KLIPPER_STALL_S)),
-    time_model="planner", planner=PLANNER)
+    time_model="planner", planner=PLANNER, rotation_max_added_time_pct=MAX_ROTATION_ADDED_TIME_PCT)
