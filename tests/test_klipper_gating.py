@@ -342,8 +342,12 @@ def test_printer_config_reads_includes_and_save_config(tmp_path):
 
 def test_a_corexy_printer_is_refused(tmp_path):
     (tmp_path / "p.cfg").write_text("[printer]\nkinematics: corexy\n")
-    with pytest.raises(fwmod.FirmwareError, match="cartesian"):
+    with pytest.raises(fwmod.FirmwareError, match=r"cartesian printers only: both stepper_x \(A\) and "
+                       r"stepper_y \(B\) step for every X or Y move.*per axis \(X, Y\), not per motor A/B"):
         GatingOptions.for_firmware("klipper-gating", printer=read_printer_config(tmp_path / "p.cfg"))
+    (tmp_path / "d.cfg").write_text("[printer]\nkinematics: delta\n")
+    with pytest.raises(fwmod.FirmwareError, match="'delta'.*do not each move one axis alone"):
+        GatingOptions.for_firmware("klipper-gating", printer=read_printer_config(tmp_path / "d.cfg"))
 
 
 KLIPPER = os.environ.get("GATESOPT_KLIPPER")

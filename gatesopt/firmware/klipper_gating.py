@@ -55,6 +55,27 @@ MAX_ROTATION_ADDED_TIME_PCT = 0.05
 GATEABLE = ("X", "Y", "Z")    # kinematic steppers of a cartesian printer
 AXIS_OF = {"X": "x", "Y": "y", "Z": "z"}   # which shaped axis each stepper is active on (cartesian)
 
+def kinematics_refusal(source: str, kinematics: str) -> str:
+    """Why klipper-gating does not write for a printer that is not cartesian.
+
+    The module follows Klipper's kinematics (a stepper is active for a move with a nonzero
+    direction on any axis it is active on: itersolve ``check_active``). On corexy both stepper_x
+    (A) and stepper_y (B) are active on x and y, so each is idle only while the head does not move
+    in XY at all (Z-only and extrude-only moves, dwells), and then both together; a delta's towers
+    likewise. gatesopt's gating problem and energy profile are per axis (the X motor steps when X
+    moves), not per motor A/B, so it cannot say which of those moments pay: it refuses."""
+    if kinematics in ("corexy", "corexz", "hybrid_corexy", "hybrid_corexz", "markforged"):
+        how = ("both stepper_x (A) and stepper_y (B) step for every X or Y move, so each is idle "
+               "only while the head stands still in XY, and gatesopt's gating model and energy "
+               "profile are per axis (X, Y), not per motor A/B")
+    else:
+        how = ("its steppers do not each move one axis alone, and gatesopt's gating model and "
+               "energy profile are per axis (X, Y, Z)")
+    return (f"{source}: kinematics {kinematics!r}: klipper-gating models cartesian printers only: "
+            f"{how}. The module itself follows Klipper's kinematics, but gatesopt writes no "
+            f"GATESOPT_GATE lines for this printer")
+
+
 # every stepper name is read (an extruder too, which the module refuses: the verifier then names it)
 GATESOPT_GATE = ExtendedMotorCommand(
     "GATESOPT_GATE", "STEPPERS", tuple((STEPPER_NAMES[m], m) for m in STEPPER_NAMES),
@@ -86,9 +107,7 @@ class KlipperGating(Firmware):
 
     def schedule(self, printer=None, *, start_ahead_s: float, end_late_s: float) -> Schedule:
         if printer is not None and printer.kinematics not in (None, "cartesian"):
-            raise FirmwareError(f"{printer.source}: kinematics {printer.kinematics!r}: klipper-gating "
-                                "models cartesian printers (each of stepper_x, stepper_y, stepper_z "
-                                "moves one axis alone)")
+            raise FirmwareError(kinematics_refusal(printer.source, printer.kinematics))
         pre, post = [0.0] * 4, [0.0] * 4
         if printer is not None:
             for i, m in enumerate("XYZ"):
