@@ -77,6 +77,11 @@ def run(files, out: Path, extra: list[str]) -> None:
                                                   "print_time_change_pct", "travel_change_pct", "wall_s",
                                                   "solve_s", "times", "slowdown", "lines_before", "notes")})
                 row["report_wall_s"] = s.get("wall_s")
+                o = s.get("ordering") or {}
+                # what the budget left the ordering's solve, and how many groups it had no time for
+                row["order"] = {k: o.get(k) for k in ("solve_budget_s", "solve_s", "groups_reordered",
+                                                      "groups_optimal", "groups_fallback",
+                                                      "groups_out_of_time")}
                 row["wall_s"] = wall
             else:
                 row["error"] = (r.stderr or r.stdout).strip()[-300:]
@@ -135,18 +140,21 @@ def report(out: Path) -> str:
              if quiet else "no file measured at load <= 2.5 (the machine was never quiet).")
           + f" CPU seconds: median {_median([r.get('cpu_s', 0) for r in rows]):.2f}, max "
           f"{max(r.get('cpu_s', 0) for r in rows):.2f}.", "",
-          "| file | lines | wall s | ratio | CPU s | load | slow x | read | ordering (solve) | gating (solve) | rotate | verify | report | saving % | rot deg | print time % | travel % |",
-          "|---|---:|---:|---:|---:|---:|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+          "| file | lines | wall s | ratio | CPU s | load | slow x | read | ordering (solve) | solve budget, out of time | gating (solve) | rotate | verify | report | saving % | rot deg | print time % | travel % |",
+          "|---|---:|---:|---:|---:|---:|---:|---:|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         t = r.get("times") or {}
         g = t.get("gating_build_s", 0) + t.get("gating_solve_s", 0) + t.get("rotate_s", 0) + t.get("emit_s", 0)
         head = (f"| {r['file']} | {r.get('lines_before') or 0:,} | {r['wall_s']:.2f} | {r['wall_s'] / TARGET_S:.2f} | "
                 f"{r.get('cpu_s', float('nan')):.2f} | {r['load_before']:.1f} | {r.get('slowdown') or 1.0:.2f} | ")
         if r.get("rc") != 0:
-            md.append(head + f"error: {r.get('error', '')[:80]} | | | | | | | | | |")
+            md.append(head + f"error: {r.get('error', '')[:80]} | | | | | | | | | | |")
             continue
+        o = r.get("order") or {}
+        ob = ("-" if o.get("solve_budget_s") is None else
+              f"{o['solve_budget_s']:.2f} s, {o.get('groups_out_of_time') or 0} of {o.get('groups_reordered') or 0}")
         md.append(head + f"{t.get('read_s', 0):.2f} | {t.get('ordering_s', 0):.2f} ({t.get('ordering_solve_s', 0):.2f}) | "
-                  f"{g:.2f} ({t.get('gating_solve_s', 0):.2f}) | {t.get('rotate_s', 0):.2f} | "
+                  f"{ob} | {g:.2f} ({t.get('gating_solve_s', 0):.2f}) | {t.get('rotate_s', 0):.2f} | "
                   f"{t.get('verify_s', 0):.2f} | {t.get('report_s', 0):.2f} | {r.get('saving_pct', 0):.2f} | "
                   f"{r.get('rotation_deg') or 0:g} | {r.get('print_time_change_pct') or 0:+.2f} | "
                   f"{r.get('travel_change_pct') or 0:+.1f} |")
@@ -155,7 +163,10 @@ def report(out: Path) -> str:
            "times slower, and the ordering gets that much less. Columns: seconds per stage from the run's own report (`--json` `times`): read = start-up, "
            "imports and reading the file; ordering = the curve ordering's build, solve and emit (its "
            "solve in brackets: it gets what the 10 s budget leaves after an estimate of the other stages, "
-           "`rewrite/budget.py`); gating = build, solve (both solves: the rotation search and the solve "
+           "`rewrite/budget.py`); solve budget, out of time: what the budget left the ordering's solve "
+           "(its groups' searches, and passing every group) and how many of its re-orderable groups it "
+           "had no time for (they keep the slicer's order, status fallback: `ordering/runner.py`), '-' "
+           "where the ordering was skipped (a note says why); gating = build, solve (both solves: the rotation search and the solve "
            "again on the rotated text), rotating the text and emitting; rotate = rendering and "
            "re-parsing the rotated text (part of gating); verify = parsing the output and every "
            "check; report = the print times (planner) and travel of both files. print time %: the "

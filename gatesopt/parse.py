@@ -1,7 +1,7 @@
 """parse: G-code text -> Program. Modal state is resolved here, once, and nowhere else.
 
 The sequential work (tokenizing, modal state, one row per timed step) is the compiled kernel in
-``_scan.py``; this module reads the input, rejects what cannot be G-code with a one-line message
+``_scan.py`` (its tokenizer ``_scan_words.py``, its table readers ``_scan_tables.py``); this module reads the input, rejects what cannot be G-code with a one-line message
 naming file and line, and adds what regular expressions over the whole text find faster than a
 loop: layers (each slicer's own markers, or a Z-change fallback), feature types, header facts.
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _scan, slicers
+from . import _scan, _scan_tables, slicers
 from .errors import GcodeError
 from .firmware import EXTENDED_MOTOR_COMMANDS
 from .program import AXES, Kind, Program
@@ -27,9 +27,9 @@ DEFAULT_FEED_MM_S = 25.0    # F1500: what Marlin-based slicers assume before the
 #: (``slicers.LAYER_MARKERS`` written on comment lines, ``Z_MARKERS``, ``FEATURE_MARKERS``) and the
 #: extended commands that switch motors (``firmware.EXTENDED_MOTOR_COMMANDS``)
 SCAN_TABLES = (
-    *_scan.pack_comment_markers([m for m in slicers.LAYER_MARKERS if m.where == slicers.COMMENT_LINE],
-                                slicers.LAYER_KINDS, slicers.Z_MARKERS, slicers.FEATURE_MARKERS),
-    *_scan.pack_motor_commands(EXTENDED_MOTOR_COMMANDS, AXES))
+    *_scan_tables.pack_comment_markers([m for m in slicers.LAYER_MARKERS if m.where == slicers.COMMENT_LINE],
+                                       slicers.LAYER_KINDS, slicers.Z_MARKERS, slicers.FEATURE_MARKERS),
+    *_scan_tables.pack_motor_commands(EXTENDED_MOTOR_COMMANDS, AXES))
 #: layer markers written as a comment after the G-code of a line (``slicers.TRAILING``), each with
 #: its kind (1-based, ``slicers.LAYER_KINDS``): found here, by ``bytes.find`` over the whole text
 #: (the scanner reads the markers of comment lines only, not the comments of G-code lines)

@@ -3,7 +3,7 @@
 One table per kind of knowledge, read by every module that needs to know what a slicer meant:
 
 - ``LAYER_MARKERS``, ``Z_MARKERS``, ``FEATURE_MARKERS``: the comments the parser's scanner looks
-  for (``gatesopt._scan`` reads them as arrays, packed by ``_scan.pack_comment_markers``; the
+  for (``gatesopt._scan`` reads them as arrays, packed by ``_scan_tables.pack_comment_markers``; the
   layer markers written after G-code on the same line are found by ``parse``). Adding a slicer's
   layer marker is one ``LayerMarker`` row here, with an example line (``tests/test_slicers.py``
   parses every row's example and checks the layers it finds).

@@ -336,13 +336,13 @@ def test_helper_solves_the_chain_from_the_back(monkeypatch):
 
 
 def test_a_budget_is_for_the_whole_run_and_the_solve_gets_what_the_rest_leaves():
-    from gatesopt.rewrite.order import (FINISH_FIXED_S, FINISH_S_PER_LINE, MIN_SOLVE_SHARE,
-                                            solve_budget_s)
+    from gatesopt.rewrite.order import FINISH_FIXED_S, FINISH_S_PER_LINE, solve_budget_s
     assert solve_budget_s(None, 10 ** 6, 3.0) is None
     assert solve_budget_s(10.0, 100_000, 0.5) == pytest.approx(
         10.0 - 0.5 - FINISH_FIXED_S - 100_000 * FINISH_S_PER_LINE)
-    # a file whose emit alone would take longer than the budget: the solve keeps its share
-    assert solve_budget_s(10.0, 10 ** 8, 0.5) == pytest.approx(MIN_SOLVE_SHARE * 10.0)
+    # a file whose emit alone would take longer than the budget: the solve gets nothing (every
+    # group keeps the slicer's order), never a share past the budget's end
+    assert solve_budget_s(10.0, 10 ** 8, 0.5) == 0.0
 
 
 def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):

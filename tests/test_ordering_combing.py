@@ -254,9 +254,9 @@ def test_first_value_of_a_state_is_a_barrier():
 
 
 def test_solve_output_keeps_the_fan_each_extrusion_saw():
-    """Re-ordered and gated (``gatesopt solve``): the moves are split by gating, so the verifier's
-    fan check there is per layer, filament by fan duty; it holds for the output and catches a
-    missing re-issue."""
+    """Re-ordered and gated (``gatesopt solve``): the verifier's fan check holds for the output and
+    catches a missing re-issue, once: per layer, filament by fan duty (``commands``) where gating
+    split moves, move by move (``fan``) where the output has no gating line, as here."""
     from gatesopt.rewrite import run
     from gatesopt.verify import verify
     prog = gatesopt.parse(_bridge_fan_gcode())
@@ -267,7 +267,10 @@ def test_solve_output_keeps_the_fan_each_extrusion_saw():
     k = lines.index("M106 S255")
     broken = gatesopt.parse("\n".join(lines[:k] + lines[k + 1:]) + "\n")
     found = verify(prog, broken).findings
-    assert any(f.check == "commands" and "part fan at S100" in f.message for f in found)
+    fan = [f for f in found if (f.check == "commands" and "part fan at S100" in f.message)
+           or (f.check == "fan" and "part fan at S100" in f.message)]
+    assert fan, [str(f) for f in found]
+    assert len({f.check for f in fan}) == 1, [str(f) for f in found]      # one check, not both
 
 
 def test_the_part_fan_is_one_state_however_its_p_word_is_written():

@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from gatesopt import _scan, slicers
+from gatesopt import _scan, _scan_tables, slicers
 from gatesopt import parse as parse_fn
 from gatesopt.firmware import EXTENDED_MOTOR_COMMANDS, ExtendedMotorCommand
 from gatesopt.program import AXES, Kind
@@ -61,8 +61,8 @@ def test_more_slicers_than_a_three_bit_field_held(monkeypatch):
     """Twelve slicers, each with its own marker: the tenth one's layers are found as its own."""
     markers = tuple(slicers.LayerMarker(f"s{k}", f";S{k}_LAYER".encode(), f";S{k}_LAYER") for k in range(12))
     kinds = tuple(m.slicer for m in markers)
-    tables = (*_scan.pack_comment_markers(markers, kinds, slicers.Z_MARKERS, slicers.FEATURE_MARKERS),
-              *_scan.pack_motor_commands(EXTENDED_MOTOR_COMMANDS, AXES))
+    tables = (*_scan_tables.pack_comment_markers(markers, kinds, slicers.Z_MARKERS, slicers.FEATURE_MARKERS),
+              *_scan_tables.pack_motor_commands(EXTENDED_MOTOR_COMMANDS, AXES))
     monkeypatch.setattr(parse_module, "SCAN_TABLES", tables)
     monkeypatch.setattr(slicers, "LAYER_KINDS", kinds)
     prog = parse_fn(_two_layers(";S10_LAYER", False))
@@ -79,7 +79,7 @@ def test_more_slicers_than_a_three_bit_field_held(monkeypatch):
 def test_extended_motor_commands_are_a_table(monkeypatch):
     """A dialect's own motor command is one more row; Klipper's keeps working beside it."""
     gate = ExtendedMotorCommand("GATESOPT_TEST", "MOTOR", (("X", "X"), ("Y", "Y")), "ON")
-    tables = parse_module.SCAN_TABLES[:2] + _scan.pack_motor_commands(EXTENDED_MOTOR_COMMANDS + (gate,), AXES)
+    tables = parse_module.SCAN_TABLES[:2] + _scan_tables.pack_motor_commands(EXTENDED_MOTOR_COMMANDS + (gate,), AXES)
     text = ("G1 X1 Y1 F600\nGATESOPT_TEST MOTOR=Y ON=0\nSET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=0\n"
             "gatesopt_test motor=y on=1\nGATESOPT_TEST MOTOR=Q ON=0\nG1 X2\n")
     before = parse_fn(text)

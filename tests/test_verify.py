@@ -355,3 +355,29 @@ def test_two_collinear_moves_rewritten_as_one_split_elsewhere_are_caught():
     assert "geometry" not in _checks(verify(p, ok, start_ahead_s=0, end_late_s=0))
     bad = gatesopt.parse("G90\nM83\nG1 X0 Y0\nG1 X7 Y0 E0.7\nS0 Y\nG1 X20 Y0 E1.3\nS1 Y\nG1 X20 Y10 E1\n")
     assert "geometry" in _checks(verify(p, bad, start_ahead_s=0, end_late_s=0))
+
+
+def test_a_reordered_output_reports_each_fault_once():
+    # verify() runs the extrusion and commands checks on every output; the re-ordering's own
+    # checks (gatesopt.verify.ordering) ran them a second time: one fault, two findings
+    p = gatesopt.parse(SQUARE)
+    q = gatesopt.parse(SQUARE.replace("M104 S200\n", "").replace("G1 X20 Y0 E5.0", "G1 X20 Y0 E5.5"))
+    rep = verify(p, q, reordered=True)
+    assert "ordering" in rep.checks
+    texts = [str(f) for f in rep.findings]
+    assert len(texts) == len(set(texts)), texts
+    assert sum("control command missing: M104 S200" in t for t in texts) == 1
+    assert sum(f.check == "extrusion" for f in rep.findings) == 1
+
+
+def test_whole_print_extrusion_is_not_called_layer_minus_one():
+    # the layer finders disagree (a marker only in the output): net E is compared over the whole
+    # print, and the finding says so instead of naming "layer -1"
+    p = gatesopt.parse(SQUARE)
+    q = gatesopt.parse(SQUARE.replace("G1 Z0.4 F600\n", "G1 Z0.4 F600\n;LAYER:1\n")
+                       .replace("G1 X20 Y0 E5.0", "G1 X20 Y0 E5.5"))
+    assert p.n_layers != q.n_layers
+    found = [f for f in verify(p, q, reordered=True).findings if f.check == "extrusion"]
+    assert len(found) == 1
+    assert "layer -1" not in found[0].message and "whole print" in found[0].message
+    assert "net E 5.50000 mm, original 5.00000 mm" in found[0].message

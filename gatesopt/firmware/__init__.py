@@ -54,7 +54,7 @@ class ExtendedMotorCommand:
     reads such a command (klippy/gcode.py ``_get_extended_params``: the first word is the command,
     then ``KEY=VALUE`` parameters separated by blanks, keys in any case, the last of a key counts, a
     word without ``=`` makes the line an error; ``;`` or ``#`` starts a comment). The parser's
-    scanner (``gatesopt._scan``, the table packed by ``_scan.pack_motor_commands``) and
+    scanner (``gatesopt._scan``, the table packed by ``_scan_tables.pack_motor_commands``) and
     ``parse_motor_line`` (``read``) both read it from this record, the same way:
 
     - the line's first word is ``word`` (any case);

@@ -165,14 +165,14 @@ def _put_code(out, p, code, code_ptr, txt_id, txt_buf, txt_ptr, nl):
 
 
 @njit(cache=True)
-def _split_row(out, p, buf, a, b, r, e0, e1, cut_frac, cut_code, code_ptr, txt_id, txt_buf, txt_ptr, nl,
-               start_mm, end_mm, offset_mm, rel_xyz, rel_e, inch, tok_a, tok_b, tok_axis):
-    """Write line buf[a:b] (step r) split at the cuts e0..e1 (sorted by fraction) with their lines
-    between the pieces, as ``emit_line.LineRewriter.rewrite`` does without rotation. Returns
-    (position after it, lines added), or (-1, 0) when the line is left to the reference
-    implementation. (A numba kernel over 120 lines: one pass over one line's words and pieces,
-    kept whole so that it reads in the order of ``LineRewriter.rewrite`` it must equal.)"""
-    # body: the line without its ending; code: up to the first ';', right-stripped
+def _plain_words(buf, a, b, tok_a, tok_b, tok_axis):
+    """Line buf[a:b] read in the plain form the kernels rewrite themselves: ``G<digits>[.<digits>]``
+    then `` <LETTER><number>`` words, each letter once, then a comment if any. Returns (body,
+    code, g_end, n_tok, axis_tok): where the line ends without its line ending, where its G-code
+    ends (up to the first ';', right-stripped), where its G word ends; the words' spans in
+    ``tok_a`` / ``tok_b`` [:n_tok] and their axes in ``tok_axis`` (-1: not X Y Z E); each axis's
+    word (``axis_tok``, -1: none). ``n_tok`` is -1 when the line is not in the plain form."""
+    axis_tok = np.full(4, -1, np.int64)
     body = b
     while body > a and (buf[body - 1] == 10 or buf[body - 1] == 13):
         body -= 1
@@ -181,25 +181,24 @@ def _split_row(out, p, buf, a, b, r, e0, e1, cut_frac, cut_code, code_ptr, txt_i
         code += 1
     while code > a and (buf[code - 1] == _SP or buf[code - 1] == 9):
         code -= 1
-    # plain form only: "G<digits>[.<digits>]" then " <LETTER><number>" words, each letter once
     if code - a < 2 or buf[a] != 71:
-        return -1, 0
+        return body, code, a, -1, axis_tok
     j = _value_end(buf, a + 1, code)
     if j < 0 or buf[a + 1] == _MINUS or buf[a + 1] == _PLUS or buf[a + 1] == _DOT or buf[j - 1] == _DOT:
-        return -1, 0
+        return body, code, a, -1, axis_tok
+    g_end = j
     n_tok = 0
     seen = 0
-    axis_tok = np.full(4, -1, np.int64)
     while j < code:
-        if buf[j] != _SP or j + 1 >= code:
-            return -1, 0
+        if buf[j] != _SP or j + 1 >= code or n_tok >= tok_a.shape[0]:
+            return body, code, g_end, -1, axis_tok
         L = buf[j + 1]
         if not (65 <= L <= 90) or (seen >> (L - 65)) & 1:
-            return -1, 0
+            return body, code, g_end, -1, axis_tok
         seen |= 1 << (L - 65)
         v = _value_end(buf, j + 2, code)
         if v < 0 or (v < code and buf[v] != _SP):
-            return -1, 0
+            return body, code, g_end, -1, axis_tok
         tok_a[n_tok] = j + 1
         tok_b[n_tok] = v
         ax = _AXIS_OF_LETTER[L - 65]
@@ -208,7 +207,19 @@ def _split_row(out, p, buf, a, b, r, e0, e1, cut_frac, cut_code, code_ptr, txt_i
             axis_tok[ax] = n_tok
         n_tok += 1
         j = v
-    g_end = _value_end(buf, a + 1, code)      # the G word as written
+    return body, code, g_end, n_tok, axis_tok
+
+
+@njit(cache=True)
+def _split_row(out, p, buf, a, b, r, e0, e1, cut_frac, cut_code, code_ptr, txt_id, txt_buf, txt_ptr, nl,
+               start_mm, end_mm, offset_mm, rel_xyz, rel_e, inch, tok_a, tok_b, tok_axis):
+    """Write line buf[a:b] (step r) split at the cuts e0..e1 (sorted by fraction) with their lines
+    between the pieces, as ``emit_line.LineRewriter.rewrite`` does without rotation. Returns
+    (position after it, lines added), or (-1, 0) when the line is left to the reference
+    implementation."""
+    body, code, g_end, n_tok, axis_tok = _plain_words(buf, a, b, tok_a, tok_b, tok_axis)
+    if n_tok < 0:
+        return -1, 0
     scale = 25.4 if inch[r] else 1.0
     extra = 2 if inch[r] else 0
     sums = np.zeros(4, np.int64)
@@ -289,11 +300,8 @@ def _split_row(out, p, buf, a, b, r, e0, e1, cut_frac, cut_code, code_ptr, txt_i
         p = _put_bytes(out, p, nl, 0, nl.shape[0])
         added += 1
         for c in range(e, g_last + 1):
-            for t in range(code_ptr[cut_code[c]], code_ptr[cut_code[c] + 1]):
-                kk = txt_id[t]
-                p = _put_bytes(out, p, txt_buf, txt_ptr[kk], txt_ptr[kk + 1])
-                p = _put_bytes(out, p, nl, 0, nl.shape[0])
-                added += 1
+            p = _put_code(out, p, cut_code[c], code_ptr, txt_id, txt_buf, txt_ptr, nl)
+            added += code_ptr[cut_code[c] + 1] - code_ptr[cut_code[c]]
         e = g_last + 1
         k += 1
 
@@ -376,41 +384,9 @@ def _rotated_row(out, p, buf, a, b, r, pstart, pend, offset_mm, rel_e, snap, has
     rewriter's state (``em_*``: the last X/Y text written, its offset, the head's XY) as it does.
     Returns the position after it, or -1 to leave the line to the reference (not the plain form:
     ``G<n>`` then `` <LETTER><number>`` words, each letter once; a number that needs more care)."""
-    body = b
-    while body > a and (buf[body - 1] == 10 or buf[body - 1] == 13):
-        body -= 1
-    code = a
-    while code < body and buf[code] != _SEMI:
-        code += 1
-    while code > a and (buf[code - 1] == _SP or buf[code - 1] == 9):
-        code -= 1
-    if code - a < 2 or buf[a] != 71:
+    body, code, g_end, n_tok, axis_tok = _plain_words(buf, a, b, tok_a, tok_b, tok_axis)
+    if n_tok < 0:
         return -1
-    j = _value_end(buf, a + 1, code)
-    if j < 0 or buf[a + 1] == _MINUS or buf[a + 1] == _PLUS or buf[a + 1] == _DOT or buf[j - 1] == _DOT:
-        return -1
-    g_end = j
-    n_tok = 0
-    seen = 0
-    axis_tok = np.full(4, -1, np.int64)
-    while j < code:
-        if buf[j] != _SP or j + 1 >= code or n_tok >= tok_a.shape[0]:
-            return -1
-        L = buf[j + 1]
-        if not (65 <= L <= 90) or (seen >> (L - 65)) & 1:
-            return -1
-        seen |= 1 << (L - 65)
-        v = _value_end(buf, j + 2, code)
-        if v < 0 or (v < code and buf[v] != _SP):
-            return -1
-        tok_a[n_tok] = j + 1
-        tok_b[n_tok] = v
-        ax = _AXIS_OF_LETTER[L - 65]
-        tok_axis[n_tok] = ax
-        if ax >= 0:
-            axis_tok[ax] = n_tok
-        n_tok += 1
-        j = v
     if axis_tok[0] < 0 and axis_tok[1] < 0:
         return -1           # X and Y added where the line names neither: the reference
     # X and Y: the previous text where the move is single-axis after rotating (the snap), else

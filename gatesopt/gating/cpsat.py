@@ -25,6 +25,25 @@ UNIT_REL = 1e-9         # ... or this share of the objective's magnitude, if fin
 TIME_UNIT_S = 1e-6      # time unit of the stall budget
 
 
+#: items (variables, constraints) written between two checks for a stop or the deadline while the
+#: model is built in Python (``_polled``): a 217k-line file's model took ~2 s to build, and a
+#: Ctrl-C during it waited for all of it (bench/ctrl_c.py)
+POLL_ITEMS = 2048
+
+
+class _BuildStopped(Exception):
+    """A stop request or the deadline arrived while the CP-SAT model was being built."""
+
+
+def _polled(items, should_stop):
+    """``items``, checking ``should_stop()`` every ``POLL_ITEMS`` of them (raises
+    ``_BuildStopped``)."""
+    for i, item in enumerate(items):
+        if i % POLL_ITEMS == 0 and should_stop():
+            raise _BuildStopped
+        yield item
+
+
 def _status_map():
     from ortools.sat.python import cp_model as cp
     return {cp.OPTIMAL: Status.OPTIMAL, cp.FEASIBLE: Status.FEASIBLE, cp.INFEASIBLE: Status.INFEASIBLE,
@@ -71,8 +90,9 @@ class _CpModel:
         return np.round(np.asarray(v, float) / self.unit_j).astype(np.int64)
 
 
-def _cp_model(cp, model: CoupledModel) -> _CpModel:
-    """Variables, constraints and the lexicographic objective (energy units * W + lines)."""
+def _cp_model(cp, model: CoupledModel, should_stop=lambda: False) -> _CpModel:
+    """Variables, constraints and the lexicographic objective (energy units * W + lines). Raises
+    ``_BuildStopped`` once ``should_stop()`` (checked every ``POLL_ITEMS`` items)."""
     nx, nz, nw, na = model.nx, len(model.z_members), len(model.w_members), len(model.a_pairs)
     ny = len(model.angles)
     lines_ub = int(round(model.x_lines.sum())) + nz + nw
@@ -84,24 +104,24 @@ def _cp_model(cp, model: CoupledModel) -> _CpModel:
            + np.abs(model.a_energy_j).sum())
     unit = max(min(UNIT_J, mag * UNIT_REL), mag * W / 2.0 ** 53)
     m = cp.CpModel()
-    x = [m.NewBoolVar(f"x_{g}") for g in model.x_idle]          # x[g]: idle interval g off
+    x = [m.NewBoolVar(f"x_{g}") for g in _polled(model.x_idle, should_stop)]   # x[g]: idle interval g off
     y = [m.NewBoolVar(f"y_{k}") for k in model.angles]          # y[k]: rotation k chosen
     z = [m.NewBoolVar(f"z_{i}") for i in range(nz)]             # z[e]: shared instruction line e
     w = [m.NewBoolVar(f"w_{i}") for i in range(nw)]             # w[t]: shared split at moment t
     a = [m.NewBoolVar(f"a_{i}") for i in range(na)]             # a[p]: X and Y intervals of pair p both off
     m.AddExactlyOne(y)
     if ny > 1:
-        for i, k in enumerate(model.x_angle.tolist()):
+        for i, k in _polled(enumerate(model.x_angle.tolist()), should_stop):
             m.AddImplication(x[i], y[k])
-    for mem in model.c_members:             # rule B of a firmware schedule
+    for mem in _polled(model.c_members, should_stop):             # rule B of a firmware schedule
         m.AddAtMostOne([x[j] for j in mem.tolist()])
-    for i, mem in enumerate(model.z_members):
+    for i, mem in _polled(enumerate(model.z_members), should_stop):
         for j in mem.tolist():
             m.AddImplication(x[j], z[i])
-    for i, mem in enumerate(model.w_members):
+    for i, mem in _polled(enumerate(model.w_members), should_stop):
         for j in mem.tolist():
             m.AddImplication(x[j], w[i])
-    for i, (g, h) in enumerate(model.a_pairs.tolist()):
+    for i, (g, h) in _polled(enumerate(model.a_pairs.tolist()), should_stop):
         if model.a_energy_j[i] > 0:
             m.AddBoolOr([x[g].Not(), x[h].Not(), a[i]])
         else:
@@ -115,7 +135,11 @@ def _cp_model(cp, model: CoupledModel) -> _CpModel:
     if math.isfinite(model.max_lines):
         xl = np.round(model.x_lines).astype(np.int64).tolist()
         m.Add(sum(c * v for c, v in zip(xl, x) if c) + sum(z) + sum(w) <= int(model.max_lines))
+    if should_stop():
+        raise _BuildStopped
     _add_share_cuts(m, model, x)
+    if should_stop():
+        raise _BuildStopped
     # the constant energy_before_j is in the objective so that CP-SAT's relative gap is relative
     # to the print's energy, as HiGHS's is (its offset_)
     c = _CpModel(m, x, y, z, w, a, unit, W, int(round(model.energy_before_j / unit)) * W)
@@ -123,7 +147,7 @@ def _cp_model(cp, model: CoupledModel) -> _CpModel:
     cz = c.q(model.z_energy_j) * W + 1
     cw = np.ones(nw, np.int64)
     ca = c.q(model.a_energy_j) * W
-    terms = [(int(k), v) for k, v in zip(cx.tolist(), x) if k]
+    terms = [(int(k), v) for k, v in _polled(zip(cx.tolist(), x), should_stop) if k]
     terms += [(int(k), v) for k, v in zip(cz.tolist(), z) if k]
     terms += [(int(k), v) for k, v in zip(cw.tolist(), w) if k]
     terms += [(int(k), v) for k, v in zip(ca.tolist(), a) if k]
@@ -131,14 +155,15 @@ def _cp_model(cp, model: CoupledModel) -> _CpModel:
     return c
 
 
-def _add_hints(c: _CpModel, model: CoupledModel, hv) -> None:
-    """The start ``hv`` = (x, y) as CP-SAT hints, with the z, w, a values it implies."""
+def _add_hints(c: _CpModel, model: CoupledModel, hv, should_stop=lambda: False) -> None:
+    """The start ``hv`` = (x, y) as CP-SAT hints, with the z, w, a values it implies (raises
+    ``_BuildStopped`` once ``should_stop()``)."""
     hx, hy = hv
-    for v, b in zip(c.x, hx.tolist()):
+    for v, b in _polled(zip(c.x, hx.tolist()), should_stop):
         c.m.AddHint(v, int(b))
     for v, b in zip(c.y, hy.tolist()):
         c.m.AddHint(v, int(b))
-    for i, mem in enumerate(model.z_members):
+    for i, mem in _polled(enumerate(model.z_members), should_stop):
         c.m.AddHint(c.z[i], int(hx[mem].max()))
     for i, mem in enumerate(model.w_members):
         c.m.AddHint(c.w[i], int(hx[mem].max()))
@@ -193,9 +218,12 @@ def _fewest_lines(cp, c: _CpModel, model: CoupledModel, solver, problem: GatingP
     second.parameters.num_workers = nw
     second.parameters.cp_model_presolve = False
     second.parameters.random_seed = int(problem.options.seed)
-    # at most as long again as the first stage took, within what is left of the limit
+    # at most as long again as the first stage took, within what is left of the limit (none
+    # left: no second stage, rather than a fresh 50 ms past the limit)
     left = used if time_limit_s is None else min(used, float(time_limit_s) - used)
-    second.parameters.max_time_in_seconds = max(left, 0.05)
+    if left <= 0.0 or stop_requested():
+        return None
+    second.parameters.max_time_in_seconds = left
     second.parameters.catch_sigint_signal = False
     st2, _ = run_native(lambda: second.solve(c.m), second.stop_search)
     if st2 not in (cp.OPTIMAL, cp.FEASIBLE):
@@ -262,15 +290,29 @@ def solve(problem: GatingProblem, *, time_limit_s: float | None = None,
     if stop_requested():
         return _start_answer(problem, start, model, Status.FEASIBLE, time.perf_counter() - t0,
                              "not searched: stop requested", Stopped.INTERRUPTED)
-    c = _cp_model(cp, model)
-    hv = hint_vector(problem, model, start)
-    if hv is not None:
-        _add_hints(c, model, hv)
+    # the limit is for the whole call: the dp start and building the model count against it
+    deadline = None if time_limit_s is None else t0 + float(time_limit_s)
+
+    def should_stop() -> bool:
+        return stop_requested() or (deadline is not None and time.perf_counter() >= deadline)
+    try:
+        c = _cp_model(cp, model, should_stop)
+        hv = hint_vector(problem, model, start)
+        if hv is not None:
+            _add_hints(c, model, hv, should_stop)
+    except _BuildStopped:
+        stopped = Stopped.INTERRUPTED if stop_requested() else Stopped.TIME_LIMIT
+        return _start_answer(problem, start, model, Status.FEASIBLE, time.perf_counter() - t0,
+                             f"not searched: {stopped} while building the model", stopped)
     solver = cp.CpSolver()
     nw = _set_parameters(solver, problem)
-    if time_limit_s is not None:
-        # the limit is for the whole call: the dp start and building the model count against it
-        solver.parameters.max_time_in_seconds = max(float(time_limit_s) - (time.perf_counter() - t0), 0.01)
+    if deadline is not None:
+        left = deadline - time.perf_counter()
+        if left <= 0.0:     # the limit went to the start and the build: no fresh 10 ms for CP-SAT
+            return _start_answer(problem, start, model, Status.FEASIBLE, time.perf_counter() - t0,
+                                 "not searched: time limit reached while building the model",
+                                 Stopped.TIME_LIMIT)
+        solver.parameters.max_time_in_seconds = left
     on_solution, on_bound, rule = _gap_stop(cp, c, model, nx, nz, na, problem.options.mip_rel_gap, t0)
     solver.best_bound_callback = on_bound
     st, stopped = run_native(lambda: solver.solve(c.m, on_solution), solver.stop_search,

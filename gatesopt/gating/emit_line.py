@@ -36,7 +36,7 @@ _ARC = int(Kind.ARC)
 _NUDGES = sorted(((i, j) for i in range(-4, 5) for j in range(-4, 5)), key=lambda t: (abs(t[0]) + abs(t[1]), t))
 
 # a word's value: a number, or an unexpanded slicer placeholder ("Y{machine_depth}"), which the
-# parser drops as the firmware does (``_scan._parse_words``) and ``MotionLine.value`` reads as absent
+# parser drops as the firmware does (``_scan_words.parse_words``) and ``MotionLine.value`` reads as absent
 _WORD = re.compile(r"([A-Za-z])\s*(\{[^}]*\}?|[-+]?(?:\d+\.?\d*|\.\d+)?)")
 
 

@@ -150,7 +150,12 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
     if not exact_next:
         return GroupSolution.make(heur.order, heur.objective, heur.bound, Status.FALLBACK,
                                   time.perf_counter() - t0, "auto:ils")
-    left = max(time_limit_s - (time.perf_counter() - t0), 0.05)
+    left = time_limit_s - (time.perf_counter() - t0)
+    if left <= 0.0:
+        # the greedy path, the matching and ILS took the whole limit (a large group on a loaded
+        # machine): no exact step after the deadline (it once got 50 ms more whatever was left)
+        return GroupSolution.make(heur.order, heur.objective, heur.bound, Status.FALLBACK,
+                                  time.perf_counter() - t0, "auto:ils")
     ex = milp.solve(group, time_limit_s=left, hint=heur, give_up_gap=GIVE_UP_GAP,
                     known_bound=heur.bound)
     if ex.objective > heur.objective:        # never worse than the warm start

@@ -327,6 +327,21 @@ def trivial_solution(group: Group, t0: float, formulation: str) -> GroupSolution
     return None
 
 
+def kept_solution(group: Group, t0: float, formulation: str) -> GroupSolution:
+    """The slicer's own order of ``group`` (each curve as printed), unsearched: what a group gets
+    when the budget has no time left for it (``runner.GroupRunner``). Status "fallback" and bound
+    0 (nothing proven: its gap is 100 %), except for 0 or 1 curves (``trivial_solution``: exact
+    at no cost). ``t0``: when its solve started."""
+    triv = trivial_solution(group, t0, formulation)
+    if triv is not None:
+        return triv
+    order = np.flatnonzero(~np.asarray(group.cand_reversed, bool) & (np.asarray(group.cand_seam) == 0))
+    if len(order) != group.n_curves:        # (every curve has its as-printed candidate)
+        raise AssertionError(f"group of {group.n_curves} curves has {len(order)} as-printed candidates")
+    return GroupSolution.make(order, group.path_cost(order), 0.0, Status.FALLBACK,
+                              time.perf_counter() - t0, formulation)
+
+
 @dataclass(frozen=True, eq=False)
 class OrderingProblem:
     """Per layer, a sequence of groups of curves (see module docstring).

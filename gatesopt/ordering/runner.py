@@ -9,12 +9,15 @@ from .. import _jit
 from ..solvers import Status
 from .budget import (OVERHEAD_S_PER_CURVE, OVERRUN_PRIOR_CURVES, OVERRUN_S_PER_CURVE,
                      STOP_HELPER_S, TAIL_S_PER_CURVE, BudgetPlan)
-from .problem import GroupSolution
+from .problem import GroupSolution, kept_solution
 
 #: a group whose solve spent more than this compiling numba kernels (a first run after an
 #: install) and did not prove it is solved once more: its limit went to the compiler (measured:
 #: the README's first command, run cold, left 8 of 9 groups "feasible at limit", warm all 9 optimal)
 RESOLVE_AFTER_COMPILE_S = 0.2
+#: the formulation of a group the budget left no time for (``GroupRunner.run``): the slicer's
+#: order, status fallback
+OUT_OF_TIME = "kept:out of time"
 
 
 class GroupRunner:
@@ -45,13 +48,22 @@ class GroupRunner:
         self.curves_timed = OVERRUN_PRIOR_CURVES
         self.n_curves_from = problem.n_curves - problem.group_curve_start   # per group, to the end
         self.shared = shared
+        self.out_of_time = 0    # groups the budget left no time for (the slicer's order kept)
+        # the caller's time between groups (building each group, its paths' options), per
+        # curve passed, measured from here on (``passed``) and started from the prior
+        self.pass_s = OVERHEAD_S_PER_CURVE * OVERRUN_PRIOR_CURVES
+        self.curves_passed = OVERRUN_PRIOR_CURVES
+        self.mark = time.perf_counter()     # when the caller's time since the last group began
+        self.in_run_s = 0.0                 # of it, what ``run`` took
 
     def run(self, g: int, grp) -> GroupSolution:
-        key = grp.key()
-        gs = self.cache.get(key)
-        if gs is not None:
-            return GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status, 0.0,
-                                      gs.formulation + "+cached")
+        t_in = time.perf_counter()
+        try:
+            return self._run(g, grp)
+        finally:
+            self.in_run_s += time.perf_counter() - t_in
+
+    def _run(self, g: int, grp) -> GroupSolution:
         limit = self.time_limit_s
         if self.plan is not None:
             # what groups took beyond their limit so far (greedy passes, bounds, model building),
@@ -61,6 +73,18 @@ class GroupRunner:
             # time spent compiling numba kernels (a first run) is not charged
             elapsed = time.perf_counter() - self.t0 - _jit.compile_s_since(self.t0)
             wall_left = self.budget_s - elapsed - self.rest_s(g)
+            if wall_left - rate * grp.n_curves <= 0.0:
+                # even the cheapest answer (the greedy path, taken whatever the limit) would end
+                # after the budget: the slicer's order, unsearched (a 3 s budget on the Cura
+                # bunny's 1081 groups ran 20 s of greedy paths at limit 0 before this)
+                self.out_of_time += 1
+                return kept_solution(grp, time.perf_counter(), OUT_OF_TIME)
+        key = grp.key()
+        gs = self.cache.get(key)
+        if gs is not None:
+            return GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status, 0.0,
+                                      gs.formulation + "+cached")
+        if self.plan is not None:
             cpus = 2 if self.other_alive() else 1
             left = max(0.0, cpus * wall_left - rate * self.plan.pending_curves())
             # the two processes pool their time, but one group runs on one of them: it must end
@@ -84,14 +108,27 @@ class GroupRunner:
         self.cache[key] = gs
         return gs
 
+    def pass_rate(self) -> float:
+        """Seconds per curve the caller spends between groups (``passed``), as measured so far
+        on this run (so on this machine as loaded), from the prior ``OVERHEAD_S_PER_CURVE``."""
+        return self.pass_s / self.curves_passed
+
     def rest_s(self, g: int) -> float:
         """What the main process needs after group g outside any solver: passing the groups
         after it (building each group, taking the helper's answers) and the end of the solve
-        (``chain.pick_paths``, travel totals)."""
-        return (OVERHEAD_S_PER_CURVE * float(self.n_curves_from[g + 1])
-                + TAIL_S_PER_CURVE * float(self.n_curves_from[0])
+        (``chain.pick_paths``, travel totals): the same kind of work per curve, both at the rate
+        measured (``pass_rate``)."""
+        scale = self.pass_rate() / OVERHEAD_S_PER_CURVE
+        return (self.pass_rate() * float(self.n_curves_from[g + 1])
+                + scale * TAIL_S_PER_CURVE * float(self.n_curves_from[0])
                 + (STOP_HELPER_S if self.shared is not None else 0.0))
 
     def passed(self, g: int) -> None:
+        """Group g is done (the caller's loop calls this once per group, solved here or not):
+        the time since the last call, less what ``run`` took, is the caller's, per curve of g."""
+        now = time.perf_counter()
+        self.pass_s += max(0.0, now - self.mark - self.in_run_s - _jit.compile_s_since(self.mark))
+        self.curves_passed += int(self.n_curves_from[g] - self.n_curves_from[g + 1])
+        self.mark, self.in_run_s = now, 0.0
         if self.plan is not None:
             self.plan.done(g)

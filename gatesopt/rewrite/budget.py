@@ -27,16 +27,20 @@ from .order import FINISH_FIXED_S, FINISH_S_PER_LINE
 
 #: seconds per input line of the stages after the ordering, without a rotation: the gating
 #: problem's build and dp solve, the emit, parsing the output, the verifier and the report's
-#: planner times and travel (measured, docs/RESULTS.md "Default solve: wall time")
-AFTER_ORDER_S_PER_LINE = 16e-6
+#: planner times and travel. Measured (docs/BENCHMARKS.md "Default solve: wall time", 79 files at
+#: load ~1.5, files over 20k lines, the 0.3 s fixed part taken out): at most 8.5 us per line
+#: without a rotation (prusa25_xend_honey25_acp), the Cura bunny 6.3; 16e-6 left the ordering
+#: ~1.2 s less than the rest took on the bunny
+AFTER_ORDER_S_PER_LINE = 10e-6
 #: and with a rotation: rendering the rotated text (``gating.emit.render``), parsing it, and
-#: building the gating problem again (``gating.rotation``: the rotated text is solved again)
-ROTATE_S_PER_LINE = 8e-6
+#: building the gating problem again (``gating.rotation``: the rotated text is solved again):
+#: the same runs, at most 23.3 us per line in all (real_prusa274_screw_arcs), lh01 18.4
+ROTATE_S_PER_LINE = 14e-6
 #: per file, whatever its size
 AFTER_ORDER_FIXED_S = 0.3
 #: the slowdown is measured only after this much wall time (less: too short to tell), and taken
-#: at most this large (beyond it the run cannot keep its budget anyway; the ordering keeps its
-#: minimum share, ``rewrite.order.MIN_SOLVE_SHARE``)
+#: at most this large (beyond it the run cannot keep its budget anyway: the ordering is skipped,
+#: ``rewrite.order.stage_floor_s``)
 SLOWDOWN_PROBE_S = 0.5
 MAX_SLOWDOWN = 4.0
 
@@ -76,10 +80,14 @@ def ordering_budget_s(budget_s: float, program: Program, options, formulation: s
     return budget_s - spent_s - slow * rest - (slow - 1.0) * emit
 
 
-def no_time_note(budget_s: float, spent_s: float, slow: float) -> str:
-    """The note of a run whose budget left the curve ordering no time."""
+def no_time_note(budget_s: float, spent_s: float, slow: float, left_s: float | None = None,
+                 floor_s: float | None = None) -> str:
+    """The note of a run whose budget left the curve ordering no time: ``left_s`` what the budget
+    left it, ``floor_s`` what it takes without searching (``rewrite.order.stage_floor_s``)."""
     load = (f"; the machine is loaded: this run got 1/{slow:.1f} of a core so far"
             if slow > 1.5 else "")
-    return (f"curve ordering skipped: the {budget_s:g} s budget (--budget) leaves it no time after "
-            f"{spent_s:.1f} s of reading and the estimate of gating and checking{load}: the "
+    than = (f" ({left_s:.1f} s, less than the {floor_s:.1f} s its build, group pass and emit "
+            "take without searching)" if left_s is not None and floor_s is not None else "")
+    return (f"curve ordering skipped: the {budget_s:g} s budget (--budget) leaves it no time{than} "
+            f"after {spent_s:.1f} s of reading and the estimate of gating and checking{load}: the "
             "slicer's order kept (a larger --budget re-orders)")

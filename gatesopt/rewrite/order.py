@@ -19,6 +19,9 @@ from ..ordering.emitter import emit
 from ..ordering.groups import build
 from ..ordering.layers import model_travel_mm, solve
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
+from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
+from ..ordering.runner import OUT_OF_TIME
+from ..ordering.travel_stats import runs, travel_mask
 from ..parse import parse
 from ..planner import plan
 from ..program import Program
@@ -139,6 +142,21 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     return solution, text, out, kept
 
 
+def out_of_time_groups(problem: OrderingProblem, solution: OrderingSolution) -> int:
+    """Re-orderable groups the budget left no time for (``runner.OUT_OF_TIME``: the slicer's
+    order, unsearched)."""
+    reorderable = problem.group_reorderable
+    return sum(bool(reorderable[g]) and gs.formulation.startswith(OUT_OF_TIME)
+               for g, gs in enumerate(solution.groups))
+
+
+def out_of_time_note(n_groups: int, n_decided: int, solve_budget_s) -> str:
+    """The report's line for groups the budget left no time for (``out_of_time_groups``)."""
+    of = f" of the {solve_budget_s:.2f} s the budget left the solve" if solve_budget_s else ""
+    return (f"curve ordering ran out of time{of}: {n_groups:,} of {n_decided:,} re-orderable groups "
+            f"keep the slicer's order unsearched (status fallback; a larger --budget searches them)")
+
+
 def kept_slower_note(n_layers: int) -> str:
     """The report's line for layers the time guard put back (``emit_guarded``)."""
     return (f"{n_layers} layers keep the slicer's order: re-ordered they took longer under the "
@@ -157,35 +175,68 @@ def kept_slower_note(n_layers: int) -> str:
 FINISH_S_PER_LINE = 15e-6
 #: and per file, whatever its size (imports on first use, the report)
 FINISH_FIXED_S = 0.15
-#: the solve keeps at least this share of a whole-run budget however large the file: a budget too
-#: small for the file's emit gives a late answer rather than none
-MIN_SOLVE_SHARE = 0.25
+#: building the ordering problem (``ordering.groups.build``), per input line: ``reorder`` measures
+#: it, ``stage_floor_s`` estimates it before (the Cura bunny: 1.28 s for 204,404 lines, quiet)
+BUILD_S_PER_LINE = 7e-6
 
 
 def solve_budget_s(budget_s: float | None, n_lines: int, spent_s: float) -> float | None:
     """What a budget for the whole run leaves the solve: ``budget_s`` less what is spent
     (``spent_s``: parse, build) and an estimate of what is to come after the solve
-    (``FINISH_S_PER_LINE`` per line of the file, ``FINISH_FIXED_S``), at least
-    ``MIN_SOLVE_SHARE`` of it. None (no budget) stays None."""
+    (``FINISH_S_PER_LINE`` per line of the file, ``FINISH_FIXED_S``), never below 0: with
+    nothing left every group keeps the slicer's order (``runner.OUT_OF_TIME``). (It once kept
+    a quarter of the budget however little was left: a late answer by design.) None (no budget)
+    stays None."""
     if budget_s is None:
         return None
     left = budget_s - spent_s - FINISH_FIXED_S - FINISH_S_PER_LINE * n_lines
-    return max(MIN_SOLVE_SHARE * budget_s, left)
+    return max(0.0, left)
+
+
+def stage_floor_s(program: Program, slow: float = 1.0) -> float:
+    """What the ordering stage takes with no time to search at all: building the problem, passing
+    every group (``runner.GroupRunner``'s priors per curve, the curves estimated by the file's
+    travels: one per curve on the corpus, 67,775 for the Cura bunny's 67,356 curves) and the
+    emit; building and passing at ``slow`` times their quiet rates (``budget.slowdown_factor``).
+    A whole-run budget that leaves the ordering less keeps the slicer's order without building
+    anything (``rewrite.pipeline.run``)."""
+    curves = runs(travel_mask(program), program)
+    return (slow * (BUILD_S_PER_LINE * program.n_lines
+                    + (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * curves)
+            + FINISH_FIXED_S + FINISH_S_PER_LINE * program.n_lines)
+
+
+class NoTimeToOrder(Exception):
+    """The solve's budget, once the problem is built, would not pay for passing its groups
+    (``reorder`` with ``slow``): searching nothing, the solve and its emit would still end the
+    run late."""
+
+    def __init__(self, solve_budget_s: float, pass_s: float, n_groups: int):
+        super().__init__(f"the {solve_budget_s:.2f} s the budget left the solve would not pay for "
+                         f"passing its {n_groups:,} groups ({pass_s:.2f} s)")
+        self.solve_budget_s, self.pass_s, self.n_groups = solve_budget_s, pass_s, n_groups
 
 
 def reorder(program: Program, options: OrderingOptions | None = None, *,
             formulation: str = "auto", time_limit_s: float = 2.0,
             budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
-            progress=None, started_s: float | None = None):
+            progress=None, started_s: float | None = None, slow: float | None = None):
     """build -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
     ``started_s``, default now) -> ``emit_guarded``, without verifying (``order_program`` does;
     ``rewrite.pipeline.run`` verifies its own output). Returns (problem, the solve's budget, solution,
-    text, parsed output, layers the time guard put back)."""
+    text, parsed output, layers the time guard put back). ``slow`` (``budget.slowdown_factor``;
+    None: never): raise ``NoTimeToOrder`` after the build where the solve's budget would not pay
+    for passing the groups at ``slow`` times the runner's priors (every group would keep the
+    slicer's order, late)."""
     t0 = time.perf_counter() if started_s is None else started_s
     problem = build(program, options or OrderingOptions())
     # compiling numba kernels (a first run) is not the run's to budget: it counts no time
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
     solve_budget = solve_budget_s(budget_s, program.n_lines, spent)
+    if slow is not None and solve_budget is not None:
+        pass_s = slow * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
+        if solve_budget < pass_s:
+            raise NoTimeToOrder(solve_budget, pass_s, problem.n_groups)
     solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=solve_budget,
                      workers=workers, progress=progress)
     solution, text, out, kept = emit_guarded(program, problem, solution, time_guard)
@@ -301,6 +352,9 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
     layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
     sizes = np.diff(problem.group_curve_start)
     slower = _slower_notes(fig, slower_layers)
+    late = out_of_time_groups(problem, solution)
+    if late:
+        slower.append(out_of_time_note(late, len(decided), solve_budget_s))
     time_obj = problem.cost_unit == "ms"
     return {
         "objective": options.objective,
@@ -320,6 +374,8 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         "largest_group": int(max((sizes[g] for g, _ in decided), default=0)),
         "groups_optimal": counts["optimal"], "groups_feasible": counts["feasible"],
         "groups_fallback": counts["fallback"],
+        # of the fallback groups, those the budget left no time for: the slicer's order, unsearched
+        "groups_out_of_time": late,
         # safe mode's blocks (ordering/blocks.py): segments of >= 3 islands, how many moved, how
         # many block orders were proven optimal (the slicer's order kept counts if it was proven)
         "block_segments": int(problem.block_report.get("segments", 0)),

@@ -39,10 +39,11 @@ from ..ordering.problem import OrderingOptions
 from ..parse import parse
 from ..program import Program
 from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
-from ..verify import VerifyReport, check_ordering, check_positions, energy_of, verify
+from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
 from .budget import no_time_note, ordering_budget_s, slowdown_factor
 from .figures import figures
-from .order import kept_slower_note, order_summary, reorder
+from .order import (NoTimeToOrder, kept_slower_note, order_summary, out_of_time_groups,
+                    out_of_time_note, reorder, stage_floor_s)
 from .printer import FirmwareChoice, choose
 
 #: the keys of the ordering's report that ``gatesopt solve --json`` carries at its top level (the
@@ -150,17 +151,23 @@ class Stages:
 
 def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
                   budget_s: float | None = None, progress=None, options=None,
-                  formulation: str = "auto", started_s: float | None = None):
+                  formulation: str = "auto", started_s: float | None = None,
+                  slow: float | None = None):
     """Re-order curves (``rewrite.order.reorder``): (program, ordered?, note, problem,
     ``summarize(findings)``: the ordering's report, given the findings of its checks, solve
-    seconds). A stop request (Ctrl-C) keeps the slicer's order (a valid answer) with a note; every
-    other exception propagates."""
+    seconds). A stop request (Ctrl-C) keeps the slicer's order (a valid answer) with a note, as
+    does a budget that once the problem is built leaves its solve too little to pass its groups
+    (``slow``: ``reorder``'s ``NoTimeToOrder``); every other exception propagates."""
     t0 = time.perf_counter()      # the ordering's own clock (its report's wall_s)
     options = options or OrderingOptions()
     try:
         problem, solve_budget, solution, _, out, slower = reorder(
             program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
-            workers=workers, progress=progress, started_s=t0 if started_s is None else started_s)
+            workers=workers, progress=progress, started_s=t0 if started_s is None else started_s,
+            slow=slow)
+    except NoTimeToOrder as exc:
+        return (program, False, f"curve ordering skipped after its build: {exc}: the slicer's order "
+                "kept (a larger --budget re-orders)", None, None, 0.0)
     except KeyboardInterrupt as exc:    # Ctrl-C: the slicer's own order is a valid answer
         if not isinstance(exc, Interrupted):
             if stop_requested():
@@ -170,7 +177,12 @@ def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
                 f"{time.perf_counter() - t0:.1f} s: the slicer's order kept", None, None,
                 time.perf_counter() - t0)
     wall_s = time.perf_counter() - t0
-    note = f"curve ordering: {kept_slower_note(len(slower))}" if len(slower) else ""
+    notes = [f"curve ordering: {kept_slower_note(len(slower))}"] if len(slower) else []
+    late = out_of_time_groups(problem, solution)
+    if late:
+        notes.append(out_of_time_note(late, int(np.count_nonzero(problem.group_reorderable)),
+                                      solve_budget))
+    note = "; ".join(notes)
     out = dataclasses.replace(out, source=program.source)
 
     def summarize(findings) -> dict:
@@ -390,11 +402,17 @@ def _verify_run(program: Program, ordered_base: Program, out: Program, o: Gating
     if ordered and sol is not None:
         # the ordering's own checks, on the re-ordered print before gating split any move
         extra = tuple(check_ordering(program, ordered_base))
+        # the report has ``verify``'s extrusion and commands findings on the output itself: the
+        # same faults seen on the re-ordered print are not added twice (the ordering's summary
+        # below counts them all)
+        own = tuple(f for f in extra if f.check not in SHARED_CHECKS)
         # and the positions check ``verify`` skips for a re-ordering, on what gating rewrote: the
         # re-ordered print against the output (rotation and gating keep its moves in order)
         pos = check_positions(ordered_base, out)
-        if extra or pos:
-            rep = dataclasses.replace(rep, ok=False, findings=rep.findings + extra + tuple(pos))
+        if own or pos:
+            rep = dataclasses.replace(rep, ok=False, findings=rep.findings + own + tuple(pos))
+        elif extra:
+            rep = dataclasses.replace(rep, ok=False)
         rep = dataclasses.replace(rep, checks=rep.checks + ("ordering", "positions"))
     return rep, extra
 
@@ -439,17 +457,19 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             # compiling numba kernels (a first run) is not charged to the budget (cli.progress)
             spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
             ob = ordering_budget_s(budget_s, program, o, formulation, gating, spent_s, time_limit_s, slow)
-            if ob <= 0.0:
-                # the rest alone is estimated to take the whole budget: the slicer's order (a
-                # re-ordering costs its build, a pass over every group and its emit even at no
-                # time to search: seconds on a large file), said so
+            floor = stage_floor_s(program, slow)
+            if ob <= floor:
+                # what the rest leaves the ordering would not pay for its build, a pass over
+                # every group and its emit even with no time to search (seconds on a large file:
+                # the run would end late by the difference): the slicer's order, said so
                 order = False
-                notes.append(no_time_note(budget_s, spent_s, slow))
+                notes.append(no_time_note(budget_s, spent_s, slow, max(ob, 0.0), floor))
         if order:
             with times.stage("ordering_s"):
                 base, ordered, note, order_problem, summarize, order_solve_s = _order_curves(
                     program, order_time_limit_s, order_workers, ob, order_progress,
-                    order_options, order_formulation)
+                    order_options, order_formulation,
+                    slow=slow if budget_s is not None else None)
             times.add("ordering_solve_s", order_solve_s)
             if note:
                 notes.append(note)

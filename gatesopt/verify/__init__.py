@@ -75,8 +75,8 @@ from .firmware import check_firmware, detect_firmware, firmware_problem
 from .geometry import (GEOMETRY_TOL_MM, PARTITION_MAX_PIECES, SHORT_MM, check_geometry, order_changed,
                        segment_pair)
 from .motor_lines import without_added_motor_lines
+from .ordering import SHARED_CHECKS, check_barriers, check_moves
 from .ordering import check as check_ordering
-from .ordering import check_barriers
 from .positions import check_positions
 from .rotation import read_rotation, undone_tol
 from .schedule import check_schedule, scheduled_lines, timeline_s
@@ -84,7 +84,8 @@ from .timing import TIME_TOL_S, check_timing
 
 __all__ = ["verify", "VerifyReport", "Finding", "read_rotation", "energy_of", "check_geometry",
            "check_extrusion", "check_positions", "check_commands", "check_timing", "check_firmware",
-           "check_ordering", "check_barriers", "check_bounds", "firmware_problem", "detect_firmware", "fan_duty_s",
+           "check_ordering", "check_moves", "check_barriers", "SHARED_CHECKS", "check_bounds",
+           "firmware_problem", "detect_firmware", "fan_duty_s",
            "GEOMETRY_TOL_MM", "SHORT_MM", "PARTITION_MAX_PIECES", "E_REL_TOL", "TIME_TOL_S",
            "CLAIM_REL_TOL", "CONTROL_COMMANDS", "ROTATE_PREFIX", "ORDER_PREFIX"]
 
@@ -154,6 +155,9 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     findings: list[Finding] = []
     checks = []
     deg, cx, cy = read_rotation(output, original)
+    bare = without_added_motor_lines(output, original) if reordered else output
+    # a re-ordering not rotated, without gating lines: the ordering's checks compare it move by move
+    move_by_move = bool(reordered) and deg % 360.0 == 0.0 and bare.n_lines == output.n_lines
     findings += check_geometry(original, output, tol_mm=geometry_tol_mm, segments=segments)
     checks.append("geometry")
     findings += check_extrusion(original, output)
@@ -169,7 +173,9 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
     if deg % 360.0 != 0.0:
         # the slicer's bounds lines describe the rotated print: rewritten, checked on their own
         exempt = (bounds_line_numbers(original), bounds_line_numbers(output))
-    findings += check_commands(original, output, reordered=reordered, exempt=exempt)
+    # compared move by move, the part fan is checked per move (``check_moves``' fan), which implies
+    # the per-layer filament by fan duty: one finding per fault, the stricter one
+    findings += check_commands(original, output, reordered=reordered, exempt=exempt, fan_duty=not move_by_move)
     checks.append("commands")
     if deg % 360.0 != 0.0:
         findings += check_bounds(original, output, deg, (cx, cy))
@@ -195,9 +201,9 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
                                  original=original, tol_s=time_tol_s)
         checks.append("timing")
     if reordered:
-        bare = without_added_motor_lines(output, original)
-        if deg % 360.0 == 0.0 and bare.n_lines == output.n_lines:
-            findings += list(check_ordering(original, output))
+        if move_by_move:
+            # extrusion and commands ran above (``SHARED_CHECKS``): the ordering's own checks only
+            findings += list(check_moves(original, output))
             checks.append("ordering")
         else:
             # rotated or gated: the ordering checks' move-by-move comparison fails on rotated

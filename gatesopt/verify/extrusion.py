@@ -23,7 +23,8 @@ def _layer_e(program: Program) -> tuple[np.ndarray, np.ndarray]:
 def check_extrusion(original: Program, output: Program, *, rel_tol: float = E_REL_TOL) -> list[Finding]:
     ea, layers = _layer_e(original)
     eb, _ = _layer_e(output)
-    if original.n_layers != output.n_layers:     # the layer finder disagrees: compare the total
+    whole = original.n_layers != output.n_layers
+    if whole:                   # the layer finder disagrees: compare the total
         ea, eb = ea.sum(keepdims=True), eb.sum(keepdims=True)
     n = max(len(ea), len(eb))
     ea = np.pad(ea, (0, n - len(ea)))
@@ -31,6 +32,11 @@ def check_extrusion(original: Program, output: Program, *, rel_tol: float = E_RE
     bad = np.abs(ea - eb) > rel_tol * np.maximum(np.abs(ea), np.abs(eb)) + 1e-6
     out = []
     for k in np.flatnonzero(bad)[:5]:
+        if whole:
+            out.append(Finding("extrusion", None, f"whole print (layers found: {output.n_layers} in the "
+                               f"output, {original.n_layers} in the original): net E {eb[k]:.5f} mm, "
+                               f"original {ea[k]:.5f} mm"))
+            continue
         L = k - 1
         rows = np.flatnonzero((output.layer == L) & output.extruding)
         line = int(output.line[rows[0]]) + 1 if len(rows) else None

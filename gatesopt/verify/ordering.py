@@ -187,6 +187,18 @@ def check_fan(original: Program, output: Program, *, max_findings: int = 3,
     return out
 
 
+#: the checks ``check`` shares with ``gatesopt.verify.verify``, which runs them on every output
+SHARED_CHECKS = ("extrusion", "commands")
+
+
+def check_moves(original: Program, output: Program) -> list[Finding]:
+    """The re-ordering's own checks, move by move: ``check`` without ``SHARED_CHECKS`` (for
+    ``verify``, which has run those: one finding per fault)."""
+    keys = (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
+    return (check_geometry(original, output, keys=keys) + check_fan(original, output, keys=keys)
+            + check_barriers(original, output))
+
+
 def check(original: Program, output: Program) -> list[Finding]:
     """All findings for a re-ordered output (empty list: it prints what the original printed)."""
     keys = (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
