@@ -6,6 +6,10 @@ A link from curve u (left at its exit) to curve v (entered at its entry) is emit
 - *copied*: v is the curve the slicer printed after u and both are printed as the slicer printed
   them, so the slicer's own gap is copied (its wipe, retraction, z-hop, combing path): the link
   costs that gap's time, ``TimePricer.copy_ms[v]``;
+- *reversed* (``gaps.reversed_gap``): u is the curve the slicer printed after v, left where the
+  gap between them ended and v entered where it began, and that gap is pure travel
+  (``gaps.ReversibleGaps``): it is written backwards and costs its own time, ``copy_ms[u]``, as
+  the copied link the other way round does (plus the E move of a net E v's entry consumes);
 - *rebuilt* (``gaps.rebuilt_gap``): retract (if ``travel.TravelRule.retracts`` says so), lift,
   one straight travel, lower, unretract, plus the net E of the slicer's gaps it consumes (a prime
   the slicer added). Its time is the sum of those moves' times.
@@ -18,9 +22,12 @@ sum of move times, the same function that prices the moves of an emitted gap
 (``MoveTimes.steps_s``), so the cost the solver optimises is what the emitted travels cost under
 that model (tests/test_ordering_cost.py checks it on emitted files). The costs are in ms.
 
-The cost is asymmetric: a copied gap is priced one way only, and a rebuilt link's E moves depend on
-the gaps of the curve it enters. It breaks the triangle inequality where a long link retracts and
-two short ones do not. formulations/ordering.md says which bounds rely on what.
+The cost is asymmetric where a copied gap cannot be reversed (a wipe, a state line, firmware
+retraction in it: priced one way only), and a rebuilt link's E moves depend on the gaps of the
+curve it enters; where every copied gap of a group is reversible and no gap has a net E, a link
+costs the same both ways (the symmetric model is then exact, not a relaxation). It breaks the
+triangle inequality where a long link retracts and two short ones do not.
+formulations/ordering.md says which bounds rely on what.
 """
 from __future__ import annotations
 
@@ -31,6 +38,7 @@ import numpy as np
 
 from ..limits import MachineLimits
 from ..program import MOTION_KINDS, Program
+from .gaps import REVERSE_EPS, ReversibleGaps
 from .layout import LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, Layout
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
@@ -280,6 +288,12 @@ class TimePricer:
             t = move.steps_s(program, steps) if step_s is None else np.asarray(step_s)[steps]
             copy = np.bincount(owner, weights=t, minlength=n)
         self.copy_ms = copy * MS_PER_S
+        #: gaps a link may write reversed, at their own time (``gaps.ReversibleGaps``)
+        self.reversible = ReversibleGaps.of(program, lay)
+
+    def _rev_args(self) -> tuple:
+        r = self.reversible
+        return (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
 
     # -- links ----------------------------------------------------------------------------------
     def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
@@ -302,7 +316,8 @@ class TimePricer:
                np.ascontiguousarray(to_xy), z0, z1, self.group_first, self.own.net_e,
                self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-               self.rule.vector(), self.style_vec, self.move_vec, out, need, no_retract)
+               *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec, out, need,
+               no_retract)
         self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
         return out.reshape(k)
 
@@ -367,7 +382,7 @@ class TimePricer:
                       self.z_entry[gc], self.z_exit[gc], self.group_first, self.own.net_e,
                       self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-                      self.rule.vector(), self.style_vec, self.move_vec,
+                      *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec,
                       self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid)
 
 
@@ -386,13 +401,41 @@ class _GroupLinks:
 
 
 @numba.njit(cache=True, inline="always")
+def _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_plain, rev_start,
+                   rev_end):
+    """``gaps.ReversibleGaps.applies`` for the link p -> c leaving p at (fx, fy) (the head stands
+    at p's end if p is printed as the slicer printed it) and entering c at (tx, ty)."""
+    if p != c + 1 or c < 0 or not rev_ok[p] or group_first[p] != group_first[c]:
+        return False
+    if c != group_first[c] and not rev_plain[c]:
+        return False
+    hx, hy = (fx, fy) if p_changed else (rev_end[p, 0], rev_end[p, 1])
+    return (abs(hx - rev_start[p, 0]) <= REVERSE_EPS and abs(hy - rev_start[p, 1]) <= REVERSE_EPS
+            and abs(tx - rev_end[c, 0]) <= REVERSE_EPS and abs(ty - rev_end[c, 1]) <= REVERSE_EPS)
+
+
+@numba.njit(cache=True, inline="always")
+def _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt):
+    """A reversed gap's cost (ms): the gap's own time, plus the E move of the net E of c's own
+    gap, which the entry into c consumes (``gaps.reversed_gap``)."""
+    t = copy_ms[p]
+    if c != group_first[c] and abs(own_net[c]) > MOVE_EPS_MM:
+        t += _trapezoid(abs(own_net[c]), min(style[1], mt[5]), mt[4], mt[6]) * 1000.0
+    return t
+
+
+@numba.njit(cache=True, inline="always")
 def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, own_net, own_r,
-              own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt):
+              own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
+              rev_start, rev_end, rule, style, mt):
     """One link's cost (ms) as emitted, mirroring ``gaps.rebuilt_gap`` and ``travel.TravelRule``,
     except the combing exemption: returns (cost, whether the exemption applies if the travel
     crosses no wall, the cost then). ``rule``: TravelRule.vector()."""
     if p >= 0 and p == c - 1 and not p_changed and not c_changed:
         return copy_ms[c], False, 0.0                   # the slicer's own gap, copied
+    if p >= 0 and _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_plain,
+                                 rev_start, rev_end):
+        return _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt), False, 0.0
     retract_mm, min_travel, fw_style, comb_cap = rule[0], rule[1], rule[2] > 0.5, rule[3]
     crossing = p < 0 or group_first[c] != group_first[p]
     own = c != group_first[c]
@@ -433,19 +476,21 @@ def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, o
 @numba.njit(cache=True)
 def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
-           rule, style, mt, out, need, no_retract):
+           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, out, need, no_retract):
     """``_link_one`` per link; the wall test is the caller's (``need``, ``no_retract``)."""
     for i in range(len(nxt)):
         out[i], need[i], no_retract[i] = _link_one(
             prev[i], prev_changed[i], nxt[i], nxt_changed[i], from_xy[i, 0], from_xy[i, 1],
             to_xy[i, 0], to_xy[i, 1], z0[i], z1[i], group_first, own_net, own_r, own_fw_net,
-            own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt)
+            own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain, rev_start,
+            rev_end, rule, style, mt)
 
 
 @numba.njit(cache=True)
 def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
-           rule, style, mt, has_walls, trim, a, b, x0, y0, h, nx, ny, start, items):
+           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, has_walls, trim, a, b, x0, y0,
+           h, nx, ny, start, items):
     """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
@@ -482,11 +527,16 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
             if p == c - 1 and not changed[u] and not changed[v]:
                 out[u, v] = copy_ms[c]
                 continue
+            if _reversed_link(p, changed[u], c, ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1],
+                              group_first, rev_ok, rev_plain, rev_start, rev_end):
+                out[u, v] = _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt)
+                continue
             if abs(z_ext[u] - z_ent[v]) > MOVE_EPS_MM or group_first[p] != group_first[c]:
                 t, need, dry = _link_one(p, changed[u], c, changed[v], ext[u, 0], ext[u, 1],
                                          ent[v, 0], ent[v, 1], z_ext[u], z_ent[v], group_first,
                                          own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r,
-                                         bnd_fw_net, bnd_fw, copy_ms, rule, style, mt)
+                                         bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
+                                         rev_start, rev_end, rule, style, mt)
             else:
                 dx = ent[v, 0] - ext[u, 0]
                 dy = ent[v, 1] - ext[u, 1]
