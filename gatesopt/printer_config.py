@@ -18,7 +18,8 @@ writes the shaper) over the rest. This module does the same and reads:
   klippy/kinematics/extruder.py), the limits of extrude-only moves, Z-with-E moves and retractions;
 - ``[gcode_arcs]``: ``resolution`` (default 1.0 mm; without the section Klipper has no G2/G3);
 - ``[gatesopt_gating]``: ``start_ahead`` (0.0018 s), ``end_late`` (0.0010 s), ``min_off_time``
-  (0 s), ``steppers`` ("stepper_x, stepper_y"): the module's options
+  (0 s), ``min_pin_spacing`` (0.1 s, 0.025 .. 1), ``steppers`` ("stepper_x, stepper_y"): the
+  module's options
   (integrations/klipper/gatesopt_gating.py);
 - the stepper sections present (``[stepper_x]``, ...).
 
@@ -53,6 +54,8 @@ class GatingSection:
     start_ahead_s: float = 0.0018
     end_late_s: float = 0.0010
     min_off_time_s: float = 0.0
+    min_pin_spacing_s: float = 0.100    # least time between two changes of one pin (the module's
+                                        # DEFAULT_PIN_SPACING_S; its docstring cites Klipper's source)
     steppers: tuple[str, ...] = ("stepper_x", "stepper_y")
 
 
@@ -205,6 +208,8 @@ def _gating(cp, source: str) -> GatingSection | None:
         end_late_s=_float(cp, sec, "end_late", d.end_late_s, minval=0.0, below=0.05000001, source=source),
         min_off_time_s=_float(cp, sec, "min_off_time", d.min_off_time_s, minval=0.0, below=3600.000001,
                               source=source),
+        min_pin_spacing_s=_float(cp, sec, "min_pin_spacing", d.min_pin_spacing_s, minval=0.025,
+                                 below=1.000000001, source=source),
         steppers=steppers)
 
 

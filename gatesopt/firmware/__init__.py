@@ -196,6 +196,9 @@ class Firmware:
     word_stalls: tuple = ()       # (word, off s, on s): a stall of its own for a word it carries out
     time_model: str = "paper"     # "planner": gating is priced with the planner (its limits, printer.cfg)
     planner: PlannerRules | None = field(default=None, repr=False)   # None: the file's own rules
+    rotation_max_added_time_pct: float | None = None   # a rotation chosen by --rotate auto may make
+                                  # the print (first extrusion to end, time model) at most this much
+                                  # longer (``GatingOptions.max_rotation_added_time_pct``)
 
     # -- text -------------------------------------------------------------------------------------
     def off_lines(self, motors) -> list[str]:
