@@ -1036,6 +1036,7 @@ def compare(orig: Replay, out: Replay, stripped: Replay | None, report: dict, fi
         "end_late_min_s": min((v.end_late_min_s for v in out.steppers.values() if v.gated), default=float("nan")),
         "off_time_s": {MOTOR_OF[k]: v.off_time_s for k, v in out.steppers.items() if v.gated},
         "report_off_time_s": report.get("off_time_s", {}),
+        "off_time_waits_s": report.get("off_time_waits_s", {}),
         "saving_pct": report.get("saving_pct"),
         "klippy_s": orig.klippy_s + out.klippy_s, "decode_s": orig.decode_s + out.decode_s,
     }
@@ -1072,8 +1073,7 @@ def table(rows: list[dict]) -> str:
         swo_txt = "0" if not any(swo.values()) else "**" + " ".join(f"{k} {v}" for k, v in swo.items() if v) + "**"
         med = r["start_ahead_median_s"]
         med_txt = min(med.values()) if med else float("nan")
-        off = " ".join(f"{k} {r['off_time_s'].get(k, 0.0):.1f}/{float(r['report_off_time_s'].get(k, 0.0)):.1f}"
-                       for k in sorted(set(r["off_time_s"]) | {k for k, v in r["report_off_time_s"].items() if v}))
+        off = off_text(r)
         model = r.get("model_added_pct")
         out.append(
             f"| {r['file']} | {r['firmware']} | {r['solve']} | {r['shaper']} | {r['print_s']:.1f} | "
@@ -1083,6 +1083,34 @@ def table(rows: list[dict]) -> str:
             f"{swo_txt} | {_ms(r['start_ahead_min_s'])} / {_ms(med_txt)} | {_ms(r['end_late_min_s'])} | "
             f"{off or '—'} | {r['klippy_s']:.1f} |")
     return "\n".join(out)
+
+
+def off_pairs(r: dict) -> dict[str, tuple[float, float]]:
+    """Per gated motor: (off time in the replay, off time gatesopt's report gives outside heat-up
+    waits). klippy's batch mode does not wait for its heaters (M109 / M190 / TEMPERATURE_WAIT return
+    at once, klippy/extras/heaters.py ``_wait_for_temperature``), so the part of the report's off
+    time that lies in those waits (``off_time_waits_s``: the energy profile's heating time, right
+    for a printer) has no counterpart in the replay and is left out of the comparison."""
+    rep, waits, got = r.get("report_off_time_s") or {}, r.get("off_time_waits_s") or {}, r.get("off_time_s") or {}
+    motors = sorted(set(got) | {k for k, v in rep.items() if v})
+    return {k: (float(got.get(k, 0.0)), float(rep.get(k, 0.0)) - float(waits.get(k, 0.0))) for k in motors}
+
+
+def off_deviation(r: dict) -> float:
+    """The largest |replay - report| / report over the gated motors (off time outside heat-up
+    waits, ``off_pairs``); nan without gating."""
+    dev = [abs(a - b) / b if b > 0 else (0.0 if a == 0 else math.inf) for a, b in off_pairs(r).values()]
+    return max(dev) if dev else float("nan")
+
+
+def off_text(r: dict) -> str:
+    """"X 80.3/80.9 Y ..." (replay / report outside heat-up waits), with the waits the report
+    counts besides where there are some."""
+    waits = {k: float(v) for k, v in (r.get("off_time_waits_s") or {}).items() if v and v > 0.05}
+    txt = " ".join(f"{k} {a:.1f}/{b:.1f}" for k, (a, b) in off_pairs(r).items())
+    if waits:
+        txt += " (+ waits " + " ".join(f"{k} {v:.1f}" for k, v in waits.items()) + ")"
+    return txt
 
 
 def _fmt_num(x) -> str:
@@ -1102,8 +1130,8 @@ def summary(rows: list[dict]) -> str:
     start-ahead / end-late minima and the cost of a disable and of a split move."""
     out = ["| firmware | solve | shaper | files | errors | files with steps while off (steps) | "
            "added % median [min, max] | ms/disable | ms/split | start-ahead min ms | "
-           "start-ahead median ms (per file) | end-late min ms |",
-           "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+           "start-ahead median ms (per file) | end-late min ms | off within 2 % |",
+           "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     keys = list(dict.fromkeys((r["firmware"], r["solve"], r["shaper"]) for r in rows))
     for key in keys:
         rs = [r for r in rows if (r["firmware"], r["solve"], r["shaper"]) == key]
@@ -1117,8 +1145,15 @@ def summary(rows: list[dict]) -> str:
                    f"{_range([r.get('per_disable_ms') for r in ok])} | {_range([r.get('per_split_ms') for r in ok])} | "
                    f"{_ms(min(sa)) if sa else '—'} | "
                    f"{_range([1000 * min(r['start_ahead_median_s'].values()) for r in ok if r['start_ahead_median_s']], '{:.2f}')} | "
-                   f"{_ms(min(el)) if el else '—'} |")
+                   f"{_ms(min(el)) if el else '—'} | {_within(ok)} |")
     return "\n".join(out)
+
+
+def _within(rows: list[dict], tol: float = 0.02) -> str:
+    """"n of m" files with gating whose off times are within ``tol`` of the report's."""
+    dev = [off_deviation(r) for r in rows]
+    dev = [d for d in dev if not math.isnan(d)]
+    return f"{sum(d <= tol for d in dev)} of {len(dev)}" if dev else "—"
 
 
 def scheduled_table(rows: list[dict]) -> str:
@@ -1136,8 +1171,7 @@ def scheduled_table(rows: list[dict]) -> str:
         if "error" in r:
             out.append(f"| {r['file']} | {r['shaper']} | {r['error'][:120]} |" + " |" * 9)
             continue
-        off = " ".join(f"{k} {r['off_time_s'].get(k, 0.0):.1f}/{float(r['report_off_time_s'].get(k, 0.0)):.1f}"
-                       for k in sorted(set(r["off_time_s"]) | {k for k, v in r["report_off_time_s"].items() if v}))
+        off = off_text(r)
         sav, opt = r.get("saving_pct"), best.get((r["file"], r["solve"]))
         out.append(
             f"| {r['file']} | {r['shaper']} | {r['print_s']:.1f} | {r['added_s']:+.3f} ({r['added_pct']:+.3f} %) | "
@@ -1164,7 +1198,10 @@ def section(rows: list[dict], command: str, notes: list[str], title: str | None 
         "where nothing else changed (no ordering, no rotation); *steps while off*: steps the MCU "
         "was told to take while that motor's enable pin was off; *start-ahead* / *end-late*: over "
         "every gated off interval (a step before and after it): pin on → next step, last step → "
-        "pin off; *off s*: total gated off time per motor in Klipper vs gatesopt's `off_time_s`.",
+        "pin off; *off s*: total gated off time per motor in Klipper vs gatesopt's `off_time_s` "
+        "less its `off_time_waits_s` (klippy's batch mode skips heater waits, M109 / M190 / "
+        "TEMPERATURE_WAIT: the off time the report counts in them is shown as *+ waits*); *off "
+        "within 2 %*: files whose every gated motor's off time in Klipper is within 2 % of that.",
         "", summary(rows), "", table(rows), "",
         *(["Outputs for gatesopt's Klipper module (`--module`), each solved for the printer.cfg it is "
            "replayed on (`--printer-config`: the shaper's window, the module's options): *steps while "

@@ -10,7 +10,8 @@ re-enable at the next move instead). So:
 - *ms/enable* = (output - output without ENABLE=1 lines) / enable lines;
 - *ms/disable* = (output without ENABLE=1 lines - output without gating lines) / disable lines;
 - *instr s* = output - output without gating lines, against gatesopt's price of those lines
-  (disable lines x ``stall_off_s`` + enable lines x ``stall_on_s`` of ``gatesopt.firmware``);
+  (the report's added paper time: disable lines x ``stall_off_s`` + each enable line priced per
+  move, ``planner.stop_restart_s`` + its restart);
 - *rest s* = output without gating lines - original: what the rest of the rewrite costs (split
   moves; 0 extrude-only moves are split by this dialect).
 
@@ -52,7 +53,11 @@ def row_of(file: str, shaper: str, orig, out, stripped, no_on, report: dict, out
     fw = fwmod.get("klipper")
     n_on, n_off = len(ENABLE_ON.findall(out_text)), len(ENABLE_OFF.findall(out_text))
     instr_s = out.end_s - stripped.end_s
-    model_s = n_off * fw.stall_off_s + n_on * fw.stall_on_s
+    # gatesopt's price of the lines: what its report adds to the paper time (the dialect changes
+    # no move's time; disables x stall_off_s, each enable priced per move, planner.stop_restart_s)
+    before, after = report.get("paper_time_before_s"), report.get("paper_time_after_s")
+    model_s = (after - before) if before is not None and after is not None else \
+        n_off * fw.stall_off_s + n_on * fw.stall_on_s
     gated = [v for v in out.steppers.values() if v.gated]
     return {
         "file": file, "shaper": shaper, "print_s": orig.print_s, "added_s": out.end_s - orig.end_s,
@@ -176,7 +181,8 @@ def section(rows: list[dict], command: str) -> str:
         "`ENABLE=1` lines (Klipper's own re-enable at the next move, the dialect before this change). "
         "*model %*: gatesopt's added time; *ms/enable*, *ms/disable*: what each line adds in Klipper; "
         "*instr s replay / model*: time the gating lines add in Klipper vs gatesopt's price of them "
-        "(disables x `stall_off_s` + enables x `stall_on_s`); *rest s*: output without gating lines "
+        "(the report's added time: disables x `stall_off_s` + each enable priced per move by the speed "
+        "its flush stops, `planner.stop_restart_s`); *rest s*: output without gating lines "
         "vs original (split moves); *steps while off*: steps sent while a gated pin was off; "
         "*start-ahead*: pin on -> next step of that motor; *end-late*: last step -> pin off.", "",
         tables(rows), ""])

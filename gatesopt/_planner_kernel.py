@@ -118,11 +118,13 @@ def junction_speed(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row):
     # Klipper toolhead.py Move.calc_junction
     if np_ == 0.0 or nc == 0.0:
         return 0.0          # extruder-only moves are not kinematic: full stop around them
+    # the junction deviation is the toolhead's, from its max_accel (toolhead.py
+    # _calc_junction_deviation: scv^2 (sqrt 2 - 1) / max_accel), times each move's own
+    # acceleration: a Z move (max_z_accel) turns slower than an XY move at the same angle
     scv = row[C_SCV]
-    jd_c = scv * scv * (math.sqrt(2.0) - 1.0) / ac
-    jd_p = scv * scv * (math.sqrt(2.0) - 1.0) / ap
+    jd = scv * scv * (math.sqrt(2.0) - 1.0) / row[C_ACCEL_PRINT]
     quarter_tan = 0.25 * sin_d2 / max(cos_d2, 1e-12)
-    v2 = min(r_jd * jd_c * ac, r_jd * jd_p * ap, 2.0 * lc * ac * quarter_tan, 2.0 * lp * ap * quarter_tan)
+    v2 = min(r_jd * jd * ac, r_jd * jd * ap, 2.0 * lc * ac * quarter_tan, 2.0 * lp * ap * quarter_tan)
     # extruder.calc_junction: instant_corner_velocity on the change of E per mm of XYZ path
     diff_r = abs(uc[3] / nc - up[3] / np_)
     if diff_r > 1e-9:
@@ -175,24 +177,43 @@ def prepare_moves(code, d, L, F, arc_row, arc_us, arc_ue, arc_phi, stop_before, 
         fmin = row[C_MIN_FEED] if has_e else row[C_MIN_TRAVEL_FEED]
         if f < fmin:
             f = fmin
-        # M203 per-axis feedrate caps, Klipper max_velocity, minimum segment time (M205 B)
+        # Klipper: the extruder's limits (max_extrude_only_velocity / _accel, the E columns) apply
+        # to a move without X and Y (extrude-only, or Z with E) and to a retraction (E < 0), as
+        # the move's speed and acceleration over |E per mm| (klippy/kinematics/extruder.py
+        # PrinterExtruder.check_move); Marlin caps E on every move (M203 / M201 E)
+        e_caps = True
+        if code == SCV:
+            e_caps = (j < 0 and d[k, 0] == 0.0 and d[k, 1] == 0.0) or d[k, 3] < 0.0
+        # M203 per-axis feedrate caps (the Z caps are Klipper's max_z_velocity * move_d / |dz|,
+        # klippy/kinematics/cartesian.py check_move), Klipper max_velocity, minimum segment
+        # time (M205 B)
         for ax in range(4):
+            if ax == 3 and not e_caps:
+                continue
             if ua[ax] > 0.0 and f * ua[ax] > row[C_MAX_FEED + ax]:
                 f = row[C_MAX_FEED + ax] / ua[ax]
-        if f > row[C_MAX_VELOCITY]:
+        # an extrude-only move keeps its requested speed on Klipper (toolhead.py Move: no
+        # max_velocity for it), capped by max_extrude_only_velocity above
+        if f > row[C_MAX_VELOCITY] and not (code == SCV and e_only):
             f = row[C_MAX_VELOCITY]
         mst = row[C_MIN_SEGMENT_TIME]
         if mst > 0.0 and f * mst > L[k]:
             f = L[k] / mst
         # acceleration: Marlin planner.cpp -- retract_acceleration for extruder-only moves,
         # travel_acceleration for moves without E steps, acceleration otherwise; M201 per axis
+        # Klipper: an extrude-only move's acceleration is max_extrude_only_accel alone (toolhead.py
+        # Move starts it at 99999999.9, extruder.py check_move lowers it), not max_accel
         if e_only:
             a = row[C_ACCEL_RETRACT]
+            if code == SCV and row[C_MAX_ACCEL + 3] < 1e300:
+                a = row[C_MAX_ACCEL + 3]
         elif has_e:
             a = row[C_ACCEL_PRINT]
         else:
             a = row[C_ACCEL_TRAVEL]
         for ax in range(4):
+            if ax == 3 and not e_caps:
+                continue
             if ua[ax] > 0.0 and a * ua[ax] > row[C_MAX_ACCEL + ax]:
                 a = row[C_MAX_ACCEL + ax] / ua[ax]
         acc[k] = a
@@ -396,16 +417,23 @@ def stop_costs(queries, L, a, vnom, vj, vj_free, safe, stop_before, entry, exit_
 
 @njit(cache=True)
 def klipper_cruise_cap(L, a, a_smooth, vnom, vj, stop_before):
-    """Klipper's "smoothed" look-ahead (toolhead.py ``MoveQueue.flush`` with ``max_accel_to_decel``;
-    newer Klipper: ``minimum_cruise_ratio``, the same machinery): the peak speed of each move is
-    also capped as if the moves accelerated and decelerated at ``a_smooth``, so a run of short
-    moves does not accelerate fully only to brake at once. Returns the cruise cap (mm/s) per move;
-    entry and exit speeds are those of the ordinary passes, clipped to the cap (``set_junction``).
+    """Klipper's "smoothed" look-ahead (klippy/toolhead.py ``LookAheadQueue.flush`` at 84104bb,
+    ``minimum_cruise_ratio``; older Klipper: ``max_accel_to_decel``, the same machinery): the
+    peak speed of each move is also capped as if the moves accelerated and decelerated at
+    ``a_smooth`` (``Move.mcr_delta_v2``), so a run of short moves does not accelerate fully only to
+    brake at once. Returns the cruise cap (mm/s) per move; entry and exit speeds are those of the
+    ordinary passes, clipped to the cap (``Move.set_junction``).
+
+    As in ``flush``: backward over one queue (the moves between two stops), a move that can
+    accelerate on the smoothed speeds gets ``min((start + reachable) / 2, max_cruise, peak)``
+    with ``peak`` the smoothed peak of the last move that could both accelerate and decelerate
+    (or that ends a run of moves that could not); a move that cannot accelerate takes in the
+    forward pass ``min(cruise of the move before, its own start)``. All in v^2.
     """
     m = L.shape[0]
     cap2 = np.empty(m)
     ms = np.empty(m)       # max_start_v2
-    msm = np.empty(m)      # max_smoothed_v2
+    msm = np.empty(m)      # max_mcr_start_v2
     dv2 = np.empty(m)
     sdv2 = np.empty(m)
     for k in range(m):
@@ -416,43 +444,43 @@ def klipper_cruise_cap(L, a, a_smooth, vnom, vj, stop_before):
             ms[k] = 0.0
             msm[k] = 0.0
         else:
-            ms[k] = min(vj[k] * vj[k], ms[k - 1] + dv2[k - 1])
+            ms[k] = min(vj[k] * vj[k], cap2[k], cap2[k - 1], ms[k - 1] + dv2[k - 1])
             msm[k] = min(ms[k], msm[k - 1] + sdv2[k - 1])
-    delayed = np.empty(m, dtype=np.int64)
-    d_start = np.empty(m)
-    nd = 0
+    cruise = np.empty(m)
+    start_v2 = np.empty(m)
     k = m - 1
     while k >= 0:
         # one queue: from the last move back to the first one after a stop (the queue ends at rest)
-        next_end = 0.0
-        next_smooth = 0.0
+        hi = k
+        next_start = 0.0
+        next_mcr = 0.0
         peak = 0.0
-        nd = 0
+        pending = 0
         while True:
-            reach = next_end + dv2[k]
+            reach = next_start + dv2[k]
             start = min(ms[k], reach)
-            reach_s = next_smooth + sdv2[k]
-            smooth = min(msm[k], reach_s)
-            if smooth < reach_s:
-                if smooth + sdv2[k] > next_smooth or nd > 0:
-                    peak = min(cap2[k], (smooth + reach_s) * 0.5)
-                    for j in range(nd):
-                        cap2[delayed[j]] = min(peak, d_start[j], cap2[delayed[j]])
-                    nd = 0
-                cap2[k] = min((start + reach) * 0.5, cap2[k], peak)
-            else:
-                delayed[nd] = k
-                d_start[nd] = start
-                nd += 1
-            next_end = start
-            next_smooth = smooth
+            pending += 1
+            reach_m = next_mcr + sdv2[k]
+            mcr_start = min(msm[k], reach_m)
+            cruise[k] = -1.0            # None: set in the forward pass
+            if mcr_start < reach_m:
+                if mcr_start + sdv2[k] > next_mcr or pending > 1:
+                    peak = (mcr_start + reach_m) * 0.5
+                cruise[k] = min((start + reach) * 0.5, cap2[k], peak)
+                pending = 0
+            start_v2[k] = start
+            next_start = start
+            next_mcr = mcr_start
             if stop_before[k] or k == 0:
                 break
             k -= 1
-        for j in range(nd):     # cannot happen when the first move starts from rest; kept safe
-            cap2[delayed[j]] = min(d_start[j], cap2[delayed[j]])
+        prev = 0.0
+        for i in range(k, hi + 1):
+            if cruise[i] < 0.0:
+                cruise[i] = min(prev, start_v2[i])
+            prev = cruise[i]
         k -= 1
     out = np.empty(m)
     for k in range(m):
-        out[k] = math.sqrt(max(cap2[k], 0.0))
+        out[k] = math.sqrt(max(min(cruise[k], cap2[k]), 0.0))
     return out

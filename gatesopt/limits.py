@@ -30,6 +30,7 @@ import numpy as np
 
 from . import firmware
 from .errors import GatesoptError
+from .headers import PREFIX as GATESOPT_PREFIX
 from .program import MOTION_KINDS, Program
 
 # The flat parameter vector: one name per scalar limit. ``MachineLimits`` exposes them as typed
@@ -261,6 +262,12 @@ def _flavor(data: bytes) -> str:
 def _printer_profile(data: bytes, firmware: str) -> tuple[str, str]:
     """(PRINTER_DEFAULTS key, why) for the values the file does not give."""
     head = data[:20000]
+    while head.startswith(GATESOPT_PREFIX.encode()):
+        # gatesopt's own header lines on a file it rewrote: the slicer's header follows (a
+        # CuraEngine file starts with ";FLAVOR:"; re-ordered, it got Marlin's stock junction
+        # deviation instead of Cura's classic jerk, so its print time before and after were
+        # planned under different rules)
+        head = head.split(b"\n", 1)[1] if b"\n" in head else b""
     if b";Generated with Cura" in head or head.startswith(b";FLAVOR:"):
         m = _CURA_MACHINE_RE.search(head)
         if m is not None:       # the Cura front-end names the machine definition it evaluated
@@ -308,8 +315,10 @@ def _line_sets(m, rules, mm_min: bool, legacy_m204: bool, printer) -> tuple[list
             sets += [(f"jerk_{a.lower()}", w[a.encode()] / 60) for a in "XYZE" if a.encode() in w]
         elif cmd == b"M204":
             if rules.m204 == "klipper":
-                # Klipper's M204: S sets max_accel; else min(P, T)
-                acc = w.get(b"S", min(w.get(b"P", INF), w.get(b"T", INF)))
+                # Klipper's M204: S sets max_accel; else min(P, T) when both are given; P or T
+                # alone is answered 'Invalid M204 command' and changes nothing (klippy/toolhead.py
+                # ToolHeadCommandHelper.cmd_M204): PrusaSlicer's per-feature "M204 P800" lines
+                acc = w.get(b"S", min(w[b"P"], w[b"T"]) if b"P" in w and b"T" in w else INF)
                 if acc < INF:
                     sets += [("accel_print", acc), ("accel_travel", acc), ("accel_retract", acc)]
             elif b"S" in w:
@@ -480,4 +489,10 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
         source["junction"] = "M205 J (junction deviation)"
     if junction == "jerk" and np.isnan(v[K["jerk_x"]]):
         junction = "deviation"
+    if junction == "scv" and np.isnan(v[K["square_corner_velocity"]]):
+        # a printer profile without one (Cura's definitions) planned by Klipper's rules: Klipper's
+        # own default (klippy/toolhead.py square_corner_velocity 5.0); NaN would leave every
+        # junction speed undefined
+        v[K["square_corner_velocity"]] = rules.defaults.get("square_corner_velocity", 5.0)
+        source["square_corner_velocity"] = f"default: {family} (the {profile} profile has none)"
     return _from_vector(v, family, junction, source, changes, profile)

@@ -26,7 +26,11 @@ the printer's motion planner does instead (``plan``):
   (M205 B) where the file sets one (Marlin applies it only while its queue runs low, SLOWDOWN;
   here it applies to every move -- an upper bound; Klipper has none); acceleration = print
   (M204 P) for moves with E steps, travel (M204 T) without, retract (M204 R) for extruder-only
-  moves, each capped per axis by M201;
+  moves, each capped per axis by M201. Klipper: one max_accel, the Z caps scaled by move_d / |dz|
+  (kinematics/cartesian.py ``check_move``), the extruder's max_extrude_only_velocity / _accel
+  on extrude-only moves (which keep their requested speed over max_velocity), Z-with-E moves and
+  retractions only (kinematics/extruder.py ``check_move``), the junction deviation of the
+  toolhead's max_accel times each move's own acceleration (toolhead.py ``Move.calc_junction``);
 * arcs (G2/G3) are one step here but the firmware cuts them into ~1 mm segments: their nominal
   speed is capped by the junction speed between two such segments (turn angle s / R);
 * non-motion steps keep ``program.duration_s``; dwells, heat waits, homing and the motor
@@ -93,6 +97,8 @@ class Plan:
     nominal_mm_s: np.ndarray    # highest cruise speed the move may reach after the limits (and Klipper's
                                 # smoothing cap); 0 for non-motion steps
     limits: MachineLimits = field(repr=False)
+    free_mm_s: np.ndarray = field(repr=False, default=None)   # nominal speed before Klipper's
+                                # smoothing cap (the limits alone); 0 for non-motion steps
     # kernel inputs kept for stop_cost_s (moves only)
     move_step: np.ndarray = field(repr=False, default=None)      # step index of each move
     step_move: np.ndarray = field(repr=False, default=None)      # move index of each step (-1: none)
@@ -303,12 +309,16 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
         raise GatesoptError(f"{program.source}: no finite positive speed for some moves; "
                             f"check the feedrates and machine limits (profile {limits.profile})")
 
+    vfree = vnom
     rules = fwmod.planner_rules(limits.firmware, None)
     if m and (rules.smoothed_lookahead if rules is not None else limits.junction == "scv"):
         # Klipper's smoothed look-ahead, where the file sets ACCEL_TO_DECEL below ACCEL
         # (newer Klipper: minimum_cruise_ratio, the pseudo acceleration max_accel * (1 - ratio))
+        # the pseudo acceleration is the toolhead's max_accel times (1 - ratio), whatever lowered
+        # the move's own (Z, extruder caps): toolhead.py Move.mcr_delta_v2 = min(2 d
+        # mcr_pseudo_accel, delta_v2), so a Z or extrude-only move is not smoothed below its accel
         a_smooth = np.minimum(np.minimum(table[regime, _k.C_ACCEL_TO_DECEL], acc),
-                              acc * (1.0 - table[regime, _k.C_MIN_CRUISE_RATIO]))
+                              table[regime, _k.C_ACCEL_PRINT] * (1.0 - table[regime, _k.C_MIN_CRUISE_RATIO]))
         if np.any(a_smooth < acc):
             vnom = _k.klipper_cruise_cap(L, acc, a_smooth, vnom, vj, stop_before)
 
@@ -332,8 +342,49 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
     return Plan(duration_s=dur, entry_mm_s=full(entry), cruise_mm_s=full(peak), exit_mm_s=full(exit_),
                 accel_s=full(t_acc), cruise_s=full(t_cruise), decel_s=full(t_dec),
                 accel_mm_s2=full(acc), length_mm=np.array(program.length_mm, dtype=float),
-                nominal_mm_s=full(vnom), limits=limits, move_step=idx, step_move=step_move,
+                nominal_mm_s=full(vnom), limits=limits, free_mm_s=full(vfree), move_step=idx,
+                step_move=step_move,
                 _vj=vj, _vj_free=vj_free, _safe=safe, _stop_before=stop_before, _barrier=barrier)
+
+
+def stop_restart_s(p: Plan, rows, split=False) -> np.ndarray:
+    """Per query, what a full stop and restart costs at an instruction line placed before step
+    ``rows[i]`` (``split[i]``: inside that move instead), priced from the speeds the moves there
+    allow and nothing else, so that the same line costs the same in the original (where the solver
+    places it) and in the output (where the verifier finds it between two moves): the head passes
+    the place at ``v`` -- the junction speed of the move before and the next move without a stop
+    (``Plan._vj_free``: the junction rule, both nominal speeds; 0 next to an extrude-only move on
+    Klipper), or inside a move its nominal speed before any smoothing cap -- and stopping there
+    costs ``v / (2 a_before) + v / (2 a_after)`` over passing at ``v`` (decelerate and accelerate
+    again at the moves' own accelerations). A line with no move after it costs nothing (the
+    print is over). This ignores whatever else stops the head nearby (a dwell) and moves too short
+    to reach ``v`` again: an upper bound there."""
+    rows = np.atleast_1d(np.asarray(rows, dtype=np.int64))
+    split = np.broadcast_to(np.asarray(split, dtype=bool), rows.shape)
+    out = np.zeros(len(rows))
+    ms = p.move_step
+    if len(ms) == 0:
+        return out
+    # the next move: the row itself when it is a move (or is split), else the first move after it
+    c = np.searchsorted(ms, rows, side="left")
+    ok = c < len(ms)
+    cc = np.minimum(c, len(ms) - 1)
+    acc = p.accel_mm_s2[ms]
+    inside = split & ok & (ms[cc] == rows)
+    v = np.where(inside, p.free_mm_s[ms[cc]], p._vj_free[cc])
+    a_next = acc[cc]
+    a_prev = np.where(inside, acc[cc], acc[np.maximum(cc - 1, 0)])
+    first = (cc == 0) & ~inside
+    out = np.where(ok & ~first, v / (2.0 * a_prev) + v / (2.0 * a_next), 0.0)
+    return out
+
+
+def enable_price(family: str | None = None, printer=None):
+    """``firmware.stall_durations``' ``enable_price`` callable: ``stop_restart_s`` at the given rows
+    of a program planned with ``family``'s rules (``printer``: the printer's Klipper config)."""
+    def price(program: Program, rows) -> np.ndarray:
+        return stop_restart_s(plan(program, machine_limits(program, family=family, printer=printer)), rows)
+    return price
 
 
 # ------------------------------------------------------------------------------------------------

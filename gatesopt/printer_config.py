@@ -13,9 +13,13 @@ writes the shaper) over the rest. This module does the same and reads:
 - ``[input_shaper]``: ``shaper_type`` (default mzv), ``shaper_type_x/_y/_z``, ``shaper_freq_x/_y/_z``
   (default 0: no shaping), ``damping_ratio_x/_y/_z`` (default 0.1) -> each axis's step window
   (``gatesopt.shaper``);
+- ``[extruder]``: ``max_extrude_only_velocity`` / ``max_extrude_only_accel`` (default: max_velocity
+  / max_accel times ``4 nozzle_diameter^2`` over the filament's cross section;
+  klippy/kinematics/extruder.py), the limits of extrude-only moves, Z-with-E moves and retractions;
 - ``[gcode_arcs]``: ``resolution`` (default 1.0 mm; without the section Klipper has no G2/G3);
 - ``[gatesopt_gating]``: ``start_ahead`` (0.0018 s), ``end_late`` (0.0010 s), ``min_off_time``
-  (0 s), ``steppers`` ("stepper_x, stepper_y"): the module's options
+  (0 s), ``min_pin_spacing`` (0.1 s, 0.025 .. 1), ``steppers`` ("stepper_x, stepper_y"): the
+  module's options
   (integrations/klipper/gatesopt_gating.py);
 - the stepper sections present (``[stepper_x]``, ...).
 
@@ -50,6 +54,8 @@ class GatingSection:
     start_ahead_s: float = 0.0018
     end_late_s: float = 0.0010
     min_off_time_s: float = 0.0
+    min_pin_spacing_s: float = 0.100    # least time between two changes of one pin (the module's
+                                        # DEFAULT_PIN_SPACING_S; its docstring cites Klipper's source)
     steppers: tuple[str, ...] = ("stepper_x", "stepper_y")
 
 
@@ -65,6 +71,8 @@ class PrinterConfig:
     square_corner_velocity_mm_s: float = 5.0
     max_z_velocity_mm_s: float | None = None
     max_z_accel_mm_s2: float | None = None
+    max_extrude_only_velocity_mm_s: float | None = None   # [extruder], its default applied
+    max_extrude_only_accel_mm_s2: float | None = None
     arc_resolution_mm: float | None = None       # None: no [gcode_arcs]
     shapers: tuple = ()                          # (("x", gatesopt.shaper.Shaper), ...): shaped axes
     gating: GatingSection | None = None          # None: no [gatesopt_gating]
@@ -86,6 +94,10 @@ class PrinterConfig:
             out["max_feed_z"] = zv
         if za is not None:
             out["max_accel_z"] = za
+        if self.max_extrude_only_velocity_mm_s is not None:
+            out["max_feed_e"] = self.max_extrude_only_velocity_mm_s
+        if self.max_extrude_only_accel_mm_s2 is not None:
+            out["max_accel_e"] = self.max_extrude_only_accel_mm_s2
         return out
 
     def window_s(self, axes: str) -> tuple[float, float]:
@@ -196,7 +208,29 @@ def _gating(cp, source: str) -> GatingSection | None:
         end_late_s=_float(cp, sec, "end_late", d.end_late_s, minval=0.0, below=0.05000001, source=source),
         min_off_time_s=_float(cp, sec, "min_off_time", d.min_off_time_s, minval=0.0, below=3600.000001,
                               source=source),
+        min_pin_spacing_s=_float(cp, sec, "min_pin_spacing", d.min_pin_spacing_s, minval=0.025,
+                                 below=1.000000001, source=source),
         steppers=steppers)
+
+
+def _extrude_only(cp, max_v, max_a, source: str) -> tuple[float | None, float | None]:
+    """[extruder] ``max_extrude_only_velocity`` / ``_accel``, with Klipper's defaults
+    (klippy/kinematics/extruder.py ``PrinterExtruder.__init__``: max_velocity / max_accel times
+    ``def_max_extrude_ratio = 4 nozzle_diameter^2 / (pi (filament_diameter / 2)^2)``); None where
+    neither the option nor what its default needs is in the file."""
+    sec = "extruder"
+    if not cp.has_section(sec):
+        return None, None
+    nozzle = _float(cp, sec, "nozzle_diameter", None, above=0.0, source=source)
+    filament = _float(cp, sec, "filament_diameter", None, above=0.0, source=source)
+    ratio = None
+    if nozzle is not None and filament is not None:
+        ratio = 4.0 * nozzle ** 2 / (math.pi * (filament / 2.0) ** 2)
+    out = []
+    for opt, base in (("max_extrude_only_velocity", max_v), ("max_extrude_only_accel", max_a)):
+        default = base * ratio if base is not None and ratio is not None else None
+        out.append(_float(cp, sec, opt, default, above=0.0, source=source))
+    return out[0], out[1]
 
 
 def read_printer_config(path) -> PrinterConfig:
@@ -218,6 +252,7 @@ def read_printer_config(path) -> PrinterConfig:
     if cp.has_section("gcode_arcs"):
         arcs = _float(cp, "gcode_arcs", "resolution", 1.0, above=0.0, source=src)
     steppers = tuple(s for s in cp.sections() if s.startswith("stepper_") or s == "extruder")
+    e_v, e_a = _extrude_only(cp, max_v, max_a, src)
     return PrinterConfig(
         source=src, kinematics=cp.get(p, "kinematics", fallback=None),
         max_velocity_mm_s=max_v, max_accel_mm_s2=max_a,
@@ -225,4 +260,5 @@ def read_printer_config(path) -> PrinterConfig:
         square_corner_velocity_mm_s=_float(cp, p, "square_corner_velocity", 5.0, minval=0.0, source=src),
         max_z_velocity_mm_s=_float(cp, p, "max_z_velocity", None, above=0.0, source=src),
         max_z_accel_mm_s2=_float(cp, p, "max_z_accel", None, above=0.0, source=src),
+        max_extrude_only_velocity_mm_s=e_v, max_extrude_only_accel_mm_s2=e_a,
         arc_resolution_mm=arcs, shapers=_shapers(cp, src), gating=_gating(cp, src), steppers=steppers)

@@ -195,12 +195,38 @@ class StreamGatingResult:
         return 100.0 * (1.0 - self.energy_after_j / self.energy_before_j) if self.energy_before_j else 0.0
 
 
+def _spaced_from_the_chunk_before(problem, sol, keep: np.ndarray) -> np.ndarray:
+    """``keep`` less the first off intervals of each motor that a firmware timing its own switches
+    (``options.schedule``: the klipper-gating module) would skip for rule B after the chunk before.
+
+    The module sees the whole file: its rule B counts from the motor's last gated "on", which may
+    be in the chunk before, as late as that chunk's last row. So the first interval of a motor here
+    is written only if the lower-bound time from this chunk's start to its line already clears the
+    spacing (``GatingProblem.spacing_need_s``); one that does not is dropped, and the next is checked
+    the same way (within the chunk the solver's own rule B holds between those kept)."""
+    if problem.options.schedule is None or problem.options.schedule.min_spacing_s <= 0:
+        return keep
+    idx = problem.idle_intervals_of(sol.angle_index)
+    keep = keep.copy()
+    for m in np.unique(sol.off_motor[keep]):
+        mine = idx[problem.idle_motor[idx] == m]
+        need = problem.spacing_need_s(int(m))
+        for j in np.flatnonzero(keep & (sol.off_motor == m)):      # in time order
+            i = mine[np.argmin(np.abs(problem.idle_start_s[mine] - sol.off_start_s[j]))]
+            if problem.idle_lb_off_s[i] >= need:
+                break
+            keep[j] = False
+    return keep
+
+
 def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dgates",
                 motors=("X", "Y"), chunk_bytes: int = DEFAULT_CHUNK_BYTES, verify_chunks: bool = True,
-                force: bool = False, progress=None) -> StreamGatingResult:
+                force: bool = False, progress=None, printer=None) -> StreamGatingResult:
     """Gate a file of any size chunk by chunk into ``out_path`` (temp file + rename, verified).
 
     No rotation (a rotation must be chosen over the whole print, which a stream cannot see first).
+    ``printer``: the printer's Klipper config (``gatesopt.printer_config``) for ``klipper-gating``
+    (the input shaper's window, the module's options), as ``GatingOptions.for_firmware`` takes it.
     """
     from .gating.emit import emit
     from .gating.options import GatingOptions
@@ -212,7 +238,7 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
     out_path = Path(out_path)
     if out_path.exists() and not force:
         raise GatesoptError(f"{out_path}: exists; pass --force to overwrite it")
-    opts = GatingOptions.for_firmware(firmware, motors=tuple(motors), rotate="none")
+    opts = GatingOptions.for_firmware(firmware, motors=tuple(motors), rotate="none", printer=printer)
     name = str(path)
     state_in = _scan.initial_state(25.0, DEFAULT_FEED_MM_S)
     state_out = state_in.copy()
@@ -242,6 +268,8 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
                 sol = solve(problem, formulation)
                 end = problem.total_s    # the chunk's timeline (time_before_s adds its own stalls)
                 keep = sol.off_end_s < end - 1e-12        # motors on at the chunk boundary
+                if chunks > 1:
+                    keep = _spaced_from_the_chunk_before(problem, sol, keep)
                 if not keep.all():
                     m, a, b = sol.off_motor[keep], sol.off_start_s[keep], sol.off_end_s[keep]
                     sc = score(problem, m, a, b)
@@ -258,7 +286,8 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
                 e_after += sol.energy_j
                 if verify_chunks:
                     rep = verify(prog, outp, firmware=firmware, start_ahead_s=opts.start_ahead_s,
-                                 end_late_s=opts.end_late_s, claimed=(sol.energy_j, sol.time_after_s))
+                                 end_late_s=opts.end_late_s, claimed=(sol.energy_j, sol.time_after_s),
+                                 printer=printer)
                     if not rep.ok:
                         findings += [f"chunk {chunks}: {f}" for f in rep.findings[:5]]
                 del prog, outp, problem, sol, text, data, state_before_out

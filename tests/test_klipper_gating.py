@@ -91,6 +91,77 @@ def test_the_dialects_margins_and_rule_a_are_the_modules(shaped, mzv30):
     assert o.stall_off_s == o.stall_on_s == 0.0 and not o.on_line
 
 
+def test_the_pin_spacing_default_and_range_are_the_modules(tmp_path):
+    """One number for the least time between two changes of a pin: the module's default and range,
+    the dialect's default, the printer.cfg reader's default and range."""
+    from gatesopt.firmware import klipper_gating
+    from gatesopt.printer_config import GatingSection
+    gg = _load_module()
+    assert gg.DEFAULT_PIN_SPACING_S == klipper_gating.PIN_SPACING_S == GatingSection().min_pin_spacing_s == 0.1
+    assert _options().schedule.min_spacing_s == gg.DEFAULT_PIN_SPACING_S
+    for value, ok in ((gg.MIN_PIN_SPACING_S, True), (gg.MAX_PIN_SPACING_S, True),
+                      (gg.MIN_PIN_SPACING_S * 0.99, False), (gg.MAX_PIN_SPACING_S * 1.01, False)):
+        cfg = tmp_path / "p.cfg"
+        cfg.write_text(MZV30_CFG + f"min_pin_spacing: {value!r}\n")
+        if ok:
+            assert read_printer_config(cfg).gating.min_pin_spacing_s == value
+        else:
+            with pytest.raises(PrinterConfigError, match="min_pin_spacing"):
+                read_printer_config(cfg)
+
+
+def test_min_pin_spacing_in_printer_cfg_sets_rules_a_and_b(tmp_path):
+    """``min_pin_spacing: 0.05`` in [gatesopt_gating]: rule A's floor and rule B's spacing are 0.05 s
+    in the gating problem (a 0.09 s idle stretch becomes an idle interval, two offs 0.06 s apart are
+    both allowed), as the module applies them."""
+    cfg = tmp_path / "p.cfg"
+    cfg.write_text("[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n"
+                   "[gatesopt_gating]\nmin_pin_spacing: 0.05\n")
+    fast = read_printer_config(cfg)
+    o = _options(fast)
+    assert (o.schedule.min_off_s, o.schedule.min_spacing_s) == (0.05, 0.05)
+    s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0)])
+    e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0)])
+    short = lambda opts: from_moves(s, e, np.array([0.05, 0.09, 0.05]), opts).n_idle_intervals
+    assert short(_options(motors=("X",))) == 0 and short(_options(fast, motors=("X",))) == 1
+    # rule B: X idle 0.2 s, steps 0.06 s, idle 0.2 s: both off only with the smaller spacing
+    s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0)])
+    e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0), (4, 10, .2, 0)])
+    d = np.array([0.05, 0.2, 0.06, 0.3, 0.02, 0.05])
+    for opts, both in ((_options(), 1), (o, 2)):
+        sol = solve(from_moves(s, e, d, opts), "dp")
+        assert int(np.sum(sol.off_motor == 0)) == both
+
+
+def test_the_pin_spacing_of_printer_cfg_is_what_solve_and_verify_use(tmp_path):
+    """A file solved for ``min_pin_spacing: 0.025`` gates more than one for the default, the
+    verifier derives exactly the report's off time with that printer.cfg, and without it (the
+    module's default 0.1 s) finds lines the module would skip."""
+    from gatesopt.cli import main
+    import json
+    src, cfg = tmp_path / "in.gcode", tmp_path / "printer.cfg"
+    src.write_text(GCODE)
+    base = "[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n[gatesopt_gating]\n"
+    off = {}
+    for name, extra in (("default", ""), ("fast", "min_pin_spacing: 0.025\n")):
+        cfg.write_text(base + extra)
+        out, rep = tmp_path / f"{name}.gcode", tmp_path / f"{name}.json"
+        assert main(["solve", str(src), "-o", str(out), "--firmware", "klipper-gating", "--printer-config",
+                     str(cfg), "--no-order", "--rotate", "none", "--json", str(rep)]) == 0
+        report = json.loads(rep.read_text())
+        lines = scheduled_lines(parse(out.read_text().encode()), firmware="klipper-gating",
+                                start_ahead_s=0.0018, end_late_s=0.001, printer=read_printer_config(cfg),
+                                original=parse(GCODE.encode()))
+        assert lines and all(s.gated for s in lines)
+        off[name] = sum(report["off_time_s"].values())
+        assert sum(s.on_s - s.off_s for s in lines) == pytest.approx(off[name], abs=1e-9)
+        assert main(["verify", str(src), str(out), "--claimed", str(rep), "--printer-config", str(cfg)]) == 0
+    assert off["fast"] > off["default"]
+    rep = verify(parse(GCODE.encode()), parse((tmp_path / "fast.gcode").read_text().encode()),
+                 firmware="klipper-gating")
+    assert not rep.ok and any("skips this line" in str(f) for f in rep.findings)
+
+
 # ------------------------------------------------------------------------------------------------
 # brute force == dp == milp == cpsat under rules A and B
 def _random_moves(rng, n):
@@ -271,8 +342,12 @@ def test_printer_config_reads_includes_and_save_config(tmp_path):
 
 def test_a_corexy_printer_is_refused(tmp_path):
     (tmp_path / "p.cfg").write_text("[printer]\nkinematics: corexy\n")
-    with pytest.raises(fwmod.FirmwareError, match="cartesian"):
+    with pytest.raises(fwmod.FirmwareError, match=r"cartesian printers only: both stepper_x \(A\) and "
+                       r"stepper_y \(B\) step for every X or Y move.*per axis \(X, Y\), not per motor A/B"):
         GatingOptions.for_firmware("klipper-gating", printer=read_printer_config(tmp_path / "p.cfg"))
+    (tmp_path / "d.cfg").write_text("[printer]\nkinematics: delta\n")
+    with pytest.raises(fwmod.FirmwareError, match="'delta'.*do not each move one axis alone"):
+        GatingOptions.for_firmware("klipper-gating", printer=read_printer_config(tmp_path / "d.cfg"))
 
 
 KLIPPER = os.environ.get("GATESOPT_KLIPPER")
@@ -413,3 +488,65 @@ def test_the_verifier_reads_repeated_and_early_lines_as_the_module_does():
     got = [(s.motor, s.gated, s.reason) for s in
            scheduled_lines(out, firmware="klipper-gating", start_ahead_s=1.8e-3, end_late_s=1e-3, original=prog)]
     assert got == [(1, False, "motor_off"), (0, True, ""), (0, False, "repeated")]
+
+
+# ------------------------------------------------------------------------------------------------
+# the rotation adds no planned time beyond issue 34's 0.05 %
+def test_auto_rotation_that_lengthens_the_planned_print_is_refused():
+    """A 45 deg turn that saves energy but lengthens the travel out of the print (to an absolute
+    park point the rotation does not move) by far more than 0.05 % of the planned print: --rotate
+    auto keeps 0 deg for klipper-gating and says why; without the limit it turns the print."""
+    import gatesopt
+    from gatesopt.firmware import klipper_gating
+    from test_rotation_policy import diagonal_part
+    text = diagonal_part().replace("G1 X0 Y200 F6000", "G1 X70 Y70 F6000\nG1 X0 Y200 F6000")
+    prog = gatesopt.parse(text)
+    o = GatingOptions.for_firmware("klipper-gating", bed_size_mm=(235, 235))
+    assert o.max_rotation_added_time_pct == klipper_gating.MAX_ROTATION_ADDED_TIME_PCT == 0.05
+    res = run(prog, o, order=False)
+    s = res.summary()
+    assert res.report.ok and s["rotation_deg"] == 0.0
+    assert s["rotation_line"].startswith("none: 45 deg, the best of ")
+    assert "to the planned print, more than the 0.05 % allowed (--rotate 45 to take it)" in s["rotation_line"]
+    free = run(prog, o.replace(max_rotation_added_time_pct=None), order=False)
+    assert free.report.ok and free.summary()["rotation_deg"] == 45.0
+    assert res.report.energy_j > free.report.energy_j      # the refusal costs energy, not time
+
+
+def _arc_turns(text: str) -> list[float]:
+    """Klipper's turn of every G2/G3 with I/J in ``text`` (absolute XY, no offsets)."""
+    from gatesopt.gating.emit_line import klipper_arc_turn
+    cur, out = [0.0, 0.0], []
+    for line in text.splitlines():
+        w = line.split(";")[0].split()
+        if not w or w[0] not in ("G0", "G1", "G2", "G3"):
+            continue
+        d = {x[0]: x[1:] for x in w[1:]}
+        tgt = [float(d["X"]) if "X" in d else cur[0], float(d["Y"]) if "Y" in d else cur[1]]
+        if w[0] in ("G2", "G3") and "I" in d:
+            out.append(klipper_arc_turn(cur, tgt, (float(d["I"]), float(d["J"])), w[0] == "G2"))
+        cur = tgt
+    return out
+
+
+def test_a_rotated_spiral_lift_turns_in_klipper_as_the_original():
+    """Orca's spiral lift ``G3 Z.. I.. J.. P1`` (target = start): Klipper's planArc makes it a full
+    circle only if its float sums give exactly 0, a null arc for a hair more. Turned 45 deg and
+    rounded, such arcs flipped (+4.6 s on real_orca230_arcs in Klipper); the rotated I/J keep every
+    one as Klipper turned the original."""
+    rng = np.random.default_rng(7)
+    out = ["G21", "G90", "M83", "G28", "G1 Z0.2 F600"]
+    for k in range(80):
+        x, y = (float(v) for v in np.round(rng.uniform(60, 140, 2), 3))
+        out += [f";LAYER:{k}", f"G1 X{x:.3f} Y{y:.3f} F6000", f"G1 X{x + 20:.3f} Y{y:.3f} E1 F1800",
+                f"G3 Z{0.4 + 0.2 * k:.1f} I{rng.uniform(-1.2, 1.2):.3f} J{rng.choice([-1, 1]) * 1.1:.3f} P1 F30000",
+                f"G1 Z{0.2 + 0.2 * k:.1f}", f"G1 X{x + 20:.3f} Y{y + 20:.3f} E1 F1800"]
+    out += ["G1 X0 Y200 F6000"]
+    prog = parse("\n".join(out).encode() + b"\n", source="lift.gcode")
+    o = GatingOptions.for_firmware("klipper-gating", bed_size_mm=(235, 235), rotate=45.0)
+    res = run(prog, o, order=False)
+    assert res.report.ok, res.report.findings
+    before, after = _arc_turns("\n".join(out)), _arc_turns(res.text)
+    assert len(before) == len(after) == 80
+    assert sum(abs(a) > math.pi for a in before) not in (0, 80)       # both kinds among the originals
+    assert all(abs(a - b) < math.pi for a, b in zip(before, after))

@@ -202,7 +202,7 @@ class FakeTracking:
 
 class Rig:
     """A cartesian printer (X and Y gateable) with the module's core attached."""
-    def __init__(self, margins=None, min_off=0.0, axes=None):
+    def __init__(self, margins=None, min_off=0.0, axes=None, spacing=None):
         self.mcu = FakeMcu()
         self.th = FakeToolhead()
         self.margins = dict(margins or {"stepper_x": (0.0, 0.0), "stepper_y": (0.0, 0.0)})
@@ -217,7 +217,8 @@ class Rig:
         self.core = gg.GatingCore(
             self.th, {n: (self.steppers[n], self.tracking[n]) for n in axes},
             lambda stepper: self.margins[stepper.get_name()],
-            lambda pin: self.mcu.est, SCHED, SA, EL, min_off, respond=self.said.append)
+            lambda pin: self.mcu.est, SCHED, SA, EL, min_off, respond=self.said.append,
+            pin_spacing_s=spacing)
         self.th.core = self.core
 
     def events(self, name):
@@ -301,6 +302,31 @@ def test_too_short_interval_stays_on_and_is_counted():
     rig2 = Rig()
     run_interval(rig2, [my(NEED0 + 1e-9)])      # just enough
     assert len(rig2.events("stepper_x")) == 2
+
+
+def test_pin_spacing_option_sets_rules_a_and_b_and_the_event_spacing():
+    """min_pin_spacing 0.05: a 0.09 s stretch (rule A's 0.1 s floor skips it) is gated with its
+    pin events >= 0.05 s apart; two offs whose on -> off is 0.06 s apart are both gated (rule B at
+    0.1 s keeps the second on). The MCU's min_schedule_time still bounds the lead over now."""
+    rig = Rig(spacing=0.05)
+    run_interval(rig, [my(NEED0 - SCHED + 0.05 + 1e-9)])
+    (t_off, v0), (t_on, v1) = rig.events("stepper_x")
+    assert (v0, v1) == (0, 1) and 0.05 <= t_on - t_off < SCHED
+    rig_default = Rig()
+    run_interval(rig_default, [my(NEED0 - SCHED + 0.05 + 1e-9)])
+    assert rig_default.events("stepper_x") == []
+    for spacing, gated in ((0.05, 2), (None, 1)):
+        r = Rig(spacing=spacing)
+        run_interval(r, [my(0.5)], after=mx(0.06))
+        r.core.command_gate(["stepper_x"])
+        r.th.move(my(0.5))
+        r.th.move(mx(0.1))
+        r.th.process()
+        ev = r.events("stepper_x")
+        assert len(ev) == 2 * gated
+        assert all(b[0] - a[0] >= (spacing or SCHED) - 1e-12 for a, b in zip(ev, ev[1:]))
+    rig.mcu.est = 1e6      # an off must still lead the MCU's clock by min_schedule_time
+    assert rig.core._earliest_event(rig.core.gates["stepper_x"]) == 1e6 + SCHED
 
 
 def test_proof_uses_min_move_t_not_the_planned_duration():
@@ -723,6 +749,15 @@ def test_config_defaults_and_ranges():
     printer, module = make_printer()
     assert module.names == ["stepper_x", "stepper_y"]
     assert (module.start_ahead_s, module.end_late_s, module.min_off_s) == (0.0018, 0.0010, 0.0)
+    assert module.pin_spacing_s == gg.DEFAULT_PIN_SPACING_S == 0.1
+    printer.send_event("klippy:connect")
+    assert module.core.pin_spacing_s == 0.1 and module.core.min_sched_s == SCHED
+    printer2, module2 = make_printer(options={"min_pin_spacing": "0.04"})
+    printer2.send_event("klippy:connect")
+    assert module2.core.pin_spacing_s == 0.04
+    for bad in ("0.02", "1.5"):
+        with pytest.raises(ConfigError):
+            make_printer(options={"min_pin_spacing": bad})
     with pytest.raises(ConfigError):
         make_printer(options={"end_late": "0.2"})
     with pytest.raises(ConfigError):

@@ -14,6 +14,7 @@ import pytest
 import gatesopt
 from conftest import REPO
 from gatesopt import firmware as fwmod
+from gatesopt.firmware import klipper as kl
 from gatesopt.gating import GatingOptions
 from gatesopt.gating.timeline import whole_steps
 from gatesopt.program import Kind
@@ -69,8 +70,25 @@ def test_klipper_writes_an_explicit_enable_start_ahead_plus_the_shaper_lead_befo
     nxt = steps_x[steps_x > on_row][0]
     # the motor is on 61.8 ms (start-ahead + the shaper lead) before the move that steps it
     assert t_start[nxt] - t_start[on_row] >= 0.0618 - 1e-9
-    # priced: one disable (0.22 s) and one enable (a flush) line
-    assert res.solution.added_time_s == pytest.approx(KLIPPER.stall_off_s + KLIPPER.stall_on_s)
+    # priced: one disable and one enable line, each flush stopping the head next to an
+    # extrude-only move (after the retraction, before the unretract), which Klipper starts and
+    # ends at rest anyway (toolhead.py Move.calc_junction): the disable's two 0.1 s dwells and
+    # each line's restart 2 x SDS_CHECK_TIME are left
+    assert res.solution.added_time_s == pytest.approx(0.2 + 2 * 2 * kl.SDS_CHECK_TIME_S)
+
+
+# X prints, Y travels a long way alone at 100 mm/s without a retraction, X prints again
+TRAVEL = _gcode("G1 X10 Y10 F6000\nG1 X60 E2 F1200\nG1 Y180 F6000\nG1 X10 E4 F1200\n")
+
+
+def test_klipper_enable_priced_by_the_speed_it_stops():
+    # both lines land inside the Y travel (end-late after the last X move, start-ahead + lead
+    # before the next): each flush stops the head from the travel's 100 mm/s and it accelerates
+    # again at Klipper's 3000 mm/s^2: 100 / (2 * 3000) + 100 / (2 * 3000) = 33.3 ms over passing
+    # at 100 mm/s, plus the 2 ms restart; the disable dwells 2 x 0.1 s besides
+    res = _run(TRAVEL, "klipper")
+    assert ON.findall(res.text) == ["x"] and OFF.findall(res.text) == ["x"]
+    assert res.solution.added_time_s == pytest.approx(0.2 + 2 * (100 / 3000 + 2 * kl.SDS_CHECK_TIME_S))
 
 
 def test_the_choice_says_what_klipper_cannot_honour():

@@ -109,9 +109,9 @@ def test_model_cost_is_the_emitted_travels_time(variant, seed, mode):
 @pytest.mark.parametrize("variant", [0, 1, 4])
 def test_copied_gaps_cost_the_planners_time(variant):
     """By default the slicer's own gaps cost what the planner says they take in the input; the
-    slicer's whole order then costs exactly the planner's time of its gaps, and less than the
-    move-by-move price where gaps have several moves (a retraction, a hop: junctions the planner
-    joins)."""
+    slicer's whole order then costs exactly the planner's time of its gaps; priced as a rebuilt
+    travel is (``copied_gaps="moves"``: each gap's moves planned together from and to rest,
+    ``MoveTimes.gaps_s``) they cost the same within 1 % (the gap's ends meet curves)."""
     from gatesopt.planner import plan
     prog = gatesopt.parse(slicer_gcode(1, **VARIANTS[variant]))
     prob = build(prog, OrderingOptions(mode="free"))
@@ -120,7 +120,7 @@ def test_copied_gaps_cost_the_planners_time(variant):
     d = plan(prog).duration_s
     gaps = sum(d[a:b].sum() for a, b in zip(lay.curve_s1[:-1].tolist(), lay.curve_s0[1:].tolist()))
     assert prob.pricer.copy_ms[1:].sum() == pytest.approx(1000.0 * gaps, rel=1e-9)
-    assert prob.pricer.copy_ms.sum() < moves.pricer.copy_ms.sum()
+    assert prob.pricer.copy_ms.sum() == pytest.approx(moves.pricer.copy_ms.sum(), rel=0.01)
     n = prob.n_curves
     ident, no = np.arange(n), np.zeros(n, bool)
     assert prob.order_cost(ident, no, np.zeros(n, np.int64)) == pytest.approx(1000.0 * gaps, rel=1e-9)

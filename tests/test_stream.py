@@ -111,3 +111,50 @@ def test_streamed_gating_is_verified_and_close_to_whole_file(tmp_path):
     with pytest.raises(Exception, match="exists"):
         gate_stream(src, out, chunk_bytes=8_000)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.gcode"]
+
+
+def _x_pairs_between_y_moves(n: int = 120) -> str:
+    """Y moves of 1 s (X idle) between two X moves of 0.02 s each: two of X's idle intervals in a
+    row are 0.04 s apart, less than the klipper-gating module's 0.1 s between two changes of a pin
+    (its rule B), so only every other one may be off, across chunk boundaries too."""
+    out = ["G21", "G90", "M83", "G28", "G1 Z0.2 F600", ";LAYER:0", "G1 X10 Y10 F6000"]
+    x = 10.0
+    for k in range(n):
+        out.append(f"G1 Y{60 if k % 2 == 0 else 10} E2 F3000")
+        for _ in range(2):
+            x += 0.5
+            out.append(f"G1 X{x:.1f} E0.02 F1500")
+    out.append("G1 X0 Y200 F6000")
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize("shaped", [False, True])
+def test_streamed_klipper_gating_is_what_the_module_gates_across_chunks(tmp_path, shaped):
+    """gate_stream with --firmware klipper-gating: the module sees the whole file, so its rule B
+    counts from a gated "on" in the chunk before; every line of the streamed output is one the
+    module gates (the whole output read as the module reads it), with and without an input
+    shaper's window (``printer``), at several chunk sizes."""
+    from gatesopt.printer_config import read_printer_config
+    from gatesopt.verify import verify
+    from gatesopt.verify.schedule import scheduled_lines
+    src = tmp_path / "pairs.gcode"
+    src.write_text(_x_pairs_between_y_moves())
+    printer = None
+    if shaped:
+        cfg = tmp_path / "printer.cfg"
+        cfg.write_text("[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n"
+                       "[input_shaper]\nshaper_type: mzv\nshaper_freq_x: 30\nshaper_freq_y: 30\n"
+                       "[gatesopt_gating]\n")
+        printer = read_printer_config(cfg)
+    original = parse(src)
+    for chunk in (300, 333, 450, 700):
+        out = tmp_path / f"out{chunk}.gcode"
+        kw = {"printer": printer} if printer is not None else {}
+        res = gate_stream(src, out, firmware="klipper-gating", chunk_bytes=chunk, **kw)
+        assert res.chunks > 10 and res.verified and res.energy_after_j < res.energy_before_j
+        output = parse(out)
+        rep = verify(original, output, firmware="klipper-gating", printer=printer)
+        assert rep.ok, [str(f) for f in rep.findings[:3]]
+        lines = scheduled_lines(output, firmware="klipper-gating", start_ahead_s=0.0018, end_late_s=0.001,
+                                printer=printer, original=original)
+        assert len(lines) > 30 and all(s.gated for s in lines)

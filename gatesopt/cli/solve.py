@@ -68,6 +68,14 @@ def status_text(s: dict) -> str:
     return str(s["status"]) + (f" (stopped: {s['stopped']})" if s.get("stopped") else "")
 
 
+def _waits_part(waits: dict) -> str:
+    """"   (in heat-up waits: X 92.50 s ...)": the off time that lies in M109 / M190 waits."""
+    shown = {m: t for m, t in waits.items() if t > 0.005}
+    if not shown:
+        return ""
+    return "   (in heat-up waits: " + "  ".join(f"{m} {t:.2f} s" for m, t in shown.items()) + ")"
+
+
 def format_solve_report(s: dict) -> str:
     at = f" at the {s['rotation_deg']:g} deg rotation chosen" if s["rotation_deg"] else ""
     lines = [
@@ -89,7 +97,8 @@ def format_solve_report(s: dict) -> str:
         f"   file size {s['size_change_pct']:+.2f} %",
         f"rotation      {s.get('rotation_line') or 'none'}"
         + (f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um" if s["rotation_deg"] else ""),
-        "off time      " + ("  ".join(f"{m} {t:.2f} s" for m, t in s["off_time_s"].items()) or "-"),
+        "off time      " + ("  ".join(f"{m} {t:.2f} s" for m, t in s["off_time_s"].items()) or "-")
+        + _waits_part(s.get("off_time_waits_s") or {}),
         figure_lines(s)[1],
     ]
     o = s.get("ordering")

@@ -179,6 +179,13 @@ class Firmware:
     no_drain_words: frozenset = frozenset()   # motor words it carries out without draining the queue
     stall_is_stop: bool = False   # the disable stall is a full stop (priced by the planner when given)
     drains_on_disable: bool = True  # a disable brings the head to rest (``planner.Plan.stop_cost_s``)
+    enable_is_stop: bool = False  # an enable line is a full stop priced per move where the caller
+                                  # has a planner (``stall_durations(enable_price=...)``): then
+                                  # ``enable_restart_s`` + the stop, instead of ``stall_on_s``
+    enable_restart_s: float = 0.0  # what an enable line costs on top of its stop (Klipper's restart)
+    disable_is_stop: bool = False  # the same for a disable line: ``disable_fixed_s`` + the stop,
+                                   # instead of ``stall_off_s``, where the caller has a planner
+    disable_fixed_s: float = 0.0   # what a disable line costs on top of its stop (Klipper's dwells)
     start_lead_s: float = 0.0     # counted on top of the start-ahead: the firmware steps this much
                                   # before a move's nominal start (Klipper's input shaper)
     note: str = ""                # what gating in this dialect cannot honour (said with the choice)
@@ -189,6 +196,9 @@ class Firmware:
     word_stalls: tuple = ()       # (word, off s, on s): a stall of its own for a word it carries out
     time_model: str = "paper"     # "planner": gating is priced with the planner (its limits, printer.cfg)
     planner: PlannerRules | None = field(default=None, repr=False)   # None: the file's own rules
+    rotation_max_added_time_pct: float | None = None   # a rotation chosen by --rotate auto may make
+                                  # the print (first extrusion to end, time model) at most this much
+                                  # longer (``GatingOptions.max_rotation_added_time_pct``)
 
     # -- text -------------------------------------------------------------------------------------
     def off_lines(self, motors) -> list[str]:
@@ -241,6 +251,12 @@ class Firmware:
         ``printer`` (``gatesopt.printer_config.PrinterConfig`` or None); None: the lines switch at
         the moment they are written (every stock dialect)."""
         return None
+
+    def start_lead(self, printer=None) -> float:
+        """What is counted on top of the start-ahead on a printer described by ``printer``
+        (``gatesopt.printer_config.PrinterConfig`` or None): ``start_lead_s`` unless the dialect
+        reads it from the printer (Klipper: its input shaper)."""
+        return self.start_lead_s
 
     def gating_defaults(self, printer=None) -> dict:
         """Gating options the printer's config fixes for this dialect (``GatingOptions`` field
@@ -422,7 +438,8 @@ def motor_line_is_on(text: str) -> bool | None:
 
 # ------------------------------------------------------------------------------------------------
 # the stall model
-def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, planner=None) -> np.ndarray:
+def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, planner=None,
+                    enable_price=None) -> np.ndarray:
     """Per-step stall time (s) of ``program``'s motor instructions under ``firmware``.
 
     Rows of ``Kind.MOTOR`` are enable/disable lines; every other row gets 0. A stall delays the
@@ -432,7 +449,11 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     fixed ``stall_off_s``. Under the acceleration-aware time model (``gatesopt.planner``), whose
     durations already bring the head to rest at every line that drains the queue
     (``planner.drains_queue``: M18/M84, SET_STEPPER_ENABLE), pass ``planner=lambda p, r: 0.0``
-    so the stop is not counted twice; Klipper's two 0.1 s dwells stay.
+    so the stop is not counted twice; Klipper's two 0.1 s dwells stay. ``enable_price``, if given,
+    is a callable ``enable_price(program, rows) -> seconds`` (one per row: the full stop at that
+    line, ``planner.stop_restart_s``) used for a dialect whose enable line is a stop
+    (``enable_is_stop``: Klipper's ``ENABLE=1`` flush), plus its ``enable_restart_s``, and whose
+    disable line is one (``disable_is_stop``: Klipper's ``ENABLE=0``), plus its ``disable_fixed_s``.
     """
     fw = get(firmware)
     out = np.zeros(program.n_steps)
@@ -462,6 +483,12 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     if planner is not None and fw.stall_is_stop:
         for r in rows[ok & ~on]:
             out[r] = float(planner(program, int(r)))
+    if enable_price is not None and fw.enable_is_stop and np.any(ok & on):
+        r_on = rows[ok & on]
+        out[r_on] = fw.enable_restart_s + np.asarray(enable_price(program, r_on), float)
+    if enable_price is not None and fw.disable_is_stop and np.any(ok & ~on):
+        r_off = rows[ok & ~on]
+        out[r_off] = fw.disable_fixed_s + np.asarray(enable_price(program, r_off), float)
     return out
 
 

@@ -23,9 +23,13 @@ the moves between line and step are the start-ahead; the flush's stop only delay
 
 A flush brings the head to rest at the line: inside a move from its cruising speed (v / a, 50 ms
 at 150 mm/s and 3000 mm/s^2), between two moves from their junction speed, which is 0 next to a
-retraction (an extrude-only move starts and ends at rest, ``Move.calc_junction``). The price here
-is one stop at 50 mm/s; the real one depends on the speed where the line stands (measured per
-line in docs/RESULTS.md). No line of this dialect splits an extrude-only move (``split_moves``
+retraction (an extrude-only move starts and ends at rest, ``Move.calc_junction``). So an enable
+line is priced per move (``enable_is_stop``): ``planner.stop_restart_s`` -- v / (2 a) to stop
+from the speed v the head passes the line at and as much to get back to it, 0 next to an
+extrude-only move -- plus the restart ``2 * SDS_CHECK_TIME``, in the gating problem and in the
+verifier alike (where no planner prices it, ``KLIPPER_ENABLE_STALL_S``: a stop at 50 mm/s). A
+disable line likewise (``disable_is_stop``): its flush's stop, the two 0.1 s dwells and the
+restart (``KLIPPER_STALL_S``, 0.22 s, where no planner prices it; 203-241 ms measured). No line of this dialect splits an extrude-only move (``split_moves``
 "kinematic": Klipper plans each half from rest to rest); splitting no move at all ("none") was
 tried and gated next to nothing: most idle intervals worth a 0.22 s stall lie inside one long
 single-axis move.
@@ -43,6 +47,10 @@ stall. ``M18``/``M84`` go to ``motor_off()``, which disables *all* steppers and 
 Planner rules: klippy/toolhead.py -- one ``max_accel`` for every move (M204 S sets it, else
 min(P, T)), junctions by ``square_corner_velocity`` (default 5), ``max_velocity`` caps every move
 (it and ``max_accel`` have no default there; we use a common 300 mm/s, 3000 mm/s^2), the
+Z caps of the kinematics (``max_z_velocity`` / ``max_z_accel`` scaled by move_d / |dz|,
+kinematics/cartesian.py ``check_move``), the extruder's ``max_extrude_only_velocity`` /
+``max_extrude_only_accel`` on extrude-only moves, Z-with-E moves and retractions (defaults from a
+0.4 mm nozzle and 1.75 mm filament: 79.8 mm/s, 798 mm/s^2; kinematics/extruder.py), the
 "smoothed" look-ahead of ``max_accel_to_decel`` / ``minimum_cruise_ratio``; a slicer writes a
 Klipper printer's square corner velocity as ``machine_max_jerk_x`` (OrcaSlicer).
 """
@@ -69,7 +77,19 @@ KLIPPER_ENABLE_STALL_S = round(KLIPPER_STOP_S + 2 * SDS_CHECK_TIME_S, 4)
 #: counted on top of the start-ahead: the longest pre-active time of Klipper's input shapers
 #: (klippy/extras/shaper_defs.py) at 20 Hz, 3hump_ei's 58.3 ms, rounded up
 SHAPER_LEAD_S = 0.060
+#: on top of a printer's own pre-active time (``Klipper.start_lead``): stepcompress may send a step
+#: 25 us early (klippy/chelper/stepcompress.c, MAX_STEPCOMPRESS_ERROR), and MCU clock rounding
+SHAPER_LEAD_SLACK_S = 25e-6 + 1e-6
 INF = math.inf
+#: klippy/kinematics/extruder.py PrinterExtruder: without ``max_extrude_only_velocity`` /
+#: ``_accel`` in [extruder], max_velocity and max_accel times ``4 nozzle^2 / filament area``
+#: (the default cross-section over the filament's); 0.4 mm nozzle, 1.75 mm filament here
+KLIPPER_NOZZLE_MM, KLIPPER_FILAMENT_MM = 0.4, 1.75
+
+
+def default_extrude_ratio(nozzle_mm: float = KLIPPER_NOZZLE_MM, filament_mm: float = KLIPPER_FILAMENT_MM) -> float:
+    """Klipper's ``def_max_extrude_ratio`` (extruder.py): 4 nozzle^2 / (pi (filament / 2)^2)."""
+    return 4.0 * nozzle_mm ** 2 / (math.pi * (filament_mm / 2.0) ** 2)
 
 #: Klipper's stepper names of the axes on a cartesian printer (printer.cfg sections)
 STEPPER_NAMES = {"X": "stepper_x", "Y": "stepper_y", "Z": "stepper_z", "E": "extruder"}
@@ -78,8 +98,9 @@ PLANNER = PlannerRules(
     family="klipper", junction="scv", junction_fixed=True,
     junction_note="Klipper: square_corner_velocity", jerk_is_scv=True, one_accel=True,
     m204="klipper", smoothed_lookahead=True, disable_dwell_s=KLIPPER_ENABLE_DWELL_S,
-    defaults=dict(max_accel_x=INF, max_accel_y=INF, max_accel_z=100, max_accel_e=INF,
-                  max_feed_x=INF, max_feed_y=INF, max_feed_z=15, max_feed_e=INF,
+    defaults=dict(max_accel_x=INF, max_accel_y=INF, max_accel_z=100,
+                  max_accel_e=3000 * default_extrude_ratio(),
+                  max_feed_x=INF, max_feed_y=INF, max_feed_z=15, max_feed_e=300 * default_extrude_ratio(),
                   jerk_x=math.nan, jerk_y=math.nan, jerk_z=math.nan, jerk_e=math.nan,
                   accel_print=3000, accel_travel=3000, accel_retract=3000, accel_to_decel=INF,
                   junction_deviation=math.nan, square_corner_velocity=5.0, max_velocity=300,
@@ -101,6 +122,17 @@ class Klipper(Firmware):
     def _lines(self, word: str, motors, enable: int) -> list[str]:
         return [f"SET_STEPPER_ENABLE STEPPER={STEPPER_NAMES[m]} ENABLE={enable}" for m in motors]
 
+    def start_lead(self, printer=None) -> float:
+        """``SHAPER_LEAD_S`` (any of Klipper's shapers at 20 Hz or more) without a printer config;
+        with one, its own input shaper's pre-active time: the largest of the shaped axes' (a
+        cartesian stepper moves one axis; ``PrinterConfig.window_s``, Klipper's shaper_defs
+        pulses time-centred as klippy/chelper/kin_shaper.c does), 0 without ``[input_shaper]``,
+        plus ``SHAPER_LEAD_SLACK_S`` (stepcompress may send a step early; MCU clock rounding)."""
+        if printer is None:
+            return self.start_lead_s
+        pre = max(printer.window_s(a)[0] for a in "xyz")
+        return pre + SHAPER_LEAD_SLACK_S if pre > 0 else 0.0
+
 
 DIALECT = Klipper(
     name="klipper", off_word="SET_STEPPER_ENABLE", on_word="SET_STEPPER_ENABLE", merge_motors=False,
@@ -109,8 +141,11 @@ DIALECT = Klipper(
     executes=frozenset({"SET_STEPPER_ENABLE", "M18", "M84"}),
     description="Klipper: SET_STEPPER_ENABLE per stepper, ~0.22 s stall off, ~0.02 s on",
     start_lead_s=SHAPER_LEAD_S, split_moves="kinematic",
+    enable_is_stop=True, enable_restart_s=2 * SDS_CHECK_TIME_S,
+    disable_is_stop=True, disable_fixed_s=KLIPPER_ENABLE_DWELL_S + 2 * SDS_CHECK_TIME_S,
     note=(f"klipper: each motor switched on {SHAPER_LEAD_S * 1e3:g} ms more than the start-ahead "
-          "before its next move (an input shaper's steps start before the move); each "
+          "before its next move (an input shaper's steps start before the move; with "
+          "--printer-config: that printer's shaper pre-active time); each "
           "SET_STEPPER_ENABLE stops the print head (ENABLE=0 also dwells 2 x 0.1 s, so a motor "
           "goes off >= 0.1 s after its last step whatever the end-late); with an input shaper "
           "every such line costs 2 x its pre-active time more than priced"),

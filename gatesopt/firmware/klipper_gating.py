@@ -15,17 +15,18 @@ off at ``t_end + off_delay`` (``t_end``: the end of the moves queued before the 
 (``pre``/``post``: S's step window, the input shaper's, ``gatesopt.shaper``; 25 us: Klipper's
 ``MAX_STEPCOMPRESS_ERROR``; 1 us: clock rounding) -- if rule A and rule B hold, with ``gap`` the sum
 of the moves' ``min_move_t`` (distance over speed, klippy/toolhead.py ``Move``) between the line
-and the activating move, and ``min_sched`` = 0.1 s (the MCU's ``min_schedule_time``):
+and the activating move, and ``spacing`` the module's ``min_pin_spacing`` (default 0.1 s, Klipper's
+own spacing of one pin's changes: the module's docstring, "Pin spacing", cites the source):
 
-- rule A: ``gap >= off_delay + on_lead + max(min_off_time, min_sched)``;
-- rule B: ``min_sched`` between the previous "on" of S and this "off": ``on_lead_prev + (the
+- rule A: ``gap >= off_delay + on_lead + max(min_off_time, spacing)``;
+- rule B: ``spacing`` between the previous "on" of S and this "off": ``on_lead_prev + (the
   min_move_t from the move that ended S's previous gated interval to the line) + off_delay >=
-  min_sched``.
+  spacing``.
 
 What this module declares to the gating model (``Schedule``; ``gatesopt.gating`` honours it, the
 verifier derives the intervals from the lines with its own code): the firmware's own delay and lead
-per motor, rule A's floor ``min_off_s`` = max(min_off_time, min_sched), rule B's spacing
-``min_sched``, the lower bound of ``min_move_t`` (``planner.min_move_time_s``: L / F, arcs as
+per motor, rule A's floor ``min_off_s`` = max(min_off_time, spacing), rule B's ``spacing``
+(both from the printer.cfg's ``[gatesopt_gating]`` section, the module's defaults without one), the lower bound of ``min_move_t`` (``planner.min_move_time_s``: L / F, arcs as
 Klipper's chords), no more than ``MAX_OFF_DELAY_S`` of delay, and the planner time model with
 Klipper's rules and the printer's limits (``--printer-config``), so that reported times and
 off-times are what Klipper plans.
@@ -45,10 +46,35 @@ from .klipper import KLIPPER_STALL_S, PLANNER, STEPPER_NAMES
 # the module's constants (integrations/klipper/gatesopt_gating.py)
 CLOCK_SLACK_S = 1e-6          # pin and step times are MCU clocks: rounding
 STEP_EARLY_S = 25e-6          # stepcompress may send a step this much early (MAX_STEPCOMPRESS_ERROR)
-MIN_SCHEDULE_S = 0.100        # the MCU's min_schedule_time(): between two events of one pin
+PIN_SPACING_S = 0.100         # the module's DEFAULT_PIN_SPACING_S: between two changes of one pin
 MAX_OFF_DELAY_S = 0.050       # the module skips an interval whose off would come later than this
+#: issue 34: the module adds no time (no flush, no dwell, no split move), so what a rotation adds to
+#: the planned print is all klipper-gating adds; --rotate auto keeps 0 deg where the planner says a
+#: rotation adds more than this (a travel into or out of the turned print, priced by the planner)
+MAX_ROTATION_ADDED_TIME_PCT = 0.05
 GATEABLE = ("X", "Y", "Z")    # kinematic steppers of a cartesian printer
 AXIS_OF = {"X": "x", "Y": "y", "Z": "z"}   # which shaped axis each stepper is active on (cartesian)
+
+def kinematics_refusal(source: str, kinematics: str) -> str:
+    """Why klipper-gating does not write for a printer that is not cartesian.
+
+    The module follows Klipper's kinematics (a stepper is active for a move with a nonzero
+    direction on any axis it is active on: itersolve ``check_active``). On corexy both stepper_x
+    (A) and stepper_y (B) are active on x and y, so each is idle only while the head does not move
+    in XY at all (Z-only and extrude-only moves, dwells), and then both together; a delta's towers
+    likewise. gatesopt's gating problem and energy profile are per axis (the X motor steps when X
+    moves), not per motor A/B, so it cannot say which of those moments pay: it refuses."""
+    if kinematics in ("corexy", "corexz", "hybrid_corexy", "hybrid_corexz", "markforged"):
+        how = ("both stepper_x (A) and stepper_y (B) step for every X or Y move, so each is idle "
+               "only while the head stands still in XY, and gatesopt's gating model and energy "
+               "profile are per axis (X, Y), not per motor A/B")
+    else:
+        how = ("its steppers do not each move one axis alone, and gatesopt's gating model and "
+               "energy profile are per axis (X, Y, Z)")
+    return (f"{source}: kinematics {kinematics!r}: klipper-gating models cartesian printers only: "
+            f"{how}. The module itself follows Klipper's kinematics, but gatesopt writes no "
+            f"GATESOPT_GATE lines for this printer")
+
 
 # every stepper name is read (an extruder too, which the module refuses: the verifier then names it)
 GATESOPT_GATE = ExtendedMotorCommand(
@@ -81,9 +107,7 @@ class KlipperGating(Firmware):
 
     def schedule(self, printer=None, *, start_ahead_s: float, end_late_s: float) -> Schedule:
         if printer is not None and printer.kinematics not in (None, "cartesian"):
-            raise FirmwareError(f"{printer.source}: kinematics {printer.kinematics!r}: klipper-gating "
-                                "models cartesian printers (each of stepper_x, stepper_y, stepper_z "
-                                "moves one axis alone)")
+            raise FirmwareError(kinematics_refusal(printer.source, printer.kinematics))
         pre, post = [0.0] * 4, [0.0] * 4
         if printer is not None:
             for i, m in enumerate("XYZ"):
@@ -95,11 +119,12 @@ class KlipperGating(Firmware):
             raise FirmwareError(f"the input shaper's window after a move ({max(post):.4f} s) plus end-late "
                                 f"({end_late_s:.4f} s) is {worst:.4f} s, more than the module's "
                                 f"{MAX_OFF_DELAY_S} s: it would gate nothing")
-        min_off = max(printer.gating.min_off_time_s if printer is not None and printer.gating else 0.0,
-                      MIN_SCHEDULE_S)
+        sec = printer.gating if printer is not None else None
+        spacing = sec.min_pin_spacing_s if sec is not None else PIN_SPACING_S
+        min_off = max(sec.min_off_time_s if sec is not None else 0.0, spacing)
         arc = printer.arc_resolution_mm if printer is not None and printer.arc_resolution_mm else 1.0
         return Schedule(off_delay_s=off_extra, on_lead_s=on_extra, min_off_s=min_off,
-                        min_spacing_s=MIN_SCHEDULE_S, arc_segment_mm=arc)
+                        min_spacing_s=spacing, arc_segment_mm=arc)
 
 
 DIALECT = KlipperGating(
@@ -113,4 +138,4 @@ DIALECT = KlipperGating(
     motor_commands=(GATESOPT_GATE,), no_drain_words=frozenset({"GATESOPT_GATE"}),
     word_stalls=(("SET_STEPPER_ENABLE", KLIPPER_STALL_S, KLIPPER_STALL_S),
                  ("M18", KLIPPER_STALL_S, KLIPPER_STALL_S), ("M84", KLIPPER_STALL_S, KLIPPER_STALL_S)),
-    time_model="planner", planner=PLANNER)
+    time_model="planner", planner=PLANNER, rotation_max_added_time_pct=MAX_ROTATION_ADDED_TIME_PCT)

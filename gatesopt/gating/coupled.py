@@ -17,7 +17,7 @@ import numpy as np
 
 from ..energy import step_power_w
 from ..program import X, Y
-from .problem import GatingProblem, chain_predecessors
+from .problem import GatingProblem, chain_predecessors, off_stall_s, on_stall_s
 from .scoring import line_moments
 from .solution import GatingSolution
 from .timeline import TIME_EPS_S, integral, is_split, row_at
@@ -197,7 +197,8 @@ def _build_model(problem, kept_angles, keep_idle, neg_inter, use_inter) -> Coupl
     size = {g[0]: len(g) for g in o.groups}
     mult = np.ones(nx) if o.merge_lines else np.array([size[int(m)] for m in problem.idle_motor[idle]], float)
     ev_mult = mult[ev_x]
-    ev_stall_s = np.where(ev_on, o.stall_on_s, o.stall_off_s) * ev_mult
+    ev_stall_s = np.where(ev_on, on_stall_s(problem, ev_row, ev_split),
+                          off_stall_s(problem, ev_row, ev_split)) * ev_mult
     ev_stall_j = ev_stall_s * stall_w[np.minimum(ev_row, n - 1)]
 
     x_energy = -sav[idle].astype(float)
@@ -340,11 +341,15 @@ def _worth_a_variable(problem: GatingProblem, cand: np.ndarray) -> np.ndarray:
 
     stall_w = _stall_power_w(problem)
     r_off = np.minimum(row_at(problem.start_s, gs, "off"), n - 1)
-    r_on = np.minimum(row_at(problem.start_s, ge, "on"), n - 1)
+    q_on = row_at(problem.start_s, ge, "on")
+    r_on = np.minimum(q_on, n - 1)
+    on_s = on_stall_s(problem, q_on, is_split(problem.start_s, q_on, ge))
     size = {g[0]: len(g) for g in o.groups}
     mult = 1.0 if o.merge_lines else np.array([size[int(m)] for m in problem.idle_motor[cand]], float)
-    own = mult * (~shared(gs, np.ones(len(cand), bool)) * o.stall_off_s * stall_w[r_off]
-                  + (has_on & ~shared(ge, has_on)) * o.stall_on_s * stall_w[r_on])
+    q_off = row_at(problem.start_s, gs, "off")
+    off_s = off_stall_s(problem, q_off, is_split(problem.start_s, q_off, gs))
+    own = mult * (~shared(gs, np.ones(len(cand), bool)) * off_s * stall_w[r_off]
+                  + (has_on & ~shared(ge, has_on)) * on_s * stall_w[r_on])
     return problem.idle_saving_j[cand] > own
 
 

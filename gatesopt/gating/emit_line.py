@@ -31,6 +31,9 @@ SNAP_MM = 1e-3
 SPLITTABLE = (Kind.TRAVEL, Kind.EXTRUDE, Kind.RETRACT, Kind.UNRETRACT, Kind.Z_ONLY, Kind.ARC)
 SPLITTABLE_INT = frozenset(int(k) for k in SPLITTABLE)
 _ARC = int(Kind.ARC)
+#: I/J nudges (units of the last decimal) tried for a rotated arc Klipper would turn otherwise than
+#: the original (``LineRewriter._klipper_same_turn``), nearest first
+_NUDGES = sorted(((i, j) for i in range(-4, 5) for j in range(-4, 5)), key=lambda t: (abs(t[0]) + abs(t[1]), t))
 
 # a word's value: a number, or an unexpanded slicer placeholder ("Y{machine_depth}"), which the
 # parser drops as the firmware does (``_scan_words.parse_words``) and ``MotionLine.value`` reads as absent
@@ -290,6 +293,8 @@ class LineRewriter:
                     c = self._rot(c)
                 ij = (fmt_number((c[0] - cur_xy[0]) / scale, dec["I"]),
                       fmt_number((c[1] - cur_xy[1]) / scale, dec["J"]))
+                if rot_row and len(bounds) == 2 and scale == 1.0:
+                    ij = self._klipper_same_turn(r, ln, vals, ij, dec["I"], rel, off)
             if k == 0:
                 new_ij = arc and (rot_row or len(bounds) > 2 or ln.value("R") is not None)
                 words = _first_piece_words(ln, write, vals, ij, rot_row, new_ij)
@@ -309,6 +314,33 @@ class LineRewriter:
                     self.em_text[a] = None if rel[a] else vals[a]
                     self.em_off[k] = off[k]
         return out
+
+    def _klipper_same_turn(self, r: int, ln: MotionLine, vals: dict, ij: tuple, dec: int, rel, off) -> tuple:
+        """I/J of a rotated arc that Klipper turns as far as the original (a full circle or none).
+
+        Klipper's gcode_arcs (``planArc``) makes a full circle of an arc whose target is its start
+        only when its float sums give an angle of exactly 0; a turn of a hair either way is a
+        null arc or a full one. Orca's spiral lift (``G3 Z.. I.. J.. P1``) is such an arc: turned
+        and rounded, about half of them flipped (real_orca230_arcs at 45 deg: +4.6 s in Klipper's
+        planner, +/-0.145 s each). Where the rotated numbers (as Klipper reads the text) would
+        flip, I and J move by a few units of their last decimal (<= 0.4 um), nearest first, until
+        they do not (the float error of nearby values is correlated: one unit is often not enough)."""
+        p = self.p
+        i0, j0 = ln.value("I"), ln.value("J")
+        texts = [self.em_text[a] for a in ("X", "Y")]
+        if (not i0 or not j0 or ln.value("R") is not None or rel["X"] or rel["Y"] or off[:2].any()
+                or any(v != 0.0 for v in self.em_off) or None in texts or "X" not in vals or "Y" not in vals):
+            return ij
+        cw = ln.gword.upper() in ("G2", "G02")
+        want = klipper_arc_turn(p.start_mm[r, :2], p.end_mm[r, :2], (float(i0), float(j0)), cw)
+        cur = (float(texts[0]), float(texts[1]))
+        tgt = (float(vals["X"]), float(vals["Y"]))
+        unit = 10.0 ** -dec
+        for di, dj in _NUDGES:
+            cand = (fmt_number(float(ij[0]) + di * unit, dec), fmt_number(float(ij[1]) + dj * unit, dec))
+            if abs(klipper_arc_turn(cur, tgt, (float(cand[0]), float(cand[1])), cw) - want) < math.pi:
+                return cand
+        return ij
 
     def _axes_to_write(self, r: int, ln: MotionLine, rot_row: bool, arc: bool) -> list[str]:
         """The axis words step r's pieces carry: those it names, and X and Y both where the
@@ -409,6 +441,23 @@ def _first_piece_words(ln: MotionLine, write, vals: dict, ij, rot_row: bool, new
     if new_ij and "IJ" not in done:
         words += [f"I{ij[0]}", f"J{ij[1]}"]
     return words
+
+
+def klipper_arc_turn(cur, target, offset, clockwise: bool) -> float:
+    """The angle (rad, < 0 clockwise) Klipper turns a G2/G3 through, computed as klippy's
+    gcode_arcs.py ``planArc`` does, float for float: from ``cur`` (X, Y) to ``target`` about
+    ``cur + offset`` (I, J); 2 pi when the angle comes out exactly 0 and target is cur."""
+    r_p, r_q = -offset[0], -offset[1]
+    center_p, center_q = cur[0] - r_p, cur[1] - r_q
+    rt_a, rt_b = target[0] - center_p, target[1] - center_q
+    turn = math.atan2(r_p * rt_b - r_q * rt_a, r_p * rt_a + r_q * rt_b)
+    if turn < 0.0:
+        turn += 2.0 * math.pi
+    if clockwise:
+        turn -= 2.0 * math.pi
+    if turn == 0.0 and cur[0] == target[0] and cur[1] == target[1]:
+        turn = 2.0 * math.pi
+    return turn
 
 
 def _written_xy(vals, rel, off, scale, prev_xy) -> np.ndarray:

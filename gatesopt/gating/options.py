@@ -48,6 +48,10 @@ class GatingOptions:
     min_rotation_gain_pct: float = 0.5  # under rotate="auto" a rotation must save this much energy
                                         # more than 0 deg (% of the 0 deg answer's), else the print
                                         # stays as the slicer placed it (rewrite.run; issue 37)
+    max_rotation_added_time_pct: float | None = None   # under rotate="auto" a rotation may make the
+                                        # print (its first extrusion to its end, on the time model)
+                                        # at most this much longer, else it stays (rewrite.run; the
+                                        # klipper-gating dialect: issue 34's 0.05 %); None: no limit
     check_bed: bool = True              # False: rotations are not checked against a bed (a model
                                         # experiment, e.g. ``report.rotation_sweep``: nothing printed)
     profile: str = "paper"              # energy profile name or TOML path
@@ -82,7 +86,8 @@ class GatingOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise GatingOptionsError(f"{name} must be a finite number >= 0, not {v!r}")
-        for name in ("max_added_time_pct", "max_added_lines_pct", "bed_margin_mm", "min_rotation_gain_pct"):
+        for name in ("max_added_time_pct", "max_added_lines_pct", "bed_margin_mm", "min_rotation_gain_pct",
+                     "max_rotation_added_time_pct"):
             v = getattr(self, name)
             if v is not None and not (math.isfinite(v) and v >= 0):
                 raise GatingOptionsError(f"{name} must be >= 0 or None, not {v!r}")
@@ -174,7 +179,8 @@ class GatingOptions:
         kw = dict(firmware=c.firmware, stall_off_s=c.stall_off_s, stall_on_s=c.stall_on_s,
                   on_line=c.on_lines_per_gate > 0, merge_lines=c.off_lines_merged,
                   time_model=fw.time_model, planner_family=fw.planner.family if fw.planner else None,
-                  printer=printer, split_moves=fw.split_moves)
+                  printer=printer, split_moves=fw.split_moves,
+                  max_rotation_added_time_pct=fw.rotation_max_added_time_pct)
         defaults = dict(fw.gating_defaults(printer))
         gateable = defaults.pop("gateable", None)
         for k, v in defaults.items():
@@ -184,7 +190,7 @@ class GatingOptions:
                                            f"{printer.source} ({v:g}), which the firmware uses")
         kw.update(defaults)
         kw.update({k: v for k, v in changes.items() if v is not None})
-        kw["start_ahead_s"] = kw.get("start_ahead_s", cls.start_ahead_s) + fw.start_lead_s
+        kw["start_ahead_s"] = kw.get("start_ahead_s", cls.start_ahead_s) + fw.start_lead(printer)
         opts = cls(**kw)
         fw.check_motors(opts.motors)
         if gateable is not None and not set(opts.motors) <= set(gateable):

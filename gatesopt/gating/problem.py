@@ -23,6 +23,7 @@ as in the file, ``xy_inter_w[i]`` is the correction when X and Y are both off (n
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -32,12 +33,12 @@ from .. import firmware as fw_mod
 from ..energy import PowerCoefficients, load_profile, step_energy_j, step_power_w
 from ..errors import GatesoptError
 from ..limits import machine_limits
-from ..planner import min_move_time_s, plan
+from ..planner import enable_price, min_move_time_s, plan, stop_restart_s
 from ..program import AXES, Kind, Program, X, Y
 from . import _kernels as _k
 from .options import GatingOptions
 from .rotation import greedy_angle, rotated_rows, rotation_candidates, rotation_center, steps_at
-from .timeline import whole_steps
+from .timeline import is_split, whole_steps
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +101,12 @@ class GatingProblem:
     # --- the file's own motor lines (start G-code M17, a mid-print M84 ...) -----------------------
     # their firmware stalls (``gatesopt.firmware.stall_durations``, as the verifier prices them):
     # a fixed cost of the print, whatever gating does; one stall piece each in ``Pieces``
+    # a dialect whose lines are full stops priced per move (``Firmware.enable_is_stop`` /
+    # ``disable_is_stop``): the stop at a line placed at the start of step r (``stop_at_s[r]``,
+    # n + 1) or inside it (``stop_in_s[r]``), ``planner.stop_restart_s``; empty: the options'
+    # constant ``stall_on_s`` / ``stall_off_s`` everywhere
+    stop_at_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    stop_in_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     own_stall_row: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
     own_stall_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     # --- a firmware that times its own switches (``options.schedule``, formulations/gating.md §9) --
@@ -260,7 +267,54 @@ def _motor_rates(coeffs: PowerCoefficients, enable0: np.ndarray, o: GatingOption
     return _Rates(p0, rate, xy_inter, group_rate)
 
 
-def _own_stalls(program: Program, firmware: str) -> tuple[np.ndarray, np.ndarray]:
+def enable_price_fn(o: GatingOptions):
+    """``firmware.stall_durations``' ``enable_price`` for the options' dialect (None where its
+    lines are not stops priced per move): ``planner.stop_restart_s`` on the program planned with
+    the options' rules and printer config, as the verifier prices the output."""
+    fw = fw_mod.get(o.firmware)
+    if not (fw.enable_is_stop or fw.disable_is_stop):
+        return None
+    return enable_price(o.planner_family, o.printer)
+
+
+def _stop_prices(program: Program, o: GatingOptions) -> tuple[np.ndarray, np.ndarray]:
+    """(at (n+1,), in (n,)): the stop of a line at the start of each step and inside it
+    (``planner.stop_restart_s``), for a dialect whose lines are stops priced per move; empty
+    otherwise."""
+    fw = fw_mod.get(o.firmware)
+    if not (fw.enable_is_stop or fw.disable_is_stop):
+        return np.zeros(0), np.zeros(0)
+    n = program.n_steps
+    p = plan(program, machine_limits(program, family=o.planner_family, printer=o.printer))
+    rows = np.arange(n + 1)
+    return stop_restart_s(p, rows), stop_restart_s(p, rows[:n], True)
+
+
+def _stop_at(problem, row, split):
+    row = np.asarray(row, np.int64)
+    n = problem.n_steps
+    return np.where(split, problem.stop_in_s[np.minimum(row, max(n - 1, 0))],
+                    problem.stop_at_s[np.minimum(row, n)])
+
+
+def on_stall_s(problem, row, split) -> np.ndarray | float:
+    """The stall of on lines at ``row`` (inside it where ``split``): the firmware's restart plus
+    the stop there where the problem prices lines per move, else ``options.stall_on_s``."""
+    fw = fw_mod.get(problem.options.firmware)
+    if len(problem.stop_at_s) == 0 or not fw.enable_is_stop:
+        return problem.options.stall_on_s
+    return fw.enable_restart_s + _stop_at(problem, row, split)
+
+
+def off_stall_s(problem, row, split) -> np.ndarray | float:
+    """The stall of off lines at ``row`` (inside it where ``split``), as ``on_stall_s``."""
+    fw = fw_mod.get(problem.options.firmware)
+    if len(problem.stop_at_s) == 0 or not fw.disable_is_stop:
+        return problem.options.stall_off_s
+    return fw.disable_fixed_s + _stop_at(problem, row, split)
+
+
+def _own_stalls(program: Program, firmware: str, o: GatingOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(rows, seconds) of the firmware stalls of the file's own motor lines.
 
     The file's own motor lines stall the firmware too (Marlin's M18 in start G-code drains the
@@ -269,7 +323,8 @@ def _own_stalls(program: Program, firmware: str) -> tuple[np.ndarray, np.ndarray
     the output with; here it is a constant of the print, priced like a gating line's stall."""
     own_s = np.zeros(program.n_steps)
     if np.any(program.kind == Kind.MOTOR):
-        own_s = fw_mod.stall_durations(program, firmware)
+        own_s = fw_mod.stall_durations(program, firmware,
+                                       enable_price=enable_price_fn(o) if o is not None else None)
     own_row = np.flatnonzero(own_s > 0)
     return own_row, own_s[own_row]
 
@@ -296,6 +351,8 @@ class _Timing:
                                     # motor itself (homing, the file's own motor lines it carries out)
     whole: np.ndarray               # (n,) bool: steps no line may split (``timeline.whole_steps``;
                                     # none under a schedule: its lines go between steps)
+    stop_at_s: np.ndarray = None    # per-move stops at a line (``GatingProblem.stop_at_s``), or empty
+    stop_in_s: np.ndarray = None
 
 
 def _schedule_keep(o: GatingOptions, t: _Timing, m: int, prev, nxt) -> np.ndarray:
@@ -308,6 +365,35 @@ def _schedule_keep(o: GatingOptions, t: _Timing, m: int, prev, nxt) -> np.ndarra
     need = o.off_margin_s(m) + o.on_margin_s(m) + o.schedule.min_off_s + RULE_EPS_S
     clear = t.barrier_cum[np.minimum(nxt, n), m] == t.barrier_cum[after, m]
     return (prev >= 0) & (gap >= need) & clear
+
+
+def _per_move_stalls(out: dict, t: _Timing, o: GatingOptions, per_event: int) -> None:
+    """Replace the constant stalls the kernel priced each interval's lines with the per-move ones
+    (``_stop_prices``: the firmware's fixed part plus the stop where the line stands), in place;
+    nothing without per-move prices."""
+    if t.stop_at_s is None or len(t.stop_at_s) == 0:
+        return
+    fw = fw_mod.get(o.firmware)
+    n = len(t.dur)
+
+    def stop(q, moment):
+        split = is_split(t.start_s, q, moment)
+        return np.where(split, t.stop_in_s[np.minimum(q, max(n - 1, 0))], t.stop_at_s[np.minimum(q, n)])
+
+    delta = np.zeros(len(out["idle_stall_s"]))
+    delta_j = np.zeros(len(delta))
+    if fw.disable_is_stop:
+        r = out["idle_off_row"]
+        d = (fw.disable_fixed_s + stop(r, out["idle_start_s"]) - o.stall_off_s) * per_event
+        delta += d
+        delta_j += d * t.stall_w[np.minimum(r, max(n - 1, 0))]
+    if fw.enable_is_stop and o.on_line:
+        q = out["idle_on_row"]
+        d = np.where(q < n, (fw.enable_restart_s + stop(q, out["idle_end_s"]) - o.stall_on_s) * per_event, 0.0)
+        delta += d
+        delta_j += d * t.stall_w[np.minimum(q, max(n - 1, 0))]
+    out["idle_stall_s"] = out["idle_stall_s"] + delta
+    out["idle_stall_j"] = out["idle_stall_j"] + delta_j
 
 
 def _idle_table(o: GatingOptions, t: _Timing, group_rate_w: dict, steps_list, angles_idx):
@@ -332,6 +418,7 @@ def _idle_table(o: GatingOptions, t: _Timing, group_rate_w: dict, steps_list, an
                 start_s, np.ascontiguousarray(st), rates[m], cums[m], stall_w, float(o.on_margin_s(m)),
                 float(o.off_margin_s(m)), bool(o.on_line), float(o.stall_off_s), float(o.stall_on_s),
                 per_event, o.schedule is None, t.whole)))
+            _per_move_stalls(out, t, o, per_event)
             prev, nxt = out["idle_prev_row"], out["idle_next_row"]
             if o.schedule is not None:
                 keep = _schedule_keep(o, t, m, prev, nxt)
@@ -478,7 +565,8 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
     rates = _motor_rates(coeffs, enable0, o)
     rate = rates.rate_w
     stall_w = step_power_w(stall_coeffs, enable0)
-    own_row, own_s = _own_stalls(program, o.firmware)
+    own_row, own_s = _own_stalls(program, o.firmware, o)
+    stop_at, stop_in = _stop_prices(program, o)
 
     steps0 = np.asarray(program.steps_motor(), bool)
     arc = np.asarray(program.kind == Kind.ARC)
@@ -490,7 +578,7 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
     angles, notes = list(plan.angles_deg), list(plan.notes)
     angles_arr = np.array(angles)
     table = _angle_table(program, o, angles, lo, hi, center, dur, rate, steps0, arc)
-    timing = _timing(program, o, start_s, dur, stall_w)
+    timing = dataclasses.replace(_timing(program, o, start_s, dur, stall_w), stop_at_s=stop_at, stop_in_s=stop_in)
     idle, has_idle = _built_idle_intervals(o, angles_arr, table, timing, rates)
     energy_before = float(step_energy_j(dur, coeffs, enable0).sum()
                           + step_energy_j(own_s, stall_coeffs.take(own_row), enable0[own_row]).sum())
@@ -508,4 +596,5 @@ def build(program: Program, options: GatingOptions | None = None, *, duration_s=
         angle_built=ro(has_idle),
         **{k: ro(v) for k, v in idle.items()},
         energy_before_j=energy_before, time_before_s=T + float(own_s.sum()), header=dict(program.header),
-        notes=tuple(notes), rotation_plan=plan, own_stall_row=ro(own_row.astype(np.int64)), own_stall_s=ro(own_s))
+        notes=tuple(notes), rotation_plan=plan, own_stall_row=ro(own_row.astype(np.int64)), own_stall_s=ro(own_s),
+        stop_at_s=ro(stop_at), stop_in_s=ro(stop_in))

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..energy import step_energy_j
 from ..program import AXES
-from .problem import GatingProblem, steps_motor_at
+from .problem import GatingProblem, off_stall_s, on_stall_s, steps_motor_at
 from .timeline import TIME_EPS_S, is_split, nearest_boundary, row_at
 
 
@@ -151,7 +151,8 @@ def instructions(problem, off_motor, off_start_s, off_end_s) -> Instructions:
     r0 = np.minimum(r, max(n - 1, 0))
     frac = np.where(split, (t - problem.start_s[r0]) / np.where(problem.duration_s[r0] > 0,
                                                                 problem.duration_s[r0], 1.0), 0.0)
-    stall = np.where(on, o.stall_on_s, o.stall_off_s)
+    # a line's stall: per move where the dialect's lines are stops (Klipper's flush)
+    stall = np.where(on, on_stall_s(problem, r, split), off_stall_s(problem, r, split))
     return Instructions(t, r, on, bits, split, frac, stall.astype(float))
 
 

@@ -71,6 +71,23 @@ class GatingSolution:
             d[AXES[m]] = float((self.off_end_s[sel] - self.off_start_s[sel]).sum())
         return d
 
+    def off_time_in_s(self, rows) -> dict:
+        """Per motor letter, the part of the off time that falls in the steps ``rows`` (a bool
+        mask over the problem's steps): e.g. the heat-up waits (``Kind.WAIT``), which a host that
+        does not wait for its heaters (klippy's batch mode) passes in no time at all."""
+        rows = np.asarray(rows, dtype=bool)
+        d = {AXES[m]: 0.0 for m in self.problem.motors}
+        if rows.shape != (self.problem.n_steps,) or not rows.any():
+            return d
+        t0 = self.problem.start_s[:-1][rows]
+        t1 = self.problem.start_s[1:][rows]
+        for m in self.problem.motors:
+            sel = self.off_motor == m
+            a, b = self.off_start_s[sel], self.off_end_s[sel]
+            overlap = np.minimum(b[:, None], t1[None, :]) - np.maximum(a[:, None], t0[None, :])
+            d[AXES[m]] = float(np.maximum(overlap, 0.0).sum())
+        return d
+
     def steps_motor(self) -> np.ndarray:
         """(n, 4) which motors step in each row under this solution's rotation."""
         return steps_motor_at(self.problem, self.angle_index)[0]

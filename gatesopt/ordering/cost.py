@@ -6,6 +6,10 @@ A link from curve u (left at its exit) to curve v (entered at its entry) is emit
 - *copied*: v is the curve the slicer printed after u and both are printed as the slicer printed
   them, so the slicer's own gap is copied (its wipe, retraction, z-hop, combing path): the link
   costs that gap's time, ``TimePricer.copy_ms[v]``;
+- *reversed* (``gaps.reversed_gap``): u is the curve the slicer printed after v, left where the
+  gap between them ended and v entered where it began, and that gap is pure travel
+  (``gaps.ReversibleGaps``): it is written backwards and costs its own time, ``copy_ms[u]``, as
+  the copied link the other way round does (plus the E move of a net E v's entry consumes);
 - *rebuilt* (``gaps.rebuilt_gap``): retract (if ``travel.TravelRule.retracts`` says so), lift,
   one straight travel, lower, unretract, plus the net E of the slicer's gaps it consumes (a prime
   the slicer added). Its time is the sum of those moves' times.
@@ -18,9 +22,12 @@ sum of move times, the same function that prices the moves of an emitted gap
 (``MoveTimes.steps_s``), so the cost the solver optimises is what the emitted travels cost under
 that model (tests/test_ordering_cost.py checks it on emitted files). The costs are in ms.
 
-The cost is asymmetric: a copied gap is priced one way only, and a rebuilt link's E moves depend on
-the gaps of the curve it enters. It breaks the triangle inequality where a long link retracts and
-two short ones do not. formulations/ordering.md says which bounds rely on what.
+The cost is asymmetric where a copied gap cannot be reversed (a wipe, a state line, firmware
+retraction in it: priced one way only), and a rebuilt link's E moves depend on the gaps of the
+curve it enters; where every copied gap of a group is reversible and no gap has a net E, a link
+costs the same both ways (the symmetric model is then exact, not a relaxation). It breaks the
+triangle inequality where a long link retracts and two short ones do not.
+formulations/ordering.md says which bounds rely on what.
 """
 from __future__ import annotations
 
@@ -29,14 +36,16 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from .. import _planner_kernel as pk
 from ..limits import MachineLimits
 from ..program import MOTION_KINDS, Program
+from .gap_plan import (MOVE_EPS_MM, REBUILT_MAX_MOVES, W_COLS, W_F, W_J, W_JREADY, W_L,
+                       e_row, gaps_planned, junction, plan_moves_s, prep_move, same_z_s)
+from .gaps import REVERSE_EPS, ReversibleGaps
 from .layout import LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, Layout
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
 
-#: below this a length is no move (the writer skips axes that change by less than 1e-9 mm)
-MOVE_EPS_MM = 1e-9
 MS_PER_S = 1000.0
 #: the speed a Marlin 2 (junction deviation) move starts from rest at: MINIMUM_PLANNER_SPEED
 #: (Marlin planner.h; ``planner.py`` uses the same)
@@ -64,6 +73,11 @@ class MoveTimes:
     z_accel_mm_s2: float = 100.0
     z_cap_mm_s: float = np.inf
     z_junction_mm_s: float = 0.0
+    #: the planner's junction rule (``_planner_kernel.JUNCTION_CODE``) and the limits in force
+    #: (``limits.KEYS`` order): a rebuilt travel's moves are then planned together, as the
+    #: planner plans them (``plan_moves_s``); -1: each move alone, from and to its junction speed
+    junction_code: int = -1
+    limits_row: tuple = ()
 
     @staticmethod
     def from_limits(lim: MachineLimits) -> "MoveTimes":
@@ -92,7 +106,9 @@ class MoveTimes:
             e_junction_mm_s=0.0 if lim.firmware == "klipper" else junction(3),
             z_accel_mm_s2=finite_min(lim.accel_travel_mm_s2, acc[2]),
             z_cap_mm_s=finite_min(feed[2], v_cap),
-            z_junction_mm_s=junction(2))
+            z_junction_mm_s=junction(2),
+            junction_code=pk.JUNCTION_CODE.get(lim.junction, -1),
+            limits_row=tuple(float(x) for x in lim.vector()))
 
     def xy_s(self, length_mm, feed_mm_s):
         return trapezoid_s(length_mm, np.minimum(feed_mm_s, self.xy_cap_mm_s), self.xy_accel_mm_s2,
@@ -129,12 +145,32 @@ class MoveTimes:
                                 self.wipe_accel_mm_s2, self.xy_junction_mm_s)
         return out
 
+    def gaps_s(self, program: Program, a, b) -> np.ndarray:
+        """Time (s) of each gap ``steps a[i]:b[i]`` of ``program`` (its motion steps: travel,
+        retraction, z-hop, wipe): with the file's limits planned together as the planner plans
+        them (``plan_moves_s``, from and to rest: the curves around a gap are not part of it),
+        the way a rebuilt travel is priced; else each move alone (``steps_s``)."""
+        a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+        if self.junction_code < 0:
+            steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())]
+                                   + [np.zeros(0, np.int64)])
+            owner = np.repeat(np.arange(len(a)), b - a)
+            return np.bincount(owner, weights=self.steps_s(program, steps), minlength=len(a))
+        kind = program.kind
+        motion = (np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype))
+                  & (program.length_mm > MOVE_EPS_MM))
+        d = np.ascontiguousarray(program.end_mm - program.start_mm)
+        return gaps_planned(a, b, motion, d, np.ascontiguousarray(program.length_mm, float),
+                             np.ascontiguousarray(program.feed_mm_s, float), self.junction_code,
+                             np.asarray(self.limits_row, float))
+
     def vector(self) -> np.ndarray:
-        """The parameters in field order (for the compiled kernels)."""
+        """The parameters in field order (for the compiled kernels): the ten per-kind values,
+        the junction code, then the limits row (``MT_ROW`` on)."""
         return np.array([self.xy_accel_mm_s2, self.xy_cap_mm_s, self.xy_junction_mm_s,
                          self.wipe_accel_mm_s2, self.e_accel_mm_s2, self.e_cap_mm_s,
                          self.e_junction_mm_s, self.z_accel_mm_s2, self.z_cap_mm_s,
-                         self.z_junction_mm_s], float)
+                         self.z_junction_mm_s, float(self.junction_code), *self.limits_row], float)
 
 
 def trapezoid_s(length_mm, speed_mm_s, accel_mm_s2, junction_mm_s):
@@ -170,22 +206,51 @@ def _trapezoid(L, v, a, vj):
     return 2.0 * (np.sqrt(v0 * v0 + a * L) - v0) / a
 
 
+#: where ``MoveTimes.vector()`` holds the junction code and the limits row
+MT_CODE, MT_ROW = 10, 11
+
+
 @numba.njit(cache=True)
-def _rebuilt_s(dist, z0, z1, retract, use_fw, r, net, mt, style):
+def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
     """Time (s) of a rebuilt travel (``gaps.rebuilt_gap``): retraction (E, at the retract feed),
-    lift by the z-hop if it retracts, the straight XY travel, lowering, and the unretraction that
-    brings the consumed gaps to their net E (or that net E alone). ``mt``: MoveTimes.vector();
-    ``style``: (retract feed, unretract feed, travel feed, z feed, hop)."""
+    lift by the z-hop if it retracts, the straight XY travel (dx, dy), lowering, and the
+    unretraction that brings the consumed gaps to their net E (or that net E alone). ``mt``:
+    MoveTimes.vector(); ``style``: (retract feed, unretract feed, travel feed, z feed, hop).
+    With the file's limits (``mt[MT_CODE] >= 0``) the moves are planned together, as the planner
+    plans them (``plan_moves_s``, in the work array ``w``: ``work_array()``); else each alone
+    from and to its kind's junction speed."""
     v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
-    t = 0.0
-    if retract and not use_fw:
-        t += _trapezoid(r, min(v_r, mt[5]), mt[4], mt[6])
-        t += _trapezoid(abs(net + r), min(v_u, mt[5]), mt[4], mt[6])
-    elif abs(net) > MOVE_EPS_MM:
-        t += _trapezoid(abs(net), min(v_u, mt[5]), mt[4], mt[6])
+    dist = np.sqrt(dx * dx + dy * dy)
     z_up = max(z0, z1)
     if retract and hop > 0.0:
         z_up += hop
+    e_r = r if retract and not use_fw else 0.0
+    e_u = abs(net + r) if retract and not use_fw else abs(net)
+    e_u_sign = 1.0 if (net + r if retract and not use_fw else net) >= 0.0 else -1.0
+    if mt[MT_CODE] >= 0.0:
+        w[:, :] = 0.0
+        n = 0
+        if e_r > MOVE_EPS_MM:
+            w[n, 3], w[n, W_L], w[n, W_F] = -e_r, e_r, v_r
+            n += 1
+        if z_up - z0 > MOVE_EPS_MM:
+            w[n, 2], w[n, W_L], w[n, W_F] = z_up - z0, z_up - z0, v_z
+            n += 1
+        if dist > MOVE_EPS_MM:
+            w[n, 0], w[n, 1], w[n, W_L], w[n, W_F] = dx, dy, dist, v_xy
+            n += 1
+        if abs(z_up - z1) > MOVE_EPS_MM:
+            w[n, 2], w[n, W_L], w[n, W_F] = z1 - z_up, abs(z_up - z1), v_z
+            n += 1
+        if e_u > MOVE_EPS_MM:
+            w[n, 3], w[n, W_L], w[n, W_F] = e_u_sign * e_u, e_u, v_u
+            n += 1
+        return plan_moves_s(w, n, int(mt[MT_CODE]), mt[MT_ROW:])
+    t = 0.0
+    if e_r > MOVE_EPS_MM:
+        t += _trapezoid(e_r, min(v_r, mt[5]), mt[4], mt[6])
+    if e_u > MOVE_EPS_MM:
+        t += _trapezoid(e_u, min(v_u, mt[5]), mt[4], mt[6])
     if z_up - z0 > MOVE_EPS_MM:
         t += _trapezoid(z_up - z0, min(v_z, mt[8]), mt[7], mt[9])
     if dist > MOVE_EPS_MM:
@@ -236,10 +301,7 @@ def gap_times_ms(program: Program, move: MoveTimes, lay: Layout | None = None) -
     n = len(lay.curve_s0)
     if n < 2:
         return np.zeros(0)
-    a, b = lay.curve_s1[:-1], lay.curve_s0[1:]
-    steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())])
-    owner = np.repeat(np.arange(n - 1), b - a)
-    return np.bincount(owner, weights=move.steps_s(program, steps), minlength=n - 1) * MS_PER_S
+    return move.gaps_s(program, lay.curve_s1[:-1], lay.curve_s0[1:]) * MS_PER_S
 
 
 class TimePricer:
@@ -274,12 +336,19 @@ class TimePricer:
         copy = np.zeros(n)
         if n > 1:
             a, b = lay.curve_s1[:-1], lay.curve_s0[1:]
-            steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())]) \
-                if len(a) else np.zeros(0, np.int64)
-            owner = np.repeat(np.arange(1, n), b - a)
-            t = move.steps_s(program, steps) if step_s is None else np.asarray(step_s)[steps]
-            copy = np.bincount(owner, weights=t, minlength=n)
+            if step_s is None:
+                copy[1:] = move.gaps_s(program, a, b)
+            else:
+                steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())])
+                owner = np.repeat(np.arange(1, n), b - a)
+                copy = np.bincount(owner, weights=np.asarray(step_s)[steps], minlength=n)
         self.copy_ms = copy * MS_PER_S
+        #: gaps a link may write reversed, at their own time (``gaps.ReversibleGaps``)
+        self.reversible = ReversibleGaps.of(program, lay)
+
+    def _rev_args(self) -> tuple:
+        r = self.reversible
+        return (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
 
     # -- links ----------------------------------------------------------------------------------
     def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
@@ -302,7 +371,8 @@ class TimePricer:
                np.ascontiguousarray(to_xy), z0, z1, self.group_first, self.own.net_e,
                self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-               self.rule.vector(), self.style_vec, self.move_vec, out, need, no_retract)
+               *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec, out, need,
+               no_retract)
         self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
         return out.reshape(k)
 
@@ -367,7 +437,7 @@ class TimePricer:
                       self.z_entry[gc], self.z_exit[gc], self.group_first, self.own.net_e,
                       self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-                      self.rule.vector(), self.style_vec, self.move_vec,
+                      *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec,
                       self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid)
 
 
@@ -386,13 +456,41 @@ class _GroupLinks:
 
 
 @numba.njit(cache=True, inline="always")
+def _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_plain, rev_start,
+                   rev_end):
+    """``gaps.ReversibleGaps.applies`` for the link p -> c leaving p at (fx, fy) (the head stands
+    at p's end if p is printed as the slicer printed it) and entering c at (tx, ty)."""
+    if p != c + 1 or c < 0 or not rev_ok[p] or group_first[p] != group_first[c]:
+        return False
+    if c != group_first[c] and not rev_plain[c]:
+        return False
+    hx, hy = (fx, fy) if p_changed else (rev_end[p, 0], rev_end[p, 1])
+    return (abs(hx - rev_start[p, 0]) <= REVERSE_EPS and abs(hy - rev_start[p, 1]) <= REVERSE_EPS
+            and abs(tx - rev_end[c, 0]) <= REVERSE_EPS and abs(ty - rev_end[c, 1]) <= REVERSE_EPS)
+
+
+@numba.njit(cache=True, inline="always")
+def _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt):
+    """A reversed gap's cost (ms): the gap's own time, plus the E move of the net E of c's own
+    gap, which the entry into c consumes (``gaps.reversed_gap``)."""
+    t = copy_ms[p]
+    if c != group_first[c] and abs(own_net[c]) > MOVE_EPS_MM:
+        t += _trapezoid(abs(own_net[c]), min(style[1], mt[5]), mt[4], mt[6]) * 1000.0
+    return t
+
+
+@numba.njit(cache=True, inline="always")
 def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, own_net, own_r,
-              own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt):
+              own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
+              rev_start, rev_end, rule, style, mt, w):
     """One link's cost (ms) as emitted, mirroring ``gaps.rebuilt_gap`` and ``travel.TravelRule``,
     except the combing exemption: returns (cost, whether the exemption applies if the travel
-    crosses no wall, the cost then). ``rule``: TravelRule.vector()."""
+    crosses no wall, the cost then). ``rule``: TravelRule.vector(); ``w``: ``work_array()``."""
     if p >= 0 and p == c - 1 and not p_changed and not c_changed:
         return copy_ms[c], False, 0.0                   # the slicer's own gap, copied
+    if p >= 0 and _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_plain,
+                                 rev_start, rev_end):
+        return _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt), False, 0.0
     retract_mm, min_travel, fw_style, comb_cap = rule[0], rule[1], rule[2] > 0.5, rule[3]
     crossing = p < 0 or group_first[c] != group_first[p]
     own = c != group_first[c]
@@ -424,28 +522,31 @@ def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, o
         retract = moving and (fw_bnd or (fw_style and dist >= min_travel))
     else:
         retract = moving and r > 0.0 and (r_b > 0.0 or (retract_mm > 0.0 and dist >= min_travel))
-    t = _rebuilt_s(dist, z0, z1, retract, use_fw, r, net, mt, style) * 1000.0
+    t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w) * 1000.0
     if retract and comb_cap > 0.0 and dist <= comb_cap and dz <= MOVE_EPS_MM:
-        return t, True, _rebuilt_s(dist, z0, z1, False, use_fw, r, net, mt, style) * 1000.0
+        return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style, w) * 1000.0
     return t, False, 0.0
 
 
 @numba.njit(cache=True)
 def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
-           rule, style, mt, out, need, no_retract):
+           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, out, need, no_retract):
     """``_link_one`` per link; the wall test is the caller's (``need``, ``no_retract``)."""
+    w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
     for i in range(len(nxt)):
         out[i], need[i], no_retract[i] = _link_one(
             prev[i], prev_changed[i], nxt[i], nxt_changed[i], from_xy[i, 0], from_xy[i, 1],
             to_xy[i, 0], to_xy[i, 1], z0[i], z1[i], group_first, own_net, own_r, own_fw_net,
-            own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rule, style, mt)
+            own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain, rev_start,
+            rev_end, rule, style, mt, w)
 
 
 @numba.njit(cache=True)
 def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
-           rule, style, mt, has_walls, trim, a, b, x0, y0, h, nx, ny, start, items):
+           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, has_walls, trim, a, b, x0, y0,
+           h, nx, ny, start, items):
     """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
@@ -453,6 +554,7 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
     per pair of points (a travel and its reverse cross the same walls), memoized."""
     m = len(gc)
     out = np.empty((m, m))
+    w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
     memo = np.full((n_points, n_points), -1, np.int8)
     stamp = np.full(max(len(a), 1), -1, np.int64)
     tag = 0
@@ -462,17 +564,48 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
     use_fw = np.zeros(m, np.bool_)
     e_wet = np.zeros(m)
     e_dry = np.zeros(m)
+    net_v = np.zeros(m)
+    planned = mt[MT_CODE] >= 0.0       # the moves planned together (``_rebuilt_s``), per link
     for v in range(m):
         c = gc[v]
         net, r_i, fw_net, fw_ret = 0.0, 0.0, 0, False
         if c != group_first[c]:
             net, r_i, fw_net, fw_ret = own_net[c], own_r[c], own_fw_net[c], own_fw[c]
+        net_v[v] = net
         use_fw[v] = fw_net == 0 and (fw_ret or (fw_style and r_i <= 0.0))
         e_dry[v] = _trapezoid(abs(net), min(v_u, mt[5]), mt[4], mt[6]) if abs(net) > MOVE_EPS_MM else 0.0
         e_wet[v] = e_dry[v] if use_fw[v] else (_trapezoid(retract_mm, min(v_r, mt[5]), mt[4], mt[6])
                                                + _trapezoid(abs(net + retract_mm), min(v_u, mt[5]), mt[4], mt[6]))
     t_hop = 2.0 * _trapezoid(hop, min(v_z, mt[8]), mt[7], mt[9]) if hop > 0.0 else 0.0
     v_xy_cap = min(v_xy, mt[1])
+    # planned: the moves that do not depend on the link, prepared once (``same_z_s``)
+    code = int(mt[MT_CODE])
+    lim_row = mt[MT_ROW:]
+    hop_on = hop > MOVE_EPS_MM
+    pre = np.zeros((3, W_COLS))
+    u_rows = np.zeros((2, m, W_COLS))
+    has_u = np.zeros((2, m), np.bool_)
+    if planned:
+        if retract_mm > MOVE_EPS_MM:
+            e_row(pre, 0, -retract_mm, v_r, code, lim_row)
+        for k, dz_k in ((1, hop), (2, -hop)):
+            pre[k, 2], pre[k, W_L], pre[k, W_F] = dz_k, abs(dz_k), v_z
+            if hop_on:
+                prep_move(pre, k, code, lim_row)
+        if hop_on and retract_mm > MOVE_EPS_MM:
+            pre[1, W_J] = junction(pre, 1, code, lim_row)
+            pre[1, W_JREADY] = 1.0
+        for v in range(m):
+            wet = net_v[v] if use_fw[v] else net_v[v] + retract_mm
+            for j, e in ((0, wet), (1, net_v[v])):
+                has_u[j, v] = abs(e) > MOVE_EPS_MM
+                if has_u[j, v]:
+                    e_row(u_rows[j], v, e, v_u, code, lim_row)
+            if hop_on and has_u[0, v]:
+                w[0, :] = pre[2]
+                w[1, :] = u_rows[0, v]
+                u_rows[0, v, W_J] = junction(w, 1, code, lim_row)
+                u_rows[0, v, W_JREADY] = 1.0
     for u in range(m):
         for v in range(m):
             if local[u] == local[v]:
@@ -482,11 +615,16 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
             if p == c - 1 and not changed[u] and not changed[v]:
                 out[u, v] = copy_ms[c]
                 continue
+            if _reversed_link(p, changed[u], c, ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1],
+                              group_first, rev_ok, rev_plain, rev_start, rev_end):
+                out[u, v] = _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt)
+                continue
             if abs(z_ext[u] - z_ent[v]) > MOVE_EPS_MM or group_first[p] != group_first[c]:
                 t, need, dry = _link_one(p, changed[u], c, changed[v], ext[u, 0], ext[u, 1],
                                          ent[v, 0], ent[v, 1], z_ext[u], z_ent[v], group_first,
                                          own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r,
-                                         bnd_fw_net, bnd_fw, copy_ms, rule, style, mt)
+                                         bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
+                                         rev_start, rev_end, rule, style, mt, w)
             else:
                 dx = ent[v, 0] - ext[u, 0]
                 dy = ent[v, 1] - ext[u, 1]
@@ -496,14 +634,16 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                     retract = moving and fw_style and dist >= min_travel
                 else:
                     retract = moving and retract_mm > 0.0 and dist >= min_travel
-                t_xy = _trapezoid(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
-                dry = (t_xy + e_dry[v]) * 1000.0
-                if retract:
-                    t = (t_xy + e_wet[v] + t_hop) * 1000.0
-                    need = comb_cap > 0.0 and dist <= comb_cap
+                need = retract and comb_cap > 0.0 and dist <= comb_cap
+                if planned:
+                    with_e = not use_fw[v] and retract_mm > MOVE_EPS_MM
+                    t = same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v,
+                                  has_u[0 if retract else 1, v], w, code, lim_row, v_xy) * 1000.0
+                    dry = -1.0          # made below where the link goes dry (no wall crossed)
                 else:
-                    t = dry
-                    need = False
+                    t_xy = _trapezoid(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
+                    dry = (t_xy + e_dry[v]) * 1000.0
+                    t = (t_xy + e_wet[v] + t_hop) * 1000.0 if retract else dry
             if need and has_walls:
                 i, j = pid_ext[u], pid_ent[v]
                 if memo[i, j] < 0:
@@ -516,5 +656,9 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                     t = dry
             elif need:
                 t = dry
+            if t < 0.0:
+                t = same_z_s(dx, dy, dist, False, not use_fw[v] and retract_mm > MOVE_EPS_MM,
+                              hop_on, pre, u_rows, v, has_u[1, v], w, code, lim_row,
+                              v_xy) * 1000.0
             out[u, v] = t
     return out

@@ -7,7 +7,10 @@ Rules (formulations/ordering.md, "Emit"; ``layout`` explains the line classes):
   or a loop that starts at another vertex, is written move by move (``G1 X Y E F``; arcs with G2
   and G3 swapped and I/J re-computed from the new start point).
 - A gap whose two neighbours are still neighbours (same curves, same ends) is copied as it was:
-  the slicer's own retraction, wipe, z-hop, combing path.
+  the slicer's own retraction, wipe, z-hop, combing path. Under the time objective, a link that
+  runs the other way round between the same two ends (curve c + 1 left where the gap before it
+  ended, curve c entered where it began) writes that gap backwards where it is pure travel
+  (``gaps.reversed_gap``, ``gaps.ReversibleGaps``), at the price ``cost`` gives it.
 - Any other gap is rebuilt the way the slicer builds its travels (``gaps.rebuilt_gap``), with
   parameters read from the file (``travel.TravelStyle``): retract (if the travel is at least the
   shortest travel the slicer retracted for), z-hop, one straight travel, lower, unretract. If the slicer combs (it made
@@ -38,7 +41,7 @@ import numpy as np
 
 from ..headers import ORDER_HEADER
 from ..program import Program
-from .gaps import rebuilt_gap
+from .gaps import rebuilt_gap, reversed_gap
 from .layout import LINE_LABEL, Layout, layout
 from ..slicers import LABEL_CLOSE
 from .problem import OrderingProblem, OrderingSolution
@@ -51,7 +54,7 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     """G-code text with the curves of ``problem`` in the order of ``solution``.
 
     ``memo``: a dict kept between calls on the same program and problem (the time guard emits
-    again after putting a few layers back, ``pipeline.emit_guarded``). A layer whose curves, in
+    again after putting a few layers back, ``rewrite.guard.emit_guarded``). A layer whose curves, in
     the same order and directions, are entered from the same state (previous curve, position,
     feedrate, state lines, feature, E up to ``MEMO_E_TOL_MM``) gets the text it got before; E
     words differ from a fresh emit by at most that tolerance, where rounding tips a last digit."""
@@ -73,12 +76,15 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
     if fixed is None:
         # the time objective's pricer holds the rule it priced (its walls' grids built already)
         rule = problem.pricer.rule if problem.pricer is not None else TravelRule.of(program, problem, lay)
-        fixed = (rule, Writer.per_line(program, lay), _Plan.per_curve(p, problem, lay))
+        # the gaps a link may write reversed: the time objective's pricer says which (and prices
+        # them so); the travel objective rebuilds every link that is not the slicer's own
+        rgaps = problem.pricer.reversible if problem.pricer is not None else None
+        fixed = (rule, Writer.per_line(program, lay), _Plan.per_curve(p, problem, lay), rgaps)
         if memo is not None:
             memo[_FIXED] = fixed
-    rule, lists, per_curve = fixed
+    rule, lists, per_curve, rgaps = fixed
     w = Writer(program, lay, lists)
-    plan = _Plan(p, lay, rule, order, rev, seam, per_curve)
+    plan = _Plan(p, lay, rule, order, rev, seam, per_curve, rgaps)
     changed, gap_lines = plan.changed, plan.gap_lines
 
     # prefix + first gap: verbatim (the first layer keeps its order, so curve 0 stays first)
@@ -149,8 +155,8 @@ class _Plan:
     scalar indexing curve by curve was a fifth of the emit)."""
 
     def __init__(self, p: Program, lay: Layout, rule: TravelRule, order, rev, seam,
-                 per_curve: tuple):
-        self.p, self.lay, self.rule = p, lay, rule
+                 per_curve: tuple, rgaps=None):
+        self.p, self.lay, self.rule, self.rgaps = p, lay, rule, rgaps
         self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
         self.changed = (rev | (seam != 0)).tolist()
         (self.group_first, self.layer, self.l0, self.l1, self.feature, self.req,
@@ -238,8 +244,11 @@ def _emit_curve(plan: _Plan, w: Writer, k: int, prev: int) -> int:
             elif c != first:
                 lines.append((plan.gap_lines(c), False))
             lines = _closing(plan, w, prev, c, lines)
-            rebuilt_gap(w, p, lay, plan.rule, lines, c,
-                        _entry_mm(p, lay, c, plan.rev[c], plan.seam[c]), plan.layer[c])
+            entry = _entry_mm(p, lay, c, plan.rev[c], plan.seam[c])
+            if plan.rgaps is not None and plan.rgaps.applies(plan.group_first, prev, c, w.xyz, entry):
+                reversed_gap(w, p, lay, plan.rule, lines, c)
+            else:
+                rebuilt_gap(w, p, lay, plan.rule, lines, c, entry, plan.layer[c])
     w.reissue(plan.curve_state, c)      # state the curve saw in the original
     fi = plan.feature[c]
     if fi >= 0 and w.feature != p.feature_names[fi]:

@@ -4,6 +4,11 @@ travel the slicer retracted for), z-hop, one straight travel, lower, unretract, 
 parameters read from the file (``travel.TravelStyle``). A combing slicer's travel that crosses no
 wall of its layer skips the retraction (``travel.TravelRule``, ``travel.WallCrossing``). The gaps' non-motion lines are
 kept around it.
+
+A link between the two ends of a slicer's gap the other way round (from curve c + 1 back into
+curve c) writes that gap backwards where it is pure travel (``ReversibleGaps``, ``reversed_gap``;
+formulations/ordering.md, "Reversed gaps"): the time objective prices it at the gap's own time,
+which makes its link costs symmetric.
 """
 from __future__ import annotations
 
@@ -13,15 +18,89 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..program import Program
+from ..program import Kind, Program
 from .layout import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, LINE_NEUTRAL,
-                     Layout)
+                     LINE_STATE, Layout)
 from .travel import TravelRule
 from .writer import Writer
 
 #: the gap lines a curve moved elsewhere leaves behind: feature labels and wipe markers are
 #: re-derived where it lands
 TYPE_OR_WIPE = re.compile(r"^\s*;\s*(TYPE:|FEATURE:|feature |WIPE_START|WIPE_END)", re.I)
+#: a reversed gap's net E and its ends' height difference may be this far from 0 (float noise of
+#: absolute E / Z read from the file)
+REVERSE_EPS = 1e-9
+#: step kinds a reversible gap may hold: travels without E, E-only moves, Z-only moves
+REVERSIBLE_KINDS = (int(Kind.TRAVEL), int(Kind.RETRACT), int(Kind.UNRETRACT), int(Kind.Z_ONLY))
+
+
+@dataclass(frozen=True, eq=False)
+class ReversibleGaps:
+    """Per curve c, about the slicer's gap before it (between curve c - 1 and c; formulations/
+    ordering.md, "Reversed gaps"):
+
+    ``plain[c]``: its lines are moves, neutral lines and state lines only (no firmware
+    retraction, E reset, barrier): a link into c that writes another gap's moves reversed can
+    take its lines along (``reversed_gap``);
+    ``ok[c]``: also, it can be written reversed -- from the start of c back to the end of c - 1,
+    each move run backwards at its own feed: no state line (its moves ran under the state curve
+    c - 1 saw, which curve c sees too), travels without E, E-only and Z-only moves (no wipe, no
+    arc), net E 0 and both ends at one height. Its reverse is then the same moves in reverse
+    order (a retraction at its start, the unretraction at its end), and the planner's time of a
+    move sequence run backwards is the same (trapezoids with equal acceleration and deceleration;
+    a junction's speed limit depends on the angle between its moves, the same either way round):
+    the link from c back into c - 1 costs the gap's own time (``cost.TimePricer``).
+    ``start_xy[c]`` / ``end_xy[c]``: where curve c starts and ends (the gap before c ends at
+    ``start_xy[c]`` and starts at ``end_xy[c - 1]``)."""
+
+    ok: np.ndarray          # (n,) bool
+    plain: np.ndarray       # (n,) bool
+    start_xy: np.ndarray    # (n, 2)
+    end_xy: np.ndarray      # (n, 2)
+
+    @staticmethod
+    def of(program: Program, lay: Layout) -> "ReversibleGaps":
+        n = len(lay.curve_s0)
+        s0, s1 = lay.curve_s0, lay.curve_s1
+        start_xy = program.start_mm[s0, :2].astype(float) if n else np.zeros((0, 2))
+        end_xy = program.end_mm[s1 - 1, :2].astype(float) if n else np.zeros((0, 2))
+        ok = np.zeros(n, bool)
+        plain = np.zeros(n, bool)
+        if n < 2:
+            return ReversibleGaps(ok, plain, start_xy, end_xy)
+        cls = lay.line_class
+        g0, g1 = lay.curve_l1[:-1] + 1, lay.curve_l0[1:]        # gap before c = 1..n-1: lines [g0, g1)
+
+        def span(flags, a, b):
+            c = np.concatenate(([0], np.cumsum(flags)))
+            return c[b] - c[a]
+        plain_cls = (cls == LINE_MOTION) | (cls == LINE_NEUTRAL) | (cls == LINE_STATE)
+        plain[1:] = (span(~plain_cls, g0, g1) == 0) & ~lay.gap_boundary[1:]
+        a, b = s1[:-1], s0[1:]                                     # its steps [a, b)
+        d = program.end_mm - program.start_mm
+        moves_xy = np.hypot(d[:, 0], d[:, 1]) > REVERSE_EPS
+        bad = ~np.isin(program.kind, np.asarray(REVERSIBLE_KINDS, program.kind.dtype)) | (
+            moves_xy & (np.abs(d[:, 3]) > 0.0))
+        net_e = span(d[:, 3], a, b)
+        dz = program.start_mm[b, 2] - program.end_mm[s1[:-1] - 1, 2]
+        ok[1:] = (plain[1:] & (span(cls == LINE_STATE, g0, g1) == 0) & (span(bad, a, b) == 0)
+                  & (np.abs(net_e) <= REVERSE_EPS) & (np.abs(dz) <= REVERSE_EPS))
+        return ReversibleGaps(ok, plain, start_xy, end_xy)
+
+    def applies(self, group_first, p: int, c: int, head_xy, entry_xy) -> bool:
+        """Whether the link from curve p (the head at ``head_xy``) into curve c (entered at
+        ``entry_xy``) is the gap before p written reversed: p follows c in the file, in one group,
+        the gap between them reversible, the head where that gap ended and c entered where it
+        began; a gap that c's entry consumes (c not its group's first) plain. The pricer's
+        kernels (``cost._reversed_link``) test the same."""
+        if p != c + 1 or c < 0 or not self.ok[p] or group_first[p] != group_first[c]:
+            return False
+        if c != group_first[c] and not self.plain[c]:
+            return False
+        return (abs(head_xy[0] - self.start_xy[p, 0]) <= REVERSE_EPS
+                and abs(head_xy[1] - self.start_xy[p, 1]) <= REVERSE_EPS
+                and abs(entry_xy[0] - self.end_xy[c, 0]) <= REVERSE_EPS
+                and abs(entry_xy[1] - self.end_xy[c, 1]) <= REVERSE_EPS)
 
 
 @dataclass
@@ -196,3 +275,30 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
         move_e(net - emitted)
     for i in late:
         copy(i)
+
+
+def reversed_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets, c: int) -> None:
+    """The link from curve c + 1 back into curve c: the slicer's gap between them
+    (``ReversibleGaps.ok``) written backwards, each of its moves from its end to its start at its
+    own feed, an E move's E negated (the unretraction becomes the retraction at the start, the
+    retraction the unretraction at the end); then the lines and net E of the gaps this entry
+    into c consumes (``line_sets``, as ``rebuilt_gap`` takes them: c's own gap unless c begins
+    its group), which travel with c (a net E there: one E move at the unretraction feed, as
+    ``rebuilt_gap`` writes it and ``cost`` prices it)."""
+    g = _sort_lines(w, p, line_sets)
+    a, b = int(lay.curve_s1[c]), int(lay.curve_s0[c + 1])
+    emitted = 0.0
+    for s in range(b - 1, a - 1, -1):
+        d_e = float(p.end_mm[s, 3] - p.start_mm[s, 3])
+        feed = float(p.feed_mm_s[s])
+        if p.kind[s] in (Kind.RETRACT, Kind.UNRETRACT):
+            w.move_e(-d_e, feed, bool(p.relative_e[s]))
+            emitted -= d_e
+        else:
+            cmd = "G0" if p.line_number[p.line[s]] == 0 else "G1"
+            w.move_xyz(p.start_mm[s, :3], feed, cmd, p.offset_mm[s])
+    if abs(g.net - emitted) > REVERSE_EPS:
+        w.move_e(g.net - emitted, rule.style.unretract_feed_mm_s,
+                 bool(p.relative_e[int(lay.curve_s0[c])]))
+    for i in g.pre + g.mid + g.post + g.late:
+        w.copy_line(i)

@@ -40,11 +40,15 @@ def _no_stall(program: Program, row: int) -> float:
     return 0.0      # the planner's durations already stop the head at a queue-draining line
 
 
+def _no_enable_stop(program: Program, rows):
+    return [0.0] * len(rows)    # the same for an enable line that stops (Klipper): its restart stays
+
+
 def print_time_s(program: Program, firmware: str = "3dgates") -> float:
     """The print time of ``program`` under the planner model, firmware dwells included (module
     docstring): every step of the file, heat-up waits and homing at their profile durations."""
     planned = durations(program, "planner")
-    stall = fwmod.stall_durations(program, firmware, planner=_no_stall)
+    stall = fwmod.stall_durations(program, firmware, planner=_no_stall, enable_price=_no_enable_stop)
     return float(planned.sum() + stall.sum())
 
 

@@ -8,25 +8,23 @@ model travel is there too, as ``model_travel_*_mm``.
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _jit
-from ..ordering.emitter import emit
 from ..ordering.groups import build
-from ..ordering.layers import model_travel_mm, solve
+from ..ordering.layers import solve
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
 from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
 from ..ordering.runner import OUT_OF_TIME
 from ..ordering.travel_stats import runs, travel_mask
-from ..parse import parse
-from ..planner import plan
 from ..program import Program
 from ..verify.ordering import check
 from .figures import figures
+from .guard import (GUARD_TOL_S, emit_guarded, keep_layers, layer_times_s,  # noqa: F401 (re-exported)
+                    step_times_s)
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,102 +42,6 @@ class OrderResult:
     @property
     def ok(self) -> bool:
         return not self.findings
-
-
-#: emit-and-compare passes of the time guard (``emit_guarded``): each pass after the first is a
-#: fraction of an emit (its memo re-emits only the layers that changed)
-GUARD_PASSES = 6
-
-
-#: a layer counts as slower re-ordered only by more than this (s): the planner's look-ahead runs
-#: across layers, so a layer whose own text did not change can differ by a hair where a moved
-#: neighbour meets it
-GUARD_TOL_S = 1e-3
-
-
-def step_times_s(program: Program) -> np.ndarray:
-    """Per step, its time under the planner model (``planner.plan``: acceleration, junction
-    speeds, the file's machine limits): what the time guard and the report's print time use."""
-    return plan(program).duration_s
-
-
-def layer_times_s(program: Program, durations_s: np.ndarray | None = None) -> np.ndarray:
-    """Per layer (0..n_layers-1), the time of every step in it (planner model, or the
-    ``durations_s`` given)."""
-    d = step_times_s(program) if durations_s is None else durations_s
-    m = program.layer >= 0
-    return np.bincount(program.layer[m], weights=d[m], minlength=program.n_layers)
-
-
-def keep_layers(problem: OrderingProblem, solution: OrderingSolution, layers) -> OrderingSolution:
-    """``solution`` with the curves of ``layers`` back in the slicer's order and direction.
-    A layer's curves are one contiguous block of the print order, and curve numbers grow with
-    the layer, so sorting the positions they hold restores each block."""
-    problem = problem.program_problem
-    order = solution.curve_order.copy()
-    at = np.isin(problem.curve_layer[order], np.asarray(layers, np.int64))
-    order[at] = np.sort(order[at])
-    rev, seam = solution.curve_reversed.copy(), solution.curve_seam.copy()
-    rev[order[at]] = False
-    seam[order[at]] = 0
-    return dataclasses.replace(solution, curve_order=order, curve_reversed=rev, curve_seam=seam,
-                               travel_after_mm=model_travel_mm(problem, order, rev, seam),
-                               cost_after=problem.order_cost(order, rev, seam))
-
-
-def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingSolution,
-                 time_guard: bool = True):
-    """Emit and re-parse; with ``time_guard``, layers whose re-ordered print takes longer than
-    the slicer's keep its order (emitted again). Returns (solution, text, output, those layers)."""
-    memo: dict = {}                     # layers that did not change are not emitted again
-
-    def emitted(solution):
-        text = emit(program, problem, solution, memo)
-        return text, parse(text, source=f"{program.source} (re-ordered)")
-    text, out = emitted(solution)
-    kept = np.zeros(0, np.int64)
-    if not time_guard or out.n_layers != program.n_layers:
-        return solution, text, out, kept
-    # a safety net: the time objective prices each travel as emitted (cost.py), but only its
-    # moves, each from and to its junction speed, not how the planner joins them to the curves
-    # around them (nor, under the travel objective, retractions at all). A layer put back
-    # changes where the next one starts, which can make that one slower: a few passes
-    before = layer_times_s(program)
-    best = None                         # the tried state with the shortest print: (time, state)
-    for n_pass in range(GUARD_PASSES + 1):
-        after = layer_times_s(out)
-        if best is None or after.sum() < best[0]:
-            best = (after.sum(), (solution, text, out, kept))
-        slower = np.flatnonzero(after > before + GUARD_TOL_S)
-        # a layer already in the slicer's order and still slower pays for a neighbour: the
-        # travel between them is rebuilt (with a retraction where the slicer combed) because the
-        # layer before it, re-ordered, ends elsewhere, or the layer after it starts elsewhere (a
-        # rebuilt boundary gap retracts before the layer change). Such a neighbour goes back too
-        # if the two layers together are slower than the slicer's; where the neighbour gains
-        # more than the kept layer loses, the print is faster as it is.
-        still = np.intersect1d(slower, kept)
-        near = np.concatenate((still - 1, still + 1))
-        by = np.concatenate((still, still))
-        ok = (near >= 0) & (near < program.n_layers)
-        near, by = near[ok], by[ok]
-        pays = after[near] + after[by] > before[near] + before[by] + GUARD_TOL_S
-        slower = np.setdiff1d(np.union1d(slower, near[pays]), kept)
-        if not len(slower):
-            break
-        if n_pass == GUARD_PASSES:
-            # not settled: putting a layer back made the next one slower, pass after pass (seen:
-            # a chain of one layer per pass, slic3r13_torus free, whose last pass was 0.008 s
-            # slower than the slicer's). The tried state with the shortest print is returned; if
-            # even that one is slower than the slicer's, every layer keeps the slicer's order
-            if best[0] <= before.sum() + GUARD_TOL_S:
-                return best[1]
-            kept = np.arange(program.n_layers)
-            solution = keep_layers(problem, solution, kept)
-            return (solution, *emitted(solution), kept)
-        kept = np.union1d(kept, slower)
-        solution = keep_layers(problem, solution, kept)
-        text, out = emitted(solution)
-    return solution, text, out, kept
 
 
 def out_of_time_groups(problem: OrderingProblem, solution: OrderingSolution) -> int:

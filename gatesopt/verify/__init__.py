@@ -216,11 +216,11 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
             findings += list(check_objects(original, bare, snap_tol_mm=snap))
             checks.append("ordering(barriers, objects; moves: geometry)")
     e_after, t_after, stall = energy_of(output, firmware=fw, profile=profile, original=original,
-                                        scheduled=scheduled, duration_s=dur_out)
+                                        scheduled=scheduled, duration_s=dur_out, printer=printer)
     # the original's motor lines are all its own (a stall priced with the state they leave, as the
     # solver's ``energy_before_j`` does), not gating lines whose effect is undone
     e_before, t_before, _ = energy_of(original, firmware=fw, profile=profile, original=original,
-                                      duration_s=dur_orig)
+                                      duration_s=dur_orig, printer=printer)
     cl = claimed_energy_time(claimed)
     if cl is not None:
         checks.append("energy")

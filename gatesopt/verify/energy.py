@@ -6,6 +6,7 @@ import numpy as np
 
 from .. import firmware as fwmod
 from ..energy import load_profile, step_energy_j
+from ..planner import enable_price
 from ..program import Kind, Program
 from .finding import Finding
 from .motor_lines import read_motor_rows
@@ -35,8 +36,18 @@ def _file_enable(program: Program, original: Program | None = None) -> np.ndarra
     return en
 
 
+def _stalls(program: Program, firmware, printer) -> np.ndarray:
+    """``firmware.stall_durations`` with the per-move price of a dialect whose enable line is a
+    stop (Klipper's ``ENABLE=1`` flush; ``planner.stop_restart_s``), as the solver priced it."""
+    fw = fwmod.get(firmware)
+    price = None
+    if fw.enable_is_stop:
+        price = enable_price(fw.planner.family if fw.planner is not None else None, printer)
+    return fwmod.stall_durations(program, fw, enable_price=price)
+
+
 def energy_of(program: Program, *, firmware="3dgates", profile="paper", duration_s=None,
-              original: Program | None = None, scheduled=None):
+              original: Program | None = None, scheduled=None, printer=None):
     """(energy J, time s, stall s) of ``program`` recomputed from its text with the one model.
 
     A firmware stall at a motor instruction is priced with the motors as the slicer's file has
@@ -47,14 +58,15 @@ def energy_of(program: Program, *, firmware="3dgates", profile="paper", duration
 
     ``scheduled``: for a firmware that times its own switches, the (line, motor) pairs as it
     carries them out (``schedule.scheduled_lines``): the motors are then off over those intervals
-    only, not from an added line to the motor's next step as the parsed state has them."""
+    only, not from an added line to the motor's next step as the parsed state has them.
+    ``printer``: the printer's Klipper config (the planner limits of a per-move stall price)."""
     if scheduled is not None:
-        stall = fwmod.stall_durations(program, firmware)
+        stall = _stalls(program, firmware, printer)
         return (*scheduled_energy(program, scheduled, _file_enable(program, original), stall, profile=profile,
                                   duration_s=duration_s), float(stall.sum()))
     prof = load_profile(profile)
     coeffs = prof.coefficients(program)
-    stall = fwmod.stall_durations(program, firmware)
+    stall = _stalls(program, firmware, printer)
     dur = (program.duration_s if duration_s is None else np.asarray(duration_s, float)) + stall
     en = np.asarray(program.enabled, bool).copy()
     motor = program.kind == Kind.MOTOR

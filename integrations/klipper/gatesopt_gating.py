@@ -39,27 +39,49 @@ Times are Klipper print times in seconds. For one GATESOPT_GATE line and one nam
 * ``gap`` = the sum of ``min_move_t`` (a lower bound of the planned duration: distance over the
   move's speed limit) of the moves queued after the line and before the activating move,
   extrude-only moves included. Dwells, heater waits and other time are not counted.
-  ``min_sched`` is the MCU's ``min_schedule_time()`` (0.100 s): Klipper's floor between two
-  events of one pin (the next event is sent only after the previous one ran).
+  ``spacing`` is the option ``min_pin_spacing`` (default ``DEFAULT_PIN_SPACING_S``, 0.100 s):
+  the least time between two changes of one pin (see "Pin spacing" below). ``min_sched`` is the
+  MCU's ``min_schedule_time()`` (0.100 s): the least lead of an event over the MCU's clock now.
 * S is switched off for the interval only if all of these hold, else it stays on and the
   interval is counted as skipped:
 
   - gating is enabled for S (``SET_GATESOPT_GATING``), Klipper has S enabled, and S is not
     already switched off by an earlier line;
-  - rule A (off time): ``gap >= off_delay + on_lead + max(min_off_time, min_sched)``;
+  - rule A (off time): ``gap >= off_delay + on_lead + max(min_off_time, spacing)``;
   - rule B (spacing from this module's previous "on" of S): ``since_on + off_delay >=
-    min_sched``, where ``since_on = on_lead_prev + (sum of min_move_t of the moves from the
+    spacing``, where ``since_on = on_lead_prev + (sum of min_move_t of the moves from the
     activating move that ended the previous gated interval of S up to the line)``; there is
     no rule B before the first gated interval or after Klipper itself enabled S;
   - ``off_delay <= MAX_OFF_DELAY_S`` (Klipper's M84/SET_STEPPER_ENABLE dwell 0.1 s after the
     last move; an off must come before any of Klipper's own pin changes);
   - real time: ``t_off >= estimated_print_time + min_sched`` and ``t_off >= (time of the previous
-    change of this pin) + min_sched`` when the off is scheduled (in Klipper's batch mode,
+    change of this pin) + spacing`` when the off is scheduled (in Klipper's batch mode,
     ``klippy.py -o``, the estimated print time is always 0, so only the second part applies).
 
 * The off is scheduled as soon as both ``t_end`` is known and rule A is proven (the gap only
   grows as moves arrive), the on when the activating move leaves the look-ahead. The on always
-  comes after the off (rule A) and never before ``t_off + min_sched``.
+  comes after the off (rule A) and never before ``t_off + spacing``.
+
+Pin spacing (why 0.1 s, from Klipper's source)
+----------------------------------------------
+
+``MCU_digital_out.set_digital`` (klippy/mcu.py) sends ``queue_digital_out`` with ``minclock`` = the
+clock of the pin's previous event and ``reqclock`` = the new event's clock: each digital_out pin
+reserves one slot of the MCU's move queue (``request_move_queue_slot``), so serialqueue.c holds the
+message until the MCU clock at its arrival has passed the previous event (``check_upcoming_queues``)
+and it must then reach the MCU before ``reqclock``; one that arrives late shuts the MCU down
+("Timer too close", src/sched.c ``sched_add_timer``). The time between two changes of one pin is
+therefore the whole lead its second message gets. Klipper gives every scheduled message 0.1 s of
+lead: serialqueue.c ``MIN_REQTIME_DELTA`` (0.100: a message is sent no later than that before its
+reqclock), mcu.py ``MIN_SCHEDULE_TIME`` (0.100, "Minimum time host needs to get scheduled events
+queued into mcu"), and on this very pin stepper_enable.py dwells ``DISABLE_STALL_TIME`` (0.100)
+before and after a disable "for sufficient delay" from the previous and to the next auto enable;
+output_pin.py's request queue, pwm_cycle_time.py and replicape.py space one pin's changes by
+``min_schedule_time()`` too, and the steppers' own queue_step messages are flushed 0.2-0.4 s
+ahead (motion_queuing.py ``BGFLUSH_LOW_TIME``, ``BGFLUSH_HIGH_TIME``). 0.1 s is the default; a
+host and link known to be fast may set less, down to ``MIN_PIN_SPACING_S`` (0.025 s, serialqueue.c
+``MIN_RTO``: a block lost once is sent again no sooner, so a smaller spacing fails on one
+retransmission). The solver must be given the same value (gatesopt reads it from the printer.cfg).
 
 What it refuses: at start-up (config error) a listed stepper that is not a kinematic stepper of
 the toolhead, a stepper with no enable pin (TMC "virtual enable") or with a shared enable pin; at
@@ -89,6 +111,12 @@ STEP_EARLY_S = 0.000025
 # Klipper's own disable (stepper_enable.set_motors_enable) dwells DISABLE_STALL_TIME (0.1 s) after
 # the last move before it changes a pin; an off later than that could come after it.
 MAX_OFF_DELAY_S = 0.050
+# Least time between two changes of one enable pin ("Pin spacing" above): the default is Klipper's
+# own (stepper_enable.DISABLE_STALL_TIME, mcu.MIN_SCHEDULE_TIME, serialqueue MIN_REQTIME_DELTA);
+# the floor is serialqueue.c's MIN_RTO, the earliest a lost message is sent again
+DEFAULT_PIN_SPACING_S = 0.100
+MIN_PIN_SPACING_S = 0.025
+MAX_PIN_SPACING_S = 1.0
 DEFAULT_STEPPERS = "stepper_x, stepper_y"
 # Skips of one reason written to klippy.log before the rest are only counted
 LOG_SKIPS_PER_REASON = 20
@@ -109,10 +137,10 @@ def on_lead_s(pre_active_s, start_ahead_s):
     return pre_active_s + start_ahead_s + STEP_EARLY_S + CLOCK_SLACK_S
 
 def required_gap_s(pre_active_s, post_active_s, start_ahead_s, end_late_s,
-                   min_off_s, min_sched_s):
+                   min_off_s, pin_spacing_s):
     """Rule A: the least sum of min_move_t that proves an interval may be gated."""
     return (off_delay_s(post_active_s, end_late_s)
-            + on_lead_s(pre_active_s, start_ahead_s) + max(min_off_s, min_sched_s))
+            + on_lead_s(pre_active_s, start_ahead_s) + max(min_off_s, pin_spacing_s))
 
 def gate_times(t_end, t_next, pre_active_s, post_active_s, start_ahead_s,
                end_late_s):
@@ -203,14 +231,18 @@ class GatingCore:
     gates: {name: (MCU_stepper, EnableTracking)} of the gateable steppers
     margins(stepper) -> (pre_active_s, post_active_s)
     est_print_time(pin) -> the MCU's estimated print time now
-    min_sched_s: the MCU's min_schedule_time()
+    min_sched_s: the MCU's min_schedule_time() (least lead of an event over the MCU's clock)
+    pin_spacing_s: least time between two changes of one pin (None: min_sched_s)
     """
     def __init__(self, toolhead, gates, margins, est_print_time, min_sched_s,
-                 start_ahead_s, end_late_s, min_off_s, respond=None):
+                 start_ahead_s, end_late_s, min_off_s, respond=None,
+                 pin_spacing_s=None):
         self.toolhead = toolhead
         self.margins = margins
         self.est_print_time = est_print_time
         self.min_sched_s = min_sched_s
+        self.pin_spacing_s = (min_sched_s if pin_spacing_s is None
+                              else pin_spacing_s)
         self.start_ahead_s = start_ahead_s
         self.end_late_s = end_late_s
         self.min_off_s = min_off_s
@@ -265,7 +297,7 @@ class GatingCore:
         """Earliest print time a new change of g's pin may be scheduled."""
         t = self.est_print_time(g.pin) + self.min_sched_s
         if g.last_event_pt is not None:
-            t = max(t, g.last_event_pt + self.min_sched_s)
+            t = max(t, g.last_event_pt + self.pin_spacing_s)
         return t
     # G-code line
     def command_gate(self, names):
@@ -295,7 +327,7 @@ class GatingCore:
                            % (delay,))
             elif (g.anchor_cum_s is not None
                   and (self.cum_s - g.anchor_cum_s + g.anchor_lead_s + delay
-                       < self.min_sched_s)):
+                       < self.pin_spacing_s)):
                 self._skip(g, iv, "spacing", "%.4f s after the last on"
                            % (self.cum_s - g.anchor_cum_s + g.anchor_lead_s
                               + delay,))
@@ -305,7 +337,7 @@ class GatingCore:
         pre, post = self._margins(g, iv)
         return iv.gap_s >= required_gap_s(pre, post, self.start_ahead_s,
                                           self.end_late_s, self.min_off_s,
-                                          self.min_sched_s)
+                                          self.pin_spacing_s)
     # Moves (every move entering the look-ahead queue)
     def note_move(self, move):
         dt = move.min_move_t
@@ -536,6 +568,9 @@ class GatesoptGating:
                                           maxval=0.05)
         self.min_off_s = config.getfloat('min_off_time', 0., minval=0.,
                                          maxval=3600.)
+        self.pin_spacing_s = config.getfloat(
+            'min_pin_spacing', DEFAULT_PIN_SPACING_S, minval=MIN_PIN_SPACING_S,
+            maxval=MAX_PIN_SPACING_S)
         self.section = config.get_name()
         self.toolhead = None
         self.core = None
@@ -585,7 +620,8 @@ class GatesoptGating:
         self.core = GatingCore(
             self.toolhead, gates, stepper_margins, est_print_time,
             mcu.min_schedule_time(), self.start_ahead_s, self.end_late_s,
-            self.min_off_s, respond=self.gcode.respond_raw)
+            self.min_off_s, respond=self.gcode.respond_raw,
+            pin_spacing_s=self.pin_spacing_s)
         # Every move Klipper plans passes here, after all transforms and
         # speed limits (toolhead.move and drip moves)
         orig_add_move = lookahead.add_move

@@ -1,0 +1,186 @@
+"""A rebuilt travel's moves planned as the planner plans them (issue 36; formulations/ordering.md,
+"Cost model"): the kernels ``cost._rebuilt_s`` and ``cost._dense`` price a link with, and
+``cost.MoveTimes.gaps_s`` prices a file's gaps with. Each move gets its nominal speed,
+acceleration and safe speed by its kind and the per-axis caps (``prep_move``, as
+``_planner_kernel.prepare_moves``), the junctions between them the firmware's rule
+(``_planner_kernel.junction_speed``), then the look-ahead passes and trapezoids
+(``plan_moves_s``). The moves live in one work array (``work_array``), so a link allocates
+nothing.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from .. import _planner_kernel as pk
+
+#: below this a length is no move (the writer skips axes that change by less than 1e-9 mm)
+MOVE_EPS_MM = 1e-9
+#: sin(theta/2) / (1 - sin(theta/2)) of junction deviation at a right angle (``junction_speed``)
+R_JD_RIGHT_ANGLE = float(np.sqrt(0.5) / (1.0 - np.sqrt(0.5)))
+
+
+@numba.njit(cache=True)
+def prep_move(w, k, code, row):
+    """Row k of the work array: unit vector, nominal speed and acceleration by the move's kind
+    and the per-axis caps (``_planner_kernel.prepare_moves``), safe speed; marked ready."""
+    Lk = w[k, W_L]
+    for ax in range(4):
+        w[k, W_U + ax] = w[k, ax] / Lk
+    has_e = w[k, 3] != 0.0
+    e_only = w[k, 0] == 0.0 and w[k, 1] == 0.0 and w[k, 2] == 0.0
+    f = w[k, W_F]
+    fmin = row[pk.C_MIN_FEED] if has_e else row[pk.C_MIN_TRAVEL_FEED]
+    if f < fmin:
+        f = fmin
+    for ax in range(4):
+        ua = abs(w[k, W_U + ax])
+        if ua > 0.0 and f * ua > row[pk.C_MAX_FEED + ax]:
+            f = row[pk.C_MAX_FEED + ax] / ua
+    if f > row[pk.C_MAX_VELOCITY]:
+        f = row[pk.C_MAX_VELOCITY]
+    mst = row[pk.C_MIN_SEGMENT_TIME]
+    if mst > 0.0 and f * mst > Lk:
+        f = Lk / mst
+    if e_only:
+        a = row[pk.C_ACCEL_RETRACT]
+    elif has_e:
+        a = row[pk.C_ACCEL_PRINT]
+    else:
+        a = row[pk.C_ACCEL_TRAVEL]
+    for ax in range(4):
+        ua = abs(w[k, W_U + ax])
+        if ua > 0.0 and a * ua > row[pk.C_MAX_ACCEL + ax]:
+            a = row[pk.C_MAX_ACCEL + ax] / ua
+    w[k, W_V], w[k, W_A] = f, a
+    w[k, W_SAFE] = pk.safe_speed(code, w[k, W_U:W_U + 4], f, row)
+    w[k, W_READY] = 1.0
+
+
+@numba.njit(cache=True)
+def junction(w, k, code, row):
+    """The planner's junction speed from work row k - 1 into row k (both ready)."""
+    return pk.junction_speed(code, w[k - 1, W_U:W_U + 4], w[k, W_U:W_U + 4], w[k - 1, W_V],
+                             w[k, W_V], w[k - 1, W_A], w[k, W_A], w[k - 1, W_L], w[k, W_L],
+                             w[k - 1, W_SAFE], w[k, W_SAFE], row)
+
+
+@numba.njit(cache=True)
+def plan_moves_s(w, n, code, row):
+    """Time (s) of moves 0..n-1 planned as ``planner.plan`` plans them: each move's nominal speed
+    and acceleration by its kind and the per-axis caps (``prep_move``), the junction speeds
+    between them by the firmware's rule (``junction_speed``), look-ahead passes, trapezoids.
+    ``w`` (``work_array``): per move its displacement X Y Z E (columns 0-3), length ``W_L`` (XYZ,
+    or |E| for an extruder-only move) and feed ``W_F``; a row marked ``W_READY`` (and a junction
+    marked ``W_JREADY``) was prepared by the caller, the rest is written here."""
+    if n == 0:
+        return 0.0
+    for k in range(n):
+        if w[k, W_READY] == 0.0:
+            prep_move(w, k, code, row)
+    for k in range(1, n):
+        if w[k, W_JREADY] == 0.0:
+            w[k, W_J] = junction(w, k, code, row)
+    # the junctions with the curves around: at the first and last move's safe speed, except under
+    # junction deviation, where a junction with an extruder-only move is a right angle whatever
+    # the curve's direction (Marlin: its unit vector is along E), v^2 = a JD sin(45)/(1 - sin(45)),
+    # a the entered move's acceleration (the print acceleration for the curve after); a dry
+    # travel's first or last move is taken at that angle too
+    last = w[n - 1, W_SAFE]
+    w[0, W_J] = w[0, W_SAFE]
+    if code == pk.DEVIATION and row[pk.C_JD] > 0.0:
+        w[0, W_J] = max(w[0, W_J], min(np.sqrt(w[0, W_A] * row[pk.C_JD] * R_JD_RIGHT_ANGLE),
+                                       w[0, W_V]))
+        last = max(last, min(np.sqrt(row[pk.C_ACCEL_PRINT] * row[pk.C_JD] * R_JD_RIGHT_ANGLE),
+                             w[n - 1, W_V]))
+    nxt = last
+    for k in range(n - 1, -1, -1):          # backward: each entry can brake to the next
+        v = np.sqrt(nxt * nxt + 2.0 * w[k, W_A] * w[k, W_L])
+        w[k, W_E] = min(w[k, W_J], v)
+        nxt = w[k, W_E]
+    for k in range(1, n):                   # forward: each entry reachable from the one before
+        v = np.sqrt(w[k - 1, W_E] * w[k - 1, W_E] + 2.0 * w[k - 1, W_A] * w[k - 1, W_L])
+        w[k, W_E] = min(w[k, W_E], v)
+    t = 0.0
+    for k in range(n):
+        e0, vc, a, Lk = w[k, W_E], w[k, W_V], w[k, W_A], w[k, W_L]
+        ex = w[k + 1, W_E] if k + 1 < n else last
+        v0 = min(e0, vc)
+        v1 = min(ex, np.sqrt(e0 * e0 + 2.0 * a * Lk), vc)
+        d_acc = (vc * vc - v0 * v0) / (2.0 * a)
+        d_dec = (vc * vc - v1 * v1) / (2.0 * a)
+        if d_acc + d_dec <= Lk:
+            t += (vc - v0) / a + (vc - v1) / a + (Lk - d_acc - d_dec) / vc
+        else:
+            vp = max(np.sqrt(a * Lk + 0.5 * (v0 * v0 + v1 * v1)), v0, v1)
+            t += (vp - v0) / a + (vp - v1) / a
+    return t
+
+
+#: ``plan_moves_s``'s work array: columns per move (a rebuilt travel has at most 5 moves)
+W_L, W_F, W_U, W_V, W_A, W_SAFE, W_J, W_E, W_READY, W_JREADY, W_COLS = (
+    4, 5, 6, 10, 11, 12, 13, 14, 15, 16, 17)
+REBUILT_MAX_MOVES = 5
+
+
+def work_array(n: int = REBUILT_MAX_MOVES) -> np.ndarray:
+    """A work array for ``plan_moves_s`` (and ``_rebuilt_s``) of ``n`` moves."""
+    return np.zeros((n, W_COLS))
+
+
+@numba.njit(cache=True)
+def gaps_planned(a, b, motion, d_all, L_all, F_all, code, row):
+    """``MoveTimes.gaps_s`` with the limits: per gap its motion steps planned together."""
+    out = np.zeros(len(a))
+    for i in range(len(a)):
+        n = 0
+        for s in range(a[i], b[i]):
+            n += motion[s]
+        if n == 0:
+            continue
+        w = np.zeros((n, W_COLS))
+        k = 0
+        for s in range(a[i], b[i]):
+            if motion[s]:
+                for ax in range(4):
+                    w[k, ax] = d_all[s, ax]
+                w[k, W_L], w[k, W_F] = L_all[s], F_all[s]
+                k += 1
+        out[i] = plan_moves_s(w, n, code, row)
+    return out
+
+
+@numba.njit(cache=True)
+def e_row(w, k, e_mm, feed, code, row):
+    """Work row k: an extruder-only move of ``e_mm`` (signed) at ``feed``, prepared."""
+    w[k, :] = 0.0
+    w[k, 3], w[k, W_L], w[k, W_F] = e_mm, abs(e_mm), feed
+    prep_move(w, k, code, row)
+
+
+@numba.njit(cache=True)
+def same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v, has_u, w, code, row, v_xy):
+    """``_rebuilt_s`` for a link at one height inside a group (``_dense``), from prepared rows:
+    ``pre`` the retraction, lift and lowering (the lift's junction from the retraction made),
+    ``u_rows[0 / 1, v]`` the unretraction into candidate v retracting / dry (with, retracting,
+    its junction from the lowering); per link only the travel and its two junctions are made."""
+    n = 0
+    if retract and with_e:
+        w[n, :] = pre[0]
+        n += 1
+    if retract and hop_on:
+        w[n, :] = pre[1]
+        n += 1
+    if dist > MOVE_EPS_MM:
+        w[n, :] = 0.0
+        w[n, 0], w[n, 1], w[n, W_L], w[n, W_F] = dx, dy, dist, v_xy
+        n += 1
+    if retract and hop_on:
+        w[n, :] = pre[2]
+        n += 1
+    if has_u:
+        w[n, :] = u_rows[0 if retract else 1, v]
+        if not (retract and hop_on):
+            w[n, W_JREADY] = 0.0
+        n += 1
+    return plan_moves_s(w, n, code, row)

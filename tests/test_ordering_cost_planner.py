@@ -1,0 +1,107 @@
+"""The time objective against the planner (issue 36, "an objective that differs from what the
+printer pays makes proven optimal answers that lose in practice"): a rebuilt travel's cost
+(``cost._rebuilt_s``) is the planner's time of the travel as emitted (``planner.plan`` on the
+re-parsed output), on a small layer whose re-ordering rebuilds diagonal travels with a
+retraction and a z-hop under classic jerk."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import gatesopt
+from gatesopt.ordering import OrderingOptions, build, emit, solve
+from gatesopt.ordering.cost import TimePricer
+from gatesopt.ordering.layout import layout
+from gatesopt.planner import plan
+
+#: how close the model's link and the planner's emitted gap must be (the gap's first and last
+#: moves meet curves, whose junction with them the model takes at the moves' safe speeds: exact
+#: here, as an extruder-only move's safe speed is what the planner gives after an extrusion)
+TOL_MS = 0.5
+
+
+def mk3_layers() -> str:
+    """Two layers of four infill lines (the slicer's order poor), every travel retracted and
+    hopped, a Prusa MK3's limits: travel acceleration 1250 mm/s^2 above the X and Y limits of
+    1000 (a diagonal travel accelerates faster than one along an axis), Z jerk 0.4 mm/s."""
+    lines = [";FLAVOR:Marlin", "G21", "G90", "M83", "M201 X1000 Y1000 Z200 E5000",
+             "M203 X200 Y200 Z12 E120", "M204 P1000 R1250 T1250", "M205 X8 Y8 Z0.4 E2.5", "G28",
+             "G1 Z0.2 F720"]
+    pts = [((10, 10), (40, 10)), ((120, 90), (150, 90)), ((60, 30), (90, 30)), ((93, 31), (93, 60))]
+    for layer in range(2):
+        z = 0.2 * (layer + 1)
+        lines += [";LAYER_CHANGE", f"G1 Z{z:.1f} F720", "G1 E-0.8 F2100"]
+        for a, b in pts:
+            lines += [f"G1 Z{z + 0.4:.1f} F720", f"G1 X{a[0]} Y{a[1]} F10800", f"G1 Z{z:.1f} F720",
+                      "G1 E0.8 F2100", ";TYPE:Internal infill",
+                      f"G1 X{b[0]} Y{b[1]} E1.5 F2700", "G1 E-0.8 F2100"]
+    return "\n".join(lines) + "\nM104 S0\n"
+
+
+def _rebuilt_links(prog, prob, sol):
+    """(model ms, planner ms) of each rebuilt travel inside the re-ordered layer."""
+    out = gatesopt.parse(emit(prog, prob, sol))
+    lay = layout(out)
+    assert len(lay.curve_s0) == prob.n_curves
+    d = plan(out).duration_s
+    order = sol.curve_order
+    a, b = prob.entry_exit_xy(order, sol.curve_reversed, sol.curve_seam)
+    changed = (sol.curve_reversed | (sol.curve_seam != 0))[order]
+    model = prob.pricer.links_ms(order[:-1], changed[:-1], b[:-1], order[1:], changed[1:], a[1:])
+    rows = []
+    for k in range(1, len(order)):
+        same_layer = prob.curve_layer[order[k]] == prob.curve_layer[order[k - 1]]
+        copied = order[k] == order[k - 1] + 1 and not changed[k] and not changed[k - 1]
+        if same_layer and not copied:
+            gap = d[lay.curve_s1[k - 1]:lay.curve_s0[k]].sum() * 1000.0
+            rows.append((model[k - 1], gap))
+    return np.asarray(rows)
+
+
+def test_a_rebuilt_travel_costs_what_the_planner_plans():
+    prog = gatesopt.parse(mk3_layers())
+    prob = build(prog, OrderingOptions(mode="free"))
+    sol = solve(prob, "auto")
+    rows = _rebuilt_links(prog, prob, sol)
+    assert len(rows) >= 3                       # the layer was re-ordered: travels rebuilt
+    assert np.abs(rows[:, 0] - rows[:, 1]).max() <= TOL_MS
+    # each move alone from and to its kind's junction speed (the model before): the diagonal
+    # travel at the X/Y acceleration, the z-hop ending at the Z jerk where the planner carries
+    # the travel's safe speed into it -- off by far more
+    pr = prob.pricer
+    alone = dataclasses.replace(pr.move, junction_code=-1)
+    old = dataclasses.replace(prob, pricer=TimePricer(prog, prob.layout, prob, pr.rule, alone))
+    rows_old = _rebuilt_links(prog, old, sol)
+    assert np.abs(rows_old[:, 0] - rows_old[:, 1]).max() > 10 * TOL_MS
+
+
+@pytest.mark.parametrize("junction", ["deviation", "scv"])
+def test_a_rebuilt_travel_costs_what_the_planner_plans_under_other_junction_rules(junction):
+    # junction deviation (Marlin 2) and Klipper's square corner velocity: the same agreement
+    text = mk3_layers().replace(";FLAVOR:Marlin", ";FLAVOR:Marlin" if junction == "deviation"
+                                else ";FLAVOR:Klipper")
+    text = text.replace("M205 X8 Y8 Z0.4 E2.5", "M205 J0.02" if junction == "deviation"
+                        else "SET_VELOCITY_LIMIT SQUARE_CORNER_VELOCITY=5")
+    prog = gatesopt.parse(text)
+    prob = build(prog, OrderingOptions(mode="free"))
+    if prob.pricer.move.junction_code != {"deviation": 1, "scv": 2}[junction]:
+        pytest.skip(f"this file does not select the {junction} rule")
+    sol = solve(prob, "auto")
+    rows = _rebuilt_links(prog, prob, sol)
+    assert len(rows) >= 3
+    assert np.abs(rows[:, 0] - rows[:, 1]).max() <= TOL_MS
+
+
+def test_a_re_ordered_file_is_planned_with_the_limits_of_the_file_it_came_from():
+    # a CuraEngine file starts with ";FLAVOR:" (its printer profile is read from that); the
+    # re-ordered file starts with gatesopt's header line: it must get the same limits and
+    # junction rule, or print time before and after are planned under different rules
+    from gatesopt.headers import ORDER_HEADER
+    from gatesopt.limits import machine_limits
+    text = mk3_layers()
+    a = machine_limits(gatesopt.parse(text))
+    b = machine_limits(gatesopt.parse(ORDER_HEADER + "\n" + text))
+    assert a.profile == b.profile and a.junction == b.junction == "jerk"
+    assert np.array_equal(a.vector(), b.vector(), equal_nan=True)
