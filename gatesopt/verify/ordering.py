@@ -47,6 +47,22 @@ def _barrier_bins(program: Program, lay: Layout | None = None):
 ARC_LENGTH_TOL_MM = 0.01
 
 
+def _bins_differ(ia, ib, m, e_a_rows, e_b_rows, s_a_rows, s_b_rows, arc_a_rows, rel_tol, snap_tol_mm):
+    """Per bin (``ia`` / ``ib``: each extruding row's bin in the original / output, ``m`` bins) the
+    extruded E and path length of both files, and the bins where they differ beyond the
+    tolerances (relative, plus an allowance per arc and per snapped move): the comparison
+    ``check_barriers`` and ``check_objects`` share."""
+    e_a, s_a = np.bincount(ia, e_a_rows, m), np.bincount(ia, s_a_rows, m)
+    e_b, s_b = np.bincount(ib, e_b_rows, m), np.bincount(ib, s_b_rows, m)
+    n_arc = np.bincount(ia, arc_a_rows.astype(float), m)
+    n_moves = np.bincount(ia, minlength=m) + np.bincount(ib, minlength=m)
+    len_tol = (rel_tol * np.maximum(s_a, s_b) + 1e-3 + ARC_LENGTH_TOL_MM * n_arc
+               + snap_tol_mm * n_moves)
+    bad = ((np.abs(e_a - e_b) > rel_tol * np.maximum(np.abs(e_a), np.abs(e_b)) + 1e-6)
+           | (np.abs(s_a - s_b) > len_tol))
+    return np.flatnonzero(bad), e_a, e_b, s_a, s_b
+
+
 def check_barriers(original: Program, output: Program, *, rel_tol: float = 1e-4,
                    snap_tol_mm: float = 0.0, lays: tuple | None = None) -> list[Finding]:
     """``snap_tol_mm``: how far a rotated output's snap may have moved each end point of a move
@@ -65,16 +81,9 @@ def check_barriers(original: Program, output: Program, *, rel_tol: float = 1e-4,
     key, inv = np.unique(key, return_inverse=True)
     keys = np.column_stack([key // span - 1, key % span])
     ia, ib = inv[:len(la)], inv[len(la):]
-    m = len(keys)
-    e_a, s_a = np.bincount(ia, ea, m), np.bincount(ia, sa, m)
-    n_arc = np.bincount(ia, arc_a.astype(float), m)
-    e_b, s_b = np.bincount(ib, eb, m), np.bincount(ib, sb, m)
-    n_moves = np.bincount(ia, minlength=m) + np.bincount(ib, minlength=m)
-    len_tol = (rel_tol * np.maximum(s_a, s_b) + 1e-3 + ARC_LENGTH_TOL_MM * n_arc
-               + snap_tol_mm * n_moves)
-    bad = ((np.abs(e_a - e_b) > rel_tol * np.maximum(np.abs(e_a), np.abs(e_b)) + 1e-6)
-           | (np.abs(s_a - s_b) > len_tol))
-    for i in np.flatnonzero(bad)[:5].tolist():
+    bad, e_a, e_b, s_a, s_b = _bins_differ(ia, ib, len(keys), ea, eb, sa, sb, arc_a, rel_tol,
+                                           snap_tol_mm)
+    for i in bad[:5].tolist():
         out.append(Finding("barriers", None,
                            f"layer {keys[i, 0]}, after barrier line #{keys[i, 1]}: extruded E "
                            f"{e_b[i]:.5f} mm over {s_b[i]:.3f} mm, original {e_a[i]:.5f} mm over "
@@ -130,19 +139,12 @@ def check_objects(original: Program, output: Program, *, rel_tol: float = 1e-4,
     obj = np.concatenate([ka, kb])
     pair, inv = np.unique(np.column_stack([key, obj]), axis=0, return_inverse=True)
     inv = np.ravel(inv)
-    m = len(pair)
     ia, ib = inv[:len(ra)], inv[len(ra):]
-    ea = original.end_mm[ra, 3] - original.start_mm[ra, 3]
-    eb = output.end_mm[rb, 3] - output.start_mm[rb, 3]
-    e_a, e_b = np.bincount(ia, ea, m), np.bincount(ib, eb, m)
-    s_a, s_b = np.bincount(ia, original.length_mm[ra], m), np.bincount(ib, output.length_mm[rb], m)
-    n_arc = np.bincount(ia, (original.kind[ra] == Kind.ARC).astype(float), m)
-    n_moves = np.bincount(ia, minlength=m) + np.bincount(ib, minlength=m)
-    len_tol = (rel_tol * np.maximum(s_a, s_b) + 1e-3 + ARC_LENGTH_TOL_MM * n_arc
-               + snap_tol_mm * n_moves)
-    bad = ((np.abs(e_a - e_b) > rel_tol * np.maximum(np.abs(e_a), np.abs(e_b)) + 1e-6)
-           | (np.abs(s_a - s_b) > len_tol))
-    for i in np.flatnonzero(bad)[:5].tolist():
+    bad, e_a, e_b, s_a, s_b = _bins_differ(
+        ia, ib, len(pair), original.end_mm[ra, 3] - original.start_mm[ra, 3],
+        output.end_mm[rb, 3] - output.start_mm[rb, 3], original.length_mm[ra],
+        output.length_mm[rb], original.kind[ra] == Kind.ARC, rel_tol, snap_tol_mm)
+    for i in bad[:5].tolist():
         out.append(Finding("objects", None,
                            f"layer {pair[i, 0]}, inside object labels #{pair[i, 1]}: extruded E "
                            f"{e_b[i]:.5f} mm over {s_b[i]:.3f} mm, original {e_a[i]:.5f} mm over "
