@@ -133,6 +133,61 @@ def junction_speed(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row):
 
 
 @njit(cache=True)
+def nominal_speed_accel(code, ua, feed, length, has_e, e_only, no_xy, retract, row):
+    """A move's nominal speed (mm/s) and acceleration (mm/s^2) by its kind and the firmware's
+    caps: ``ua`` its unit vector X Y Z E (signs ignored), ``feed`` its requested speed, ``length`` its path
+    length, ``has_e`` / ``e_only`` it moves E / only E, ``no_xy`` it moves neither X nor Y (a
+    line), ``retract`` E runs backwards, ``row`` the limits in force. One rule for the planner
+    (``prepare_moves``) and the ordering's travel pricing (``ordering.gap_plan.prep_move``)."""
+    f = feed
+    fmin = row[C_MIN_FEED] if has_e else row[C_MIN_TRAVEL_FEED]
+    if f < fmin:
+        f = fmin
+    # Klipper: the extruder's limits (max_extrude_only_velocity / _accel, the E columns) apply
+    # to a move without X and Y (extrude-only, or Z with E) and to a retraction (E < 0), as
+    # the move's speed and acceleration over |E per mm| (klippy/kinematics/extruder.py
+    # PrinterExtruder.check_move); Marlin caps E on every move (M203 / M201 E)
+    e_caps = True
+    if code == SCV:
+        e_caps = no_xy or retract
+    # M203 per-axis feedrate caps (the Z caps are Klipper's max_z_velocity * move_d / |dz|,
+    # klippy/kinematics/cartesian.py check_move), Klipper max_velocity, minimum segment
+    # time (M205 B)
+    for ax in range(4):
+        if ax == 3 and not e_caps:
+            continue
+        u = abs(ua[ax])
+        if u > 0.0 and f * u > row[C_MAX_FEED + ax]:
+            f = row[C_MAX_FEED + ax] / u
+    # an extrude-only move keeps its requested speed on Klipper (toolhead.py Move: no
+    # max_velocity for it), capped by max_extrude_only_velocity above
+    if f > row[C_MAX_VELOCITY] and not (code == SCV and e_only):
+        f = row[C_MAX_VELOCITY]
+    mst = row[C_MIN_SEGMENT_TIME]
+    if mst > 0.0 and f * mst > length:
+        f = length / mst
+    # acceleration: Marlin planner.cpp -- retract_acceleration for extruder-only moves,
+    # travel_acceleration for moves without E steps, acceleration otherwise; M201 per axis
+    # Klipper: an extrude-only move's acceleration is max_extrude_only_accel alone (toolhead.py
+    # Move starts it at 99999999.9, extruder.py check_move lowers it), not max_accel
+    if e_only:
+        a = row[C_ACCEL_RETRACT]
+        if code == SCV and row[C_MAX_ACCEL + 3] < 1e300:
+            a = row[C_MAX_ACCEL + 3]
+    elif has_e:
+        a = row[C_ACCEL_PRINT]
+    else:
+        a = row[C_ACCEL_TRAVEL]
+    for ax in range(4):
+        if ax == 3 and not e_caps:
+            continue
+        u = abs(ua[ax])
+        if u > 0.0 and a * u > row[C_MAX_ACCEL + ax]:
+            a = row[C_MAX_ACCEL + ax] / u
+    return f, a
+
+
+@njit(cache=True)
 def prepare_moves(code, d, L, F, arc_row, arc_us, arc_ue, arc_phi, stop_before, regime, table):
     """Per move: nominal speed, acceleration, safe speed, max junction (entry) speed, and the
     junction speed the move would have if no stop came before it (``vj_free``).
@@ -173,49 +228,8 @@ def prepare_moves(code, d, L, F, arc_row, arc_us, arc_ue, arc_phi, stop_before, 
                 ua[ax] = abs(us[ax])
         has_e = d[k, 3] != 0.0
         e_only = j < 0 and d[k, 0] == 0.0 and d[k, 1] == 0.0 and d[k, 2] == 0.0
-        f = F[k]
-        fmin = row[C_MIN_FEED] if has_e else row[C_MIN_TRAVEL_FEED]
-        if f < fmin:
-            f = fmin
-        # Klipper: the extruder's limits (max_extrude_only_velocity / _accel, the E columns) apply
-        # to a move without X and Y (extrude-only, or Z with E) and to a retraction (E < 0), as
-        # the move's speed and acceleration over |E per mm| (klippy/kinematics/extruder.py
-        # PrinterExtruder.check_move); Marlin caps E on every move (M203 / M201 E)
-        e_caps = True
-        if code == SCV:
-            e_caps = (j < 0 and d[k, 0] == 0.0 and d[k, 1] == 0.0) or d[k, 3] < 0.0
-        # M203 per-axis feedrate caps (the Z caps are Klipper's max_z_velocity * move_d / |dz|,
-        # klippy/kinematics/cartesian.py check_move), Klipper max_velocity, minimum segment
-        # time (M205 B)
-        for ax in range(4):
-            if ax == 3 and not e_caps:
-                continue
-            if ua[ax] > 0.0 and f * ua[ax] > row[C_MAX_FEED + ax]:
-                f = row[C_MAX_FEED + ax] / ua[ax]
-        # an extrude-only move keeps its requested speed on Klipper (toolhead.py Move: no
-        # max_velocity for it), capped by max_extrude_only_velocity above
-        if f > row[C_MAX_VELOCITY] and not (code == SCV and e_only):
-            f = row[C_MAX_VELOCITY]
-        mst = row[C_MIN_SEGMENT_TIME]
-        if mst > 0.0 and f * mst > L[k]:
-            f = L[k] / mst
-        # acceleration: Marlin planner.cpp -- retract_acceleration for extruder-only moves,
-        # travel_acceleration for moves without E steps, acceleration otherwise; M201 per axis
-        # Klipper: an extrude-only move's acceleration is max_extrude_only_accel alone (toolhead.py
-        # Move starts it at 99999999.9, extruder.py check_move lowers it), not max_accel
-        if e_only:
-            a = row[C_ACCEL_RETRACT]
-            if code == SCV and row[C_MAX_ACCEL + 3] < 1e300:
-                a = row[C_MAX_ACCEL + 3]
-        elif has_e:
-            a = row[C_ACCEL_PRINT]
-        else:
-            a = row[C_ACCEL_TRAVEL]
-        for ax in range(4):
-            if ax == 3 and not e_caps:
-                continue
-            if ua[ax] > 0.0 and a * ua[ax] > row[C_MAX_ACCEL + ax]:
-                a = row[C_MAX_ACCEL + ax] / ua[ax]
+        f, a = nominal_speed_accel(code, ua, F[k], L[k], has_e, e_only,
+                                   j < 0 and d[k, 0] == 0.0 and d[k, 1] == 0.0, d[k, 3] < 0.0, row)
         acc[k] = a
         # arcs: the firmware cuts them into ~1 mm segments; cap by their mutual junction speed
         if j >= 0 and arc_phi[j] != 0.0:

@@ -81,7 +81,7 @@ def test_a_rebuilt_travel_costs_what_the_planner_plans():
     strict=True, reason="known gap since the planner follows klippy move by move (8b42245, "
     "4765dc0): under Klipper's rules a rebuilt layer-change travel is priced 8.2 ms under the "
     "planner (752.4 vs 760.6 ms); not Klipper's cruise smoothing (same with "
-    "MINIMUM_CRUISE_RATIO=0); gap_plan.prep_move follows prepare_moves' extruder rules"))])
+    "MINIMUM_CRUISE_RATIO=0); gap_plan.prep_move and the planner share nominal_speed_accel"))])
 def test_a_rebuilt_travel_costs_what_the_planner_plans_under_other_junction_rules(junction):
     # junction deviation (Marlin 2) and Klipper's square corner velocity: the same agreement
     text = mk3_layers().replace(";FLAVOR:Marlin", ";FLAVOR:Marlin" if junction == "deviation"

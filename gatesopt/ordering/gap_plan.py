@@ -23,46 +23,15 @@ R_JD_RIGHT_ANGLE = float(np.sqrt(0.5) / (1.0 - np.sqrt(0.5)))
 @numba.njit(cache=True)
 def prep_move(w, k, code, row):
     """Row k of the work array: unit vector, nominal speed and acceleration by the move's kind
-    and the per-axis caps (``_planner_kernel.prepare_moves``), safe speed; marked ready."""
+    and the per-axis caps (``_planner_kernel.nominal_speed_accel``, as the planner), safe speed;
+    marked ready."""
     Lk = w[k, W_L]
     for ax in range(4):
         w[k, W_U + ax] = w[k, ax] / Lk
     has_e = w[k, 3] != 0.0
-    e_only = w[k, 0] == 0.0 and w[k, 1] == 0.0 and w[k, 2] == 0.0
-    f = w[k, W_F]
-    fmin = row[pk.C_MIN_FEED] if has_e else row[pk.C_MIN_TRAVEL_FEED]
-    if f < fmin:
-        f = fmin
-    # Klipper's extruder limits only on moves without X and Y, and on retractions, as
-    # ``_planner_kernel.prepare_moves`` (klippy/kinematics/extruder.py check_move)
-    e_caps = True
-    if code == pk.SCV:
-        e_caps = (w[k, 0] == 0.0 and w[k, 1] == 0.0) or w[k, 3] < 0.0
-    for ax in range(4):
-        if ax == 3 and not e_caps:
-            continue
-        ua = abs(w[k, W_U + ax])
-        if ua > 0.0 and f * ua > row[pk.C_MAX_FEED + ax]:
-            f = row[pk.C_MAX_FEED + ax] / ua
-    if f > row[pk.C_MAX_VELOCITY] and not (code == pk.SCV and e_only):
-        f = row[pk.C_MAX_VELOCITY]
-    mst = row[pk.C_MIN_SEGMENT_TIME]
-    if mst > 0.0 and f * mst > Lk:
-        f = Lk / mst
-    if e_only:
-        a = row[pk.C_ACCEL_RETRACT]
-        if code == pk.SCV and row[pk.C_MAX_ACCEL + 3] < 1e300:
-            a = row[pk.C_MAX_ACCEL + 3]
-    elif has_e:
-        a = row[pk.C_ACCEL_PRINT]
-    else:
-        a = row[pk.C_ACCEL_TRAVEL]
-    for ax in range(4):
-        if ax == 3 and not e_caps:
-            continue
-        ua = abs(w[k, W_U + ax])
-        if ua > 0.0 and a * ua > row[pk.C_MAX_ACCEL + ax]:
-            a = row[pk.C_MAX_ACCEL + ax] / ua
+    no_xy = w[k, 0] == 0.0 and w[k, 1] == 0.0
+    f, a = pk.nominal_speed_accel(code, w[k, W_U:W_U + 4], w[k, W_F], Lk, has_e, no_xy and w[k, 2] == 0.0, no_xy,
+                                  w[k, 3] < 0.0, row)
     w[k, W_V], w[k, W_A] = f, a
     w[k, W_SAFE] = pk.safe_speed(code, w[k, W_U:W_U + 4], f, row)
     w[k, W_READY] = 1.0
