@@ -89,14 +89,9 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
             continue
         report["segments"] += 1
         report["blocks"] += len(blocks)
-        limit = max(0.0, min(BLOCK_TIME_LIMIT_S, t_end - time.perf_counter()))
-        order, proven, took = _solve(problem, blocks, seg, limit, cache)
-        report["solve_s"] += took
+        moved, proven = _order_run(problem, blocks, seg, t_end, cache, perm, moved_layers, report)
         report["proven"] += proven
-        if not np.array_equal(order, np.arange(len(blocks))):
-            report["segments_moved"] += 1
-            moved_layers.add(int(problem.curve_layer[seg[0]]))
-            perm[seg[0]:seg[-1] + 1] = np.concatenate([blocks[i] for i in order])
+        report["segments_moved"] += moved
     runs, kept = object_runs(problem)
     report["objects_kept"] = kept
     for objs in runs:
@@ -106,19 +101,28 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
         seg = np.arange(objs[0][0], objs[-1][1] + 1)
         report["object_runs"] += 1
         report["objects"] += len(blocks)
-        limit = max(0.0, min(BLOCK_TIME_LIMIT_S, t_end - time.perf_counter()))
-        order, proven, took = _solve(problem, blocks, seg, limit, cache)
-        report["solve_s"] += took
+        moved, proven = _order_run(problem, blocks, seg, t_end, cache, perm, moved_layers, report)
         report["objects_proven"] += proven
-        if not np.array_equal(order, np.arange(len(blocks))):
-            report["object_runs_moved"] += 1
-            moved_layers.add(int(problem.curve_layer[seg[0]]))
-            perm[seg[0]:seg[-1] + 1] = np.concatenate([blocks[i] for i in order])
+        report["object_runs_moved"] += moved
     report["layers_moved"] = len(moved_layers)
     problem = dataclasses.replace(problem, notes=problem.notes + kept_notes(kept))
     if np.array_equal(perm, np.arange(n)):
         return dataclasses.replace(problem, block_report=report)
     return permuted(problem, perm, cg, report)
+
+
+def _order_run(problem, blocks, seg, t_end, cache, perm, moved_layers, report) -> tuple[int, int]:
+    """Order one run of blocks (islands or objects) within what is left until ``t_end``; a new
+    order is written into ``perm`` and its layer into ``moved_layers``. Returns (moved 0/1,
+    proven 0/1); the solve time goes to ``report["solve_s"]``."""
+    limit = max(0.0, min(BLOCK_TIME_LIMIT_S, t_end - time.perf_counter()))
+    order, proven, took = _solve(problem, blocks, seg, limit, cache)
+    report["solve_s"] += took
+    if np.array_equal(order, np.arange(len(blocks))):
+        return 0, int(proven)
+    moved_layers.add(int(problem.curve_layer[seg[0]]))
+    perm[seg[0]:seg[-1] + 1] = np.concatenate([blocks[i] for i in order])
+    return 1, int(proven)
 
 
 def kept_notes(kept: dict) -> tuple:
