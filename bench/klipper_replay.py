@@ -626,7 +626,12 @@ class StepperReplay:
     """What one stepper did in a replay. Times in seconds of print time (MCU clock / frequency).
 
     *gated* off intervals are those with a step before and after (the initial off before homing
-    and the final off after the print are not gating). ``start_ahead_s`` of a gated interval =
+    and the final off after the print are not gating). A *tail* interval is an off that begins
+    after the stepper's last step but before the print's end (the last step of any stepper): a
+    gating off that klippy's own motor-off at the end of the input keeps (the motor stays off for
+    the rest of the print, e.g. X and Y during the closing Z lift); it counts in ``off_time_s``
+    up to the print's end, as gatesopt's report counts it up to the end of its timeline, and its
+    end-late in ``end_late_*``. ``start_ahead_s`` of a gated interval =
     its first step at or after the pin is on, minus the pin-on time; ``end_late_s`` = the pin-off
     time minus its last step before. ``steps_while_off`` counts steps at clocks in [off, on) of
     any off interval: each one a step a de-energised driver did not take; ``gated_steps_while_off``
@@ -641,13 +646,14 @@ class StepperReplay:
     steps_while_off: int
     gated_steps_while_off: int
     gated: int
-    off_time_s: float
+    off_time_s: float               # gated intervals + the tail interval (to the print's end)
     start_ahead_min_s: float
     start_ahead_median_s: float
     end_late_min_s: float
     end_late_median_s: float
     off_s: np.ndarray = field(repr=False)    # gated intervals [start, end] in s, shape (n, 2)
     while_off_s: np.ndarray = field(repr=False)  # the off intervals [start, end] that had steps
+    tail_off_s: float = 0.0         # of ``off_time_s``: the tail interval, off to the print's end
 
     def as_dict(self) -> dict:
         d = {k: v for k, v in dataclasses.asdict(self).items() if k not in ("off_s", "while_off_s")}
@@ -656,8 +662,9 @@ class StepperReplay:
 
 
 def stepper_replay(name: str, rows: StepRows, off_start: np.ndarray, off_end: np.ndarray,
-                   freq_hz: float) -> StepperReplay:
-    """Steps, steps while off, start-ahead / end-late and off time of one stepper."""
+                   freq_hz: float, end_clock: int | None = None) -> StepperReplay:
+    """Steps, steps while off, start-ahead / end-late and off time of one stepper;
+    ``end_clock``: the print's last step (any stepper), where a tail interval ends (None: none)."""
     n = rows.n_steps
     nan = float("nan")
     if n == 0:
@@ -670,15 +677,22 @@ def stepper_replay(name: str, rows: StepRows, off_start: np.ndarray, off_end: np
     inside = b_end - b_start
     gated = (b_start > 0) & (b_end < n)
     gs, ge = off_start[gated], off_end[gated]
+    tail = (b_start == n) & (off_start < (end_clock if end_clock is not None else -1))
+    tail_s = float((np.minimum(off_end[tail], end_clock) - off_start[tail]).sum() / freq_hz) \
+        if tail.any() else 0.0
     if gated.any():
         nxt = step_clock_at(rows, b_end[gated])
-        prv = step_clock_at(rows, b_start[gated] - 1)
         ahead = (nxt - ge) / freq_hz
-        late = (gs - prv) / freq_hz
         a_min, a_med = float(ahead.min()), float(np.median(ahead))
+    else:
+        a_min = a_med = nan
+    late_at = gated | tail
+    if late_at.any():
+        prv = step_clock_at(rows, b_start[late_at] - 1)
+        late = (off_start[late_at] - prv) / freq_hz
         l_min, l_med = float(late.min()), float(np.median(late))
     else:
-        a_min = a_med = l_min = l_med = nan
+        l_min = l_med = nan
     hit = inside > 0
     wo = np.stack([off_start[hit] / freq_hz,
                    np.where(off_end[hit] == OPEN_END, np.inf, off_end[hit] / freq_hz)], axis=1)
@@ -687,10 +701,10 @@ def stepper_replay(name: str, rows: StepRows, off_start: np.ndarray, off_end: np
         first_step_s=first / freq_hz, last_step_s=last / freq_hz,
         steps_while_off=int(inside.sum()), gated_steps_while_off=int(inside[gated].sum()),
         gated=int(gated.sum()),
-        off_time_s=float((ge - gs).sum() / freq_hz),
+        off_time_s=float((ge - gs).sum() / freq_hz) + tail_s,
         start_ahead_min_s=a_min, start_ahead_median_s=a_med,
         end_late_min_s=l_min, end_late_median_s=l_med,
-        off_s=np.stack([gs / freq_hz, ge / freq_hz], axis=1), while_off_s=wo)
+        off_s=np.stack([gs / freq_hz, ge / freq_hz], axis=1), while_off_s=wo, tail_off_s=tail_s)
 
 
 @dataclass(frozen=True)
@@ -741,12 +755,15 @@ def replay_metrics(stream: McuStream, pins: dict[str, StepperPins]) -> Replay:
     motor-off and sometimes seconds of steps, can be missing. Such a stream is not complete.
     """
     out = {}
-    end = 0
     complete = True
     for name, sp in pins.items():
-        rows = stream.steps.get(sp.step_pin)
-        if rows is None:
+        if sp.step_pin not in stream.steps:
             raise ReplayError(f"{name}: no config_stepper for step pin {sp.step_pin} in the stream")
+    # the print's end: the last step of any stepper (a tail interval ends there)
+    end = max((int(stream.steps[sp.step_pin].last[-1]) for sp in pins.values()
+               if stream.steps[sp.step_pin].n_steps), default=0)
+    for name, sp in pins.items():
+        rows = stream.steps[sp.step_pin]
         # Klipper's stepcompress sends the logical direction XOR the dir pin's inversion
         # (klippy/chelper/stepcompress.c, set_next_step_dir)
         if sp.dir_inverted:
@@ -760,11 +777,9 @@ def replay_metrics(stream: McuStream, pins: dict[str, StepperPins]) -> Replay:
             raise ReplayError(f"{name}: enable pin {sp.enable_pin} starts at level "
                               f"{stream.initial.get(sp.enable_pin)}, expected the disabled level")
         s, e = off_intervals(ev, initial_on=False, inverted=sp.enable_inverted)
-        out[name] = stepper_replay(name, rows, s, e, stream.freq_hz)
+        out[name] = stepper_replay(name, rows, s, e, stream.freq_hz, end)
         if rows.n_steps and not (len(e) and e[-1] == OPEN_END and s[-1] >= rows.last[-1]):
             complete = False
-        if rows.n_steps:
-            end = max(end, int(rows.last[-1]))
     # the print starts at the first extruder step (homing and heating come before it)
     e = pins.get("extruder")
     e_rows = stream.steps.get(e.step_pin) if e else None
@@ -918,19 +933,27 @@ def unknown_commands(log_text: str) -> dict[str, int]:
 # --------------------------------------------------------------------------------------------
 
 _PLACEHOLDER = re.compile(r"\{[^}]*\}")
+#: a word (its letter, if any) whose value is an unexpanded placeholder
+_PLACEHOLDER_WORD = re.compile(r"[A-Za-z]?\{[^}]*\}")
 
 
 def replay_text(gcode: str) -> tuple[str, int]:
     """The text klippy replays: ``G28`` first (a file whose start code is empty would stop at its
-    first move: Klipper refuses moves before homing), and every line whose code carries a slicer
-    placeholder left unexpanded (``M104 S{material_print_temperature}`` of a CuraEngine run
-    without a front end: Klipper stops on it) made a comment. Returns the text and the number
-    of lines made comments. The same for an original and its gatesopt output."""
+    first move: Klipper refuses moves before homing), and every word whose value is a slicer
+    placeholder left unexpanded (``M104 S{material_print_temperature}``, ``G1 X0
+    Y{machine_depth}`` of a CuraEngine run without a front end: Klipper stops on it) dropped
+    from its line, the rest of the line kept: what gatesopt reads there (gatesopt/_scan_words.py:
+    a word without a value is ignored, as Marlin's ``seenval()`` does), so that the replay moves
+    where gatesopt's model moves (CuraEngine's closing ``G1 X0 Y{machine_depth}`` still moves X;
+    made a comment, it left X's last off interval without a step after it). Returns the text and
+    the number of lines changed. The same for an original and its gatesopt output."""
     out, n = ["G28 ; gatesopt replay: home first"], 0
     for line in gcode.splitlines():
-        code = line.split(";", 1)[0]
+        code, sep, comment = line.partition(";")
         if "{" in code and _PLACEHOLDER.search(code):
-            out.append("; gatesopt replay, unexpanded placeholder: " + line)
+            kept = _PLACEHOLDER_WORD.sub("", code).rstrip()
+            out.append(f"{kept} ; gatesopt replay, unexpanded placeholder dropped: {line}"
+                       if kept.strip() else "; gatesopt replay, unexpanded placeholder: " + line)
             n += 1
         else:
             out.append(line)
@@ -1034,7 +1057,8 @@ def compare(orig: Replay, out: Replay, stripped: Replay | None, report: dict, fi
         "start_ahead_min_s": min((v.start_ahead_min_s for v in out.steppers.values() if v.gated), default=float("nan")),
         "start_ahead_median_s": {MOTOR_OF[k]: v.start_ahead_median_s for k, v in out.steppers.items() if v.gated},
         "end_late_min_s": min((v.end_late_min_s for v in out.steppers.values() if v.gated), default=float("nan")),
-        "off_time_s": {MOTOR_OF[k]: v.off_time_s for k, v in out.steppers.items() if v.gated},
+        "off_time_s": {MOTOR_OF[k]: v.off_time_s for k, v in out.steppers.items() if v.off_time_s > 0},
+        "tail_off_s": {MOTOR_OF[k]: v.tail_off_s for k, v in out.steppers.items() if v.tail_off_s > 0},
         "report_off_time_s": report.get("off_time_s", {}),
         "off_time_waits_s": report.get("off_time_waits_s", {}),
         "saving_pct": report.get("saving_pct"),
@@ -1312,7 +1336,7 @@ def replay_rows(a) -> tuple[list[dict], list[str]]:
             orig_text, n_ph = replay_text(orig_raw)
             if n_ph:
                 notes.append(f"- {path.name}: {n_ph} lines with unexpanded slicer placeholders "
-                             "replayed as comments (original and outputs alike).")
+                             "replayed without those words (original and outputs alike).")
             solved = {}
 
             def output_of(fw, v, label, cfg):

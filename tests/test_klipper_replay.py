@@ -264,11 +264,40 @@ def test_extrude_only_moves_and_gating_lines():
     assert "M84" in kr.strip_gating_lines(g, "marlin") and "M18 X" not in kr.strip_gating_lines(g, "marlin")
 
 
-def test_replay_text_homes_first_and_comments_unexpanded_placeholders():
-    text, n = kr.replay_text("M104 S{material_print_temperature}\nG1 X1 ; {not code}\nG1 Y{machine_depth}\n")
+def test_replay_text_homes_first_and_drops_unexpanded_placeholder_words():
+    text, n = kr.replay_text("M104 S{material_print_temperature}\nG1 X1 ; {not code}\n"
+                             "G1 X0 Y{machine_depth} ;Present print\n{machine_end_gcode}\n")
     lines = text.splitlines()
-    assert n == 2 and lines[0].startswith("G28")
-    assert lines[1].startswith(";") and lines[2] == "G1 X1 ; {not code}" and lines[3].startswith(";")
+    assert n == 3 and lines[0].startswith("G28")
+    assert lines[1].split(";")[0].strip() == "M104" and lines[2] == "G1 X1 ; {not code}"
+    # the X word stays: gatesopt's parse drops only the word without a value, and so X moves in
+    # the replay as in gatesopt's model (made a comment, X's last off had no step after it)
+    assert lines[3].split(";")[0].strip() == "G1 X0"
+    assert lines[4].startswith(";")
+
+
+def test_an_off_after_the_last_step_counts_to_the_print_end():
+    # X (PD7) goes off at 4500 after its last step at 4030 and stays off; another stepper (PF0)
+    # steps until 9000: X's off time counts 4500 -> 9000 (gatesopt's report counts it to the end
+    # of its timeline); klippy's own motor-off after the last step of all (10000) is no gating
+    head = HEAD + ("config_stepper oid=5 step_pin=PF0 dir_pin=PF1 invert_step=0 step_pulse_ticks=32\n"
+                   "config_digital_out oid=6 pin=PD6 value=1 default_value=1 max_duration=0\n")
+    body = ("queue_digital_out oid=3 clock=900 on_ticks=0\n"
+            "queue_digital_out oid=6 clock=900 on_ticks=0\n"
+            "queue_step oid=2 interval=1000 count=3 add=10\n"
+            "queue_step oid=2 interval=500 count=2 add=0\n"
+            "queue_digital_out oid=3 clock=4500 on_ticks=1\n"
+            "queue_step oid=5 interval=1000 count=9 add=0\n"
+            "queue_digital_out oid=6 clock=10000 on_ticks=1\n"
+            "queue_digital_out oid=3 clock=10000 on_ticks=1\n")
+    pins = dict(PINS, other=kr.StepperPins("other", "PF0", "PF1", False, "PD6", True, 100.0))
+    rep = kr.replay_metrics(stream(head + body), pins)
+    x, o = rep.steppers["extruder"], rep.steppers["other"]
+    assert rep.end_s == pytest.approx(9000 / FREQ)
+    assert x.gated == 0 and x.tail_off_s == pytest.approx(4500 / FREQ)
+    assert x.off_time_s == pytest.approx(4500 / FREQ)
+    assert x.end_late_min_s == pytest.approx((4500 - 4030) / FREQ)
+    assert o.tail_off_s == 0.0 and o.off_time_s == 0.0
 
 
 def test_the_printer_has_one_dedicated_valid_enable_pin_per_stepper():
