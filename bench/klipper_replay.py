@@ -937,7 +937,20 @@ _PLACEHOLDER = re.compile(r"\{[^}]*\}")
 _PLACEHOLDER_WORD = re.compile(r"[A-Za-z]?\{[^}]*\}")
 
 
-def replay_text(gcode: str) -> tuple[str, int]:
+def relative_e_undeclared(gcode: str, name: str = "") -> bool:
+    """The file extrudes before any M82/M83 with E words that only make sense as relative
+    lengths (``gatesopt.parse.undeclared_relative_e``: Kiri:Moto leaves M83 to the printer's
+    ``print_start`` macro). gatesopt reads such a file as relative E; klippy starts in absolute E
+    (klippy/extras/gcode_move.py, ``absolute_extrude = True``) and the bench printer has no such
+    macro, so its replay is given the M83 the printer's start macro must send: replayed as
+    absolute, every XY move after a 6 mm unretract read as a 5.9 mm retraction, planned at
+    ``max_extrude_only_accel`` / |E per mm| (real_kirimoto30: 405 mm/s^2 instead of 3000, the
+    off intervals around them 0.11 s longer in the replay than in gatesopt's report)."""
+    from gatesopt.parse import undeclared_relative_e
+    return undeclared_relative_e(gcode.encode(errors="replace"), name) is not None
+
+
+def replay_text(gcode: str, relative_e: bool | None = None) -> tuple[str, int]:
     """The text klippy replays: ``G28`` first (a file whose start code is empty would stop at its
     first move: Klipper refuses moves before homing), and every word whose value is a slicer
     placeholder left unexpanded (``M104 S{material_print_temperature}``, ``G1 X0
@@ -946,8 +959,14 @@ def replay_text(gcode: str) -> tuple[str, int]:
     a word without a value is ignored, as Marlin's ``seenval()`` does), so that the replay moves
     where gatesopt's model moves (CuraEngine's closing ``G1 X0 Y{machine_depth}`` still moves X;
     made a comment, it left X's last off interval without a step after it). Returns the text and
-    the number of lines changed. The same for an original and its gatesopt output."""
+    the number of lines changed. The same for an original and its gatesopt output.
+    ``relative_e``: the file's E words are relative without an M83 of its own
+    (``relative_e_undeclared``, read from the text where None): an M83 after the ``G28``."""
     out, n = ["G28 ; gatesopt replay: home first"], 0
+    if relative_e is None:
+        relative_e = relative_e_undeclared(gcode)
+    if relative_e:
+        out.append("M83 ; gatesopt replay: relative E, as the file's start macro must set it")
     for line in gcode.splitlines():
         code, sep, comment = line.partition(";")
         if "{" in code and _PLACEHOLDER.search(code):
@@ -1333,7 +1352,11 @@ def replay_rows(a) -> tuple[list[dict], list[str]]:
     with KlippyRunner(host, Path(a.module) if a.module else None) as k:
         for path in files:
             orig_raw = read_gcode(path)
-            orig_text, n_ph = replay_text(orig_raw)
+            rel_e = relative_e_undeclared(orig_raw, path.name)
+            orig_text, n_ph = replay_text(orig_raw, rel_e)
+            if rel_e:
+                notes.append(f"- {path.name}: relative E without an M83 of its own (its start macro "
+                             "sets it): replayed with an M83 first (original and outputs alike).")
             if n_ph:
                 notes.append(f"- {path.name}: {n_ph} lines with unexpanded slicer placeholders "
                              "replayed without those words (original and outputs alike).")
@@ -1382,8 +1405,8 @@ def replay_rows(a) -> tuple[list[dict], list[str]]:
                     out_path, report, solve_s = res
                     out_raw = read_gcode(out_path)
                     try:
-                        out = k.run(cfg, replay_text(out_raw)[0], pins)
-                        stripped = k.run(cfg, replay_text(strip_gating_lines(out_raw, fw))[0], pins)
+                        out = k.run(cfg, replay_text(out_raw, rel_e)[0], pins)
+                        stripped = k.run(cfg, replay_text(strip_gating_lines(out_raw, fw), rel_e)[0], pins)
                     except ReplayError as exc:
                         rows.append({**base, "error": str(exc)})
                         continue

@@ -474,3 +474,18 @@ def test_planner_times_z_and_extrude_only_moves_as_klipper(klippy, tmp_path):
     e_accel = 3000 * 4 * 0.4 ** 2 / (math.pi * 0.875 ** 2)
     t_half = math.sqrt(2 * (0.5 / (16 * 200 / 34.406)) / e_accel)
     assert rep.print_s == pytest.approx(ours - 2 * t_half, abs=2e-3)
+
+
+def test_replay_text_gives_m83_to_a_file_that_leaves_relative_e_to_its_start_macro():
+    # Kiri:Moto writes relative E and leaves M83 to the printer's print_start: gatesopt reads it
+    # as relative (gatesopt.parse.undeclared_relative_e), klippy starts in absolute E
+    body = "".join(f"G1 X{i % 7 + 1} Y{i % 5 + 1} E0.{i % 9 + 1}\n" for i in range(40))
+    text, _ = kr.replay_text("print_start bed=70\n" + body)
+    assert text.splitlines()[1].startswith("M83")
+    assert kr.relative_e_undeclared(body)
+    # an absolute file (E only grows), or one that says M82 itself, gets no M83
+    growing = "".join(f"G1 X{i % 7 + 1} Y{i % 5 + 1} E{i + 1}\n" for i in range(40))
+    assert not kr.relative_e_undeclared(growing)
+    assert "M83" not in kr.replay_text(growing)[0]
+    assert "M83" not in kr.replay_text("M82\n" + growing)[0]
+    assert "M83" not in kr.replay_text(body, relative_e=False)[0]
