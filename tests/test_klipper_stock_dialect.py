@@ -91,6 +91,51 @@ def test_klipper_enable_priced_by_the_speed_it_stops():
     assert res.solution.added_time_s == pytest.approx(0.2 + 2 * (100 / 3000 + 2 * kl.SDS_CHECK_TIME_S))
 
 
+def _printer(tmp_path, shaper_text=""):
+    from gatesopt.printer_config import read_printer_config
+    cfg = tmp_path / "printer.cfg"
+    cfg.write_text("[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n\n" + shaper_text)
+    return read_printer_config(cfg)
+
+
+MZV30 = "[input_shaper]\nshaper_type: mzv\nshaper_freq_x: 30\nshaper_freq_y: 30\n"
+
+
+def test_the_restart_after_a_flush_is_two_kin_flush_delays_of_the_printer(tmp_path):
+    # klippy/extras/motion_queuing.py: kin_flush_delay = max(SDS_CHECK_TIME, every stepper's
+    # pre- and post-active time); flush_all_steps generates steps to the end + kin_flush_delay and
+    # calc_step_gen_restart starts the next move another kin_flush_delay later. mzv at 30 Hz
+    # (shaper_defs.get_mzv_shaper, time-centred pulses): post-active 0.75 t_d - pre-active
+    df = np.sqrt(1 - 0.01)
+    t_d = 1 / (30 * df)
+    post = 0.75 * t_d - 0.0108325
+    assert kl.restart_s() == kl.restart_s(_printer(tmp_path)) == pytest.approx(2 * kl.SDS_CHECK_TIME_S)
+    mzv = _printer(tmp_path, MZV30)
+    assert kl.kin_flush_delay_s(mzv) == pytest.approx(post, abs=2e-7)
+    assert KLIPPER.enable_fixed_s(mzv) == pytest.approx(2 * post, abs=4e-7)
+    assert KLIPPER.disable_fixed_s_at(mzv) == pytest.approx(0.2 + 2 * post, abs=4e-7)
+    # without a printer config: the dialect's own constants (no shaper)
+    assert KLIPPER.enable_fixed_s() == KLIPPER.enable_restart_s == 2 * kl.SDS_CHECK_TIME_S
+    assert KLIPPER.disable_fixed_s_at() == KLIPPER.disable_fixed_s
+
+
+def test_an_enable_line_is_priced_with_the_printers_restart(tmp_path):
+    # the line stands between a move and an extrude-only move (the head is at rest there: no
+    # stop), so it costs the restart alone: 2 ms without a shaper, 28.6 ms with mzv at 30 Hz
+    from gatesopt.planner import enable_price
+    prog = gatesopt.parse(ENABLE_AT_REST)
+    rows = np.flatnonzero(prog.kind == Kind.MOTOR)
+    for printer_cfg, want in ((None, 0.002), (_printer(tmp_path, MZV30), kl.restart_s(_printer(tmp_path, MZV30)))):
+        st = fwmod.stall_durations(prog, "klipper", enable_price=enable_price("klipper", printer_cfg),
+                                   printer=printer_cfg)
+        assert st[rows].tolist() == pytest.approx([want], abs=1e-12)
+
+
+# a line that flushes with the head at rest: between an X move and an extrude-only move
+ENABLE_AT_REST = ("G28\nG90\nM83\nG1 X10 F6000\nSET_STEPPER_ENABLE STEPPER=stepper_y ENABLE=1\n"
+                  "G1 E1 F1800\nG1 X20 F6000\n")
+
+
 def test_the_choice_says_what_klipper_cannot_honour():
     choice = printer.choose(gatesopt.parse(RETRACT), "klipper")
     assert "SET_STEPPER_ENABLE lines" in choice.line and "0.1 s" in choice.line
@@ -190,3 +235,14 @@ def test_in_klipper_a_marlin_m18_stops_the_print(klippy):
     assert "M18 X" in res.text
     with pytest.raises(kr.ReplayError, match="Must home axis first"):
         klippy.run(kr.printer_config(), kr.replay_text(res.text)[0])
+
+
+@needs_klipper
+def test_in_klipper_an_enable_line_at_rest_costs_two_kin_flush_delays(klippy, tmp_path):
+    # what test_an_enable_line_is_priced_with_the_printers_restart prices, in Klipper's planner:
+    # the same file without its line ends earlier by the restart alone, with and without mzv
+    plain = re.sub(r"^SET_STEPPER_ENABLE.*\n", "", ENABLE_AT_REST, flags=re.M)
+    for shaper, cfg_text in ((None, ""), (kr.parse_shaper("mzv:30"), MZV30)):
+        cfg = kr.printer_config(shaper)
+        added = klippy.run(cfg, ENABLE_AT_REST).end_s - klippy.run(cfg, plain).end_s
+        assert added == pytest.approx(KLIPPER.enable_fixed_s(_printer(tmp_path, cfg_text)), abs=2e-5), shaper

@@ -258,6 +258,16 @@ class Firmware:
         reads it from the printer (Klipper: its input shaper)."""
         return self.start_lead_s
 
+    def enable_fixed_s(self, printer=None) -> float:
+        """What an enable line that is a stop (``enable_is_stop``) costs on top of its stop, on a
+        printer described by ``printer`` (or None): ``enable_restart_s`` unless the dialect reads
+        it from the printer (Klipper: its input shaper's step window)."""
+        return self.enable_restart_s
+
+    def disable_fixed_s_at(self, printer=None) -> float:
+        """``disable_fixed_s`` on a printer described by ``printer`` (or None), as ``enable_fixed_s``."""
+        return self.disable_fixed_s
+
     def gating_defaults(self, printer=None) -> dict:
         """Gating options the printer's config fixes for this dialect (``GatingOptions`` field
         names, and ``gateable``: the motors it may gate there); none for a stock dialect."""
@@ -439,7 +449,7 @@ def motor_line_is_on(text: str) -> bool | None:
 # ------------------------------------------------------------------------------------------------
 # the stall model
 def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, planner=None,
-                    enable_price=None) -> np.ndarray:
+                    enable_price=None, printer=None) -> np.ndarray:
     """Per-step stall time (s) of ``program``'s motor instructions under ``firmware``.
 
     Rows of ``Kind.MOTOR`` are enable/disable lines; every other row gets 0. A stall delays the
@@ -453,7 +463,9 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     is a callable ``enable_price(program, rows) -> seconds`` (one per row: the full stop at that
     line, ``planner.stop_restart_s``) used for a dialect whose enable line is a stop
     (``enable_is_stop``: Klipper's ``ENABLE=1`` flush), plus its ``enable_restart_s``, and whose
-    disable line is one (``disable_is_stop``: Klipper's ``ENABLE=0``), plus its ``disable_fixed_s``.
+    disable line is one (``disable_is_stop``: Klipper's ``ENABLE=0``), plus its ``disable_fixed_s``
+    (both fixed parts on the printer ``printer`` describes, ``Firmware.enable_fixed_s``: Klipper's
+    restart grows with its input shaper's step window).
     """
     fw = get(firmware)
     out = np.zeros(program.n_steps)
@@ -485,10 +497,10 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
             out[r] = float(planner(program, int(r)))
     if enable_price is not None and fw.enable_is_stop and np.any(ok & on):
         r_on = rows[ok & on]
-        out[r_on] = fw.enable_restart_s + np.asarray(enable_price(program, r_on), float)
+        out[r_on] = fw.enable_fixed_s(printer) + np.asarray(enable_price(program, r_on), float)
     if enable_price is not None and fw.disable_is_stop and np.any(ok & ~on):
         r_off = rows[ok & ~on]
-        out[r_off] = fw.disable_fixed_s + np.asarray(enable_price(program, r_off), float)
+        out[r_off] = fw.disable_fixed_s_at(printer) + np.asarray(enable_price(program, r_off), float)
     return out
 
 

@@ -34,9 +34,14 @@ restart (``KLIPPER_STALL_S``, 0.22 s, where no planner prices it; 203-241 ms mea
 tried and gated next to nothing: most idle intervals worth a 0.22 s stall lie inside one long
 single-axis move.
 
+With an input shaper the restart is longer: ``2 * kin_flush_delay``, the largest step window of
+any stepper (``restart_s``: 28.6 ms at mzv 30 Hz instead of 2 ms), priced from ``--printer-config``
+(``Klipper.enable_fixed_s``); without one the restart is priced without a shaper.
+
 What it cannot honour (``note``): an end-late below Klipper's 0.1 s dwell (the pin goes off 0.1 s
-after the moves before the line end, whatever end-late asked), and with an input shaper each flush
-costs ``2 * (pre-active - 1 ms)`` more than priced (+26.6 ms per line at mzv 30 Hz).
+after the moves before the line end, whatever end-late asked), and with an input shaper but no
+printer config each flush costs ``2 * (shaper window - 1 ms)`` more than priced (+26.6 ms per line
+at mzv 30 Hz).
 
 Klipper has no ``M17``: ``klippy/gcode.py`` ``cmd_default`` answers 'Unknown command:"M17"' and
 goes on (no dwell, nothing switched). ``SET_STEPPER_ENABLE`` takes one ``STEPPER=`` per command (a
@@ -87,6 +92,27 @@ INF = math.inf
 KLIPPER_NOZZLE_MM, KLIPPER_FILAMENT_MM = 0.4, 1.75
 
 
+def kin_flush_delay_s(printer=None) -> float:
+    """Klipper's ``kin_flush_delay`` on a printer (``PrinterConfig`` or None: no shaper):
+    klippy/extras/motion_queuing.py ``check_step_generation_scan_windows``, the largest of
+    ``SDS_CHECK_TIME`` and every stepper's step-generation pre- and post-active time (its input
+    shaper's window, klippy/chelper/kin_shaper.c; ``PrinterConfig.window_s``)."""
+    if printer is None:
+        return SDS_CHECK_TIME_S
+    return max([SDS_CHECK_TIME_S] + [w for a in "xyz" for w in printer.window_s(a)])
+
+
+def restart_s(printer=None) -> float:
+    """What the print clock loses after a flush that generates every step
+    (``toolhead.flush_step_generation``, as ``SET_STEPPER_ENABLE`` does) when the next move
+    comes: ``flush_all_steps`` generates steps up to the last move's end + ``kin_flush_delay``
+    (``note_mcu_movequeue_activity``), and the next move, in the "NeedPrime" state, starts at
+    ``_calc_print_time``'s ``calc_step_gen_restart``: that + ``kin_flush_delay`` again
+    (klippy/toolhead.py, klippy/extras/motion_queuing.py). 2 ms without a shaper; with mzv at
+    30 Hz (post-active 14.3 ms) 28.6 ms."""
+    return 2.0 * kin_flush_delay_s(printer)
+
+
 def default_extrude_ratio(nozzle_mm: float = KLIPPER_NOZZLE_MM, filament_mm: float = KLIPPER_FILAMENT_MM) -> float:
     """Klipper's ``def_max_extrude_ratio`` (extruder.py): 4 nozzle^2 / (pi (filament / 2)^2)."""
     return 4.0 * nozzle_mm ** 2 / (math.pi * (filament_mm / 2.0) ** 2)
@@ -122,6 +148,17 @@ class Klipper(Firmware):
     def _lines(self, word: str, motors, enable: int) -> list[str]:
         return [f"SET_STEPPER_ENABLE STEPPER={STEPPER_NAMES[m]} ENABLE={enable}" for m in motors]
 
+    def enable_fixed_s(self, printer=None) -> float:
+        """The clock's restart after an ``ENABLE=1`` line's flush: ``2 * kin_flush_delay``
+        (``restart_s``); ``enable_restart_s`` (no shaper) without a printer config."""
+        return self.enable_restart_s if printer is None else restart_s(printer)
+
+    def disable_fixed_s_at(self, printer=None) -> float:
+        """An ``ENABLE=0`` line's two 0.1 s dwells and the restart (``enable_fixed_s``)."""
+        if printer is None:
+            return self.disable_fixed_s
+        return self.disable_fixed_s - self.enable_restart_s + restart_s(printer)
+
     def start_lead(self, printer=None) -> float:
         """``SHAPER_LEAD_S`` (any of Klipper's shapers at 20 Hz or more) without a printer config;
         with one, its own input shaper's pre-active time: the largest of the shaped axes' (a
@@ -148,6 +185,6 @@ DIALECT = Klipper(
           "--printer-config: that printer's shaper pre-active time); each "
           "SET_STEPPER_ENABLE stops the print head (ENABLE=0 also dwells 2 x 0.1 s, so a motor "
           "goes off >= 0.1 s after its last step whatever the end-late); with an input shaper "
-          "every such line costs 2 x its pre-active time more than priced"),
+          "every such line restarts 2 x its step window later (priced from --printer-config)"),
     rank=2, detect_words=("SET_STEPPER_ENABLE",), detect_rank=10,
     motor_commands=(SET_STEPPER_ENABLE,), planner=PLANNER)

@@ -303,7 +303,7 @@ def on_stall_s(problem, row, split) -> np.ndarray | float:
     fw = fw_mod.get(problem.options.firmware)
     if len(problem.stop_at_s) == 0 or not fw.enable_is_stop:
         return problem.options.stall_on_s
-    return fw.enable_restart_s + _stop_at(problem, row, split)
+    return fw.enable_fixed_s(problem.options.printer) + _stop_at(problem, row, split)
 
 
 def off_stall_s(problem, row, split) -> np.ndarray | float:
@@ -311,7 +311,7 @@ def off_stall_s(problem, row, split) -> np.ndarray | float:
     fw = fw_mod.get(problem.options.firmware)
     if len(problem.stop_at_s) == 0 or not fw.disable_is_stop:
         return problem.options.stall_off_s
-    return fw.disable_fixed_s + _stop_at(problem, row, split)
+    return fw.disable_fixed_s_at(problem.options.printer) + _stop_at(problem, row, split)
 
 
 def _own_stalls(program: Program, firmware: str, o: GatingOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -324,7 +324,8 @@ def _own_stalls(program: Program, firmware: str, o: GatingOptions | None = None)
     own_s = np.zeros(program.n_steps)
     if np.any(program.kind == Kind.MOTOR):
         own_s = fw_mod.stall_durations(program, firmware,
-                                       enable_price=enable_price_fn(o) if o is not None else None)
+                                       enable_price=enable_price_fn(o) if o is not None else None,
+                                       printer=o.printer if o is not None else None)
     own_row = np.flatnonzero(own_s > 0)
     return own_row, own_s[own_row]
 
@@ -384,12 +385,12 @@ def _per_move_stalls(out: dict, t: _Timing, o: GatingOptions, per_event: int) ->
     delta_j = np.zeros(len(delta))
     if fw.disable_is_stop:
         r = out["idle_off_row"]
-        d = (fw.disable_fixed_s + stop(r, out["idle_start_s"]) - o.stall_off_s) * per_event
+        d = (fw.disable_fixed_s_at(o.printer) + stop(r, out["idle_start_s"]) - o.stall_off_s) * per_event
         delta += d
         delta_j += d * t.stall_w[np.minimum(r, max(n - 1, 0))]
     if fw.enable_is_stop and o.on_line:
         q = out["idle_on_row"]
-        d = np.where(q < n, (fw.enable_restart_s + stop(q, out["idle_end_s"]) - o.stall_on_s) * per_event, 0.0)
+        d = np.where(q < n, (fw.enable_fixed_s(o.printer) + stop(q, out["idle_end_s"]) - o.stall_on_s) * per_event, 0.0)
         delta += d
         delta_j += d * t.stall_w[np.minimum(q, max(n - 1, 0))]
     out["idle_stall_s"] = out["idle_stall_s"] + delta

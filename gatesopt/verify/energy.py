@@ -43,7 +43,7 @@ def _stalls(program: Program, firmware, printer) -> np.ndarray:
     price = None
     if fw.enable_is_stop:
         price = enable_price(fw.planner.family if fw.planner is not None else None, printer)
-    return fwmod.stall_durations(program, fw, enable_price=price)
+    return fwmod.stall_durations(program, fw, enable_price=price, printer=printer)
 
 
 def energy_of(program: Program, *, firmware="3dgates", profile="paper", duration_s=None,
