@@ -489,3 +489,41 @@ def test_replay_text_gives_m83_to_a_file_that_leaves_relative_e_to_its_start_mac
     assert "M83" not in kr.replay_text(growing)[0]
     assert "M83" not in kr.replay_text("M82\n" + growing)[0]
     assert "M83" not in kr.replay_text(body, relative_e=False)[0]
+
+
+# Kiri:Moto's way: relative E without an M83 of its own (the printer's print_start sets it); each
+# island: travel, 6 mm unretract, three short extrusions, 6 mm retraction (no G90 either: under
+# Marlin's rules, which gatesopt reads a file without a flavor by, G90 would set E absolute too)
+UNDECLARED_RELATIVE = "G1 Z1 F600\n" + "".join(
+    f"G1 X{20 + 3 * i} Y{20 + 3 * i} F4800\nG1 E6 F4200\nG1 X{23 + 3 * i} Y{20 + 3 * i} E0.09 F660\n"
+    f"G1 X{23 + 3 * i} Y{23 + 3 * i} E0.09\nG1 X{20 + 3 * i} Y{23 + 3 * i} E0.09\nG1 E-6 F4200\n"
+    for i in range(8))
+
+
+@needs_klipper
+def test_a_file_without_m83_is_replayed_as_gatesopt_reads_it(klippy, tmp_path):
+    # gatesopt reads the E words as relative (gatesopt.parse.undeclared_relative_e); the replay
+    # gives klippy the M83 the printer's start macro would. Its planned time from the first
+    # extruder step (the first unretract, from rest) to the last (the last retraction, ending at
+    # rest) is then gatesopt's less half an E step at each end; replayed in Klipper's default
+    # absolute E, each print move after an unretract is a 5.9 mm retraction at
+    # max_extrude_only_accel / |E per mm| and the print takes far longer
+    from gatesopt import parse
+    from gatesopt.limits import machine_limits
+    from gatesopt.planner import plan
+    from gatesopt.printer_config import read_printer_config
+    cfg_text = kr.printer_config()
+    cfg = tmp_path / "printer.cfg"
+    cfg.write_text(cfg_text)
+    prog = parse(UNDECLARED_RELATIVE, source="kiri.gcode")
+    pl = plan(prog, machine_limits(prog, printer=read_printer_config(cfg)))
+    ms = pl.move_step
+    first_e = int(np.flatnonzero(prog.end_mm[ms, 3] != prog.start_mm[ms, 3])[0])
+    ours = float(pl.duration_s[ms[first_e]:].sum())
+    e_accel = 3000 * 4 * 0.4 ** 2 / (math.pi * 0.875 ** 2)
+    t_half = math.sqrt(2 * (0.5 / (16 * 200 / 34.406)) / e_accel)
+    assert kr.relative_e_undeclared(UNDECLARED_RELATIVE)
+    rep = klippy.run(cfg_text, kr.replay_text(UNDECLARED_RELATIVE)[0])
+    assert rep.print_s == pytest.approx(ours - 2 * t_half, abs=2e-3)
+    absolute = klippy.run(cfg_text, kr.replay_text(UNDECLARED_RELATIVE, relative_e=False)[0])
+    assert absolute.print_s > ours + 0.1
