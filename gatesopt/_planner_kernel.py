@@ -61,6 +61,13 @@ def junction_speed(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row):
 
     ``row``: the limits in force (KEYS order). Never above either nominal speed.
     """
+    return junction_speed_rows(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row, row)
+
+
+@njit(cache=True)
+def junction_speed_rows(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row_p, row):
+    """``junction_speed`` where the two moves were planned under different limits: ``row_p``
+    the previous move's, ``row`` the next's (Klipper keeps each move's own junction deviation)."""
     vmax = min(vp, vc)
     if code == JERK:
         # Marlin planner.cpp, CLASSIC_JERK branch of _buffer_steps (also what PrusaSlicer's
@@ -120,11 +127,15 @@ def junction_speed(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row):
         return 0.0          # extruder-only moves are not kinematic: full stop around them
     # the junction deviation is the toolhead's, from its max_accel (toolhead.py
     # _calc_junction_deviation: scv^2 (sqrt 2 - 1) / max_accel), times each move's own
-    # acceleration: a Z move (max_z_accel) turns slower than an XY move at the same angle
+    # acceleration: a Z move (max_z_accel) turns slower than an XY move at the same angle. Each
+    # move keeps the deviation in force when it was made (Move.__init__: junction_deviation =
+    # toolhead.junction_deviation): across a SET_VELOCITY_LIMIT ACCEL change each side its own
     scv = row[C_SCV]
     jd = scv * scv * (math.sqrt(2.0) - 1.0) / row[C_ACCEL_PRINT]
+    scv_p = row_p[C_SCV]
+    jd_p = scv_p * scv_p * (math.sqrt(2.0) - 1.0) / row_p[C_ACCEL_PRINT]
     quarter_tan = 0.25 * sin_d2 / max(cos_d2, 1e-12)
-    v2 = min(r_jd * jd * ac, r_jd * jd * ap, 2.0 * lc * ac * quarter_tan, 2.0 * lp * ap * quarter_tan)
+    v2 = min(r_jd * jd * ac, r_jd * jd_p * ap, 2.0 * lc * ac * quarter_tan, 2.0 * lp * ap * quarter_tan)
     # extruder.calc_junction: instant_corner_velocity on the change of E per mm of XYZ path
     diff_r = abs(uc[3] / nc - up[3] / np_)
     if diff_r > 1e-9:
@@ -188,14 +199,14 @@ def nominal_speed_accel(code, ua, feed, length, has_e, e_only, no_xy, retract, r
 
 
 @njit(cache=True)
-def prepare_moves(code, d, L, F, arc_row, arc_us, arc_ue, arc_phi, stop_before, regime, table):
+def prepare_moves(code, d, L, F, arc_row, arc_us, arc_ue, arc_phi, arc_seg, stop_before, regime, table):
     """Per move: nominal speed, acceleration, safe speed, max junction (entry) speed, and the
     junction speed the move would have if no stop came before it (``vj_free``).
 
     ``d`` (m, 4) displacement, ``L`` path length (XYZ, arc length for arcs, |E| for E-only);
     arcs: ``arc_row[k]`` indexes ``arc_us`` / ``arc_ue`` (unit tangent at start / end, X Y Z E per
-    mm) and ``arc_phi`` (signed turn of one firmware arc segment), -1 for a line; ``regime[k]`` the
-    row of ``table`` (limits in force, KEYS order).
+    mm) and ``arc_phi`` (signed turn of one firmware arc segment), ``arc_seg`` (its length), -1
+    for a line; ``regime[k]`` the row of ``table`` (limits in force, KEYS order).
     """
     m = L.shape[0]
     vnom = np.empty(m)
@@ -238,13 +249,23 @@ def prepare_moves(code, d, L, F, arc_row, arc_us, arc_ue, arc_phi, stop_before, 
             u1[1] = us[0] * sn + us[1] * c
             u1[2] = us[2]
             u1[3] = us[3]
-            seg = min(ARC_SEGMENT_MM, L[k])
+            seg = arc_seg[j]
             sa = safe_speed(code, us, f, row)
             va = junction_speed(code, us, u1, f, f, a, a, seg, seg, sa, sa, row)
             if code == JERK and va < sa:
                 va = sa
             if va < MINIMUM_PLANNER_SPEED:
                 va = MINIMUM_PLANNER_SPEED
+            if code == SCV and va < f:
+                # Klipper plans each chord as a move of its own: from the junction speed va it
+                # accelerates (to f at most) and decelerates back to va within the chord
+                # (toolhead.py LookAheadQueue.flush: each move's own trapezoid); the arc runs at
+                # that chord's average speed
+                vp = math.sqrt(va * va + a * seg)
+                if vp > f:
+                    vp = f
+                t_chord = 2.0 * (vp - va) / a + max(seg - (vp * vp - va * va) / a, 0.0) / vp
+                va = seg / t_chord
             if va < f:
                 f = va
         vnom[k] = f
@@ -254,8 +275,9 @@ def prepare_moves(code, d, L, F, arc_row, arc_us, arc_ue, arc_phi, stop_before, 
         if k == 0:
             vj_free[k] = safe[k]
         else:
-            vj_free[k] = junction_speed(code, prev_ue, us, vnom[k - 1], f, acc[k - 1], a,
-                                        L[k - 1], L[k], safe[k - 1], safe[k], row)
+            vj_free[k] = junction_speed_rows(code, prev_ue, us, vnom[k - 1], f, acc[k - 1], a,
+                                             L[k - 1], L[k], safe[k - 1], safe[k],
+                                             table[regime[k - 1]], row)
         vj[k] = safe[k] if stop_before[k] or k == 0 else vj_free[k]
         for ax in range(4):
             prev_ue[ax] = ue[ax]

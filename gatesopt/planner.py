@@ -32,7 +32,14 @@ the printer's motion planner does instead (``plan``):
   retractions only (kinematics/extruder.py ``check_move``), the junction deviation of the
   toolhead's max_accel times each move's own acceleration (toolhead.py ``Move.calc_junction``);
 * arcs (G2/G3) are one step here but the firmware cuts them into ~1 mm segments: their nominal
-  speed is capped by the junction speed between two such segments (turn angle s / R);
+  speed is capped by the junction speed between two such segments (turn angle s / R). Klipper
+  (klippy/extras/gcode_arcs.py ``planArc``): ``n = max(1, floor(L / 1 mm))`` chords of the
+  sweep / n turn each, planned as moves of their own: the arc is as long as its chords, meets
+  its neighbours along its first and last chord, and runs at the average speed of one chord
+  that starts and ends at the chords' junction speed and accelerates in between (not the
+  junction speed itself: a 1.2 mm radius circle's chords reach 50 mm/s between 23.7 mm/s
+  junctions); an arc whose target is its start is a straight move where Klipper's float angle
+  is not exactly 0 (``firmware.klipper.null_arcs``);
 * non-motion steps keep ``program.duration_s``; dwells, heat waits, homing and the motor
   instructions that drain the queue (Marlin ``M18``/``M84``, Klipper ``SET_STEPPER_ENABLE``; not
   the paper's ``S0``/``S1`` nor ``M17``, see ``drains_queue``) bring the head to rest: the moves
@@ -62,6 +69,7 @@ import numpy as np
 
 from . import _planner_kernel as _k
 from . import firmware as fwmod
+from .firmware import klipper as fwklipper
 from ._text import code_words
 from .errors import GatesoptError
 from .limits import MachineLimits, machine_limits
@@ -228,27 +236,53 @@ def durations(program: Program, model: str = "paper", limits: MachineLimits | No
     raise TimeModelError(f"unknown time model {model!r} (choose from {', '.join(TIME_MODELS)})")
 
 
-def _arc_tangents(program: Program, steps: np.ndarray, L: np.ndarray):
-    """Unit tangents (X Y Z E per mm of path) at the start and end of the arcs ``steps``, and the
-    signed turn angle of one firmware arc segment (ARC_SEGMENT_MM / R; CCW positive)."""
+def _arc_tangents(program: Program, steps: np.ndarray, L: np.ndarray, klipper: bool = False):
+    """Unit tangents (X Y Z E per mm of path) at the start and end of the arcs ``steps``, the
+    signed turn angle of one firmware arc segment (ARC_SEGMENT_MM / R; CCW positive), one
+    segment's length, and the arcs' path lengths.
+
+    ``klipper``: as klippy/extras/gcode_arcs.py ``planArc`` cuts them: ``n = max(1, floor(L /
+    resolution))`` chords of sweep / n each (``L`` the helix length, Klipper's ``mm_of_travel``),
+    Z and E split evenly; the "tangents" are then the first and the last chord's directions (the
+    start tangent turned by half a chord's angle, the end tangent turned back by it), the segment
+    a chord, the path the sum of the chords."""
     d = program.end_mm[steps] - program.start_mm[steps]
     c = program.arc_center_mm[steps]
     sign = np.where(program.arc_ccw[steps], 1.0, -1.0)
-    xy_frac = np.sqrt(np.maximum(L * L - d[:, Z] ** 2, 0.0)) / L   # XY share of the path
-    out = []
-    for pt in (program.start_mm[steps, :2], program.end_mm[steps, :2]):
-        r = pt - c
-        n = np.maximum(np.hypot(r[:, 0], r[:, 1]), 1e-12)
-        u = np.empty((len(steps), 4))
-        u[:, X] = -sign * r[:, 1] / n * xy_frac
-        u[:, Y] = sign * r[:, 0] / n * xy_frac
-        u[:, Z] = d[:, Z] / L
-        u[:, E] = d[:, E] / L
-        out.append(u)
     rs = program.start_mm[steps, :2] - c
     R = np.maximum(np.hypot(rs[:, 0], rs[:, 1]), 1e-9)
-    phi = sign * np.minimum(ARC_SEGMENT_MM, L) / R
-    return out[0], out[1], phi
+    if klipper:
+        n_seg = np.maximum(1.0, np.floor(L / ARC_SEGMENT_MM))
+        sweep = np.sqrt(np.maximum(L * L - d[:, Z] ** 2, 0.0)) / R
+        theta = sweep / n_seg
+        chord_xy = 2.0 * R * np.sin(theta / 2.0)
+        seg = np.hypot(chord_xy, d[:, Z] / n_seg)
+        seg = np.where(seg > 0, seg, np.maximum(L / n_seg, 1e-12))
+        turn = (0.5 * theta, -0.5 * theta)
+        xy_frac = chord_xy / seg
+        dz_frac, de_frac = d[:, Z] / n_seg / seg, d[:, E] / n_seg / seg
+        path = n_seg * seg
+        phi = np.where(n_seg > 1, sign * theta, 0.0)     # one chord: a line, no inner junction
+    else:
+        seg = np.minimum(ARC_SEGMENT_MM, L)
+        turn = (np.zeros(len(steps)), np.zeros(len(steps)))
+        xy_frac = np.sqrt(np.maximum(L * L - d[:, Z] ** 2, 0.0)) / L   # XY share of the path
+        dz_frac, de_frac = d[:, Z] / L, d[:, E] / L
+        path = L
+        phi = sign * seg / R
+    out = []
+    for pt, rot in zip((program.start_mm[steps, :2], program.end_mm[steps, :2]), turn):
+        r = pt - c
+        n = np.maximum(np.hypot(r[:, 0], r[:, 1]), 1e-12)
+        tx, ty = -sign * r[:, 1] / n, sign * r[:, 0] / n
+        cs, sn = np.cos(sign * rot), np.sin(sign * rot)
+        u = np.empty((len(steps), 4))
+        u[:, X] = (tx * cs - ty * sn) * xy_frac
+        u[:, Y] = (tx * sn + ty * cs) * xy_frac
+        u[:, Z] = dz_frac
+        u[:, E] = de_frac
+        out.append(u)
+    return out[0], out[1], phi, seg, path
 
 
 def drains_queue(program: Program) -> np.ndarray:
@@ -275,21 +309,36 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
         limits = machine_limits(program)
     n = program.n_steps
     kind = program.kind
-    motion = np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype)) & (program.length_mm > 0)
+    klipper = limits.firmware == "klipper"
+    length = np.array(program.length_mm, dtype=float)
+    is_arc = kind == Kind.ARC
+    if klipper and is_arc.any():
+        # a target-is-start arc Klipper moves straight to its target (``null_arcs``)
+        rows = np.flatnonzero(is_arc)
+        null = rows[fwklipper.null_arcs(program, rows)]
+        if len(null):
+            dd = program.end_mm[null] - program.start_mm[null]
+            straight = np.sqrt((dd[:, :3] ** 2).sum(axis=1))
+            length[null] = np.where(straight > 0, straight, np.abs(dd[:, 3]))
+            is_arc[null] = False
+    motion = np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype)) & (length > 0)
     idx = np.flatnonzero(motion)
     m = len(idx)
-    L = program.length_mm[idx].astype(float)
+    L = length[idx]
 
     # limits in force at each move: one table row per limit-changing line
     change_line, table = limits.regimes()
     regime = np.searchsorted(change_line, program.line[idx], side="right").astype(np.int64)
 
     d = program.end_mm[idx] - program.start_mm[idx]
-    arc = kind[idx] == Kind.ARC
+    arc = is_arc[idx]
     arc_row = np.full(m, -1, dtype=np.int64)
     ai = np.flatnonzero(arc)
     arc_row[ai] = np.arange(len(ai))
-    arc_us, arc_ue, arc_phi = _arc_tangents(program, idx[ai], L[ai])
+    arc_us, arc_ue, arc_phi, arc_seg, arc_path = _arc_tangents(program, idx[ai], L[ai], klipper)
+    if klipper and len(ai):
+        L[ai] = arc_path            # Klipper moves along the chords
+        length[idx[ai]] = arc_path
 
     # stops: a dwell / wait / home step, or a motor instruction that drains the queue, between
     # two moves brings the head to rest
@@ -301,7 +350,7 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
 
     vnom, acc, safe, vj, vj_free = _k.prepare_moves(
         _k.JUNCTION_CODE[limits.junction], d, L, program.feed_mm_s[idx].astype(float),
-        arc_row, arc_us, arc_ue, arc_phi, stop_before, regime, np.ascontiguousarray(table))
+        arc_row, arc_us, arc_ue, arc_phi, arc_seg, stop_before, regime, np.ascontiguousarray(table))
     if m and not np.all(np.isfinite(acc) & (acc > 0)):
         raise GatesoptError(f"{program.source}: no finite positive acceleration for some moves; "
                             f"check the machine limits (profile {limits.profile})")
@@ -341,7 +390,7 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
     step_move[idx] = np.arange(m)
     return Plan(duration_s=dur, entry_mm_s=full(entry), cruise_mm_s=full(peak), exit_mm_s=full(exit_),
                 accel_s=full(t_acc), cruise_s=full(t_cruise), decel_s=full(t_dec),
-                accel_mm_s2=full(acc), length_mm=np.array(program.length_mm, dtype=float),
+                accel_mm_s2=full(acc), length_mm=length,
                 nominal_mm_s=full(vnom), limits=limits, free_mm_s=full(vfree), move_step=idx,
                 step_move=step_move,
                 _vj=vj, _vj_free=vj_free, _safe=safe, _stop_before=stop_before, _barrier=barrier)
@@ -403,6 +452,8 @@ def min_move_time_s(program: Program, arc_segment_mm: float = ARC_SEGMENT_MM) ->
       speed. Klipper's ``min_move_t`` is ``move_d / v`` with ``move_d`` the same length and ``v =
       min(F, max_velocity, the kinematics' and extruder's caps)`` <= F, so L / F <= min_move_t;
       bed-mesh splitting only lengthens the path;
+    * an arc Klipper does not turn (target = start, its float angle not exactly 0:
+      ``firmware.klipper.null_arcs``): the straight move to its target, as a line;
     * an arc: Klipper's gcode_arcs cuts it into ``n = max(1, floor(L / resolution))`` chords that
       are shorter than the arc: ``n`` chords of the start radius, an ``n`` taken one less where
       ``L / resolution`` is within rounding of an integer (fewer chords are shorter), less the
@@ -417,6 +468,15 @@ def min_move_time_s(program: Program, arc_segment_mm: float = ARC_SEGMENT_MM) ->
     moving = np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype)) & (program.length_mm > 0)
     out = np.where(moving, np.asarray(program.duration_s, float), 0.0)
     arcs = np.flatnonzero(moving & (kind == Kind.ARC))
+    if len(arcs):
+        # an arc Klipper does not turn (``firmware.klipper.null_arcs``) is one straight move
+        null = fwklipper.null_arcs(program, arcs)
+        if null.any():
+            r = arcs[null]
+            dd = program.end_mm[r] - program.start_mm[r]
+            straight = np.sqrt((dd[:, :3] ** 2).sum(axis=1))
+            out[r] = np.where(straight > 0, straight, np.abs(dd[:, 3])) / program.feed_mm_s[r]
+            arcs = arcs[~null]
     if len(arcs):
         L = program.length_mm[arcs].astype(float)
         dz = program.end_mm[arcs, Z] - program.start_mm[arcs, Z]

@@ -527,3 +527,36 @@ def test_a_file_without_m83_is_replayed_as_gatesopt_reads_it(klippy, tmp_path):
     assert rep.print_s == pytest.approx(ours - 2 * t_half, abs=2e-3)
     absolute = klippy.run(cfg_text, kr.replay_text(UNDECLARED_RELATIVE, relative_e=False)[0])
     assert absolute.print_s > ours + 0.1
+
+
+# arcs as Klipper cuts them (gcode_arcs.py planArc): Orca's spiral lifts (one not turned, one a
+# full circle of 7 chords), arcs with E, and a junction across an acceleration change
+ARCS = ("G90\nM83\nG1 X100 Y100 Z1 F6000\nG1 E1 F1800\n"
+        "SET_VELOCITY_LIMIT ACCEL=5000 SQUARE_CORNER_VELOCITY=20\n"
+        "G3 Z1.4 I-.427 J1.139 F30000\nG3 Z1.8 I-1.2166 J0 F30000\nG1 X120 Y110 E1 F6000\n"
+        "G2 X110 Y120 I-10 J0 E2 F6000\nSET_VELOCITY_LIMIT ACCEL=2000\nG1 X90 Y120 E1\n"
+        "G3 X110 Y120 I10 J0 E1 F3000\nG1 E-1 F1800\n")
+
+
+@needs_klipper
+def test_planner_times_arcs_as_klipper(klippy, tmp_path):
+    # gatesopt's planner against Klipper's planned steps, from the first extruder step to the
+    # last (E-only moves from and to rest at both ends: half an E step each, as above). Before
+    # Klipper's arc rules (chords, their average speed, the spiral lift that does not turn, each
+X
+    from gatesopt import parse
+    from gatesopt.limits import machine_limits
+    from gatesopt.planner import plan
+    from gatesopt.printer_config import read_printer_config
+    cfg_text = kr.printer_config()
+    cfg = tmp_path / "printer.cfg"
+    cfg.write_text(cfg_text)
+    rep = klippy.run(cfg_text, kr.replay_text(ARCS)[0])
+    prog = parse(ARCS, source="arcs.gcode")
+    pl = plan(prog, machine_limits(prog, printer=read_printer_config(cfg)))
+    ms = pl.move_step
+    first_e = int(np.flatnonzero(prog.end_mm[ms, 3] != prog.start_mm[ms, 3])[0])
+    ours = float(pl.duration_s[ms[first_e]:].sum())
+    e_accel = 3000 * 4 * 0.4 ** 2 / (math.pi * 0.875 ** 2)
+    t_half = math.sqrt(2 * (0.5 / (16 * 200 / 34.406)) / e_accel)
+    assert rep.print_s == pytest.approx(ours - 2 * t_half, abs=5e-3)

@@ -195,3 +195,67 @@ def test_klipper_skips_m201_m203_m205_lines_without_a_printer_config():
     # Marlin's rules read them
     marlin = machine_limits(prog, family="marlin")
     assert marlin.max_accel_mm_s2[0] == 500 and marlin.max_feed_mm_s[0] == 50
+
+
+# Orca's spiral lift: G3 with Z only, target = start. Klipper (gcode_arcs.py planArc) turns it
+# a full circle only if its float angle is exactly 0: I-1.2166 J0 gives exactly 0 (r_Q = 0),
+# I-.427 J1.139 at (100, 100) a hair off it: one segment straight up (a 0.4 mm Z move)
+SPIRALS = ("SET_VELOCITY_LIMIT VELOCITY=300 ACCEL=3000 SQUARE_CORNER_VELOCITY=5\nG90\nM83\n"
+           "G1 X100 Y100 Z1 F6000\nG4 P100\nG3 Z1.4 I-.427 J1.139 F30000\nG4 P100\n"
+           "G3 Z1.8 I-1.2166 J0 F30000\nG4 P100\n")
+
+
+def test_a_spiral_lift_klipper_does_not_turn_is_a_z_move():
+    from gatesopt.firmware.klipper import arc_turn, null_arcs
+    from gatesopt.program import Kind
+    prog = parse(SPIRALS, source="spirals.gcode")
+    arcs = np.flatnonzero(prog.kind == Kind.ARC)
+    assert len(arcs) == 2
+    assert abs(arc_turn((100.0, 100.0), (100.0, 100.0), (-0.427, 1.139), False)) < 1e-12
+    assert arc_turn((100.0, 100.0), (100.0, 100.0), (-1.2166, 0.0), False) == 2 * math.pi
+    assert null_arcs(prog, arcs).tolist() == [True, False]
+    pl = planner.plan(prog)
+    # 0.4 mm at max_z_velocity 5 (the kinematics' default here is 15: capped by the Z ratio 1),
+    # max_z_accel 100, from rest to rest
+    z = pl.limits.max_feed_mm_s[2]
+    assert pl.length_mm[arcs[0]] == pytest.approx(0.4)
+    assert pl.duration_s[arcs[0]] == pytest.approx(rest_to_rest_s(0.4, z, pl.limits.max_accel_mm_s2[2]), rel=1e-12)
+    # the full circle: 7 chords (floor of the 7.65 mm helix), as long as their sum
+    R, n = 1.2166, 7
+    chord = math.hypot(2 * R * math.sin(math.pi / n), 0.4 / n)
+    assert pl.length_mm[arcs[1]] == pytest.approx(n * chord, rel=1e-12)
+
+
+def test_an_arc_runs_at_its_chords_average_speed():
+    # a 5 mm radius circle at 100 mm/s: 31 chords of 11.6 degrees; Klipper's junction between two
+    # of them (toolhead.py calc_junction, scv 5, 3000 mm/s^2) is ~44.9 mm/s, and each chord
+    # accelerates from it and back (its own trapezoid, LookAheadQueue.flush): peak
+    # sqrt(va^2 + a c), the arc's cruise the chord's length over its time
+    prog = parse("SET_VELOCITY_LIMIT VELOCITY=300 ACCEL=3000 SQUARE_CORNER_VELOCITY=5\nG90\n"
+                 "G1 X100 Y100 F6000\nG4 P100\nG2 X100 Y100 I5 J0 F6000\nG4 P100\n", source="circle.gcode")
+    pl = planner.plan(prog)
+    k = pl.move_step[1]
+    n, R, a = 31, 5.0, 3000.0
+    theta = 2 * math.pi / n
+    c = 2 * R * math.sin(theta / 2)
+    jd = 25 * (math.sqrt(2) - 1) / a
+    cos_t = -math.cos(theta)
+    sin_d2, cos_d2 = math.sqrt(0.5 * (1 - cos_t)), math.sqrt(0.5 * (1 + cos_t))
+    va = math.sqrt(min(sin_d2 / (1 - sin_d2) * jd * a, 0.5 * c * sin_d2 / cos_d2 * a))
+    vp = math.sqrt(va * va + a * c)
+    assert vp < 100
+    v_eff = c / (2 * (vp - va) / a)
+    assert pl.nominal_mm_s[k] == pytest.approx(v_eff, rel=1e-9)
+    assert pl.duration_s[k] == pytest.approx(rest_to_rest_s(n * c, v_eff, a), rel=1e-9)
+
+
+def test_a_junction_across_an_acceleration_change_keeps_each_moves_own_deviation():
+    # toolhead.py Move.__init__ keeps the toolhead's junction_deviation (scv^2 (sqrt 2 - 1) /
+    # max_accel) as it was when the move was made; calc_junction multiplies each side's by its
+    # own acceleration: at 90 degrees both give scv^2 (sqrt 2 - 1) R_jd = scv^2, whatever the accels
+    prog = parse("SET_VELOCITY_LIMIT VELOCITY=300 ACCEL=2000 SQUARE_CORNER_VELOCITY=5\nG90\n"
+                 "G1 X100 F12000\nSET_VELOCITY_LIMIT ACCEL=10000\nG1 X100 Y100 F12000\n", source="acc.gcode")
+    pl = planner.plan(prog)
+    a, b = pl.move_step
+    assert pl.accel_mm_s2[a] == 2000 and pl.accel_mm_s2[b] == 10000
+    assert pl.exit_mm_s[a] == pytest.approx(5.0, rel=1e-9)

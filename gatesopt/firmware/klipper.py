@@ -62,7 +62,10 @@ Klipper printer's square corner velocity as ``machine_max_jerk_x`` (OrcaSlicer).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
+
+import numpy as np
 
 from ..program import AXES
 from . import ExtendedMotorCommand, Firmware, PlannerRules
@@ -111,6 +114,52 @@ def restart_s(printer=None) -> float:
     (klippy/toolhead.py, klippy/extras/motion_queuing.py). 2 ms without a shaper; with mzv at
     30 Hz (post-active 14.3 ms) 28.6 ms."""
     return 2.0 * kin_flush_delay_s(printer)
+
+
+def arc_turn(cur, target, offset, clockwise: bool) -> float:
+    """The angle (rad, < 0 clockwise) Klipper turns a G2/G3 through, computed as klippy's
+    gcode_arcs.py ``planArc`` does, float for float: from ``cur`` (X, Y) to ``target`` about
+    ``cur + offset`` (I, J); 2 pi when the angle comes out exactly 0 and target is cur."""
+    r_p, r_q = -offset[0], -offset[1]
+    center_p, center_q = cur[0] - r_p, cur[1] - r_q
+    rt_a, rt_b = target[0] - center_p, target[1] - center_q
+    turn = math.atan2(r_p * rt_b - r_q * rt_a, r_p * rt_a + r_q * rt_b)
+    if turn < 0.0:
+        turn += 2.0 * math.pi
+    if clockwise:
+        turn -= 2.0 * math.pi
+    if turn == 0.0 and cur[0] == target[0] and cur[1] == target[1]:
+        turn = 2.0 * math.pi
+    return turn
+
+
+_G2_RE = re.compile(r"\s*(?:N\d+\s*)?G0*2(?![0-9.])", re.I)
+_IJ_RE = re.compile(r"([IJ])\s*([-+]?(?:\d+\.?\d*|\.\d+))", re.I)
+
+
+def null_arcs(program, rows) -> np.ndarray:
+    """Of the arc steps ``rows`` (G2/G3 in the XY plane), those Klipper moves straight to their
+    target instead of turning (bool per row): an arc whose target is its start is a full circle
+    in Klipper only when ``planArc``'s float angle comes out exactly 0 (``arc_turn``); a hair
+    either way and it is a turn of ~0 rad, one segment straight to the target (Orca's spiral lift
+    ``G3 Z.. I.. J.. P1``: a 0.4 mm Z move, 0.138 s, where a full circle of 1.2 mm radius takes
+    0.2 s; 119 of real_orca230_arcs' 189). The angle is computed from the file's I and J words
+    (read from its text as klippy reads them) and the parsed positions (exact as float(text)
+    where no G92 offsets X or Y, ``_scan_words.scan_number``)."""
+    rows = np.asarray(rows, dtype=np.int64)
+    out = np.zeros(len(rows), dtype=bool)
+    same = np.all(program.start_mm[rows, :2] == program.end_mm[rows, :2], axis=1)
+    for k in np.flatnonzero(same).tolist():
+        r = int(rows[k])
+        code = program.line_text(int(program.line[r])).split(";", 1)[0]
+        words = {a.upper(): float(v) for a, v in _IJ_RE.findall(code)}
+        if not words:
+            continue
+        cw = _G2_RE.match(code) is not None
+        cur = (float(program.start_mm[r, 0]), float(program.start_mm[r, 1]))
+        turn = arc_turn(cur, cur, (words.get("I", 0.0), words.get("J", 0.0)), cw)
+        out[k] = abs(turn) < math.pi
+    return out
 
 
 def default_extrude_ratio(nozzle_mm: float = KLIPPER_NOZZLE_MM, filament_mm: float = KLIPPER_FILAMENT_MM) -> float:

@@ -15,6 +15,7 @@ from decimal import Decimal
 import numpy as np
 
 from ..errors import GatesoptError
+from ..firmware.klipper import arc_turn as klipper_arc_turn
 from ..program import AXES, Kind, Program
 from .rotation import rotated_run_end
 
@@ -441,23 +442,6 @@ def _first_piece_words(ln: MotionLine, write, vals: dict, ij, rot_row: bool, new
     if new_ij and "IJ" not in done:
         words += [f"I{ij[0]}", f"J{ij[1]}"]
     return words
-
-
-def klipper_arc_turn(cur, target, offset, clockwise: bool) -> float:
-    """The angle (rad, < 0 clockwise) Klipper turns a G2/G3 through, computed as klippy's
-    gcode_arcs.py ``planArc`` does, float for float: from ``cur`` (X, Y) to ``target`` about
-    ``cur + offset`` (I, J); 2 pi when the angle comes out exactly 0 and target is cur."""
-    r_p, r_q = -offset[0], -offset[1]
-    center_p, center_q = cur[0] - r_p, cur[1] - r_q
-    rt_a, rt_b = target[0] - center_p, target[1] - center_q
-    turn = math.atan2(r_p * rt_b - r_q * rt_a, r_p * rt_a + r_q * rt_b)
-    if turn < 0.0:
-        turn += 2.0 * math.pi
-    if clockwise:
-        turn -= 2.0 * math.pi
-    if turn == 0.0 and cur[0] == target[0] and cur[1] == target[1]:
-        turn = 2.0 * math.pi
-    return turn
 
 
 def _written_xy(vals, rel, off, scale, prev_xy) -> np.ndarray:
