@@ -543,7 +543,7 @@ def test_planner_times_arcs_as_klipper(klippy, tmp_path):
     # gatesopt's planner against Klipper's planned steps, from the first extruder step to the
     # last (E-only moves from and to rest at both ends: half an E step each, as above). Before
     # Klipper's arc rules (chords, their average speed, the spiral lift that does not turn, each
-X
+    # move's own junction deviation) the planner had this 0.27 s longer than Klipper (2.335 vs 2.064 s)
     from gatesopt import parse
     from gatesopt.limits import machine_limits
     from gatesopt.planner import plan
