@@ -47,6 +47,7 @@ from .klipper import KLIPPER_STALL_S, PLANNER, STEPPER_NAMES
 CLOCK_SLACK_S = 1e-6          # pin and step times are MCU clocks: rounding
 STEP_EARLY_S = 25e-6          # stepcompress may send a step this much early (MAX_STEPCOMPRESS_ERROR)
 PIN_SPACING_S = 0.100         # the module's DEFAULT_PIN_SPACING_S: between two changes of one pin
+PIN_QUEUE_SLOTS = 2           # the module's DEFAULT_PIN_QUEUE_SLOTS: changes of one pin queued at once
 MAX_OFF_DELAY_S = 0.050       # the module skips an interval whose off would come later than this
 #: issue 34: the module adds no time (no flush, no dwell, no split move), so what a rotation adds to
 #: the planned print is all klipper-gating adds; --rotate auto keeps 0 deg where the planner says a
@@ -121,10 +122,13 @@ class KlipperGating(Firmware):
                                 f"{MAX_OFF_DELAY_S} s: it would gate nothing")
         sec = printer.gating if printer is not None else None
         spacing = sec.min_pin_spacing_s if sec is not None else PIN_SPACING_S
-        min_off = max(sec.min_off_time_s if sec is not None else 0.0, spacing)
+        slots = sec.pin_queue_slots if sec is not None else PIN_QUEUE_SLOTS
+        min_off = sec.min_off_time_s if sec is not None else 0.0
+        if slots == 1:      # one change in flight: an interval's own on waits for its off
+            min_off = max(min_off, spacing)
         arc = printer.arc_resolution_mm if printer is not None and printer.arc_resolution_mm else 1.0
         return Schedule(off_delay_s=off_extra, on_lead_s=on_extra, min_off_s=min_off,
-                        min_spacing_s=spacing, arc_segment_mm=arc)
+                        min_spacing_s=spacing, pin_queue_slots=slots, arc_segment_mm=arc)
 
 
 DIALECT = KlipperGating(
