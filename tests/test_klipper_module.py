@@ -570,6 +570,43 @@ def test_two_queued_rule_b_off_after_off_and_on_after_on(first_gap, active, seco
     assert lead >= SCHED - 1e-12 and pending <= 2
 
 
+def test_two_queued_rule_b_counts_min_move_t_as_the_solver_does():
+    """Slow moves (planned 0.2 s, min_move_t 0.02 and 0.05 s): the ons are 0.4 s apart in print
+    time but 0.07 s on the lower-bound clock, which is all gatesopt's solver can know: the module
+    skips the second interval as the solver and the verifier say it will."""
+    rig = Rig(slots=2)
+    run_interval(rig, [my(0.5)], after=mx(0.02, dur=0.2))
+    rig.core.command_gate(["stepper_x"])
+    rig.th.move(my(0.05, dur=0.2))
+    rig.th.move(mx(0.1))
+    rig.th.process()
+    assert len(rig.events("stepper_x")) == 2
+    assert rig.core.status()["steppers"]["stepper_x"]["skipped"]["spacing"] == 1
+
+
+def test_two_queued_after_a_forced_on_the_on_is_proven_in_real_time():
+    """After SET_GATESOPT_GATING ENABLE=0/1 the pin's last change (the forced on) is tied to no
+    move, so rule B cannot be counted on the lower-bound clock; the next off is sent only if its on
+    can still come 0.1 s after that change (else the on would be late: a step while off)."""
+    for second_gap, gated in ((0.03, False), (0.3, True)):
+        rig = Rig(slots=2)
+        rig.th.move(mx(0.5))
+        rig.core.command_gate(["stepper_x"])
+        rig.th.move(my(0.5))
+        rig.th.process()
+        assert rig.core.force_on(["stepper_x"]) == 1
+        rig.th.move(mx(0.02))
+        rig.core.command_gate(["stepper_x"])
+        rig.th.move(my(second_gap))
+        rig.th.move(mx(0.1))
+        rig.th.process()
+        st = rig.core.status()["steppers"]["stepper_x"]
+        assert st["late_enables"] == 0 and st["intervals_gated"] == 1 + gated
+        assert st["skipped"]["spacing"] == (not gated)
+        lead, pending = mcu_queue_model(sends(rig, "stepper_x"), SCHED)
+        assert lead >= SCHED - 1e-12 and pending <= 2
+
+
 def test_repeated_line_and_two_steppers_in_one_line():
     rig = Rig()
     rig.th.move(mxy(0.5))

@@ -15,18 +15,23 @@ off at ``t_end + off_delay`` (``t_end``: the end of the moves queued before the 
 (``pre``/``post``: S's step window, the input shaper's, ``gatesopt.shaper``; 25 us: Klipper's
 ``MAX_STEPCOMPRESS_ERROR``; 1 us: clock rounding) -- if rule A and rule B hold, with ``gap`` the sum
 of the moves' ``min_move_t`` (distance over speed, klippy/toolhead.py ``Move``) between the line
-and the activating move, and ``spacing`` the module's ``min_pin_spacing`` (default 0.1 s, Klipper's
-own spacing of one pin's changes: the module's docstring, "Pin spacing", cites the source):
+and the activating move, ``spacing`` the module's ``min_pin_spacing`` (default 0.1 s, Klipper's
+own lead of one pin change's message: the module's docstring, "Pin spacing", cites the source) and
+``K`` its ``pin_queue_slots`` (default 2: two changes of a pin queued on the MCU, "Pin queue"):
 
-- rule A: ``gap >= off_delay + on_lead + max(min_off_time, spacing)``;
-- rule B: ``spacing`` between the previous "on" of S and this "off": ``on_lead_prev + (the
-  min_move_t from the move that ended S's previous gated interval to the line) + off_delay >=
-  spacing``.
+- rule A: ``gap >= off_delay + on_lead + floor``, ``floor`` = ``min_off_time`` (K = 2) or
+  ``max(min_off_time, spacing)`` (K = 1);
+- rule B, between S's previous gated interval and this one: K = 1, ``spacing`` between the
+  previous "on" and this "off": ``on_lead_prev + (the min_move_t from the move that ended S's
+  previous gated interval to the line) + off_delay >= spacing``; K = 2, ``spacing`` between the
+  previous "off" and this "off" and between the previous "on" and this "on" (min_move_t sums
+  from line to line and from activating move to activating move).
 
 What this module declares to the gating model (``Schedule``; ``gatesopt.gating`` honours it, the
 verifier derives the intervals from the lines with its own code): the firmware's own delay and lead
-per motor, rule A's floor ``min_off_s`` = max(min_off_time, spacing), rule B's ``spacing``
-(both from the printer.cfg's ``[gatesopt_gating]`` section, the module's defaults without one), the lower bound of ``min_move_t`` (``planner.min_move_time_s``: L / F, arcs as
+per motor, rule A's floor ``min_off_s``, rule B's ``spacing`` and ``pin_queue_slots`` (all from the
+printer.cfg's ``[gatesopt_gating]`` section, the module's defaults without one), the lower bound of
+``min_move_t`` (``planner.min_move_time_s``: L / F, arcs as
 Klipper's chords), no more than ``MAX_OFF_DELAY_S`` of delay, and the planner time model with
 Klipper's rules and the printer's limits (``--printer-config``), so that reported times and
 off-times are what Klipper plans.

@@ -40,27 +40,37 @@ Times are Klipper print times in seconds. For one GATESOPT_GATE line and one nam
   move's speed limit) of the moves queued after the line and before the activating move,
   extrude-only moves included. Dwells, heater waits and other time are not counted.
   ``spacing`` is the option ``min_pin_spacing`` (default ``DEFAULT_PIN_SPACING_S``, 0.100 s):
-  the least time between two changes of one pin (see "Pin spacing" below). ``min_sched`` is the
-  MCU's ``min_schedule_time()`` (0.100 s): the least lead of an event over the MCU's clock now.
+  the least lead of a pin change's message (see "Pin spacing" below); ``K`` is the option
+  ``pin_queue_slots`` (default ``DEFAULT_PIN_QUEUE_SLOTS``, 2): how many changes of one pin may
+  be queued on the MCU at once, each change coming at least ``spacing`` after the change ``K``
+  back (see "Pin queue" below). ``min_sched`` is the MCU's ``min_schedule_time()`` (0.100 s):
+  the least lead of an event over the MCU's clock now.
 * S is switched off for the interval only if all of these hold, else it stays on and the
   interval is counted as skipped:
 
   - gating is enabled for S (``SET_GATESOPT_GATING``), Klipper has S enabled, and S is not
     already switched off by an earlier line;
-  - rule A (off time): ``gap >= off_delay + on_lead + max(min_off_time, spacing)``;
-  - rule B (spacing from this module's previous "on" of S): ``since_on + off_delay >=
-    spacing``, where ``since_on = on_lead_prev + (sum of min_move_t of the moves from the
-    activating move that ended the previous gated interval of S up to the line)``; there is
-    no rule B before the first gated interval or after Klipper itself enabled S;
+  - rule A (off time): ``gap >= off_delay + on_lead + floor``, ``floor = max(min_off_time,
+    spacing)`` with K = 1 (the on waits for the off), ``min_off_time`` with K = 2;
+  - rule B, from S's previous gated interval (there is none before the first gated interval,
+    after Klipper itself switched S, or after a forced on): K = 1, from its "on" to this "off":
+    ``since_on + off_delay >= spacing``, where ``since_on = on_lead_prev + (sum of min_move_t of
+    the moves from the activating move that ended the previous gated interval of S up to the
+    line)``; K = 2, from its "off" to this "off" and from its "on" to this "on":
+    ``(sum of min_move_t of the moves from the previous gated line to this line) + off_delay -
+    off_delay_prev >= spacing`` and ``since_on + gap - on_lead >= spacing`` (the second is proven
+    as rule A is, as moves arrive: the off waits for it);
   - ``off_delay <= MAX_OFF_DELAY_S`` (Klipper's M84/SET_STEPPER_ENABLE dwell 0.1 s after the
     last move; an off must come before any of Klipper's own pin changes);
   - real time: ``t_off >= estimated_print_time + min_sched`` and ``t_off >= (time of the previous
     change of this pin) + spacing`` when the off is scheduled (in Klipper's batch mode,
     ``klippy.py -o``, the estimated print time is always 0, so only the second part applies).
 
-* The off is scheduled as soon as both ``t_end`` is known and rule A is proven (the gap only
-  grows as moves arrive), the on when the activating move leaves the look-ahead. The on always
-  comes after the off (rule A) and never before ``t_off + spacing``.
+* The off is scheduled as soon as both ``t_end`` is known and rule A (and with K = 2 the on's
+  rule B) is proven (the gap only grows as moves arrive), the on when the activating move leaves
+  the look-ahead. The on always comes after the off (rule A); with K = 1 never before ``t_off +
+  spacing``; with K = 2 never before the previous on plus ``spacing``, which the module checks in
+  real time too before it sends the off (``t_end + gap - on_lead >= last change + spacing``).
 
 Pin spacing (why 0.1 s, from Klipper's source)
 ----------------------------------------------
@@ -83,9 +93,62 @@ host and link known to be fast may set less, down to ``MIN_PIN_SPACING_S`` (0.02
 ``MIN_RTO``: a block lost once is sent again no sooner, so a smaller spacing fails on one
 retransmission). The solver must be given the same value (gatesopt reads it from the printer.cfg).
 
+Pin queue (pin_queue_slots: two changes of one pin queued on the MCU)
+---------------------------------------------------------------------
+
+With Klipper's own ``set_digital`` a pin has one change in flight: the message for a change waits
+(minclock) until the previous change has run, so an interval's off and on are at least ``spacing``
+apart (rule A's floor) and an off at least ``spacing`` after the previous on. That costs most of
+the saving a 0.1 s spacing takes (gatesopt's docs/RESULTS.md, "Klipper: the pin spacing"). The MCU
+keeps a queue per pin: src/gpiocmds.c ``command_queue_digital_out`` allocates a node of the shared
+move queue (``move_alloc``) and pushes it on the pin's own queue (``move_queue_push``);
+``digital_load_event`` pops one at its clock and re-arms its timer for the next queued one. So
+with ``pin_queue_slots: 2`` (the default) this module:
+
+* reserves one more move-queue slot per gated enable pin (``mcu.request_move_queue_slot()``, from a
+  config callback of each MCU, which runs in ``MCUConfigHelper._finalize_config`` before
+  ``_connect`` reads ``_reserved_move_slots`` and gives the steppers ``move_count`` less all
+  reserved slots, klippy/mcu.py): each gated pin owns two slots, its own (``MCU_digital_out.
+  _build_config``) and this one;
+* replaces that pin's ``set_digital`` with ``PinQueue.set_digital``, which sends the same
+  ``queue_digital_out`` on the pin's own command queue with ``minclock`` = the clock of the pin's
+  change two back instead of the last one, and keeps ``_last_clock`` as Klipper does. Every change
+  of the pin goes through it, Klipper's own auto-enable and M84 included.
+
+Why that is safe (the same argument Klipper makes for one slot, with two):
+
+* the MCU never holds more than two changes of the pin, so the move queue never overflows:
+  serialqueue.c (``check_upcoming_queues``) releases a message only once the MCU clock at its
+  arrival has passed its minclock, first in, first out within the pin's command queue; change n
+  is released after change n - 2 has run, so at most changes n - 1 and n are queued, in the two
+  slots reserved for the pin (the steppers' share, ``move_count`` less every reserved slot, is
+  untouched);
+* every message still gets ``spacing`` of lead after its minclock event: rule B (K = 2) keeps
+  each off ``spacing`` after the previous off and each on ``spacing`` after the previous on, and
+  the changes of one pin alternate off, on, off, on, so the change two back is exactly that one
+  (Klipper's own changes count as changes: the real-time check ``_earliest_event`` takes the
+  change two back whatever its source); a message that arrived after its clock would shut the
+  MCU down ("Timer too close", src/sched.c ``sched_add_timer``, when it is first in the pin's
+  queue; when it is not, ``digital_load_event`` re-arms for it, and a clock already long past
+  ends in "Rescheduled timer in the past", src/generic/armcm_timer.c): the same lead Klipper
+  gives one change in flight;
+* the clocks of one pin only increase (the on of an interval after its off by rule A, the next
+  off after that on: the activating move ends before the next line), as the MCU's first in,
+  first out pin queue needs; the stepper enable pins have no max_duration
+  (stepper_enable.py ``setup_max_duration(0.)``), so ``command_queue_digital_out``'s
+  max_duration check never fires.
+
+``pin_queue_slots: 1`` is Klipper's own ``set_digital`` and reserves nothing. More than two
+queued changes would let an off come less than ``spacing`` after the previous on and tie a change
+to the interval two gated intervals back (the change three back of an off is the on before the
+previous off): the solver's exact chain (one monotone predecessor per interval) would no longer
+hold; 1 and 2 are the values accepted. ``PinQueue`` uses four attributes of Klipper's
+``MCU_digital_out`` (``DIGITAL_OUT_ATTRS``); a Klipper without them is refused at start-up.
+
 What it refuses: at start-up (config error) a listed stepper that is not a kinematic stepper of
-the toolhead, a stepper with no enable pin (TMC "virtual enable") or with a shared enable pin; at
-the command (G-code error) an unknown or ungateable name and malformed parameters.
+the toolhead, a stepper with no enable pin (TMC "virtual enable") or with a shared enable pin, a
+``pin_queue_slots`` other than 1 or 2 or one Klipper's digital_out cannot be sent with; at the
+command (G-code error) an unknown or ungateable name and malformed parameters.
 
 Klipper's bookkeeping: the pin is switched through the stepper's ``StepperEnablePin``
 (``set_disable``/``set_enable``, reference counted); Klipper's ``EnableTracking`` keeps saying
