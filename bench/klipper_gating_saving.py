@@ -109,8 +109,10 @@ def summary(rows: list[dict], shapers: list[str]) -> str:
 
     for key, name in (("kg1", "K=1 (one change in flight)"), ("kg", "K=2 (the default)"),
                       ("spacing0", "spacing 0 (any K: the most a pin queue can give)")):
-        add(f"files within 0.5 points of 3dgates, {name}",
+        add(f"files at most 0.5 points below 3dgates, {name}",
             lambda sh, key=key: f"{sum(r['3dgates'] - r[key + '_' + sh] <= 0.5 for r in rows)} of {len(rows)}")
+        add(f"files within 0.5 points either side, {name}",
+            lambda sh, key=key: f"{sum(abs(r['3dgates'] - r[key + '_' + sh]) <= 0.5 for r in rows)} of {len(rows)}")
     for key, name in (("kg1", "K=1"), ("kg", "K=2")):
         add(f"points below 3dgates, {name}: median [min, max]",
             lambda sh, key=key: spread(lambda r, s: r["3dgates"] - r[key + "_" + s], sh))
@@ -140,7 +142,15 @@ def main(argv=None) -> int:
     ap.add_argument("--files", default=None, help="comma separated corpus files (default: all of MANIFEST.tsv)")
     ap.add_argument("--input-shaper", default="none,mzv:30", help="comma separated: none, TYPE:HZ")
     ap.add_argument("--json", default=None, help="write the rows here")
+    ap.add_argument("--from-json", default=None, help="print the tables of rows written before (no solving)")
     a = ap.parse_args(argv)
+    shapers = [s.strip() for s in a.input_shaper.split(",")]
+    if a.from_json:
+        rows = json.loads(Path(a.from_json).read_text())
+        print(summary(rows, shapers))
+        print()
+        print(table(rows, shapers))
+        return 0
     if a.files:
         files = kr.corpus_files(a.files)
     else:
