@@ -959,6 +959,9 @@ def test_pin_queue_option_reserves_slots_and_sends_every_change_through_the_queu
     printer.tracking["stepper_x"].motor_disable(3.0)
     printer.tracking["stepper_x"].motor_enable(3.5)
     assert [m["minclock"] for m in out._set_cmd.sent] == [0, 0, 0.5] and out._last_clock == 3.5
+    st = module.get_status(0)
+    assert st["pin_queue_slots"] == 2 and st["steppers"]["stepper_x"]["pin_changes_sent"] == 2
+    assert st["steppers"]["stepper_x"]["pin_lead_min_s"] == 3.0      # 3.5 - 0.5 (the first: minclock 0)
     assert mcu_queue_model(out._set_cmd.sent, SCHED) == (3.0, 2)
     one_printer, one = make_printer(options={"pin_queue_slots": "1"})
     one_printer.send_event("klippy:connect")

@@ -943,7 +943,12 @@ class GatesoptGating:
     def get_status(self, eventtime):
         if self.core is None:
             return {}
-        return self.core.status()
+        st = self.core.status()
+        st['pin_queue_slots'] = self.pin_queue_slots
+        for name, q in self.queues.items():
+            st['steppers'][name]['pin_changes_sent'] = q.sent
+            st['steppers'][name]['pin_lead_min_s'] = q.min_lead_s
+        return st
 
 def stepper_margins(stepper):
     """(pre_active_s, post_active_s) of a stepper's current kinematics."""
