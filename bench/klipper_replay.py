@@ -1443,6 +1443,11 @@ def replay_rows(a) -> tuple[list[dict], list[str]]:
                     rows.append(row)
                     _progress(f"  {fw} {v or 'default'}: added {row['added_s']:+.2f} s, steps while off "
                               f"{row['steps_while_off']}, klippy {out.klippy_s:.1f} s")
+            if a.json:
+                # the rows so far, after each file: an interrupted run keeps them (``--from-json``)
+                Path(a.json).write_text(json.dumps({"command": "python bench/klipper_replay.py " + " ".join(
+                    shlex.quote(x) for x in sys.argv[1:]), "notes": notes, "rows": rows, "partial": True},
+                    indent=1, default=_json_default))
     if not a.workdir:
         shutil.rmtree(work, ignore_errors=True)
     return rows, notes
