@@ -406,9 +406,7 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
     machine is known, so its values replace the defaults, the slicer's config block (what the
     slicer assumed) is not read, and of the file's lines only those Klipper carries out apply
     (``M204`` and ``SET_VELOCITY_LIMIT`` without the ``ACCEL_TO_DECEL`` that Klipper 84104bb no
-    longer has; ``M201``/``M203``/``M205`` are unknown commands there). Under Klipper's rules
-    without a printer config those lines are skipped too (the config block still stands for the
-    printer the slicer assumed).
+    longer has; ``M201``/``M203``/``M205`` are unknown commands there).
     """
     data = program.data
     flavor = _flavor(data)
@@ -431,12 +429,6 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
     else:
         family = "marlin"
     rules = firmware.planner_rules(family)
-    if family == "klipper":
-        # Klipper carries out M204 and SET_VELOCITY_LIMIT only: M201 / M203 / M205 / M566 lines
-        # are unknown commands there (klippy/gcode.py cmd_default: answered and skipped), with a
-        # printer config or without one (a Marlin file solved for Klipper); its planner has no
-        # per-axis X/Y caps for them to set (klippy/kinematics/cartesian.py check_move: Z only)
-        cmds = [(line, m) for line, m in cmds if m.group(1).upper() in (b"M204", b"SET_VELOCITY_LIMIT")]
     source: dict[str, str] = {"firmware": f"flavor {flavor!r}" if flavor else "default (no flavor)"}
 
     # --- 3: defaults --------------------------------------------------------------------------

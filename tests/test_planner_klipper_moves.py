@@ -178,25 +178,6 @@ def test_klipper_m204_needs_s_or_both_p_and_t():
     assert [float(pl.accel_mm_s2[k]) for k in pl.move_step] == [1250.0, 1250.0, 900.0]
 
 
-def test_klipper_skips_m201_m203_m205_lines_without_a_printer_config():
-    # klippy/gcode.py cmd_default: M201 / M203 / M205 are unknown commands to Klipper (answered,
-    # skipped); its planner has no per-axis X/Y caps (kinematics/cartesian.py check_move limits Z
-    # only). A Marlin file's lines, planned by Klipper's rules without --printer-config, set
-    # nothing: a 100 mm X move at F6000 takes 100/100 + 100/3000 s at Klipper's 3000 mm/s^2,
-    # not the 500 mm/s^2 and 50 mm/s the lines ask of Marlin
-    from gatesopt.limits import machine_limits
-    prog = parse("M201 X500 Y500\nM203 X50 Y50\nM205 X8 Y8\nG90\nG1 X100 F6000\n", source="m201.gcode")
-    lim = machine_limits(prog, family="klipper")
-    assert math.isinf(lim.max_accel_mm_s2[0]) and math.isinf(lim.max_feed_mm_s[0])
-    pl = planner.plan(prog, lim)
-    k = pl.move_step[0]
-    assert pl.accel_mm_s2[k] == 3000 and pl.nominal_mm_s[k] == 100
-    assert pl.duration_s[k] == pytest.approx(100 / 100 + 100 / 3000, rel=1e-12)
-    # Marlin's rules read them
-    marlin = machine_limits(prog, family="marlin")
-    assert marlin.max_accel_mm_s2[0] == 500 and marlin.max_feed_mm_s[0] == 50
-
-
 # Orca's spiral lift: G3 with Z only, target = start. Klipper (gcode_arcs.py planArc) turns it
 # a full circle only if its float angle is exactly 0: I-1.2166 J0 gives exactly 0 (r_Q = 0),
 # I-.427 J1.139 at (100, 100) a hair off it: one segment straight up (a 0.4 mm Z move)
