@@ -415,11 +415,14 @@ class TimePricer:
             direct = float(self.links_ms(start.curve, start.changed, start.xy, end.curve,
                                          end.changed, end.xy)) if end.curve >= 0 else 0.0
         link = _GroupLinks(self, gc, changed, grp.cand_exit_xy, grp.cand_entry_xy)
-        arc = self.dense(grp, gc, changed) if grp.n_cands <= DENSE_MAX_CANDS else None
-        return LinkCosts(arc, s, e, link, direct)
+        # the matrix is made on first use (``LinkCosts.matrix``): passing a fixed group, or one
+        # the budget leaves unsearched, makes none
+        make = _DenseOf(self, grp, gc, changed) if grp.n_cands <= DENSE_MAX_CANDS else None
+        return LinkCosts(None, s, e, link, direct, make)
 
-    def dense(self, grp: Group, gc, changed) -> np.ndarray:
-        """The group's (m, m) link matrix (``_dense``)."""
+    def dense(self, grp: Group, gc, changed, mirror: bool = True) -> np.ndarray:
+        """The group's (m, m) link matrix (``_dense``); ``mirror=False`` prices every link
+        itself (the same matrix, bit for bit: the reference the tests compare with)."""
         m = grp.n_cands
         ent = np.ascontiguousarray(grp.cand_entry_xy, float)
         ext = np.ascontiguousarray(grp.cand_exit_xy, float)
@@ -433,12 +436,23 @@ class TimePricer:
         # a loop's two-way "exit" is its seam, as is its entry; a reversed curve's z comes from
         # its other end (z is constant along a curve outside spiral-vase layers, which are kept)
         return _dense(gc, np.asarray(changed, np.bool_), ent, ext,
-                      np.asarray(grp.cand_curve, np.int64), pid[:m], pid[m:], int(pid.max()) + 1 if m else 0,
+                      np.asarray(grp.cand_curve, np.int64), np.asarray(grp.cand_flip, np.int64),
+                      pid[:m], pid[m:], int(pid.max()) + 1 if m else 0,
                       self.z_entry[gc], self.z_exit[gc], self.group_first, self.own.net_e,
                       self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
                       *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec,
-                      self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid)
+                      self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid, mirror)
+
+
+class _DenseOf:
+    """``TimePricer.dense`` of one group, called once, on first use (``LinkCosts.make_arc``)."""
+
+    def __init__(self, pricer: TimePricer, grp: Group, gc, changed):
+        self.pricer, self.grp, self.gc, self.changed = pricer, grp, gc, changed
+
+    def __call__(self) -> np.ndarray:
+        return self.pricer.dense(self.grp, self.gc, self.changed)
 
 
 class _GroupLinks:
@@ -448,6 +462,15 @@ class _GroupLinks:
     def __init__(self, pricer: TimePricer, gc, changed, exit_xy, entry_xy):
         self.pricer, self.gc, self.changed = pricer, gc, changed
         self.exit_xy, self.entry_xy = exit_xy, entry_xy
+
+    def copied_only(self, u, v) -> np.ndarray | None:
+        """The costs of links u[i] -> v[i] if every one is the slicer's own gap, copied (v's
+        curve printed right after u's, both as the slicer printed them): ``copy_ms``, what
+        ``_dense`` and ``_link_one`` give them; else None."""
+        gu, gv = self.gc[u], self.gc[v]
+        if np.all((gv == gu + 1) & ~self.changed[u] & ~self.changed[v]):
+            return self.pricer.copy_ms[gv]
+        return None
 
     def __call__(self, u, v):
         u, v = np.asarray(u, np.int64), np.asarray(v, np.int64)
@@ -543,17 +566,27 @@ def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_f
 
 
 @numba.njit(cache=True)
-def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
+def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
            rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, has_walls, trim, a, b, x0, y0,
-           h, nx, ny, start, items):
+           h, nx, ny, start, items, mirror):
     """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
     (``_link_one`` where the two ends lie at different heights). The wall test is made here: once
-    per pair of points (a travel and its reverse cross the same walls), memoized."""
+    per pair of points (a travel and its reverse cross the same walls), memoized.
+
+    A rebuilt link at one height costs the same both ways when the two curves' own gaps are
+    alike (``_mirror_of``): the link u -> v and its mirror flip(v) -> flip(u) (the same two points
+    the other way round) are priced once. Bit for bit: every term of the price depends on the
+    travel's direction through |dx|, |dy| only (the per-axis caps, jerk and safe speeds take
+    |u_axis|; the junctions with E-only and Z-only moves are right angles), so the mirror's price
+    is the very same number; tests/test_ordering_cost_build.py checks both against a kernel that
+    prices every link. This halves the build of the time objective's largest per-group cost
+    (docs/BENCHMARKS.md, "Link-cost build")."""
     m = len(gc)
     out = np.empty((m, m))
+    done = np.zeros((m, m), np.bool_)     # priced as the mirror of a link before it
     w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
     memo = np.full((n_points, n_points), -1, np.int8)
     stamp = np.full(max(len(a), 1), -1, np.int64)
@@ -608,6 +641,8 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                 u_rows[0, v, W_JREADY] = 1.0
     for u in range(m):
         for v in range(m):
+            if done[u, v]:
+                continue
             if local[u] == local[v]:
                 out[u, v] = np.inf
                 continue
@@ -661,4 +696,31 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                               hop_on, pre, u_rows, v, has_u[1, v], w, code, lim_row,
                               v_xy) * 1000.0
             out[u, v] = t
+            if mirror and abs(z_ext[u] - z_ent[v]) <= MOVE_EPS_MM and group_first[p] == group_first[c]:
+                fu, fv = flip[u], flip[v]
+                if _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v, use_fw,
+                              group_first, rev_ok, rev_plain, rev_start, rev_end):
+                    out[fv, fu] = t
+                    done[fv, fu] = True
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v, use_fw, group_first,
+               rev_ok, rev_plain, rev_start, rev_end):
+    """Whether the link flip(v) -> flip(u) of ``_dense`` is priced as the rebuilt link u -> v
+    at one height (both in its generic branch): the same two points the other way round, neither
+    the slicer's gap copied nor a gap reversed, both ends at one height, and the entered curves'
+    own gaps alike (net E and firmware retraction: what the unretraction into each costs)."""
+    p2, c2 = gc[fv], gc[fu]
+    if (ext[fv, 0] != ent[v, 0] or ext[fv, 1] != ent[v, 1] or ent[fu, 0] != ext[u, 0]
+            or ent[fu, 1] != ext[u, 1]):
+        return False
+    if net_v[fu] != net_v[v] or use_fw[fu] != use_fw[v]:
+        return False
+    if p2 == c2 - 1 and not changed[fv] and not changed[fu]:
+        return False
+    if abs(z_ext[fv] - z_ent[fu]) > MOVE_EPS_MM:
+        return False
+    return not _reversed_link(p2, changed[fv], c2, ext[fv, 0], ext[fv, 1], ent[fu, 0], ent[fu, 1],
+                              group_first, rev_ok, rev_plain, rev_start, rev_end)

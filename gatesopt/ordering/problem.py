@@ -115,6 +115,39 @@ class LinkCosts:
     end: np.ndarray
     link: object = None         # callable (u, v) -> costs, for groups without ``arc``
     direct: float = 0.0         # from the start straight on to the end (a group without curves)
+    #: callable () -> the (m, m) matrix, made on first use (``matrix``) where ``arc`` is None: a
+    #: group no solver searches (a fixed group, one the budget left no time for) never pays for
+    #: it. The time objective's matrix is the largest per-group cost of passing a file's groups
+    #: (~0.1-0.3 us a link, m^2 links; docs/BENCHMARKS.md, "Link-cost build")
+    make_arc: object = None
+
+    @property
+    def has_matrix(self) -> bool:
+        """Whether the group has (or makes on first use) a dense link matrix."""
+        return self.arc is not None or self.make_arc is not None
+
+    def matrix(self) -> np.ndarray | None:
+        """The dense link matrix, made now if it was left for first use (None: the group has
+        none, its links are priced one by one)."""
+        if self.arc is None and self.make_arc is not None:
+            # a frozen dataclass: the matrix is written once, past __setattr__
+            object.__setattr__(self, "arc", self.make_arc())
+        return self.arc
+
+    def links(self, u, v) -> np.ndarray:
+        """Costs of the links u[i] -> v[i] (candidate indices). Where the matrix is still to be
+        made, links that are all the slicer's own gaps, copied (a fixed group's path, the
+        slicer's order of a group left unsearched), are read without making it: the matrix
+        holds exactly those numbers for them (``cost._dense``: ``copy_ms``)."""
+        if self.arc is None and self.make_arc is not None:
+            copied = getattr(self.link, "copied_only", None)
+            out = copied(u, v) if copied is not None else None
+            if out is not None:
+                return out
+            self.matrix()
+        if self.arc is not None:
+            return self.arc[u, v]
+        return np.asarray(self.link(u, v), float)
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,7 +182,7 @@ class Group:
     @property
     def dense(self) -> bool:
         """Whether the group has a link matrix (``arc_cost``): up to DENSE_MAX_CANDS candidates."""
-        return self._costs().arc is not None
+        return self._costs().has_matrix
 
     def _costs(self) -> LinkCosts:
         if self.costs is None:
@@ -163,7 +196,7 @@ class Group:
 
     def arc_cost(self) -> np.ndarray:
         """(m, m) cost from candidate u's exit to candidate v's entry; inf within one curve."""
-        arc = self._costs().arc
+        arc = self._costs().matrix()
         if arc is None:
             raise ValueError(f"group of {self.n_cands} candidates has no dense link matrix")
         return arc
@@ -174,11 +207,7 @@ class Group:
 
     def link_cost(self, u, v) -> np.ndarray:
         """Costs of the links u[i] -> v[i] (candidate indices)."""
-        c = self._costs()
-        u, v = np.asarray(u, np.int64), np.asarray(v, np.int64)
-        if c.arc is not None:
-            return c.arc[u, v]
-        return np.asarray(c.link(u, v), float)
+        return self._costs().links(np.asarray(u, np.int64), np.asarray(v, np.int64))
 
     def path_cost(self, order: np.ndarray) -> float:
         """Cost of the open path visiting candidates ``order`` (one per curve) from the start
@@ -209,7 +238,7 @@ class Group:
                  np.zeros(2) - 1e9 if self.end_xy is None else self.end_xy]
         c = self.costs
         if c is not None and not getattr(c, "euclidean", False):
-            parts += [c.start, c.end] + ([c.arc] if c.arc is not None else [])
+            parts += [c.start, c.end] + ([c.matrix()] if c.has_matrix else [])
         q = np.concatenate([np.ravel(np.rint(np.nan_to_num(np.asarray(a, float), posinf=-1.0) * 1e4))
                             for a in parts]).astype(np.int64)
         return q.tobytes() + self.cand_curve.tobytes()
@@ -226,7 +255,7 @@ class Group:
             raise ValueError("a group without an end point has no backwards problem")
         c = self._costs()
         link = None if c.link is None else _Mirrored(c.link)
-        mirror = LinkCosts(None if c.arc is None else np.ascontiguousarray(c.arc.T), c.end.copy(),
+        mirror = LinkCosts(None if not c.has_matrix else np.ascontiguousarray(c.matrix().T), c.end.copy(),
                            np.zeros(self.n_cands), link)
         return Group(np.asarray(self.end_xy, float).copy(), self.cand_curve, self.cand_exit_xy,
                      self.cand_entry_xy, self.cand_flip, self.n_curves, self.layer, self.label,
