@@ -345,10 +345,14 @@ class TimePricer:
         self.copy_ms = copy * MS_PER_S
         #: gaps a link may write reversed, at their own time (``gaps.ReversibleGaps``)
         self.reversible = ReversibleGaps.of(program, lay)
+        # the kernels' constant arguments, made once: a group's links are priced in a few
+        # calls, whose fixed cost is most of passing a file's groups (docs/BENCHMARKS.md)
+        r = self.reversible
+        self._rev = (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
+        self._rule_vec = rule.vector()
 
     def _rev_args(self) -> tuple:
-        r = self.reversible
-        return (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
+        return self._rev
 
     # -- links ----------------------------------------------------------------------------------
     def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
@@ -362,19 +366,25 @@ class TimePricer:
         nxt_changed = np.broadcast_to(np.asarray(nxt_changed, bool), k).ravel()
         from_xy = np.broadcast_to(np.asarray(from_xy, float), k + (2,)).reshape(-1, 2)
         to_xy = np.broadcast_to(np.asarray(to_xy, float), k + (2,)).reshape(-1, 2)
+        return self._links_flat(prev, prev_changed, np.ascontiguousarray(from_xy), nxt,
+                                nxt_changed, np.ascontiguousarray(to_xy)).reshape(k)
+
+    def _links_flat(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
+        """``links_ms`` of links given as flat arrays of one length (int64, bool, contiguous
+        (n, 2) floats): no broadcasting (``group_costs``' one call per group)."""
         z0 = np.where(prev >= 0, self.z_exit[np.maximum(prev, 0)], self.z_entry[nxt])
         z1 = self.z_entry[nxt]
         out = np.empty(len(nxt))
         need = np.zeros(len(nxt), bool)
         no_retract = np.empty(len(nxt))
-        _links(prev, prev_changed, nxt, nxt_changed, np.ascontiguousarray(from_xy),
-               np.ascontiguousarray(to_xy), z0, z1, self.group_first, self.own.net_e,
-               self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
-               self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-               *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec, out, need,
-               no_retract)
-        self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
-        return out.reshape(k)
+        _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, self.group_first,
+               self.own.net_e, self.own.retract_mm, self.own.fw_net, self.own.fw_retracted,
+               self.bnd.net_e, self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted,
+               self.copy_ms, *self._rev_args(), self._rule_vec, self.style_vec, self.move_vec, out,
+               need, no_retract)
+        if need.any():
+            self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
+        return out
 
     def _exempt(self, out, need, no_retract, nxt, from_xy, to_xy) -> None:
         """Links that retract only because no combing test was made: those that cross no wall of
@@ -406,14 +416,29 @@ class TimePricer:
         end anchors in program curves too)."""
         gc = np.asarray(curves, np.int64)[grp.cand_curve]
         changed = np.asarray(grp.cand_reversed, bool) | (np.asarray(grp.cand_seam) != 0)
-        s = self.links_ms(start.curve, start.changed, start.xy, gc, changed, grp.cand_entry_xy)
+        m = grp.n_cands
         if end is None:
-            e = np.zeros(grp.n_cands)
+            sxy = np.asarray(start.xy, float).reshape(1, 2)
+            s = self._links_flat(np.full(m, start.curve, np.int64), np.full(m, start.changed),
+                                 np.repeat(sxy, m, axis=0), gc, changed,
+                                 np.ascontiguousarray(grp.cand_entry_xy, float))
+            e = np.zeros(m)
             direct = 0.0
         else:
-            e = self.links_ms(gc, changed, grp.cand_exit_xy, end.curve, end.changed, end.xy)
-            direct = float(self.links_ms(start.curve, start.changed, start.xy, end.curve,
-                                         end.changed, end.xy)) if end.curve >= 0 else 0.0
+            # the start links, the end links and the direct one in one call (each link is priced
+            # on its own: the same numbers as three calls, a third of the calls' fixed cost)
+            k = int(end.curve >= 0)          # the direct link (priced only into a curve)
+            prev = np.concatenate([np.full(m + k, start.curve, np.int64), gc])
+            prev_ch = np.concatenate([np.full(m + k, start.changed), changed])
+            nxt = np.concatenate([gc, np.full(k + m, end.curve, np.int64)])
+            nxt_ch = np.concatenate([changed, np.full(k + m, end.changed)])
+            sxy = np.asarray(start.xy, float).reshape(1, 2)
+            exy = np.asarray(end.xy, float).reshape(1, 2)
+            from_xy = np.concatenate([np.repeat(sxy, m + k, axis=0), grp.cand_exit_xy])
+            to_xy = np.concatenate([grp.cand_entry_xy, np.repeat(exy, k + m, axis=0)])
+            both = self._links_flat(prev, prev_ch, from_xy, nxt, nxt_ch, to_xy)
+            s, e = both[:m], both[m + k:]
+            direct = float(both[m]) if k else 0.0
         link = _GroupLinks(self, gc, changed, grp.cand_exit_xy, grp.cand_entry_xy)
         # the matrix is made on first use (``LinkCosts.matrix``): passing a fixed group, or one
         # the budget leaves unsearched, makes none
@@ -441,7 +466,7 @@ class TimePricer:
                       self.z_entry[gc], self.z_exit[gc], self.group_first, self.own.net_e,
                       self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-                      *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec,
+                      *self._rev_args(), self._rule_vec, self.style_vec, self.move_vec,
                       self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid, mirror)
 
 
@@ -468,7 +493,7 @@ class _GroupLinks:
         curve printed right after u's, both as the slicer printed them): ``copy_ms``, what
         ``_dense`` and ``_link_one`` give them; else None."""
         gu, gv = self.gc[u], self.gc[v]
-        if np.all((gv == gu + 1) & ~self.changed[u] & ~self.changed[v]):
+        if ((gv == gu + 1) & ~self.changed[u] & ~self.changed[v]).all():
             return self.pricer.copy_ms[gv]
         return None
 
