@@ -400,7 +400,10 @@ class TimePricer:
 
     def anchor_link(self, a: Anchor, b: Anchor) -> float:
         """Cost (ms) of the travel from anchor ``a`` into anchor ``b`` (program curves)."""
-        return float(self.links_ms(a.curve, a.changed, a.xy, b.curve, b.changed, b.xy))
+        return float(self._links_flat(
+            np.array([a.curve], np.int64), np.array([a.changed], bool),
+            np.asarray(a.xy, float)[:2].reshape(1, 2).copy(), np.array([b.curve], np.int64),
+            np.array([b.changed], bool), np.asarray(b.xy, float)[:2].reshape(1, 2).copy())[0])
 
     def order_cost(self, order, changed, entry_xy, exit_xy) -> float:
         """Cost (ms) of the travels between consecutive curves of ``order`` (the file's prefix,
