@@ -32,6 +32,7 @@ formulations/ordering.md says which bounds rely on what.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numba
 import numpy as np
@@ -41,8 +42,8 @@ from ..limits import MachineLimits
 from ..program import MOTION_KINDS, Program
 from .gap_plan import (MOVE_EPS_MM, REBUILT_MAX_MOVES, W_COLS, W_F, W_J, W_JREADY, W_L,
                        e_row, gaps_planned, junction, plan_moves_s, prep_move, same_z_s)
-from .gaps import REVERSE_EPS, ReversibleGaps
-from .layout import LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, Layout
+from .gaps import REVERSE_EPS, GapFacts, ReversibleGaps
+from .layout import Layout
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
 
@@ -260,37 +261,6 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
     return t
 
 
-@dataclass(frozen=True, eq=False)
-class GapFacts:
-    """What the slicer's gaps before each curve hold, as ``gaps.rebuilt_gap`` sums it: per curve
-    c the gap between curve c - 1 and c (``own_*``) and the boundary gap of c's group (the gap
-    before the group's first curve, ``bnd_*``, indexed by curve too)."""
-
-    net_e: np.ndarray           # (n,) net E of the gap's moves (mm of filament)
-    retract_mm: np.ndarray      # (n,) filament its moves pull back
-    fw_net: np.ndarray          # (n,) firmware unretractions minus retractions (G11 - G10)
-    fw_retracted: np.ndarray    # (n,) bool: a G10 in the gap
-
-    @staticmethod
-    def of(program: Program, lay: Layout) -> "GapFacts":
-        n = len(lay.curve_s0)
-        l1 = lay.curve_l1
-        g0 = np.concatenate(([0], l1[:-1] + 1)) if n else np.zeros(0, np.int64)    # gap lines [g0, g1)
-        g1 = lay.curve_l0
-        step = lay.step_of_line
-        has = step >= 0
-        s = np.where(has, step, 0)
-        de = np.where(has & (lay.line_class == LINE_MOTION), program.end_mm[s, 3] - program.start_mm[s, 3], 0.0)
-
-        def span(v):
-            c = np.concatenate(([0.0], np.cumsum(v)))
-            return c[g1] - c[g0]
-        return GapFacts(span(de), span(np.where(de < 0, -de, 0.0)),
-                        np.rint(span(lay.line_class == LINE_FW_UNRETRACT)
-                                - span(lay.line_class == LINE_FW_RETRACT)).astype(np.int64),
-                        span(lay.line_class == LINE_FW_RETRACT) > 0)
-
-
 def gap_times_ms(program: Program, move: MoveTimes, lay: Layout | None = None) -> np.ndarray:
     """(n_curves - 1,) the time (ms) of each gap between two consecutive curves of ``program``
     (``layout.layout``'s curves) under ``move``: what a re-ordered file's travels cost under the
@@ -345,14 +315,10 @@ class TimePricer:
         self.copy_ms = copy * MS_PER_S
         #: gaps a link may write reversed, at their own time (``gaps.ReversibleGaps``)
         self.reversible = ReversibleGaps.of(program, lay)
-        # the kernels' constant arguments, made once: a group's links are priced in a few
-        # calls, whose fixed cost is most of passing a file's groups (docs/BENCHMARKS.md)
+        # the kernels' constant arguments, made once (per call costs: most of passing a group)
         r = self.reversible
         self._rev = (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
         self._rule_vec = rule.vector()
-
-    def _rev_args(self) -> tuple:
-        return self._rev
 
     # -- links ----------------------------------------------------------------------------------
     def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
@@ -380,7 +346,7 @@ class TimePricer:
         _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, self.group_first,
                self.own.net_e, self.own.retract_mm, self.own.fw_net, self.own.fw_retracted,
                self.bnd.net_e, self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted,
-               self.copy_ms, *self._rev_args(), self._rule_vec, self.style_vec, self.move_vec, out,
+               self.copy_ms, *self._rev, self._rule_vec, self.style_vec, self.move_vec, out,
                need, no_retract)
         if need.any():
             self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
@@ -400,10 +366,9 @@ class TimePricer:
 
     def anchor_link(self, a: Anchor, b: Anchor) -> float:
         """Cost (ms) of the travel from anchor ``a`` into anchor ``b`` (program curves)."""
-        return float(self._links_flat(
-            np.array([a.curve], np.int64), np.array([a.changed], bool),
-            np.asarray(a.xy, float)[:2].reshape(1, 2).copy(), np.array([b.curve], np.int64),
-            np.array([b.changed], bool), np.asarray(b.xy, float)[:2].reshape(1, 2).copy())[0])
+        xy = np.array([np.asarray(a.xy, float)[:2], np.asarray(b.xy, float)[:2]])
+        return float(self._links_flat(np.array([a.curve]), np.array([a.changed]), xy[:1],
+                                      np.array([b.curve]), np.array([b.changed]), xy[1:])[0])
 
     def order_cost(self, order, changed, entry_xy, exit_xy) -> float:
         """Cost (ms) of the travels between consecutive curves of ``order`` (the file's prefix,
@@ -428,9 +393,8 @@ class TimePricer:
             e = np.zeros(m)
             direct = 0.0
         else:
-            # the start links, the end links and the direct one in one call (each link is priced
-            # on its own: the same numbers as three calls, a third of the calls' fixed cost)
-            k = int(end.curve >= 0)          # the direct link (priced only into a curve)
+            # start, direct (into a curve only) and end links in one call: the same numbers
+            k = int(end.curve >= 0)
             prev = np.concatenate([np.full(m + k, start.curve, np.int64), gc])
             prev_ch = np.concatenate([np.full(m + k, start.changed), changed])
             nxt = np.concatenate([gc, np.full(k + m, end.curve, np.int64)])
@@ -443,14 +407,13 @@ class TimePricer:
             s, e = both[:m], both[m + k:]
             direct = float(both[m]) if k else 0.0
         link = _GroupLinks(self, gc, changed, grp.cand_exit_xy, grp.cand_entry_xy)
-        # the matrix is made on first use (``LinkCosts.matrix``): passing a fixed group, or one
-        # the budget leaves unsearched, makes none
-        make = _DenseOf(self, grp, gc, changed) if grp.n_cands <= DENSE_MAX_CANDS else None
+        # made on first use (``LinkCosts.matrix``): a fixed or unsearched group makes none
+        make = partial(self.dense, grp, gc, changed) if grp.n_cands <= DENSE_MAX_CANDS else None
         return LinkCosts(None, s, e, link, direct, make)
 
     def dense(self, grp: Group, gc, changed, mirror: bool = True) -> np.ndarray:
-        """The group's (m, m) link matrix (``_dense``); ``mirror=False`` prices every link
-        itself (the same matrix, bit for bit: the reference the tests compare with)."""
+        """The group's (m, m) link matrix (``_dense``; ``mirror=False``: each link priced itself,
+        the same matrix bit for bit, the tests' reference)."""
         m = grp.n_cands
         ent = np.ascontiguousarray(grp.cand_entry_xy, float)
         ext = np.ascontiguousarray(grp.cand_exit_xy, float)
@@ -469,18 +432,8 @@ class TimePricer:
                       self.z_entry[gc], self.z_exit[gc], self.group_first, self.own.net_e,
                       self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-                      *self._rev_args(), self._rule_vec, self.style_vec, self.move_vec,
+                      *self._rev, self._rule_vec, self.style_vec, self.move_vec,
                       self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid, mirror)
-
-
-class _DenseOf:
-    """``TimePricer.dense`` of one group, called once, on first use (``LinkCosts.make_arc``)."""
-
-    def __init__(self, pricer: TimePricer, grp: Group, gc, changed):
-        self.pricer, self.grp, self.gc, self.changed = pricer, grp, gc, changed
-
-    def __call__(self) -> np.ndarray:
-        return self.pricer.dense(self.grp, self.gc, self.changed)
 
 
 class _GroupLinks:
@@ -492,9 +445,8 @@ class _GroupLinks:
         self.exit_xy, self.entry_xy = exit_xy, entry_xy
 
     def copied_only(self, u, v) -> np.ndarray | None:
-        """The costs of links u[i] -> v[i] if every one is the slicer's own gap, copied (v's
-        curve printed right after u's, both as the slicer printed them): ``copy_ms``, what
-        ``_dense`` and ``_link_one`` give them; else None."""
+        """``copy_ms`` (as ``_dense`` and ``_link_one`` give) if every link u[i] -> v[i] is the
+        slicer's own gap, copied (v's curve right after u's, both as printed); else None."""
         gu, gv = self.gc[u], self.gc[v]
         if ((gv == gu + 1) & ~self.changed[u] & ~self.changed[v]).all():
             return self.pricer.copy_ms[gv]
@@ -604,14 +556,11 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
     (``_link_one`` where the two ends lie at different heights). The wall test is made here: once
     per pair of points (a travel and its reverse cross the same walls), memoized.
 
-    A rebuilt link at one height costs the same both ways when the two curves' own gaps are
-    alike (``_mirror_of``): the link u -> v and its mirror flip(v) -> flip(u) (the same two points
-    the other way round) are priced once. Bit for bit: every term of the price depends on the
-    travel's direction through |dx|, |dy| only (the per-axis caps, jerk and safe speeds take
-    |u_axis|; the junctions with E-only and Z-only moves are right angles), so the mirror's price
-    is the very same number; tests/test_ordering_cost_build.py checks both against a kernel that
-    prices every link. This halves the build of the time objective's largest per-group cost
-    (docs/BENCHMARKS.md, "Link-cost build")."""
+    ``mirror``: a rebuilt link at one height and its mirror flip(v) -> flip(u) (the same two
+    points the other way round, ``_mirror_of``) are priced once: the price depends on the
+    direction through |dx|, |dy| only (per-axis caps, jerk and safe speeds take |u_axis|; the
+    junctions with E-only and Z-only moves are right angles), so it is the same number, bit for
+    bit (tests/test_ordering_cost_build.py; docs/BENCHMARKS.md, "Link-cost build")."""
     m = len(gc)
     out = np.empty((m, m))
     done = np.zeros((m, m), np.bool_)     # priced as the mirror of a link before it
@@ -742,13 +691,9 @@ def _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v, use_fw,
     own gaps alike (net E and firmware retraction: what the unretraction into each costs)."""
     p2, c2 = gc[fv], gc[fu]
     if (ext[fv, 0] != ent[v, 0] or ext[fv, 1] != ent[v, 1] or ent[fu, 0] != ext[u, 0]
-            or ent[fu, 1] != ext[u, 1]):
-        return False
-    if net_v[fu] != net_v[v] or use_fw[fu] != use_fw[v]:
-        return False
-    if p2 == c2 - 1 and not changed[fv] and not changed[fu]:
-        return False
-    if abs(z_ext[fv] - z_ent[fu]) > MOVE_EPS_MM:
+            or ent[fu, 1] != ext[u, 1] or net_v[fu] != net_v[v] or use_fw[fu] != use_fw[v]
+            or (p2 == c2 - 1 and not changed[fv] and not changed[fu])
+            or abs(z_ext[fv] - z_ent[fu]) > MOVE_EPS_MM):
         return False
     return not _reversed_link(p2, changed[fv], c2, ext[fv, 0], ext[fv, 1], ent[fu, 0], ent[fu, 1],
                               group_first, rev_ok, rev_plain, rev_start, rev_end)
