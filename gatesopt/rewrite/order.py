@@ -8,12 +8,14 @@ model travel is there too, as ``model_travel_*_mm``.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _jit
+from ..ordering import formulations
 from ..ordering.groups import build
 from ..ordering.layers import solve
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
@@ -119,30 +121,60 @@ class NoTimeToOrder(Exception):
         self.solve_budget_s, self.pass_s, self.n_groups = solve_budget_s, pass_s, n_groups
 
 
+#: the share of the solve's budget an exact formulation leaves to the greedy solve the time guard
+#: weighs it against (``reorder``); the greedy solve also gets whatever the exact one did not use.
+#: A file whose groups are proven in less never notices
+GREEDY_SHARE = 0.2
+
+
 def reorder(program: Program, options: OrderingOptions | None = None, *,
             formulation: str = "auto", time_limit_s: float = 2.0,
             budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
             progress=None, started_s: float | None = None, slow: float | None = None):
     """build -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
-    ``started_s``, default now) -> ``emit_guarded``, without verifying (``order_program`` does;
-    ``rewrite.pipeline.run`` verifies its own output). Returns (problem, the solve's budget, solution,
-    text, parsed output, layers the time guard put back). ``slow`` (``budget.slowdown_factor``;
+    ``started_s``, default now) -> [greedy] -> ``emit_guarded``, without verifying
+    (``order_program`` does; ``rewrite.pipeline.run`` verifies its own output). Returns (problem,
+    the solve's budget, ``guard.Guarded``: the solution emitted, its text and parsed file, the
+    layers put back, where each layer's order comes from). ``slow`` (``budget.slowdown_factor``;
     None: never): raise ``NoTimeToOrder`` after the build where the solve's budget would not pay
     for passing the groups at ``slow`` times the runner's priors (every group would keep the
-    slicer's order, late)."""
+    slicer's order, late).
+
+    With an exact formulation, the time guard and a group the exact solve did not prove optimal,
+    the greedy formulation solves the whole problem too, with what is left of the solve's budget
+    (``GREEDY_SHARE`` of it at least; not at all where that would not pay for passing the groups),
+    and the guard prints per layer the slicer's, the exact or
+    the greedy order, whichever the planner model says is faster (issue 36: never slower than
+    greedy). Greedy's answer does not depend on the time it gets, only on how many groups it
+    reaches: where it reaches them all it is the one ``--formulation greedy`` emits, and the
+    guard's first stage is that run's own guard."""
     t0 = time.perf_counter() if started_s is None else started_s
     problem = build(program, options or OrderingOptions())
     # compiling numba kernels (a first run) is not the run's to budget: it counts no time
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
     solve_budget = solve_budget_s(budget_s, program.n_lines, spent)
+    # what passing every group takes with no time to search them (the runner's priors)
+    pass_s = (slow or 1.0) * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
     if slow is not None and solve_budget is not None:
-        pass_s = slow * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
         if solve_budget < pass_s:
             raise NoTimeToOrder(solve_budget, pass_s, problem.n_groups)
-    solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=solve_budget,
+    t_s = time.perf_counter()
+    with_greedy = time_guard and "exact" in formulations.lookup(formulation).capabilities
+    exact_budget = (solve_budget if solve_budget is None or not with_greedy
+                    else (1.0 - GREEDY_SHARE) * solve_budget)
+    solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=exact_budget,
                      workers=workers, progress=progress)
-    solution, text, out, kept = emit_guarded(program, problem, solution, time_guard)
-    return problem, solve_budget, solution, text, out, kept
+    greedy = None
+    reorderable = problem.group_reorderable
+    if with_greedy and any(reorderable[g] and gs.status != "optimal"
+                           for g, gs in enumerate(solution.groups)):
+        left = (None if solve_budget is None else
+                max(0.0, t_s + solve_budget + _jit.compile_s_since(t_s) - time.perf_counter()))
+        if left is None or left >= pass_s:      # (else it would end late, searching nothing)
+            greedy = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=left)
+            solution = dataclasses.replace(solution, solve_s=solution.solve_s + greedy.solve_s)
+    guarded = emit_guarded(program, problem, solution, time_guard, greedy=greedy)
+    return problem, solve_budget, guarded
 
 
 def order_program(program: Program, options: OrderingOptions | None = None, *,
@@ -160,14 +192,15 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     program.check_rewritable()
     t0 = time.perf_counter() if started_s is None else started_s
     options = options or OrderingOptions()
-    problem, solve_budget, solution, text, out, slower_layers = reorder(
+    problem, solve_budget, guarded = reorder(
         program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
         workers=workers, time_guard=time_guard, progress=progress, started_s=t0)
+    solution, text, out, slower_layers = guarded
     findings = tuple(check(program, out))
     summary = order_summary(program, out, problem, solution, options, slower_layers, findings,
                             formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
                             solve_budget_s=solve_budget, workers=workers,
-                            wall_s=time.perf_counter() - t0)
+                            wall_s=time.perf_counter() - t0, greedy_layers=guarded.greedy_layers)
     return OrderResult(program, problem, solution, text, out, findings, summary)
 
 
@@ -244,7 +277,7 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
                   solution: OrderingSolution, options: OrderingOptions, slower_layers,
                   findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
                   solve_budget_s: float | None, workers: int, wall_s: float,
-                  with_figures: bool = True) -> dict:
+                  with_figures: bool = True, greedy_layers: int = 0) -> dict:
     """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` has it under
     ``"ordering"``): the figures of the input and the output (``rewrite.figures``: travel,
     travels and retractions measured on the parsed files, print time under the planner model;
@@ -293,6 +326,10 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         "layers_optimal": lay_counts["optimal"], "layers_feasible": lay_counts["feasible"],
         "layers_fallback": lay_counts["fallback"], "layers_kept": lay_counts["kept"],
         "layers_kept_slower": int(len(slower_layers)),
+        # layers the time guard printed in the greedy order: the exact solve left them unproven
+        # and the greedy order printed faster (``guard.emit_guarded``; their groups: at best
+        # feasible, formulation ``guard.GREEDY_TAKEN``)
+        "layers_greedy": int(greedy_layers),
         "worst_gap": float(max((gs.gap for _, gs in decided), default=0.0)),
         "solve_s": solution.solve_s, "wall_s": wall_s,
         "verified": not findings, "findings": [str(f) for f in findings],
