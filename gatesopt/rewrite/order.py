@@ -23,6 +23,7 @@ from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
 from ..ordering.runner import OUT_OF_TIME
 from ..ordering.travel_stats import runs, travel_mask
 from ..program import Program
+from ..solvers import stop_requested
 from ..verify.ordering import check
 from .figures import figures
 from .guard import (GUARD_TOL_S, emit_guarded, keep_layers, layer_times_s,  # noqa: F401 (re-exported)
@@ -166,7 +167,8 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
                      workers=workers, progress=progress)
     greedy = None
     reorderable = problem.group_reorderable
-    if with_greedy and any(reorderable[g] and gs.status != "optimal"
+    # (after a Ctrl-C, ``solvers.stop_scope``, the exact answer is the one: nothing more runs)
+    if with_greedy and not stop_requested() and any(reorderable[g] and gs.status != "optimal"
                            for g, gs in enumerate(solution.groups)):
         left = (None if solve_budget is None else
                 max(0.0, t_s + solve_budget + _jit.compile_s_since(t_s) - time.perf_counter()))
