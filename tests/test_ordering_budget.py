@@ -358,7 +358,7 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
     real = pipeline.solve
 
     def spy(problem, formulation="auto", **kw):
-        if formulation != "greedy":     # (the greedy solve beside the exact one: what is left)
+        if formulation != "greedy":     # (the greedy solve before the exact one)
             seen.append(kw["budget_s"])
         return real(problem, formulation, **kw)
 
@@ -372,12 +372,13 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
     pipeline.order_program(prog, OrderingOptions(mode="free"), budget_s=10.0, started_s=started)
     not_charged = _jit.compile_s_since(started)
     pipeline.order_program(prog, OrderingOptions(mode="free"))
-    # the exact solve gets all but the greedy solve's share (rewrite.order.GREEDY_SHARE)
-    exact = 1.0 - pipeline.GREEDY_SHARE
-    assert seen[0] <= exact * (10.0 - est) and seen[2] is None
-    assert seen[1] <= exact * (10.0 - est - 4.0 + not_charged)
+    # the exact solve gets what the greedy solve before it left, at least all but its share
+    # (rewrite.order.GREEDY_SHARE)
+    assert seen[0] <= 10.0 - est and seen[2] is None
+    assert seen[1] <= 10.0 - est - 4.0 + not_charged
     assert res.ok and res.summary["budget_s"] == 10.0
-    assert res.summary["solve_budget_s"] * exact == pytest.approx(seen[0])
+    solve_budget = res.summary["solve_budget_s"]
+    assert (1.0 - pipeline.GREEDY_SHARE) * solve_budget <= seen[0] <= solve_budget
 
 
 def test_one_slow_group_early_does_not_starve_the_groups_after_it(monkeypatch):
