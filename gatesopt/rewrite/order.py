@@ -143,8 +143,8 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     groups at ``slow`` times the runner's priors (every group would keep the slicer's order, late).
 
     With an exact formulation and the time guard, the greedy formulation solves first, with at
-    most ``GREEDY_SHARE`` of the solve's budget (not at all where that would not pay for passing
-    the groups), the exact one with the rest, and the guard prints per layer the slicer's, the
+    most ``GREEDY_SHARE`` of the solve's budget (not at all where that is not twice what passing
+    the groups takes on the machine as loaded), the exact one with the rest, and the guard prints per layer the slicer's, the
     exact or the greedy order, whichever the planner model says is faster (issue 36: never slower
     than greedy). Greedy's answer depends on the time it gets only through the groups it reaches:
     where it reaches them all it is the one ``--formulation greedy`` emits, and the guard's first
@@ -152,12 +152,20 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     again, the exact solve does not run: greedy's answer is printed, its groups at best
     "feasible" (``guard.GREEDY_TAKEN``)."""
     t0 = time.perf_counter() if started_s is None else started_s
+    t_b = time.perf_counter()
     problem = build(program, options or OrderingOptions())
+    build_s = time.perf_counter() - t_b - _jit.compile_s_since(t_b)
     # compiling numba kernels (a first run) is not the run's to budget: it counts no time
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
     solve_budget = solve_budget_s(budget_s, program.n_lines, spent)
-    # what passing every group takes with no time to search them (the runner's priors)
+    # what passing every group takes with no time to search them (the runner's priors), and
+    # that on this machine as loaded (``slow``, else the build's time against its quiet rate):
+    # the greedy solve first builds every group's link costs too (cura413_star_triangles20 free
+    # at a load of 12: 3.9 s for its 102 groups, every one of them out of time in its 1.8 s)
     pass_s = (slow or 1.0) * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
+    loaded = (slow if slow is not None
+              else max(1.0, build_s / (BUILD_S_PER_LINE * max(program.n_lines, 1))))
+    greedy_pass_s = loaded / (slow or 1.0) * pass_s
     if slow is not None and solve_budget is not None:
         if solve_budget < pass_s:
             raise NoTimeToOrder(solve_budget, pass_s, problem.n_groups)
@@ -165,7 +173,7 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     exact_budget = solve_budget
     cap = None if solve_budget is None else GREEDY_SHARE * solve_budget
     if (time_guard and "exact" in formulations.lookup(formulation).capabilities
-            and (cap is None or cap >= pass_s)):
+            and (cap is None or cap >= 2.0 * greedy_pass_s)):
         t_g = time.perf_counter()
         greedy = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=cap)
         if solve_budget is not None:
