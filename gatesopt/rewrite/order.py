@@ -85,16 +85,17 @@ FINISH_FIXED_S = 0.15
 BUILD_S_PER_LINE = 7e-6
 
 
-def solve_budget_s(budget_s: float | None, n_lines: int, spent_s: float) -> float | None:
+def solve_budget_s(budget_s: float | None, n_lines: int, spent_s: float,
+                   slow: float = 1.0) -> float | None:
     """What a budget for the whole run leaves the solve: ``budget_s`` less what is spent
     (``spent_s``: parse, build) and an estimate of what is to come after the solve
-    (``FINISH_S_PER_LINE`` per line of the file, ``FINISH_FIXED_S``), never below 0: with
-    nothing left every group keeps the slicer's order (``runner.OUT_OF_TIME``). (It once kept
-    a quarter of the budget however little was left: a late answer by design.) None (no budget)
-    stays None."""
+    (``FINISH_S_PER_LINE`` per line of the file, ``FINISH_FIXED_S``, at ``slow`` times those
+    quiet rates: ``rewrite.budget.slowdown_factor``), never below 0: with nothing left every
+    group keeps the slicer's order (``runner.OUT_OF_TIME``). (It once kept a quarter of the
+    budget however little was left: a late answer by design.) None (no budget) stays None."""
     if budget_s is None:
         return None
-    left = budget_s - spent_s - FINISH_FIXED_S - FINISH_S_PER_LINE * n_lines
+    left = budget_s - spent_s - slow * (FINISH_FIXED_S + FINISH_S_PER_LINE * n_lines)
     return max(0.0, left)
 
 
@@ -133,7 +134,8 @@ GREEDY_SHARE = 0.2
 def reorder(program: Program, options: OrderingOptions | None = None, *,
             formulation: str = "auto", time_limit_s: float = 2.0,
             budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
-            progress=None, started_s: float | None = None, slow: float | None = None):
+            progress=None, started_s: float | None = None, slow: float | None = None,
+            finish_slow: float = 1.0):
     """build -> [greedy] -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
     ``started_s``, default now) -> ``emit_guarded``, without verifying (``order_program`` does;
     ``rewrite.pipeline.run`` verifies its own output). Returns (problem, the solve's budget,
@@ -141,11 +143,13 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     each layer's order comes from). ``slow`` (``budget.slowdown_factor``; None: never): raise
     ``NoTimeToOrder`` after the build where the solve's budget would not pay for passing the
     groups at ``slow`` times the runner's priors (every group would keep the slicer's order, late).
+    ``finish_slow``: the work after the solve (emit, re-parse, verify) is estimated at that many
+    times its quiet rates (``order_program`` measures it).
 
     With an exact formulation and the time guard, the greedy formulation solves first, with at
     most ``GREEDY_SHARE`` of the solve's budget (not at all where that is not twice what passing
-    the groups takes on the machine as loaded), the exact one with the rest, and the guard prints per layer the slicer's, the
-    exact or the greedy order, whichever the planner model says is faster (issue 36: never slower
+    the groups takes on the machine as loaded), the exact one with the rest, and the guard prints
+    per layer the slicer's, the exact or the greedy order, whichever the planner model says is faster (issue 36: never slower
     than greedy). Greedy's answer depends on the time it gets only through the groups it reaches:
     where it reaches them all it is the one ``--formulation greedy`` emits, and the guard's first
     stage is that run's own guard. Where what greedy left would not pay for passing the groups
@@ -157,7 +161,7 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     build_s = time.perf_counter() - t_b - _jit.compile_s_since(t_b)
     # compiling numba kernels (a first run) is not the run's to budget: it counts no time
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
-    solve_budget = solve_budget_s(budget_s, program.n_lines, spent)
+    solve_budget = solve_budget_s(budget_s, program.n_lines, spent, finish_slow)
     # what passing every group takes with no time to search them (the runner's priors), and
     # that on this machine as loaded (``slow``, else the build's time against its quiet rate):
     # the greedy solve first builds every group's link costs too (cura413_star_triangles20 free
@@ -201,20 +205,26 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
                   formulation: str = "auto", time_limit_s: float = 2.0,
                   budget_s: float | None = None, workers: int = 1,
                   time_guard: bool = True, progress=None,
-                  started_s: float | None = None) -> OrderResult:
+                  started_s: float | None = None, slow: float = 1.0) -> OrderResult:
     """Re-order ``program``'s curves and verify the result (see module docstring).
     ``budget_s``: about how long the whole run may take, from ``started_s`` (a
     ``time.perf_counter()`` reading, e.g. taken before the file was parsed; default: now) to the
     verified result; the solve gets what ``solve_budget_s`` leaves it.
     ``time_guard``: a layer whose re-ordered print takes longer than the slicer's (planner
     model) keeps the slicer's order.
-    ``progress``: passed to ``ordering.layers.solve`` (called after each group)."""
+    ``progress``: passed to ``ordering.layers.solve`` (called after each group).
+    ``slow``: under a budget the work after the solve is estimated at that many times its quiet
+    rates: the wall / CPU seconds the machine gave the run so far (``rewrite.budget.
+    slowdown_factor``, as ``gatesopt solve`` measures it; ``cli.order`` passes it). A budget too
+    short for searching keeps every group's order unsearched (``runner.OUT_OF_TIME``): passing
+    them costs ~9 us per curve (the Cura bunny's 67,356: 0.61 s CPU)."""
     program.check_rewritable()
     t0 = time.perf_counter() if started_s is None else started_s
     options = options or OrderingOptions()
     problem, solve_budget, guarded = reorder(
         program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
-        workers=workers, time_guard=time_guard, progress=progress, started_s=t0)
+        workers=workers, time_guard=time_guard, progress=progress, started_s=t0,
+        finish_slow=slow)
     solution, text, out, slower_layers = guarded
     findings = tuple(check(program, out))
     summary = order_summary(program, out, problem, solution, options, slower_layers, findings,
