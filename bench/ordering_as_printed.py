@@ -1,17 +1,24 @@
 """Curve ordering priced as printed (issue 36, "Done when"): per file, safe and free mode, auto and
 greedy, the default budget, the print time under the planner model and the criteria of the issue.
 
-    python bench/ordering_as_printed.py run [--files GLOB] [--extra DIR] [--extra-files GLOB]
-        [--modes safe,free] [--formulations auto,greedy] [--budget 10] [--workers 1]
-        [--out bench/ordering-as-printed.jsonl]
+    python bench/ordering_as_printed.py all [--write docs/RESULTS.md]
+    python bench/ordering_as_printed.py run [--files GLOB] [--extra DIR | --no-extra]
+        [--extra-files GLOB] [--modes safe,free] [--formulations auto,greedy] [--budget 10]
+        [--workers 1] [--out bench/ordering-as-printed.jsonl]
     python bench/ordering_as_printed.py report [--out ...] [--write docs/RESULTS.md]
+
+``all``: the whole bench in one command -- a fresh jsonl (``--out``, emptied first) of every
+corpus file and every fresh slice (``--extra``, default ../fresh: bench/fresh_slices.py's 40
+real slicer outputs, the pin plates and object plates among them), both modes, auto and greedy,
+then ``report`` into ``--write``: one table per set and mode, and the criteria lines per set.
 
 ``run`` appends one JSON line per (file, mode, formulation): ``rewrite.order.order_program`` (build
 -> solve within the budget -> emit with the time guard -> re-parse -> verify), the whole run
 counted from before the parse as ``gatesopt order --budget`` counts it. Besides the report's keys
 it keeps the layers the time guard put back and how many groups proven optimal lay in them
-(a "proven optimal group reverted"). ``--extra DIR`` adds files from another folder (the fresh
-slices of bench/fresh_slices.py) under ``--extra-files``.
+(a "proven optimal group reverted"). ``--extra DIR`` (default ../fresh where it exists,
+``--no-extra``: the corpus only) adds files from another folder (the fresh slices of
+bench/fresh_slices.py) under ``--extra-files`` (default: the ``--files`` glob).
 
 ``report`` writes the section "## Curve ordering priced as printed" of docs/RESULTS.md: per file
 and mode the print time before, after (auto) and greedy's, travel, layers kept slower of the
@@ -32,6 +39,7 @@ from __future__ import annotations
 import argparse
 import fnmatch
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -41,6 +49,8 @@ from _markdown import publish  # bench/_markdown.py
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 INSTANCES = ROOT.parent / "shared" / "instances"
+#: bench/fresh_slices.py's real slicer outputs (manifest.tsv beside them)
+FRESH = ROOT.parent / "fresh"
 DEFAULT_OUT = ROOT / "bench" / "ordering-as-printed.jsonl"
 HEADING = "## Curve ordering priced as printed"
 #: issue 36: layers the time guard keeps because re-ordered they were slower, of re-orderable ones
@@ -54,10 +64,10 @@ TIME_TOL_S = 1e-3
 def _files(args) -> list[Path]:
     names = sorted(p for p in INSTANCES.iterdir()
                    if p.name.endswith((".gcode", ".gcode.gz")) and fnmatch.fnmatch(p.name, args.files))
-    if args.extra:
+    if args.extra and not args.no_extra:
         names += sorted(p for p in Path(args.extra).iterdir()
                         if p.name.endswith((".gcode", ".gcode.gz"))
-                        and fnmatch.fnmatch(p.name, args.extra_files))
+                        and fnmatch.fnmatch(p.name, args.extra_files or args.files))
     return names
 
 
@@ -73,7 +83,8 @@ def _row(res, path: Path, form: str, parse_s: float, run_s: float) -> dict:
                    and int(problem.group_layer[g]) in kept_set)
     s.pop("per_layer", None)
     s.update(file=path.name, folder=path.parent.name, formulation=form, parse_s=parse_s,
-             run_s=run_s, kept_slower_layers=kept, optimal_reverted=reverted)
+             run_s=run_s, kept_slower_layers=kept, optimal_reverted=reverted,
+             load_1min=os.getloadavg()[0])
     return s
 
 
@@ -144,9 +155,9 @@ def changed_layers(r: dict) -> int:
 
 def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], dict]:
     lines = [f"| file | print s before | auto after | greedy after | travel auto | travel greedy | "
-             f"kept slower / re-orderable layers | optimal reverted | groups optimal | worst gap | "
-             f"islands moved (runs, layers) | free-mode print | run s | verified |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+             f"kept slower / re-orderable layers | greedy layers | optimal reverted | groups optimal | "
+             f"worst gap | islands moved (runs, layers) | free mode: print, travel | run s | verified |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     tally = {"files": 0, "not_faster_than_before": [], "slower_than_greedy": [], "kept": 0,
              "reorderable": 0, "reverted": 0, "optimal": 0, "groups": 0, "unverified": [],
              "errors": [], "block_files": 0, "block_moved_files": 0}
@@ -158,7 +169,7 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
             continue
         if "error" in a:
             tally["errors"].append(name)
-            lines.append(f"| {name} | error: {a['error'][:80]} |" + " |" * 12)
+            lines.append(f"| {name} | error: {a['error'][:80]} |" + " |" * 13)
             continue
         tally["files"] += 1
         b, after = a["print_time_before_s"], a["print_time_after_s"]
@@ -166,7 +177,7 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
         if after > b + TIME_TOL_S:
             tally["not_faster_than_before"].append(name)
         if gafter is not None and after > gafter + TIME_TOL_S:
-            tally["slower_than_greedy"].append(name)
+            tally["slower_than_greedy"].append(f"{name} (+{after - gafter:.2f} s)")
         tally["kept"] += a["layers_kept_slower"]
         tally["reorderable"] += changed_layers(a)
         tally["reverted"] += a["optimal_reverted"]
@@ -181,14 +192,17 @@ def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], 
         n_opt = a["groups_optimal"] + a.get("block_orders_optimal", 0)
         islands = (f"{a['block_segments_moved']}/{a['block_segments']}, {a['block_layers_moved']}"
                    if a.get("block_segments") else "-")
-        free = (f"{fr['print_time_after_s']:,.1f} ({_pct(fr['print_time_after_s'], b)})"
-                if mode == "safe" and fr and "error" not in fr else "")
+        free = (f"{fr['print_time_after_s']:,.1f} ({_pct(fr['print_time_after_s'], b)}), "
+                f"{fr['travel_change_pct']:+.1f} %" if mode == "safe" and fr and "error" not in fr
+                else "")
+        tally.setdefault("loads", []).append(a.get("load_1min"))
         lines.append(
             f"| {name} | {b:,.1f} | {after:,.1f} ({_pct(after, b)}) | "
             + (f"{gafter:,.1f} ({_pct(gafter, b)})" if gafter is not None else "-") + " | "
             f"{a['travel_change_pct']:+.1f} % | "
             + (f"{g['travel_change_pct']:+.1f} %" if gafter is not None else "-") + " | "
-            f"{a['layers_kept_slower']} / {changed_layers(a)} | {a['optimal_reverted']} | "
+            f"{a['layers_kept_slower']} / {changed_layers(a)} | {a.get('layers_greedy', '-')} | "
+            f"{a['optimal_reverted']} | "
             f"{n_opt} / {n_groups} | {100 * a['worst_gap']:.2f} % | {islands} | {free} | {a['run_s']:.1f} | "
             f"{'yes' if a['verified'] else 'NO'}"
             + ("" if not g or g.get("verified", True) else " (greedy: NO)") + " |")
@@ -211,6 +225,9 @@ def _criteria(mode: str, t: dict) -> list[str]:
            f"{100 * proven:.1f} % (target >= {100 * PROVEN_MIN_SHARE:.0f} %: "
            f"{'met' if proven >= PROVEN_MIN_SHARE else 'NOT met'}); not verified: "
            f"{names(t['unverified'])}; errors: {names(t['errors'])}"]
+    loads = [x for x in t.get("loads", []) if x is not None]
+    if loads:
+        out[-1] += f"; load average (1 min) over the auto runs {min(loads):.1f}-{max(loads):.1f}"
     if mode == "safe":
         out[-1] += (f"; files with runs of >= 3 islands: {t['block_files']}, islands re-ordered in "
                     f"{t['block_moved_files']}")
@@ -222,10 +239,12 @@ def report(args) -> None:
     folders: dict = {}
     for (folder, name, _, _) in rows:
         folders.setdefault(folder, set()).add(name)
-    cmd = args.command_line or "python bench/ordering_as_printed.py run"
+    cmd = args.command_line or "python bench/ordering_as_printed.py all --write docs/RESULTS.md"
     sec = [HEADING, "",
-           "Command (from the repository root, one process, 2 cores shared with other jobs):", "",
-           "```", cmd, "python bench/ordering_as_printed.py report --write docs/RESULTS.md", "```", "",
+           "Command (from the repository root, one process, 2 cores shared with other jobs; `all` "
+           "= `run` over the corpus and the fresh slices of ../fresh, both modes, auto and greedy, "
+           "into a fresh jsonl, then `report`):", "",
+           "```", cmd, "```", "",
            "Print time = the planner model (`planner.plan`: acceleration, junction speeds, the "
            "file's limits) from the first layer on, measured on the parsed input and the parsed, "
            "verified output; objective: time (the default). *auto after* / *greedy after*: the "
@@ -237,16 +256,24 @@ def report(args) -> None:
            ">= 2 curves proven optimal, plus safe mode's block orders proven optimal, of all "
            "of them. *islands moved*: safe mode's runs of >= 3 islands whose order changed, of all "
            "such runs, and in how many layers. *free-mode print*: the same file in free mode "
-           "(auto), against the slicer's print time. *run s*: parse to verified output.", ""]
+           "(auto), print time against the slicer's, travel change. *greedy layers*: layers the "
+           "time guard printed in the greedy order (auto's run: the exact solve left them "
+           "unproven, or a proven order printed slower than greedy's under the planner model; "
+           "their groups count as not proven). *run s*: parse to verified output.", ""]
     crit = []
     for folder in sorted(folders):
         files = sorted(folders[folder])
+        crit.append(f"{folder} ({len(files)} files):")
         for mode in ("safe", "free"):
             lines, tally = _table(rows, folder, files, mode)
             if tally["files"] == 0 and not tally["errors"]:
+                crit.append(f"- {mode} mode: no rows")
                 continue
             sec += [f"### {folder}, {mode} mode", ""] + lines + [""]
-            crit += [f"{folder}:"] + _criteria(mode, tally)
+            crit += _criteria(mode, tally)
+    for missing, where in (("instances", INSTANCES), ("fresh", FRESH)):
+        if missing not in folders and where.exists():
+            crit.append(f"{missing}: not in this jsonl (run `all`, or `run` with its folder)")
     sec += ["### Issue 36 criteria, counted over the rows above", ""] + crit + [""]
     publish("\n".join(sec), args.write)
 
@@ -304,8 +331,9 @@ def main() -> None:
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")
     r.add_argument("--files", default="*")
-    r.add_argument("--extra", default=None)
-    r.add_argument("--extra-files", default="*")
+    r.add_argument("--extra", default=str(FRESH) if FRESH.exists() else None)
+    r.add_argument("--no-extra", action="store_true", help="the corpus only")
+    r.add_argument("--extra-files", default=None, help="default: the --files glob")
     r.add_argument("--modes", default="safe,free")
     r.add_argument("--formulations", default="auto,greedy")
     r.add_argument("--time-limit", type=float, default=2.0)
@@ -321,8 +349,27 @@ def main() -> None:
     o.add_argument("--after", required=True)
     o.add_argument("--write", default=None)
     o.add_argument("--command-line", default=None, help="the run commands to print in the section")
+    a = sub.add_parser("all")
+    a.add_argument("--extra", default=str(FRESH))
+    a.add_argument("--budget", type=float, default=10.0)
+    a.add_argument("--workers", type=int, default=1)
+    a.add_argument("--out", default=str(DEFAULT_OUT))
+    a.add_argument("--write", default=None)
     args = ap.parse_args()
-    {"run": run, "report": report, "objects": objects}[args.cmd](args)
+    {"run": run, "report": report, "objects": objects, "all": run_all}[args.cmd](args)
+
+
+def run_all(args) -> None:
+    """``all`` (module docstring): corpus and fresh slices, both modes, auto and greedy, into a
+    fresh ``--out``, then the report."""
+    out = Path(args.out)
+    if out.exists():
+        out.unlink()
+    run(argparse.Namespace(files="*", extra=args.extra, no_extra=False, extra_files="*",
+                           modes="safe,free", formulations="auto,greedy", time_limit=2.0,
+                           budget=args.budget, workers=args.workers, out=str(out)))
+    cmd = "python bench/ordering_as_printed.py all" + (f" --write {args.write}" if args.write else "")
+    report(argparse.Namespace(out=str(out), write=args.write, command_line=cmd))
 
 
 if __name__ == "__main__":

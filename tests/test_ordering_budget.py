@@ -377,7 +377,8 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
     real = pipeline.solve
 
     def spy(problem, formulation="auto", **kw):
-        seen.append(kw["budget_s"])
+        if formulation != "greedy":     # (the greedy solve before the exact one)
+            seen.append(kw["budget_s"])
         return real(problem, formulation, **kw)
 
     monkeypatch.setattr(pipeline, "solve", spy)
@@ -390,9 +391,13 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
     pipeline.order_program(prog, OrderingOptions(mode="free"), budget_s=10.0, started_s=started)
     not_charged = _jit.compile_s_since(started)
     pipeline.order_program(prog, OrderingOptions(mode="free"))
+    # the exact solve gets what the greedy solve before it left, at least all but its share
+    # (rewrite.order.GREEDY_SHARE)
     assert seen[0] <= 10.0 - est and seen[2] is None
     assert seen[1] <= 10.0 - est - 4.0 + not_charged
-    assert res.ok and res.summary["budget_s"] == 10.0 and res.summary["solve_budget_s"] == seen[0]
+    assert res.ok and res.summary["budget_s"] == 10.0
+    solve_budget = res.summary["solve_budget_s"]
+    assert (1.0 - pipeline.GREEDY_SHARE) * solve_budget <= seen[0] <= solve_budget
 
 
 def test_one_slow_group_early_does_not_starve_the_groups_after_it(monkeypatch):

@@ -1,25 +1,34 @@
-"""The time guard (formulations/ordering.md, "Time guard"): which re-ordered layers keep the
-slicer's order, decided on what the planner model says the emitted file takes.
+"""The time guard (formulations/ordering.md, "Time guard"): per layer, which order the emitted
+file prints -- the slicer's, the solver's, or the greedy one -- decided on what the planner model
+says the emitted file takes.
 
 A layer's re-ordering changes more than its own steps: where it ends moves the travel into the
 next layer (the layer change), and where it starts moves the travel from the layer before. The
 planner's time of the file is split at extrusions (``layer_parts_s``): per layer, ``inner`` (its
 first extruding step to its last) and ``after`` (the steps from there to the next layer's first
-extrusion: the layer change, which belongs to both layers). With one state per layer, s = 1
-re-ordered, s = 0 put back,
+extrusion: the layer change, which belongs to both layers). One stage of the guard has one state
+per layer, s = 1 the candidate's order, s = 0 the base's (the slicer's, or an earlier stage's
+answer):
 
     T = prefix + sum_k inner_k(s_k) + sum_k after_k(s_k, s_k+1)
 
-and the guard picks the states that minimise T (a shortest path over the layers, ``_best_states``)
-from measured terms: the slicer's file gives every (0, 0) term, the re-ordered file every (1, 1)
-term, and two more emits (``_alternate``: re-ordered layers alternately put back) the (1, 0) and
-(0, 1) terms of adjacent re-ordered layers. Comparing layer by layer instead put back a layer
-whose new exit made the layer change shorter -- a gain the next layer's time shows (measured:
+and picks the states that minimise T (a shortest path over the layers, ``_best_states``) from
+measured terms: the base's file gives every (0, 0) term, the candidate's file every (1, 1) term,
+and two more emits (``_alternate``: changed layers alternately the base's) the (1, 0) and (0, 1)
+terms of adjacent changed layers. Comparing layer by layer instead put back a layer whose new
+exit made the layer change shorter -- a gain the next layer's time shows (measured:
 prusa25_star_rect15_m82 safe, 46 layers 44 ms slower each, the next 71 ms faster).
 
-The states are then emitted and measured; of every file measured (the slicer's, the re-ordered,
-the alternating ones, the chosen) the shortest print is returned: the planner's look-ahead joins
-the terms with a hair of difference, and the answer is never slower than any measured one.
+The states are then emitted and measured; of every file measured (the base's, the candidate's,
+the alternating ones, the chosen) the shortest print is the stage's answer: the planner's
+look-ahead joins the terms with a hair of difference, and the answer is never slower than any
+measured one, the base's included.
+
+With a greedy solution beside the solver's (``emit_guarded(greedy=...)``, issue 36: never slower
+than greedy), two stages run: the slicer's order against the greedy one (in the layers where the
+greedy order may be taken), then that answer against the solver's. So the file returned is never
+slower (planner model, up to ``GUARD_TOL_S`` per layer the look-ahead joins) than the slicer's,
+than the greedy file as its own guard would return it, nor than the solver's.
 """
 from __future__ import annotations
 
@@ -29,15 +38,43 @@ import numpy as np
 
 from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
-from ..ordering.problem import OrderingProblem, OrderingSolution
+from ..ordering.problem import GroupSolution, OrderingProblem, OrderingSolution
 from ..parse import parse
 from ..planner import plan
 from ..program import Program
+from ..solvers import Status
 
 #: a layer counts as slower re-ordered only by more than this (s): the planner's look-ahead runs
 #: across layers, so a layer whose own text did not change can differ by a hair where a moved
 #: neighbour meets it
 GUARD_TOL_S = 1e-3
+#: where each layer's order comes from in the guard's answer (``Guarded.source``)
+FROM_SLICER, FROM_SOLVER, FROM_GREEDY = 0, 1, 2
+#: the formulation a group printed in the greedy order is reported with (its status: at best
+#: feasible, ``emit_guarded``)
+GREEDY_TAKEN = "greedy (time guard)"
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Guarded:
+    """What ``emit_guarded`` returns: the solution emitted (per layer the order the guard chose,
+    each group with the answer printed), its text and parsed file, the layers the solver changed
+    that keep the slicer's order because re-ordered they printed slower (``kept``), and per layer
+    where its order comes from (``source``: ``FROM_SLICER``, ``FROM_SOLVER``, ``FROM_GREEDY``)."""
+
+    solution: OrderingSolution
+    text: str
+    output: Program
+    kept: np.ndarray
+    source: np.ndarray
+
+    def __iter__(self):     # (solution, text, output, kept), as the guard returned it before
+        return iter((self.solution, self.text, self.output, self.kept))
+
+    @property
+    def greedy_layers(self) -> int:
+        """Layers printed in the greedy order (another order than the solver's)."""
+        return int(np.count_nonzero(self.source == FROM_GREEDY))
 
 
 def step_times_s(program: Program) -> np.ndarray:
@@ -80,34 +117,68 @@ def layer_parts_s(program: Program, durations_s: np.ndarray | None = None):
     return inner, after, float(c[-1])
 
 
-def keep_layers(problem: OrderingProblem, solution: OrderingSolution, layers) -> OrderingSolution:
-    """``solution`` with the curves of ``layers`` back in the slicer's order and direction.
-    A layer's curves are one contiguous block of the print order, and curve numbers grow with
-    the layer, so sorting the positions they hold restores each block."""
-    problem = problem.program_problem
-    order = solution.curve_order.copy()
-    at = np.isin(problem.curve_layer[order], np.asarray(layers, np.int64))
-    order[at] = np.sort(order[at])
-    rev, seam = solution.curve_reversed.copy(), solution.curve_seam.copy()
-    rev[order[at]] = False
-    seam[order[at]] = 0
+def mix_layers(problem: OrderingProblem, base: OrderingSolution | None, solution: OrderingSolution,
+               states) -> OrderingSolution:
+    """Per layer, ``solution``'s order where ``states`` is 1, else ``base``'s (None: the slicer's
+    order and direction); each group's answer from the solution its layer is taken from (from
+    ``solution`` where ``base`` is None). A layer's curves are one contiguous block of the print
+    order in every solution, at the same positions (curve numbers grow with the layer), so the
+    blocks are taken whole."""
+    pp = problem.program_problem
+    n = pp.n_curves
+    states = np.asarray(states, np.int64)
+    take = states[pp.curve_layer] == 1          # per position (the slicer's: position = curve)
+    for s in (base, solution):
+        if s is not None and not np.array_equal(pp.curve_layer[s.curve_order], pp.curve_layer):
+            raise ValueError("a solution whose layers are not contiguous blocks in layer order")
+    if base is None:
+        order, rev, seam = np.arange(n), np.zeros(n, bool), np.zeros(n, np.int64)
+        groups = solution.groups
+    else:
+        order, rev, seam = base.curve_order, base.curve_reversed, base.curve_seam
+        g_take = states[np.asarray(problem.group_layer, np.int64)] == 1
+        groups = tuple(b if t else a for a, b, t in zip(base.groups, solution.groups, g_take))
+    order = np.where(take, solution.curve_order, order)
+    rev = np.where(take, solution.curve_reversed, rev)          # per curve: take is per layer too
+    seam = np.where(take, solution.curve_seam, seam)
     return dataclasses.replace(solution, curve_order=order, curve_reversed=rev, curve_seam=seam,
-                               travel_after_mm=model_travel_mm(problem, order, rev, seam),
-                               cost_after=problem.order_cost(order, rev, seam))
+                               groups=groups, travel_after_mm=model_travel_mm(pp, order, rev, seam),
+                               cost_after=pp.order_cost(order, rev, seam))
+
+
+def keep_layers(problem: OrderingProblem, solution: OrderingSolution, layers) -> OrderingSolution:
+    """``solution`` with the curves of ``layers`` back in the slicer's order and direction."""
+    pp = problem.program_problem
+    n_layers = int(pp.curve_layer.max()) + 1 if pp.n_curves else 0
+    states = np.ones(n_layers, np.int64)
+    states[np.asarray(layers, np.int64)] = 0
+    return mix_layers(problem, None, solution, states)
+
+
+def differing_layers(problem: OrderingProblem, a: OrderingSolution | None,
+                     b: OrderingSolution | None, n_layers: int | None = None) -> np.ndarray:
+    """(n_layers,) bool: layers whose curves ``a`` and ``b`` print in another order, direction or
+    from another seam (None: the slicer's order)."""
+    pp = problem.program_problem
+    n = pp.n_curves
+    L = max(n_layers or 0, int(pp.curve_layer.max()) + 1 if n else 0)
+
+    def arrays(s):
+        if s is None:
+            return np.arange(n), np.zeros(n, bool), np.zeros(n, np.int64)
+        return (np.asarray(s.curve_order, np.int64), np.asarray(s.curve_reversed, bool),
+                np.asarray(s.curve_seam, np.int64))
+    (oa, ra, sa), (ob, rb, sb) = arrays(a), arrays(b)
+    out = np.zeros(L, bool)
+    # positions hold the same layer in both (``mix_layers``), and a curve's layer is its own
+    out[np.unique(pp.curve_layer[(oa != ob) | (ra != rb) | (sa != sb)])] = True
+    return out
 
 
 def changed_layers(problem: OrderingProblem, solution: OrderingSolution) -> np.ndarray:
     """(n_layers,) bool: layers whose curves ``solution`` prints in another order, direction or
     from another seam than the slicer."""
-    problem = problem.program_problem
-    n = problem.n_curves
-    order = np.asarray(solution.curve_order, np.int64)
-    moved = np.zeros(n, bool)
-    moved[order] = order != np.arange(n)
-    turned = np.asarray(solution.curve_reversed, bool) | (np.asarray(solution.curve_seam) != 0)
-    out = np.zeros(max(problem.n_layers, int(problem.curve_layer.max()) + 1 if n else 0), bool)
-    out[np.unique(problem.curve_layer[moved | turned])] = True
-    return out
+    return differing_layers(problem, None, solution)
 
 
 class _Terms:
@@ -173,59 +244,122 @@ def _best_states(terms: _Terms, has: np.ndarray, changed: np.ndarray) -> tuple[n
     return states, total
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class _Measured:
+    """An emitted file: the solution, its text, the parsed file and its step times (planner)."""
+
+    solution: OrderingSolution | None
+    text: str
+    output: Program
+    durations_s: np.ndarray
+
+    @property
+    def total_s(self) -> float:
+        return float(self.durations_s.sum())
+
+
+def _stage(program: Program, problem: OrderingProblem, base: _Measured, solution: OrderingSolution,
+           changed: np.ndarray, emitted) -> tuple[_Measured, np.ndarray]:
+    """One stage (module docstring): per layer ``base``'s order (0) or ``solution``'s (1), where
+    ``changed`` (the layers in which they differ). Returns the fastest file measured, never slower
+    than ``base``'s beyond ``GUARD_TOL_S``, and its states."""
+    L = program.n_layers
+    changed = np.concatenate((changed[:L], np.zeros(max(0, L - len(changed)), bool)))
+    zero = np.zeros(L, np.int64)
+    if not changed.any():
+        return base, zero
+
+    def measured(states) -> _Measured:
+        sol = mix_layers(problem, base.solution, solution, states)
+        text, out = emitted(sol)
+        return _Measured(sol, text, out, step_times_s(out))
+    states1 = changed.astype(np.int64)
+    first = measured(states1)
+    if first.output.n_layers != L:
+        return first, states1           # (the layers no longer line up: no guard)
+    if np.all(layer_times_s(first.output, first.durations_s)
+              <= layer_times_s(base.output, base.durations_s) + GUARD_TOL_S):
+        return first, states1
+    p0 = layer_parts_s(base.output, base.durations_s)
+    p1 = layer_parts_s(first.output, first.durations_s)
+    tried = [(first.total_s, 1, first, states1)]
+    if p0 is not None and p1 is not None:
+        has = (p0[0] > 0) | (p0[1] > 0) | changed
+        terms = _Terms(L)
+        terms.add(p0, zero, has)
+        terms.add(p1, states1, has)
+        for states in _alternate(changed, has):
+            m = measured(states)
+            tried.append((m.total_s, 2, m, states))
+            parts = layer_parts_s(m.output, m.durations_s) if m.output.n_layers == L else None
+            if parts is not None:
+                terms.add(parts, states, has)
+        states, _ = _best_states(terms, has, changed)
+        if not np.array_equal(states, states1):
+            m = measured(states)
+            tried.append((m.total_s, 0, m, states))
+    best = min(tried, key=lambda x: (x[0], x[1]))
+    if best[0] <= base.total_s + GUARD_TOL_S:
+        return best[2], best[3]
+    return base, zero       # every state measured prints slower than the base: its order throughout
+
+
+def greedy_taken(gs: GroupSolution) -> GroupSolution:
+    """A greedy answer as printed by the guard: at best feasible (its proof, if the bound closed,
+    was for the start its own chain gave the group; the layer before may now end elsewhere)."""
+    status = Status.FEASIBLE if gs.status == Status.OPTIMAL else gs.status
+    form = gs.formulation if gs.formulation.startswith("kept") else GREEDY_TAKEN
+    return GroupSolution.make(gs.order, gs.objective, gs.bound, status, gs.solve_s, form)
+
+
 def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingSolution,
-                 time_guard: bool = True):
-    """Emit and re-parse; with ``time_guard``, the re-ordered layers that do not pay for
-    themselves keep the slicer's order (module docstring). Returns (solution, text, output, the
-    layers put back)."""
+                 time_guard: bool = True, greedy: OrderingSolution | None = None,
+                 greedy_layers=None) -> Guarded:
+    """Emit and re-parse ``solution``; with ``time_guard``, per layer the order the planner model
+    says prints fastest (module docstring): the slicer's where the re-ordered layer does not pay
+    for itself, and, with ``greedy`` (a greedy solution of the same problem), the greedy order in
+    the layers of ``greedy_layers`` ((n_layers,) bool; None: every layer) where it prints faster.
+    A group printed in the greedy order is reported with its greedy answer, at best "feasible"
+    (``GREEDY_TAKEN``)."""
     memo: dict = {}                     # layers that did not change are not emitted again
+    L = program.n_layers
 
     def emitted(sol):
         text = emit(program, problem, sol, memo)
         return text, parse(text, source=f"{program.source} (re-ordered)")
-    text, out = emitted(solution)
-    none = np.zeros(0, np.int64)
-    if not time_guard or out.n_layers != program.n_layers:
-        return solution, text, out, none
+    if not time_guard:
+        text, out = emitted(solution)
+        return Guarded(solution, text, out, np.zeros(0, np.int64), np.full(L, FROM_SOLVER))
     # a safety net: the time objective prices each travel as emitted (cost.py), but not every
     # junction of the planner (formulations/ordering.md, "Time guard")
-    before = step_times_s(program)
-    after = step_times_s(out)
-    if np.all(layer_times_s(out, after) <= layer_times_s(program, before) + GUARD_TOL_S):
-        return solution, text, out, none
-    changed = changed_layers(problem, solution)[:program.n_layers]
-    changed = np.concatenate((changed, np.zeros(program.n_layers - len(changed), bool)))
-    p0, p1 = layer_parts_s(program, before), layer_parts_s(out, after)
-    t0 = float(before.sum())
-    tried = [(float(after.sum()), 1, (solution, text, out, none))]
-
-    def put_back(states):
-        kept = np.flatnonzero(changed & (states == 0))
-        sol = keep_layers(problem, solution, kept) if len(kept) else solution
-        return (sol, *emitted(sol), kept)
-    if p0 is not None and p1 is not None:
-        has = (p0[0] > 0) | (p0[1] > 0) | changed
-        terms = _Terms(program.n_layers)
-        terms.add(p0, np.zeros(program.n_layers, np.int64), has)
-        terms.add(p1, changed.astype(np.int64), has)
-        for states in _alternate(changed, has):
-            state = put_back(states)
-            d = step_times_s(state[2])
-            tried.append((float(d.sum()), 2, state))
-            parts = layer_parts_s(state[2], d) if state[2].n_layers == program.n_layers else None
-            if parts is not None:
-                terms.add(parts, states, has)
-        states, _ = _best_states(terms, has, changed)
-        if not np.array_equal(states, changed.astype(np.int64)):
-            state = put_back(states)
-            tried.append((float(step_times_s(state[2]).sum()), 0, state))
-    best = min(tried, key=lambda x: (x[0], x[1]))
-    if best[0] <= t0 + GUARD_TOL_S:
-        return best[2]
-    # every state measured prints slower than the slicer's: its order throughout
-    kept = np.flatnonzero(changed)
-    sol = keep_layers(problem, solution, np.arange(program.n_layers))
-    return (sol, *emitted(sol), kept)
+    slicer = _Measured(None, "", program, step_times_s(program))
+    base = slicer
+    if greedy is not None:
+        may = np.ones(L, bool) if greedy_layers is None else np.asarray(greedy_layers, bool)[:L]
+        base, _ = _stage(program, problem, slicer, greedy, changed_layers(problem, greedy)[:L] & may,
+                         emitted)
+    best, _ = _stage(program, problem, base, solution,
+                     differing_layers(problem, base.solution, solution, L), emitted)
+    if best.solution is None:
+        # the slicer's file throughout: emitted as the solution with every layer put back
+        sol = keep_layers(problem, solution, np.arange(L))
+        best = _Measured(sol, *emitted(sol), slicer.durations_s)
+    # per layer where its order comes from, by what it prints: the solver's answer wherever the
+    # layer prints it (also where that is the slicer's or the greedy order)
+    final = best.solution
+    same = ~differing_layers(problem, final, solution, L)[:L]
+    source = np.where(same, FROM_SOLVER, FROM_SLICER)
+    groups = solution.groups
+    if greedy is not None:
+        source[~same & ~differing_layers(problem, final, greedy, L)[:L]] = FROM_GREEDY
+        at = source[np.asarray(problem.group_layer, np.int64)] == FROM_GREEDY
+        decided = problem.group_reorderable
+        groups = tuple((greedy_taken(gg) if d else gg) if t else gs
+                       for gs, gg, t, d in zip(solution.groups, greedy.groups, at, decided))
+    sol = dataclasses.replace(final, groups=groups, formulation=solution.formulation,
+                              solve_s=solution.solve_s)
+    kept = np.flatnonzero(changed_layers(problem, solution)[:L] & (source == FROM_SLICER))
+    return Guarded(sol, best.text, best.output, kept, source)
 
 
 def _alternate(changed: np.ndarray, has: np.ndarray):

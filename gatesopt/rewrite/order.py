@@ -8,12 +8,14 @@ model travel is there too, as ``model_travel_*_mm``.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _jit
+from ..ordering import formulations
 from ..ordering.groups import build
 from ..ordering.layers import solve
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
@@ -21,10 +23,11 @@ from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
 from ..ordering.runner import OUT_OF_TIME
 from ..ordering.travel_stats import runs, travel_mask
 from ..program import Program
+from ..solvers import stop_requested
 from ..verify.ordering import check
 from .figures import figures
-from .guard import (GUARD_TOL_S, emit_guarded, keep_layers, layer_times_s,  # noqa: F401 (re-exported)
-                    step_times_s)
+from .guard import (FROM_GREEDY, FROM_SOLVER, GUARD_TOL_S, emit_guarded,  # noqa: F401 (re-exported)
+                    greedy_taken, keep_layers, layer_times_s, step_times_s)
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,32 +123,82 @@ class NoTimeToOrder(Exception):
         self.solve_budget_s, self.pass_s, self.n_groups = solve_budget_s, pass_s, n_groups
 
 
+#: the share of the solve's budget the greedy solve may take before an exact formulation solves
+#: (``reorder``): the greedy answer the time guard weighs the exact one against. Greedy takes
+#: 0.03-0.5 s on most corpus files (measured, budget 8 s, load ~4), 2-4 s on the largest
+#: (cura413_xend_zigzag100, prusa25_bunny_triangles15_lh01), and does not finish real_cura591 or
+#: the Cura bunny in 8 s; what it does not use goes to the exact solve
+GREEDY_SHARE = 0.2
+
+
 def reorder(program: Program, options: OrderingOptions | None = None, *,
             formulation: str = "auto", time_limit_s: float = 2.0,
             budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
             progress=None, started_s: float | None = None, slow: float | None = None,
             finish_slow: float = 1.0):
-    """build -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
+    """build -> [greedy] -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
     ``started_s``, default now) -> ``emit_guarded``, without verifying (``order_program`` does;
-    ``rewrite.pipeline.run`` verifies its own output). Returns (problem, the solve's budget, solution,
-    text, parsed output, layers the time guard put back). ``slow`` (``budget.slowdown_factor``;
-    None: never): raise ``NoTimeToOrder`` after the build where the solve's budget would not pay
-    for passing the groups at ``slow`` times the runner's priors (every group would keep the
-    slicer's order, late). ``finish_slow``: the work after the solve (emit, re-parse, verify) is
-    estimated at that many times its quiet rates (``order_program`` measures it)."""
+    ``rewrite.pipeline.run`` verifies its own output). Returns (problem, the solve's budget,
+    ``guard.Guarded``: the solution emitted, its text and parsed file, the layers put back, where
+    each layer's order comes from). ``slow`` (``budget.slowdown_factor``; None: never): raise
+    ``NoTimeToOrder`` after the build where the solve's budget would not pay for passing the
+    groups at ``slow`` times the runner's priors (every group would keep the slicer's order, late).
+    ``finish_slow``: the work after the solve (emit, re-parse, verify) is estimated at that many
+    times its quiet rates (``order_program`` measures it).
+
+    With an exact formulation and the time guard, the greedy formulation solves first, with at
+    most ``GREEDY_SHARE`` of the solve's budget (not at all where that is not twice what passing
+    the groups takes on the machine as loaded), the exact one with the rest, and the guard prints
+    per layer the slicer's, the exact or the greedy order, whichever the planner model says is faster (issue 36: never slower
+    than greedy). Greedy's answer depends on the time it gets only through the groups it reaches:
+    where it reaches them all it is the one ``--formulation greedy`` emits, and the guard's first
+    stage is that run's own guard. Where what greedy left would not pay for passing the groups
+    again, the exact solve does not run: greedy's answer is printed, its groups at best
+    "feasible" (``guard.GREEDY_TAKEN``)."""
     t0 = time.perf_counter() if started_s is None else started_s
+    t_b = time.perf_counter()
     problem = build(program, options or OrderingOptions())
+    build_s = time.perf_counter() - t_b - _jit.compile_s_since(t_b)
     # compiling numba kernels (a first run) is not the run's to budget: it counts no time
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
     solve_budget = solve_budget_s(budget_s, program.n_lines, spent, finish_slow)
+    # what passing every group takes with no time to search them (the runner's priors), and
+    # that on this machine as loaded (``slow``, else the build's time against its quiet rate):
+    # the greedy solve first builds every group's link costs too (cura413_star_triangles20 free
+    # at a load of 12: 3.9 s for its 102 groups, every one of them out of time in its 1.8 s)
+    pass_s = (slow or 1.0) * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
+    loaded = (slow if slow is not None
+              else max(1.0, build_s / (BUILD_S_PER_LINE * max(program.n_lines, 1))))
+    greedy_pass_s = loaded / (slow or 1.0) * pass_s
     if slow is not None and solve_budget is not None:
-        pass_s = slow * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
         if solve_budget < pass_s:
             raise NoTimeToOrder(solve_budget, pass_s, problem.n_groups)
-    solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=solve_budget,
+    greedy = None
+    exact_budget = solve_budget
+    cap = None if solve_budget is None else GREEDY_SHARE * solve_budget
+    if (time_guard and "exact" in formulations.lookup(formulation).capabilities
+            and (cap is None or cap >= 2.0 * greedy_pass_s)):
+        t_g = time.perf_counter()
+        greedy = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=cap)
+        if solve_budget is not None:
+            exact_budget = max(0.0, solve_budget - (time.perf_counter() - t_g
+                                                    - _jit.compile_s_since(t_g)))
+    if greedy is not None and (stop_requested() or (exact_budget is not None
+                                                    and exact_budget < pass_s)):
+        # no time left to pass the groups again (or a Ctrl-C): greedy's answer is the solve's
+        guarded = emit_guarded(program, problem, greedy, time_guard)
+        decided = problem.group_reorderable
+        groups = tuple(greedy_taken(gs) if d else gs
+                       for gs, d in zip(guarded.solution.groups, decided))
+        sol = dataclasses.replace(guarded.solution, groups=groups, formulation=formulation)
+        source = np.where(guarded.source == FROM_SOLVER, FROM_GREEDY, guarded.source)
+        return problem, solve_budget, dataclasses.replace(guarded, solution=sol, source=source)
+    solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=exact_budget,
                      workers=workers, progress=progress)
-    solution, text, out, kept = emit_guarded(program, problem, solution, time_guard)
-    return problem, solve_budget, solution, text, out, kept
+    if greedy is not None:
+        solution = dataclasses.replace(solution, solve_s=solution.solve_s + greedy.solve_s)
+    guarded = emit_guarded(program, problem, solution, time_guard, greedy=greedy)
+    return problem, solve_budget, guarded
 
 
 def order_program(program: Program, options: OrderingOptions | None = None, *,
@@ -168,15 +221,16 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     program.check_rewritable()
     t0 = time.perf_counter() if started_s is None else started_s
     options = options or OrderingOptions()
-    problem, solve_budget, solution, text, out, slower_layers = reorder(
+    problem, solve_budget, guarded = reorder(
         program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
         workers=workers, time_guard=time_guard, progress=progress, started_s=t0,
         finish_slow=slow)
+    solution, text, out, slower_layers = guarded
     findings = tuple(check(program, out))
     summary = order_summary(program, out, problem, solution, options, slower_layers, findings,
                             formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
                             solve_budget_s=solve_budget, workers=workers,
-                            wall_s=time.perf_counter() - t0)
+                            wall_s=time.perf_counter() - t0, greedy_layers=guarded.greedy_layers)
     return OrderResult(program, problem, solution, text, out, findings, summary)
 
 
@@ -253,7 +307,7 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
                   solution: OrderingSolution, options: OrderingOptions, slower_layers,
                   findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
                   solve_budget_s: float | None, workers: int, wall_s: float,
-                  with_figures: bool = True) -> dict:
+                  with_figures: bool = True, greedy_layers: int = 0) -> dict:
     """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` has it under
     ``"ordering"``): the figures of the input and the output (``rewrite.figures``: travel,
     travels and retractions measured on the parsed files, print time under the planner model;
@@ -302,6 +356,10 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         "layers_optimal": lay_counts["optimal"], "layers_feasible": lay_counts["feasible"],
         "layers_fallback": lay_counts["fallback"], "layers_kept": lay_counts["kept"],
         "layers_kept_slower": int(len(slower_layers)),
+        # layers the time guard printed in the greedy order: the exact solve left them unproven
+        # and the greedy order printed faster (``guard.emit_guarded``; their groups: at best
+        # feasible, formulation ``guard.GREEDY_TAKEN``)
+        "layers_greedy": int(greedy_layers),
         "worst_gap": float(max((gs.gap for _, gs in decided), default=0.0)),
         "solve_s": solution.solve_s, "wall_s": wall_s,
         "verified": not findings, "findings": [str(f) for f in findings],

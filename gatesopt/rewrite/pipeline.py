@@ -165,7 +165,7 @@ def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
     t0 = time.perf_counter()      # the ordering's own clock (its report's wall_s)
     options = options or OrderingOptions()
     try:
-        problem, solve_budget, solution, _, out, slower = reorder(
+        problem, solve_budget, guarded = reorder(
             program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
             workers=workers, progress=progress, started_s=t0 if started_s is None else started_s,
             slow=slow)
@@ -180,6 +180,7 @@ def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
         return (program, False, f"curve ordering interrupted (Ctrl-C) after "
                 f"{time.perf_counter() - t0:.1f} s: the slicer's order kept", None, None,
                 time.perf_counter() - t0)
+    solution, _, out, slower = guarded
     wall_s = time.perf_counter() - t0
     notes = [f"curve ordering: {kept_slower_note(len(slower))}"] if len(slower) else []
     late = out_of_time_groups(problem, solution)
@@ -193,7 +194,7 @@ def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
         return order_summary(program, out, problem, solution, options, slower, findings,
                              formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
                              solve_budget_s=solve_budget, workers=workers, wall_s=wall_s,
-                             with_figures=False)
+                             with_figures=False, greedy_layers=guarded.greedy_layers)
     return out, True, note, problem, summarize, solution.solve_s
 
 
