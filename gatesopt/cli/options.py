@@ -114,7 +114,9 @@ def add_gating_options(p) -> None:
     p.add_argument("--max-added-lines-pct", type=float, default=None, metavar="P",
                    help="budget: at most P %% more lines")
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
-                   help="solver time limit in seconds (milp, cpsat; default 60)")
+                   help="time limit of the gating solves together, rotation search included "
+                        "(milp, cpsat; default 60); in `solve` and `batch` within --budget, which "
+                        "covers the whole run")
     p.add_argument("--profile", default="paper", metavar="NAME|TOML",
                    help="energy profile: shipped name or TOML file (default: paper)")
     p.add_argument("--threads", type=int, default=2, metavar="N",
