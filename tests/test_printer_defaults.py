@@ -235,7 +235,7 @@ def test_batch_and_compare_read_each_file_s_firmware(tmp_path, capsys):
     rows = rows["rows"] if isinstance(rows, dict) else rows
     assert sorted((r["file"].rsplit("/", 1)[1], r["firmware"]) for r in rows) == [("a.gcode", "marlin"),
                                                                                    ("b.gcode", "klipper")]
-    assert all("stalls add at most 1 %" in r["firmware_line"] for r in rows)
+    assert all("at most 1 % longer than as sliced" in r["firmware_line"] for r in rows)
     capsys.readouterr()
     assert main(["compare", str(a), "--formulations", "dp"]) == 0
     assert "firmware marlin: read flavor setting" in capsys.readouterr().out
