@@ -118,3 +118,27 @@ def test_the_budget_is_on_the_file_as_given_in_the_planner_model():
         max_added_time_pct=1.0))
     assert s["print_time_after_s"] <= limit * (1 + 1e-9)
     assert s["added_time_pct"] == pytest.approx(100 * (s["print_time_after_s"] / s["print_time_before_s"] - 1))
+
+
+def test_an_output_over_the_limit_is_solved_again_with_less(monkeypatch):
+    """Where the planner prices the stalls dearer than the gating problem's model (a Marlin stop
+    from a fast travel costs more than its 0.05 s), the output is solved again with a smaller
+    stall budget until its print time is within the limit (``_within_limit``). Here the planner is
+    made to charge 0.5 s per M18 line; without the check the output would be over."""
+    from conftest import PROJECT_INSTANCES
+    from gatesopt.gating.options import GatingOptions
+    from gatesopt.rewrite import pipeline
+    program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
+    real = pipeline.print_time_s
+
+    def dear(p, firmware="3dgates"):
+        m18 = sum(1 for i in range(p.n_lines) if p.line_text(i).startswith("M18"))
+        return real(p, firmware) + 0.5 * m18
+
+    monkeypatch.setattr(pipeline, "print_time_s", dear)
+    o = GatingOptions.for_firmware("marlin", max_added_time_pct=1.0, rotate="none")
+    res = pipeline.run(program, o, order=False)
+    limit = 1.01 * dear(program, "marlin")
+    assert res.report.ok and dear(res.output, "marlin") <= limit * (1 + 1e-9)
+    assert any("solved again" in n for n in res.notes)
+    assert res.solution.lines_added > 0     # gated still, with fewer stalls
