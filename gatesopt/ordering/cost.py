@@ -32,6 +32,7 @@ formulations/ordering.md says which bounds rely on what.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numba
 import numpy as np
@@ -41,8 +42,8 @@ from ..limits import MachineLimits
 from ..program import MOTION_KINDS, Program
 from .gap_plan import (MOVE_EPS_MM, REBUILT_MAX_MOVES, W_COLS, W_F, W_J, W_JREADY, W_L,
                        e_row, gaps_planned, junction, plan_moves_s, prep_move, same_z_s)
-from .gaps import REVERSE_EPS, ReversibleGaps
-from .layout import LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, Layout
+from .gaps import REVERSE_EPS, GapFacts, ReversibleGaps
+from .layout import Layout
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
 
@@ -260,37 +261,6 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
     return t
 
 
-@dataclass(frozen=True, eq=False)
-class GapFacts:
-    """What the slicer's gaps before each curve hold, as ``gaps.rebuilt_gap`` sums it: per curve
-    c the gap between curve c - 1 and c (``own_*``) and the boundary gap of c's group (the gap
-    before the group's first curve, ``bnd_*``, indexed by curve too)."""
-
-    net_e: np.ndarray           # (n,) net E of the gap's moves (mm of filament)
-    retract_mm: np.ndarray      # (n,) filament its moves pull back
-    fw_net: np.ndarray          # (n,) firmware unretractions minus retractions (G11 - G10)
-    fw_retracted: np.ndarray    # (n,) bool: a G10 in the gap
-
-    @staticmethod
-    def of(program: Program, lay: Layout) -> "GapFacts":
-        n = len(lay.curve_s0)
-        l1 = lay.curve_l1
-        g0 = np.concatenate(([0], l1[:-1] + 1)) if n else np.zeros(0, np.int64)    # gap lines [g0, g1)
-        g1 = lay.curve_l0
-        step = lay.step_of_line
-        has = step >= 0
-        s = np.where(has, step, 0)
-        de = np.where(has & (lay.line_class == LINE_MOTION), program.end_mm[s, 3] - program.start_mm[s, 3], 0.0)
-
-        def span(v):
-            c = np.concatenate(([0.0], np.cumsum(v)))
-            return c[g1] - c[g0]
-        return GapFacts(span(de), span(np.where(de < 0, -de, 0.0)),
-                        np.rint(span(lay.line_class == LINE_FW_UNRETRACT)
-                                - span(lay.line_class == LINE_FW_RETRACT)).astype(np.int64),
-                        span(lay.line_class == LINE_FW_RETRACT) > 0)
-
-
 def gap_times_ms(program: Program, move: MoveTimes, lay: Layout | None = None) -> np.ndarray:
     """(n_curves - 1,) the time (ms) of each gap between two consecutive curves of ``program``
     (``layout.layout``'s curves) under ``move``: what a re-ordered file's travels cost under the
@@ -345,10 +315,10 @@ class TimePricer:
         self.copy_ms = copy * MS_PER_S
         #: gaps a link may write reversed, at their own time (``gaps.ReversibleGaps``)
         self.reversible = ReversibleGaps.of(program, lay)
-
-    def _rev_args(self) -> tuple:
+        # the kernels' constant arguments, made once (per call costs: most of passing a group)
         r = self.reversible
-        return (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
+        self._rev = (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
+        self._rule_vec = rule.vector()
 
     # -- links ----------------------------------------------------------------------------------
     def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
@@ -362,19 +332,25 @@ class TimePricer:
         nxt_changed = np.broadcast_to(np.asarray(nxt_changed, bool), k).ravel()
         from_xy = np.broadcast_to(np.asarray(from_xy, float), k + (2,)).reshape(-1, 2)
         to_xy = np.broadcast_to(np.asarray(to_xy, float), k + (2,)).reshape(-1, 2)
+        return self._links_flat(prev, prev_changed, np.ascontiguousarray(from_xy), nxt,
+                                nxt_changed, np.ascontiguousarray(to_xy)).reshape(k)
+
+    def _links_flat(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
+        """``links_ms`` of links given as flat arrays of one length (int64, bool, contiguous
+        (n, 2) floats): no broadcasting (``group_costs``' one call per group)."""
         z0 = np.where(prev >= 0, self.z_exit[np.maximum(prev, 0)], self.z_entry[nxt])
         z1 = self.z_entry[nxt]
         out = np.empty(len(nxt))
         need = np.zeros(len(nxt), bool)
         no_retract = np.empty(len(nxt))
-        _links(prev, prev_changed, nxt, nxt_changed, np.ascontiguousarray(from_xy),
-               np.ascontiguousarray(to_xy), z0, z1, self.group_first, self.own.net_e,
-               self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
-               self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-               *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec, out, need,
-               no_retract)
-        self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
-        return out.reshape(k)
+        _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, self.group_first,
+               self.own.net_e, self.own.retract_mm, self.own.fw_net, self.own.fw_retracted,
+               self.bnd.net_e, self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted,
+               self.copy_ms, *self._rev, self._rule_vec, self.style_vec, self.move_vec, out,
+               need, no_retract)
+        if need.any():
+            self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
+        return out
 
     def _exempt(self, out, need, no_retract, nxt, from_xy, to_xy) -> None:
         """Links that retract only because no combing test was made: those that cross no wall of
@@ -390,7 +366,9 @@ class TimePricer:
 
     def anchor_link(self, a: Anchor, b: Anchor) -> float:
         """Cost (ms) of the travel from anchor ``a`` into anchor ``b`` (program curves)."""
-        return float(self.links_ms(a.curve, a.changed, a.xy, b.curve, b.changed, b.xy))
+        xy = np.array([np.asarray(a.xy, float)[:2], np.asarray(b.xy, float)[:2]])
+        return float(self._links_flat(np.array([a.curve]), np.array([a.changed]), xy[:1],
+                                      np.array([b.curve]), np.array([b.changed]), xy[1:])[0])
 
     def order_cost(self, order, changed, entry_xy, exit_xy) -> float:
         """Cost (ms) of the travels between consecutive curves of ``order`` (the file's prefix,
@@ -406,20 +384,36 @@ class TimePricer:
         end anchors in program curves too)."""
         gc = np.asarray(curves, np.int64)[grp.cand_curve]
         changed = np.asarray(grp.cand_reversed, bool) | (np.asarray(grp.cand_seam) != 0)
-        s = self.links_ms(start.curve, start.changed, start.xy, gc, changed, grp.cand_entry_xy)
+        m = grp.n_cands
         if end is None:
-            e = np.zeros(grp.n_cands)
+            sxy = np.asarray(start.xy, float).reshape(1, 2)
+            s = self._links_flat(np.full(m, start.curve, np.int64), np.full(m, start.changed),
+                                 np.repeat(sxy, m, axis=0), gc, changed,
+                                 np.ascontiguousarray(grp.cand_entry_xy, float))
+            e = np.zeros(m)
             direct = 0.0
         else:
-            e = self.links_ms(gc, changed, grp.cand_exit_xy, end.curve, end.changed, end.xy)
-            direct = float(self.links_ms(start.curve, start.changed, start.xy, end.curve,
-                                         end.changed, end.xy)) if end.curve >= 0 else 0.0
+            # start, direct (into a curve only) and end links in one call: the same numbers
+            k = int(end.curve >= 0)
+            prev = np.concatenate([np.full(m + k, start.curve, np.int64), gc])
+            prev_ch = np.concatenate([np.full(m + k, start.changed), changed])
+            nxt = np.concatenate([gc, np.full(k + m, end.curve, np.int64)])
+            nxt_ch = np.concatenate([changed, np.full(k + m, end.changed)])
+            sxy = np.asarray(start.xy, float).reshape(1, 2)
+            exy = np.asarray(end.xy, float).reshape(1, 2)
+            from_xy = np.concatenate([np.repeat(sxy, m + k, axis=0), grp.cand_exit_xy])
+            to_xy = np.concatenate([grp.cand_entry_xy, np.repeat(exy, k + m, axis=0)])
+            both = self._links_flat(prev, prev_ch, from_xy, nxt, nxt_ch, to_xy)
+            s, e = both[:m], both[m + k:]
+            direct = float(both[m]) if k else 0.0
         link = _GroupLinks(self, gc, changed, grp.cand_exit_xy, grp.cand_entry_xy)
-        arc = self.dense(grp, gc, changed) if grp.n_cands <= DENSE_MAX_CANDS else None
-        return LinkCosts(arc, s, e, link, direct)
+        # made on first use (``LinkCosts.matrix``): a fixed or unsearched group makes none
+        make = partial(self.dense, grp, gc, changed) if grp.n_cands <= DENSE_MAX_CANDS else None
+        return LinkCosts(None, s, e, link, direct, make)
 
-    def dense(self, grp: Group, gc, changed) -> np.ndarray:
-        """The group's (m, m) link matrix (``_dense``)."""
+    def dense(self, grp: Group, gc, changed, mirror: bool = True) -> np.ndarray:
+        """The group's (m, m) link matrix (``_dense``; ``mirror=False``: each link priced itself,
+        the same matrix bit for bit, the tests' reference)."""
         m = grp.n_cands
         ent = np.ascontiguousarray(grp.cand_entry_xy, float)
         ext = np.ascontiguousarray(grp.cand_exit_xy, float)
@@ -433,12 +427,13 @@ class TimePricer:
         # a loop's two-way "exit" is its seam, as is its entry; a reversed curve's z comes from
         # its other end (z is constant along a curve outside spiral-vase layers, which are kept)
         return _dense(gc, np.asarray(changed, np.bool_), ent, ext,
-                      np.asarray(grp.cand_curve, np.int64), pid[:m], pid[m:], int(pid.max()) + 1 if m else 0,
+                      np.asarray(grp.cand_curve, np.int64), np.asarray(grp.cand_flip, np.int64),
+                      pid[:m], pid[m:], int(pid.max()) + 1 if m else 0,
                       self.z_entry[gc], self.z_exit[gc], self.group_first, self.own.net_e,
                       self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-                      *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec,
-                      self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid)
+                      *self._rev, self._rule_vec, self.style_vec, self.move_vec,
+                      self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid, mirror)
 
 
 class _GroupLinks:
@@ -448,6 +443,14 @@ class _GroupLinks:
     def __init__(self, pricer: TimePricer, gc, changed, exit_xy, entry_xy):
         self.pricer, self.gc, self.changed = pricer, gc, changed
         self.exit_xy, self.entry_xy = exit_xy, entry_xy
+
+    def copied_only(self, u, v) -> np.ndarray | None:
+        """``copy_ms`` (as ``_dense`` and ``_link_one`` give) if every link u[i] -> v[i] is the
+        slicer's own gap, copied (v's curve right after u's, both as printed); else None."""
+        gu, gv = self.gc[u], self.gc[v]
+        if ((gv == gu + 1) & ~self.changed[u] & ~self.changed[v]).all():
+            return self.pricer.copy_ms[gv]
+        return None
 
     def __call__(self, u, v):
         u, v = np.asarray(u, np.int64), np.asarray(v, np.int64)
@@ -543,17 +546,24 @@ def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_f
 
 
 @numba.njit(cache=True)
-def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
+def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
            rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, has_walls, trim, a, b, x0, y0,
-           h, nx, ny, start, items):
+           h, nx, ny, start, items, mirror):
     """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
     (``_link_one`` where the two ends lie at different heights). The wall test is made here: once
-    per pair of points (a travel and its reverse cross the same walls), memoized."""
+    per pair of points (a travel and its reverse cross the same walls), memoized.
+
+    ``mirror``: a rebuilt link at one height and its mirror flip(v) -> flip(u) (the same two
+    points the other way round, ``_mirror_of``) are priced once: the price depends on the
+    direction through |dx|, |dy| only (per-axis caps, jerk and safe speeds take |u_axis|; the
+    junctions with E-only and Z-only moves are right angles), so it is the same number, bit for
+    bit (tests/test_ordering_cost_build.py; docs/BENCHMARKS.md, "Link-cost build")."""
     m = len(gc)
     out = np.empty((m, m))
+    done = np.zeros((m, m), np.bool_)     # priced as the mirror of a link before it
     w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
     memo = np.full((n_points, n_points), -1, np.int8)
     stamp = np.full(max(len(a), 1), -1, np.int64)
@@ -608,6 +618,8 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                 u_rows[0, v, W_JREADY] = 1.0
     for u in range(m):
         for v in range(m):
+            if done[u, v]:
+                continue
             if local[u] == local[v]:
                 out[u, v] = np.inf
                 continue
@@ -661,4 +673,27 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                               hop_on, pre, u_rows, v, has_u[1, v], w, code, lim_row,
                               v_xy) * 1000.0
             out[u, v] = t
+            if mirror and abs(z_ext[u] - z_ent[v]) <= MOVE_EPS_MM and group_first[p] == group_first[c]:
+                fu, fv = flip[u], flip[v]
+                if _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v, use_fw,
+                              group_first, rev_ok, rev_plain, rev_start, rev_end):
+                    out[fv, fu] = t
+                    done[fv, fu] = True
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v, use_fw, group_first,
+               rev_ok, rev_plain, rev_start, rev_end):
+    """Whether the link flip(v) -> flip(u) of ``_dense`` is priced as the rebuilt link u -> v
+    at one height (both in its generic branch): the same two points the other way round, neither
+    the slicer's gap copied nor a gap reversed, both ends at one height, and the entered curves'
+    own gaps alike (net E and firmware retraction: what the unretraction into each costs)."""
+    p2, c2 = gc[fv], gc[fu]
+    if (ext[fv, 0] != ent[v, 0] or ext[fv, 1] != ent[v, 1] or ent[fu, 0] != ext[u, 0]
+            or ent[fu, 1] != ext[u, 1] or net_v[fu] != net_v[v] or use_fw[fu] != use_fw[v]
+            or (p2 == c2 - 1 and not changed[fv] and not changed[fu])
+            or abs(z_ext[fv] - z_ent[fu]) > MOVE_EPS_MM):
+        return False
+    return not _reversed_link(p2, changed[fv], c2, ext[fv, 0], ext[fv, 1], ent[fu, 0], ent[fu, 1],
+                              group_first, rev_ok, rev_plain, rev_start, rev_end)
