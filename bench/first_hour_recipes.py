@@ -125,7 +125,9 @@ def recipe_tables(rows: list[dict], cmd: str) -> str:
           "with its 10 s budget, `dp`, `--firmware auto`), plus `--json R`; rotation on = the default "
           "`--rotate auto` (with `--bed WxD` of the printer the file was sliced for where the file names "
           "no bed), off = `--rotate none`. Saving = energy saving of the 3DGates model, added time = "
-          "print-time change with the firmware's stalls; solve time = the run's `solve_s` (wall time "
+          "`added_time_pct`: the print time against the file as given (planner model, the `print time` "
+          "every command reports; re-ordering, rotation and the firmware's stalls together), what the "
+          "stock 1 % budget bounds since issue 37's follow-up; solve time = the run's `solve_s` (wall time "
           "of the whole `gatesopt` process in the per-file table).", "",
           "| printer (files) | recipe | rotation | saving % mean / median / max | added time % mean / max "
           "| rotated | verified |", "|---|---|---|---:|---:|---:|---:|"]

@@ -27,7 +27,7 @@ COLUMNS = (
     "file", "formulation", "verified", "error", "slicer", "flavor", "infill_pattern", "lines", "layers",
     "energy_before_j", "energy_after_j", "saving_pct", "print_time_before_s", "print_time_after_s",
     "print_time_change_pct", "print_time_model", "paper_time_before_s", "paper_time_after_s",
-    "added_time_pct", "lines_before", "lines_after", "lines_added", "bytes_before", "bytes_after",
+    "added_time_pct", "paper_added_time_pct", "lines_before", "lines_after", "lines_added", "bytes_before", "bytes_after",
     "size_change_pct", "rotation_deg", "status", "stopped", "gap", "objective_j", "bound", "ordered",
     "travel_before_mm", "travel_after_mm", "travel_reduction_pct", "max_curves_per_layer",
     "off_time_X_s", "off_time_Y_s", "off_time_Z_s", "off_time_E_s", "max_snap_mm", "firmware",
@@ -88,8 +88,8 @@ def process_file(path: str, options: BatchOptions, data: bytes | None = None) ->
     """Solve + verify one file; a row of ``COLUMNS``. Never raises: errors become the ``error``
     column. ``data``: the G-code itself, for the path ``-`` (standard input, read once by the
     caller)."""
-    from .ordering import FORMULATIONS as ORDER_FORMULATIONS, OrderingOptions
-    from .rewrite.pipeline import run
+    from .ordering import OrderingOptions
+    from .rewrite.pipeline import order_formulation_of, run
     from .rewrite.printer import DEFAULT, choose
     from .parse import parse
 
@@ -111,8 +111,7 @@ def process_file(path: str, options: BatchOptions, data: bytes | None = None) ->
         # as `gatesopt solve` runs a file: the same whole-run budget, ordering mode and formulation
         # choice (the one the gating formulation names: milp, cpsat, greedy; auto for dp), so that
         # a row's figures are the ones `solve` gives for that file
-        form = ORDER_FORMULATIONS.get(options.formulation)
-        order_formulation = options.formulation if form and "any_size" in form.capabilities else "auto"
+        order_formulation = order_formulation_of(options.formulation)
         res = run(program, choice.options, formulation=options.formulation, time_limit_s=options.time_limit_s,
                   order=options.order, gating=options.gating and choice.options is not None, choice=choice,
                   budget_s=options.budget_s, order_options=OrderingOptions(mode=options.order_mode),

@@ -12,8 +12,10 @@ from .errors import GatesoptError
 
 #: the values of a gating run (``RunResult.summary()``) a row keeps
 GATING_KEYS = ("saving_pct", "energy_before_j", "energy_after_j", "lines_added", "instruction_lines",
-               "size_change_pct", "added_time_pct", "print_time_change_pct", "status", "stopped",
-               "gap", "bound", "solve_s", "wall_s", "rotation_deg", "verified")
+               "size_change_pct", "added_time_pct", "print_time_before_s", "print_time_after_s",
+               "print_time_change_pct", "paper_added_time_pct", "travel_before_mm", "travel_after_mm",
+               "ordered", "firmware", "status", "stopped", "gap", "bound", "solve_s", "wall_s",
+               "rotation_deg", "verified")
 #: the values of an ordering run (``OrderResult.summary``) a row keeps
 ORDERING_KEYS = ("travel_before_mm", "travel_after_mm", "travel_change_pct", "model_travel_after_mm",
                  "print_time_before_s", "print_time_after_s", "print_time_model", "groups_reordered",
@@ -43,13 +45,24 @@ def formulation_rows(program, formulations, known, solve_row, installed=lambda n
     return rows
 
 
-def gating_rows(program, options, formulations, time_limit_s) -> list[dict]:
-    """One row per gating formulation (greedy first), each a verified run without curve ordering."""
+def gating_rows(program, options, formulations, time_limit_s, *, order: bool = False,
+                budget_s: float | None = None, order_options=None, workers: int = 1,
+                choice=None, read_s: float = 0.0) -> list[dict]:
+    """One row per gating formulation (greedy first), each a verified run: with ``order``, the run
+    ``gatesopt solve --formulation F`` makes (``rewrite.run``: the curve ordering the formulation
+    names, ``order_formulation_of``, within the whole-run ``budget_s``, counted as if the file had
+    just been read in ``read_s``), so that a row gives the figures `solve` gives; without, the
+    slicer's order gated."""
+    import time
     from .rewrite import run
+    from .rewrite.pipeline import order_formulation_of
     from .gating.solve import FORMULATIONS, is_installed
 
     def solve_row(name):
-        r = run(program, options, formulation=name, time_limit_s=time_limit_s, order=False)
+        r = run(program, options, formulation=name, time_limit_s=time_limit_s, order=order,
+                budget_s=budget_s if order else None, order_options=order_options,
+                order_formulation=order_formulation_of(name), order_workers=workers, choice=choice,
+                started_s=time.perf_counter() - read_s, cpu_started_s=time.process_time() - read_s)
         s = r.summary()
         row = {k: s[k] for k in GATING_KEYS}
         if not r.report.ok:

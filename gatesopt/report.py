@@ -404,7 +404,7 @@ def build_figures(rows, sweeps=None):
 
 
 #: the results table's columns: (heading, row key, format, scale)
-TABLE_COLUMNS = (("saving %", "saving_pct", "{:.1f}", 1.0),
+TABLE_COLUMNS = (("saving %", "saving_pct", "{:.2f}", 1.0),
                  ("print time +% (planner)", "print_time_change_pct", "{:.2f}", 1.0),
                  ("size +%", "size_change_pct", "{:.1f}", 1.0), ("travel −%", "travel_reduction_pct", "{:.1f}", 1.0),
                  ("rotation °", "rotation_deg", "{:.6g}", 1.0), ("gap %", "gap", "{:.3f}", 100.0))
@@ -415,7 +415,7 @@ def render_table(rows) -> str:
     output verified (or why not)."""
     ok = _ok(rows)
     head = "".join(f"<th>{html.escape(h)}</th>" for h, _, _, _ in TABLE_COLUMNS)
-    out = ["<table id='results'><tr><th>file</th><th>formulation</th>" + head
+    out = ["<table id='results'><tr><th>file</th><th>formulation</th><th>firmware</th>" + head
            + "<th>status</th><th>verified</th></tr>"]
     for r in sorted(rows, key=lambda r: (_file_label(r), str(r.get("formulation")))):
         cells = []
@@ -424,6 +424,7 @@ def render_table(rows) -> str:
             cells.append("" if math.isnan(v) else fmt.format(v * scale))
         verdict = "yes" if r in ok else html.escape(str(r.get("error") or r.get("findings") or "no"))
         out.append(f"<tr><td>{html.escape(_file_label(r))}</td><td>{html.escape(str(r.get('formulation')))}</td>"
+                   f"<td>{html.escape(str(r.get('firmware') or ''))}</td>"
                    + "".join(f"<td>{c}</td>" for c in cells)
                    + f"<td>{html.escape(str(r.get('status') or ''))}</td><td>{verdict}</td></tr>")
     out.append("</table>")

@@ -144,7 +144,7 @@ def test_a_marlin_flavor_gets_marlin_lines_and_a_budget_said_in_one_line():
     assert c.firmware == "marlin" and c.max_added_time_pct == 1.0 and c.options.max_added_time_pct == 1.0
     assert "\n" not in c.line
     assert c.line.startswith("marlin: read flavor setting ';FLAVOR:Marlin' (line 1)")
-    assert "at most 1 % print time" in c.line
+    assert "the print takes at most 1 % longer than as sliced" in c.line
 
 
 def test_nothing_known_says_what_was_assumed_and_how_to_choose():
@@ -235,7 +235,7 @@ def test_batch_and_compare_read_each_file_s_firmware(tmp_path, capsys):
     rows = rows["rows"] if isinstance(rows, dict) else rows
     assert sorted((r["file"].rsplit("/", 1)[1], r["firmware"]) for r in rows) == [("a.gcode", "marlin"),
                                                                                    ("b.gcode", "klipper")]
-    assert all("stalls add at most 1 %" in r["firmware_line"] for r in rows)
+    assert all("at most 1 % longer than as sliced" in r["firmware_line"] for r in rows)
     capsys.readouterr()
     assert main(["compare", str(a), "--formulations", "dp"]) == 0
     assert "firmware marlin: read flavor setting" in capsys.readouterr().out

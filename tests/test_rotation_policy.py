@@ -225,7 +225,8 @@ def test_a_rotation_that_saves_too_little_once_rotated_is_not_taken():
 def test_the_stock_budget_holds_against_the_print_as_sliced_when_rotated():
     """The rotated text of this PrusaSlicer file takes 0.15 s longer itself (1175.21 s against
     1175.06 s); with the budget on the rotated print the output took +1.013 % where the firmware
-    line says "at most 1 %". The budget is on the print as sliced."""
+    line says "at most 1 %". The budget is on the print as sliced: its print time as the reports
+    give it (planner model), which the rotated text alone makes longer by more (issue 37)."""
     from conftest import SHARED_INSTANCES
     src = SHARED_INSTANCES / "prusa25_star_rect15_m82.gcode.gz"
     if not src.exists():
@@ -234,4 +235,8 @@ def test_the_stock_budget_holds_against_the_print_as_sliced_when_rotated():
     res = run(program, order=False)         # marlin read from the file, the stock 1 % budget
     s = res.summary()
     assert s["firmware"] == "marlin" and s["rotation_deg"] == 45.0 and res.report.ok
-    assert 0.9 < s["added_time_pct"] <= 1.0 + 1e-9
+    from gatesopt.rewrite.figures import print_time_s
+    turned_s = print_time_s(res.base, "marlin")     # the rotated text, no gating line
+    assert turned_s > s["print_time_before_s"]
+    assert 0.0 < s["added_time_pct"] <= 1.0 + 1e-9
+    assert s["print_time_after_s"] <= 1.01 * s["print_time_before_s"] * (1 + 1e-12)

@@ -35,18 +35,20 @@ def add_arguments(p) -> None:
                    help="bed size in mm for every file, as `solve --bed` (default: the bed each file names; a "
                         "file that names none is not rotated)")
     p.add_argument("--max-added-time-pct", type=budget_pct, default=BUDGET_NOT_GIVEN, metavar="P|none",
-                   help="budget: firmware stalls may add at most P %% to the print time (default: 1 "
-                        "for stock firmware, none for the paper's), as `solve`")
+                   help="budget: the print takes at most P %% longer than the file as given (planner "
+                        "model; default: 1 for stock firmware, none for the paper's), as `solve`")
     p.add_argument("--max-added-lines-pct", type=float, metavar="P", help="budget: at most P %% more lines")
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
-                   help="solver time limit per file in seconds (milp, cpsat; default 60)")
+                   help="gating solver time limit per file in seconds (milp, cpsat; default 60), "
+                        "within --budget")
     p.add_argument("--no-order", action="store_true", help="do not re-order curves")
     p.add_argument("--order-mode", choices=("safe", "free"), default="safe",
                    help="as `solve --order-mode`: safe keeps the slicer's feature groups, walls and "
                         "objects (default); free re-orders every curve of a layer")
     p.add_argument("--budget", type=float, default=10.0, metavar="S",
                    help="finish each file's run in about S seconds (default 10, as `solve --budget`: "
-                        "the curve ordering gets what an estimate of the rest leaves)")
+                        "every solve included: the curve ordering gets what an estimate of the rest "
+                        "leaves, an exact --formulation what is left of it, at most --time-limit)")
     p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
     p.add_argument("--profile", default="paper", metavar="NAME|TOML",
                    help="energy profile: shipped name or TOML file (default: paper)")

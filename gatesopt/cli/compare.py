@@ -4,6 +4,7 @@ same files, side by side: one verified run each (nothing written), one table; th
 from __future__ import annotations
 
 import math
+import time
 
 from .files import check_distinct, check_input, check_new_file, check_one_stdin, read_program, write_json
 from .options import (add_gating_options, firmware_choice, gating_formulations, gating_options,
@@ -25,11 +26,16 @@ def add_arguments(c) -> None:
                    help="compare the curve ordering's formulations (greedy, tsp, cpsat, milp, auto) "
                         "by travel instead of gating's by energy")
     c.add_argument("--order-mode", choices=("safe", "free"), default="safe",
-                   help="with --ordering: as `order --order-mode` (default safe)")
+                   help="the curve ordering's mode, as `order --order-mode` (default safe)")
     c.add_argument("--move-seams", action="store_true",
-                   help="with --ordering: closed loops may start at another vertex")
+                   help="the curve ordering: closed loops may start at another vertex")
     c.add_argument("--objective", choices=("time", "travel"), default="time",
                    help="what the curve ordering minimises: time (default), the travels' print time as emitted, retractions, z-hops and the slicer's own copied travels included; travel, their length (Fleming et al.)")
+    c.add_argument("--no-order", action="store_true",
+                   help="gating rows: gate the slicer's order (default: each row is the run `solve "
+                        "--formulation F` makes, curve ordering included, within --budget)")
+    c.add_argument("--budget", type=float, default=10.0, metavar="S",
+                   help="gating rows: each run's whole-run budget, as `solve --budget` (default 10)")
     c.add_argument("--order-budget", type=float, default=10.0, metavar="S",
                    help="with --ordering: each formulation's run of a file, parse to verified output, "
                         "in about S seconds (default 10, as `order --budget`)")
@@ -63,14 +69,23 @@ def run(args) -> int:
                                   default_workers())
         print(format_compare_order(rows))
     else:
+        positive_s(args.budget, "--budget")
         fields = gating_options(args)
+        from ..ordering import OrderingOptions
+        order_options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams,
+                                        objective=args.objective)
         for path in args.files:
+            t = time.perf_counter()
             program = read_program(path)
+            read_s = time.perf_counter() - t
             choice = firmware_choice(args, program, **fields)   # per file: each names its printer
             print(f"{program.source}: firmware {choice.line}")
             if choice.options is None:
                 continue
-            rows += gating_rows(program, choice.options, forms, args.time_limit)
+            # each row the run `gatesopt solve --formulation F` makes of the file (issue 37)
+            rows += gating_rows(program, choice.options, forms, args.time_limit, order=not args.no_order,
+                                budget_s=args.budget, order_options=order_options,
+                                workers=default_workers(), choice=choice, read_s=read_s)
         print(format_compare(rows))
     if args.plot:
         plot_compare(rows, args.plot, ordering=args.ordering)
@@ -97,8 +112,10 @@ def format_compare(rows: list[dict]) -> str:
                    f"{r['rotation_deg']:8.3f} {status:>11s} {gap:>9s} {r['solve_s']:8.3f} {r['wall_s']:7.2f} "
                    f"{'yes' if r['verified'] else 'NO':>8s}")
     if any("saving_pct" in r for r in rows):
-        out.append("print +%: print time, planner model; solve s: every solve of the run (the rotation "
-                   "search and the solve again after rotating); run s: the whole run")
+        out.append("each row: the run `gatesopt solve --formulation F` makes (curve ordering included "
+                   "unless --no-order); print +%: print time against the file as given, planner "
+                   "model, what --max-added-time-pct bounds; solve s: every solve of the run "
+                   "(ordering, rotation search, the solve again after rotating); run s: the whole run")
     if any(r.get("stopped") for r in rows):
         out.append("*: stopped before its gap (" + ", ".join(sorted({str(r['stopped']) for r in rows
                                                                      if r.get("stopped")})) + ")")

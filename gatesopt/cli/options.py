@@ -108,13 +108,16 @@ def add_gating_options(p) -> None:
     p.add_argument("--end-late-ms", type=float, default=DEFAULT_END_LATE_MS,
                    help="keep a motor on at least this long after it steps (default 1.0, paper)")
     p.add_argument("--max-added-time-pct", type=budget_pct, default=BUDGET_NOT_GIVEN, metavar="P|none",
-                   help="budget: firmware stalls may add at most P %% to the print time (default: 1 for "
-                        "firmware whose motor lines stall the print, Marlin, Klipper, RepRapFirmware; "
-                        "none for the paper's); none: no budget")
+                   help="budget: the print takes at most P %% longer than the file as given (its print "
+                        "time as every report gives it, planner model; re-ordering, rotation and "
+                        "stalls together) (default: 1 for firmware whose motor lines stall the print, "
+                        "Marlin, Klipper, RepRapFirmware; none for the paper's); none: no budget")
     p.add_argument("--max-added-lines-pct", type=float, default=None, metavar="P",
                    help="budget: at most P %% more lines")
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
-                   help="solver time limit in seconds (milp, cpsat; default 60)")
+                   help="time limit of the gating solves together, rotation search included "
+                        "(milp, cpsat; default 60); in `solve` and `batch` within --budget, which "
+                        "covers the whole run")
     p.add_argument("--profile", default="paper", metavar="NAME|TOML",
                    help="energy profile: shipped name or TOML file (default: paper)")
     p.add_argument("--threads", type=int, default=2, metavar="N",

@@ -72,14 +72,20 @@ def run_stream(args) -> int:
     return 0
 
 
-def time_and_energy(program, prof, time_model: str, energy_time_model: str):
+def time_and_energy(program, prof, time_model: str, energy_time_model: str, firmware: str = "3dgates"):
     """The report of ``program``: energy over ``energy_time_model``'s durations, times (total, by
-    kind, per layer, the plot's time axis) under ``time_model``'s; and those durations."""
-    shown = durations(program, model=time_model)
-    under = shown if energy_time_model == time_model else durations(program, model=energy_time_model)
-    report = profile(program, prof, duration_s=under)
+    kind, per layer, the plot's time axis) under ``time_model``'s; and those durations. The
+    stalls of the file's motor lines in ``firmware`` (the dialect its printer runs,
+    ``figures.file_firmware``) count in both, as ``solve`` and ``verify`` count them
+    (``figures.stalls_s``): a gated output profiles to the energy and print time its run reported."""
+    from ..rewrite.figures import stall_enable, stalls_s
+    shown = durations(program, model=time_model) + stalls_s(program, firmware, time_model)
+    stall = stalls_s(program, firmware, energy_time_model)
+    under = shown if energy_time_model == time_model else durations(program, model=energy_time_model) + stall
+    en = stall_enable(program, stall)
+    report = profile(program, prof, duration_s=under, enable=en)
     if energy_time_model != time_model:
-        rt = profile(program, prof, duration_s=shown)
+        rt = profile(program, prof, duration_s=shown, enable=en)
         report = dataclasses.replace(report, time_s=rt.time_s, by_kind_s=rt.by_kind_s,
                                      layer_time_s=rt.layer_time_s, step_end_s=rt.step_end_s,
                                      energy_time_s=float(np.sum(under)))
@@ -102,12 +108,15 @@ def run(args) -> int:
         return run_stream(args)
     program = read_program(args.file)       # its warnings on stderr
     prof = load_profile(args.profile)
-    report, duration_s = time_and_energy(program, prof, args.time_model, args.energy_time_model)
+    from ..rewrite.figures import file_firmware
+    firmware = file_firmware(program)
+    report, duration_s = time_and_energy(program, prof, args.time_model, args.energy_time_model, firmware)
     if args.plot:
         from ..plot import plot_profile
         plot_profile(report, args.plot)
     if args.json:
         d = _json(report, args, program)
+        d["firmware"] = firmware
         if args.time_model != "paper":
             d["paper_time_s"] = float(program.duration_s.sum())
         json.dump(d, sys.stdout, indent=2)
@@ -115,6 +124,8 @@ def run(args) -> int:
         return 0
     print(format_report(report, args.time_model, args.energy_time_model,
                         paper_time_s=None if args.time_model == "paper" else float(program.duration_s.sum())))
+    print(f"firmware    {firmware}: the stalls of the file's motor lines counted, as `solve` and "
+          "`verify` count them")
     print(_slicer_line(program, duration_s, args.time_model))
     if args.per_layer:
         print()

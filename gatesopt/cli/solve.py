@@ -49,18 +49,19 @@ def add_arguments(p) -> None:
                         "--formulation: milp or cpsat; greedy for greedy; auto for dp)")
     p.add_argument("--budget", type=float, default=10.0, metavar="S",
                    help="finish the whole run, from the start of the command to the verified "
-                        "output, in about S seconds (default 10): the curve ordering gets what an "
-                        "estimate of the rest leaves (an exact --formulation's --time-limit is "
-                        "not part of the estimate)")
+                        "output, in about S seconds (default 10), every solve included: the curve "
+                        "ordering gets what an estimate of the rest leaves, and an exact "
+                        "--formulation (milp, cpsat) searches for what is left of it, at most "
+                        "--time-limit")
     p.add_argument("--no-gating", action="store_true", help="do not insert gating instructions")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
 
 
 def order_formulation_of(gating_formulation: str) -> str:
-    """The curve ordering's formulation a gating formulation names ("--formulation milp means exact
-    for both", issue 4): the same name where the ordering has it (greedy, milp, cpsat), else auto
-    (dp is gating's alone)."""
-    return gating_formulation if gating_formulation in ordering_formulations() else "auto"
+    """``rewrite.pipeline.order_formulation_of`` (the one rule ``solve``, ``compare`` and ``batch``
+    share)."""
+    from ..rewrite.pipeline import order_formulation_of as of
+    return of(gating_formulation)
 
 
 def status_text(s: dict) -> str:
@@ -90,8 +91,9 @@ def format_solve_report(s: dict) -> str:
         figure_lines(s)[0],
     ]
     if s.get("max_added_time_pct") is not None:
-        lines.append(f"time budget   paper time T = L/F {s['added_time_pct']:+.3f} % (re-ordering and gating "
-                     f"together; the firmware's stalls may add at most {s['max_added_time_pct']:g} %)")
+        lines.append(f"time budget   print time {s['added_time_pct']:+.3f} % against the file as given "
+                     f"(planner model; re-ordering, rotation and the firmware's stalls together), "
+                     f"at most {s['max_added_time_pct']:+g} %")
     lines += [
         f"lines         {s['lines_added']:+d} ({s['instruction_lines']} instruction lines, {s['splits']} moves split)"
         f"   file size {s['size_change_pct']:+.2f} %",

@@ -20,10 +20,13 @@ travel (``travel``)
 """
 from __future__ import annotations
 
+import numpy as np
+
 from .. import firmware as fwmod
 from ..ordering.travel_stats import travel_stats
 from ..planner import durations
-from ..program import Program
+from ..program import Kind, Program
+from ..verify.energy import stall_s
 from .printer import choose
 
 #: the model of the print time the reports give, and how they say it
@@ -52,6 +55,27 @@ def print_time_s(program: Program, firmware: str = "3dgates") -> float:
     return float(planned.sum() + stall.sum())
 
 
+def stalls_s(program: Program, firmware: str, time_model: str) -> np.ndarray:
+    """Per-step firmware stall seconds of ``program``'s own motor lines in ``firmware``, on top of
+    ``time_model``'s durations: "planner", what its durations leave out (Klipper's dwells; a
+    queue drain is in them already), as ``print_time_s`` counts; "paper", every stall as the
+    verifier and the energy model price it (``verify.energy.stall_s``: Marlin's 0.05 s stop)."""
+    if time_model == "planner":
+        return fwmod.stall_durations(program, firmware, planner=_no_stall, enable_price=_no_enable_stop)
+    return stall_s(program, firmware)
+
+
+def stall_enable(program: Program, stall: np.ndarray) -> np.ndarray:
+    """The motors' state during each step, every motor on during a stall at a motor line: the
+    whole printer keeps drawing power while the firmware drains its queue or dwells, no gating
+    credit taken for it -- the convention of the verifier and the gating problem
+    (``verify.energy.energy_of``, which holds on the motors the rewrite's own lines switched off;
+    a file's own line that stalls with a motor off is the one case priced differently)."""
+    en = np.asarray(program.enabled, bool).copy()
+    en[(stall > 0) & (program.kind == Kind.MOTOR)] = True
+    return en
+
+
 def travel(program: Program) -> dict:
     """``travel_mm``, ``travels``, ``retractions`` of the file as printed (``travel_stats``)."""
     t = travel_stats(program)
@@ -73,13 +97,16 @@ def file_firmware(program: Program) -> str:
         return "3dgates"
 
 
-def figures(before: Program, after: Program, firmware: str | None = None) -> dict:
+def figures(before: Program, after: Program, firmware: str | None = None,
+            before_s: float | None = None) -> dict:
     """The report keys of both files: ``print_time_before_s`` / ``_after_s`` / ``_change_pct``
     with ``print_time_model``, and ``travel_before_mm`` / ``_after_mm`` / ``_change_pct``,
     ``travels_*``, ``retractions_*``. ``firmware``: the dialect the output's motor lines are in
-    (None: the file's own, ``file_firmware``)."""
+    (None: the file's own, ``file_firmware``); ``before_s``: ``before``'s print time in that
+    firmware where the caller has it already."""
     firmware = firmware or file_firmware(before)
-    tb, ta = print_time_s(before, firmware), print_time_s(after, firmware)
+    tb = print_time_s(before, firmware) if before_s is None else float(before_s)
+    ta = print_time_s(after, firmware)
     mb, ma = travel(before), travel(after)
     return {
         "print_time_before_s": tb, "print_time_after_s": ta, "print_time_change_pct": pct(ta, tb),

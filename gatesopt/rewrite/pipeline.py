@@ -10,8 +10,17 @@ Time: every stage is timed (``RunResult.times``) and the solve time a report giv
 the curve ordering's solve and both gating solves (the rotation search over every candidate
 angle, and the solve again on the rotated text). ``time_limit_s`` bounds the gating solves
 together, warm starts and model building included; ``budget_s`` is the whole run's, from
-``started_s`` (the caller's clock reading before it read the file) to the verified output: the
-ordering's solve gets what the rest is estimated to leave (``budget.ordering_budget_s``).
+``started_s`` (the caller's clock reading before it read the file) to the verified output, every
+solve included: the ordering's solve gets what the rest is estimated to leave
+(``budget.ordering_budget_s``), less a share for an exact gating formulation's search, which gets
+what is left of the budget when it starts, at most ``time_limit_s`` (``_gating_limit_in_budget``).
+
+The time budget (``GatingOptions.max_added_time_pct``) is on the print time the user will see: the
+output's planner time (``figures.print_time_s``, the one print time every report gives) at most
+(1 + P / 100) times the file's as given, re-ordering, rotation and stalls together
+(``budget_limit_s``). The gating problem prices stalls in its firmware's model; the stall budget it
+gets is what that limit leaves above the program it gates, and an output over the limit is solved
+again with less (``_within_limit``).
 
 Ctrl-C (``solvers.stop_scope``): the first one stops whatever solver is running, which answers
 with the best it has; a stop during the curve ordering keeps the slicer's order; the gating
@@ -40,8 +49,8 @@ from ..parse import parse
 from ..program import Kind, Program
 from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
 from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
-from .budget import no_time_note, ordering_budget_s, slowdown_factor
-from .figures import figures
+from .budget import after_order_s, no_time_note, ordering_budget_s, slowdown_factor
+from .figures import figures, print_time_s
 from .order import (NoTimeToOrder, kept_slower_note, order_summary, out_of_time_groups,
                     out_of_time_note, reorder, stage_floor_s)
 from .printer import FirmwareChoice, choose
@@ -87,16 +96,21 @@ class RunResult:
         the paper's times), the one print time (planner model) and travel (measured on the
         files), ``figures``; every time spent, ``times``."""
         r, s = self.report, self.solution
+        figs = self.figures or figures(self.original, self.output, r.firmware)
         d = {
             "source": self.original.source, "firmware": r.firmware, "verified": r.ok,
             "findings": [str(f) for f in r.findings],
             "energy_before_j": r.energy_before_j, "energy_after_j": r.energy_j,
             "saving_pct": r.saving_pct,
-            **(self.figures or figures(self.original, self.output, r.firmware)),
+            **figs,
+            # the time the print takes more than the user's file as given (re-ordering, rotation
+            # and stalls together), planner model: the print time every report gives, and what
+            # --max-added-time-pct bounds (``budget_limit_s``)
+            "added_time_pct": figs["print_time_change_pct"],
             # the energy model's time (paper T = L/F, firmware stalls included): what the
-            # energies integrate over, and what --max-added-time-pct is a share of
+            # energies integrate over
             "paper_time_before_s": r.time_before_s, "paper_time_after_s": r.time_s,
-            "added_time_pct": 100.0 * (r.time_s / r.time_before_s - 1.0) if r.time_before_s else 0.0,
+            "paper_added_time_pct": 100.0 * (r.time_s / r.time_before_s - 1.0) if r.time_before_s else 0.0,
             "lines_before": r.lines_before, "lines_after": r.lines_after,
             "lines_added": r.lines_after - r.lines_before,
             "bytes_before": r.bytes_before, "bytes_after": r.bytes_after,
@@ -232,15 +246,21 @@ def _stop_note(sol: GatingSolution, what: str) -> str | None:
 
 
 def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes: list, source: str,
-          times: Stages):
+          times: Stages, limit_s: float | None = None, planned=None):
     """Gate ``base``: (the program gating rewrote, solution, emitted). A rotation is its own
     rewrite first: the rotated text (a move whose rotated X or Y change is at most 1 um gets
     exactly the previous text on that axis, as long as the snaps do not drift the print by more
     than 1 um) is re-parsed, and gating is solved again on exactly that geometry, so that the
     emitted times and energies are the ones the solver scored. ``time_limit_s`` bounds both
-    solves together (``ROTATION_SEARCH_SHARE``); both count in ``times["gating_solve_s"]``."""
+    solves together (``ROTATION_SEARCH_SHARE``); both count in ``times["gating_solve_s"]``.
+    ``limit_s``: the print time (planner model, ``figures.print_time_s``) the output may take at
+    most, the user's file's times (1 + ``max_added_time_pct`` / 100) (``budget_limit_s``); None:
+    the budget as the options give it, a share of the problem's own time. Returns (the program
+    gating rewrote, solution, emitted, rotation report, the output parsed)."""
     with times.stage("gating_build_s"):
         problem = build(base, o)
+        base_planned = planned if planned is not None else _Planned(base, o.firmware)
+        problem = _budget_on_print(problem, base_planned, limit_s)
     notes += list(problem.notes)
     t = time.perf_counter()
     deadline = None if time_limit_s is None else t + float(time_limit_s)
@@ -263,12 +283,15 @@ def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes
         with times.stage("gating_build_s"):
             ro = o.replace(rotate="none")
             rproblem = build(rbase, ro)
-        if o.max_added_time_pct is not None and rproblem.time_before_s > problem.time_before_s > 0:
             # the rotated text can take a little longer itself (0.15 s of 1175 s on a PrusaSlicer
             # file): the budget is on the print as sliced, so the stalls get what is left of it
-            left = (1.0 + o.max_added_time_pct / 100.0) * problem.time_before_s / rproblem.time_before_s
-            rproblem = dataclasses.replace(      # the budget enters only through max_added_time_s
-                rproblem, options=ro.replace(max_added_time_pct=max(0.0, 100.0 * (left - 1.0))))
+            rbase_planned = _Planned(rbase, o.firmware)
+            if limit_s is not None:
+                rproblem = _budget_on_print(rproblem, rbase_planned, limit_s)
+            elif o.max_added_time_pct is not None and rproblem.time_before_s > problem.time_before_s > 0:
+                left = (1.0 + o.max_added_time_pct / 100.0) * problem.time_before_s / rproblem.time_before_s
+                rproblem = dataclasses.replace(      # the budget enters only through max_added_time_s
+                    rproblem, options=ro.replace(max_added_time_pct=max(0.0, 100.0 * (left - 1.0))))
         slower = _rotation_too_slow(base, problem, rbase, rproblem, o) if rotation["how"] == "auto" else None
         check = rotation["how"] == "auto" and (o.min_rotation_gain_pct > 0 or slower is not None)
         t = time.perf_counter()
@@ -279,11 +302,12 @@ def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes
         kept = None
         if check:
             kept = _unrotated_if_better(base, o, formulation, _limit_left(time_limit_s, deadline), notes,
-                                        rsol, deg, rotation, times, slower)
+                                        rsol, deg, rotation, times, slower,
+                                        lambda p: _budget_on_print(p, base_planned, limit_s))
         if kept is None:
             notes += list(rot.notes)
             max_snap = rot.max_snap_mm
-            base, sol = rbase, rsol
+            base, sol, base_planned = rbase, rsol, rbase_planned
         else:
             sol, deg = kept, 0.0
     for n in (_stop_note(first, "rotation search") if first is not sol else None,
@@ -292,9 +316,91 @@ def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes
             notes.append(n)
     with times.stage("emit_s"):
         em = emit_result(base, sol, firmware=o.firmware)
+    with times.stage("verify_s"):
+        out = parse(em.text, source=source + " (output)")
+    sol, em, out = _within_limit(base, base_planned, sol, em, out, o, limit_s, formulation,
+                                 _limit_left(time_limit_s, deadline), notes, source, times)
     em = dataclasses.replace(em, max_snap_mm=max(em.max_snap_mm, max_snap), rotation_deg=deg)
     notes += list(em.notes)
-    return base, sol, em, rotation
+    return base, sol, em, rotation, out
+
+
+class _Planned:
+    """A program's print time under the planner model in a dialect (``figures.print_time_s``),
+    computed once and only when asked for."""
+
+    def __init__(self, program: Program, firmware: str):
+        self.program, self.firmware, self._s = program, firmware, None
+
+    @property
+    def s(self) -> float:
+        if self._s is None:
+            self._s = print_time_s(self.program, self.firmware)
+        return self._s
+
+
+def budget_limit_s(program: Program, o: GatingOptions, planned: _Planned | None = None) -> float | None:
+    """The print time the output may take at most under ``o.max_added_time_pct``: the user's file
+    as given (before any re-ordering or rotation), planner model in the output's dialect
+    (``figures.print_time_s``: what the reports call print time, within a few per cent of the
+    slicers' estimates), times 1 + P / 100. None without a time budget. The budget is what the
+    user will see: re-ordering, rotation and the firmware's stalls together."""
+    if o.max_added_time_pct is None:
+        return None
+    planned = planned if planned is not None else _Planned(program, o.firmware)
+    return (1.0 + o.max_added_time_pct / 100.0) * planned.s
+
+
+def _budget_on_print(problem, planned: _Planned, limit_s: float | None):
+    """``problem`` with its stall budget (``max_added_time_s``, in the problem's own seconds) set
+    to what ``limit_s`` leaves above the planned print time of the program it was built on. The
+    problem prices a stall by its firmware's model (Marlin's 0.05 s per full stop, Klipper's
+    planner stop and dwells), which the planner's time of the output need not match exactly:
+    ``_within_limit`` checks the output and tightens the budget where it is over."""
+    if limit_s is None or problem.options.max_added_time_pct is None or problem.time_before_s <= 0:
+        return problem
+    left_s = max(0.0, limit_s - planned.s)
+    return dataclasses.replace(problem, options=problem.options.replace(
+        max_added_time_pct=100.0 * left_s / problem.time_before_s))
+
+
+#: tightening rounds of ``_within_limit`` before it solves with no stall allowed
+LIMIT_ROUNDS = 3
+
+
+def _within_limit(base: Program, planned: _Planned, sol: GatingSolution, em: EmitResult, out: Program,
+                  o: GatingOptions, limit_s: float | None, formulation: str, time_limit_s, notes: list,
+                  source: str, times: Stages):
+    """(solution, emitted, output parsed) whose planner print time is within ``limit_s``: where the
+    output's is over (the problem's stall model and the planner's stops differ: a Marlin stop from
+    a fast travel costs more than 0.05 s), the stall budget shrinks by the planner's seconds per
+    problem second measured on this output and the problem is solved again."""
+    if limit_s is None or sol.problem.options.max_added_time_pct is None:
+        return sol, em, out
+    problem = sol.problem
+    for k in range(LIMIT_ROUNDS + 1):
+        after_s = print_time_s(out, o.firmware)
+        if after_s <= limit_s * (1.0 + 1e-9):
+            return sol, em, out
+        planner_added = after_s - planned.s
+        model_added = sol.time_after_s - problem.time_before_s
+        left_s = max(0.0, limit_s - planned.s)
+        per_s = model_added / planner_added if planner_added > 0 and model_added > 0 else 0.0
+        # the last round: no stall at all (the print as the rewrite left it, before gating)
+        budget_s = 0.98 * left_s * per_s if k < LIMIT_ROUNDS else 0.0
+        notes.append(f"time budget: the output's print time {after_s:.2f} s is over the "
+                     f"{limit_s:.2f} s allowed (planner model): stalls cut to {budget_s:.2f} s of "
+                     "the solver's model and solved again")
+        problem = dataclasses.replace(problem, options=problem.options.replace(
+            max_added_time_pct=100.0 * budget_s / problem.time_before_s))
+        t = time.perf_counter()
+        sol = _solve_interruptible(problem, formulation, time_limit_s, notes)
+        times.add("gating_solve_s", time.perf_counter() - t)
+        with times.stage("emit_s"):
+            em = emit_result(base, sol, firmware=o.firmware)
+        with times.stage("verify_s"):
+            out = parse(em.text, source=source + " (output)")
+    return sol, em, out
 
 
 def _print_span_s(program: Program, problem) -> float:
@@ -325,7 +431,8 @@ def _rotation_too_slow(base: Program, problem, rbase: Program, rproblem, o: Gati
 
 def _unrotated_if_better(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes: list,
                          rotated: GatingSolution, deg: float, rotation: dict,
-                         times: Stages, slower: str | None = None) -> GatingSolution | None:
+                         times: Stages, slower: str | None = None,
+                         on_print=lambda p: p) -> GatingSolution | None:
     """The 0 deg solution of ``base`` where the rotated print's (``rotated``, solved on the
     rotated text) saves less than ``o.min_rotation_gain_pct`` more energy, else None; updates the
     ``rotation`` report (its line says why the print stays). A turned print for next to nothing is
@@ -333,7 +440,7 @@ def _unrotated_if_better(base: Program, o: GatingOptions, formulation: str, time
     once rotated: ``dp`` picks it on the separable optimum before it repairs a time budget
     (holes__prusa_mk3s, stock 1 % budget: 3.88 % at 45 deg, 4.91 % at 0 deg; issue 37's check)."""
     with times.stage("gating_build_s"):
-        problem0 = build(base, o.replace(rotate="none"))
+        problem0 = on_print(build(base, o.replace(rotate="none")))
     t = time.perf_counter()
     sol0 = _solve_interruptible(problem0, formulation, time_limit_s, notes)
     times.add("gating_solve_s", time.perf_counter() - t)
@@ -422,6 +529,50 @@ def _verify_run(program: Program, ordered_base: Program, out: Program, o: Gating
     return rep, extra
 
 
+#: with ``budget_s`` and an exact gating formulation (milp, cpsat), the share of what the budget
+#: would leave the curve ordering that goes to the gating solves instead
+EXACT_GATING_SHARE = 0.5
+#: the least time limit the budget leaves an exact gating solve (it then answers with its warm
+#: start, dp's answer, and says it stopped on its time limit)
+MIN_EXACT_GATING_S = 0.5
+
+
+def _exact(formulation: str) -> bool:
+    """True for a gating formulation whose search runs until its time limit (milp, cpsat)."""
+    from ..gating.solve import FORMULATIONS
+    f = FORMULATIONS.get(formulation)
+    return f is not None and "exact" in f.capabilities
+
+
+def _gating_limit_in_budget(program: Program, o: GatingOptions, budget_s: float, t0: float,
+                            time_limit_s, slow: float, notes: list):
+    """The exact gating solves' time limit within the whole run's ``budget_s`` (counted from
+    ``t0``): what is left after the time spent and the estimate of building, rotating, emitting
+    and checking (``budget.after_order_s``, at the machine's ``slow`` rate), at most
+    ``time_limit_s``, at least ``MIN_EXACT_GATING_S``; a note where it is less than
+    ``time_limit_s``. So that the run's time, solves included, is the budget's (issue 37)."""
+    rotate = o.rotate != "none" and not (not isinstance(o.rotate, str) and float(o.rotate) % 360.0 == 0.0)
+    spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
+    left_s = budget_s - spent_s - slow * after_order_s(max(int(program.n_lines), int(program.n_steps)), rotate)
+    limit = max(left_s, MIN_EXACT_GATING_S)
+    if time_limit_s is not None and limit >= float(time_limit_s):
+        return time_limit_s
+    notes.append(f"gating: the {budget_s:g} s budget (--budget) leaves the solver {limit:.1f} s"
+                 + (f" of its {float(time_limit_s):g} s time limit" if time_limit_s is not None else "")
+                 + " (a larger --budget gives it more)")
+    return limit
+
+
+def order_formulation_of(gating_formulation: str) -> str:
+    """The curve ordering's formulation a gating formulation names ("--formulation milp means exact
+    for both", issue 4): the same name where the ordering has it for groups of any size (greedy,
+    milp, cpsat), else auto (dp is gating's alone). ``solve``, ``compare`` and ``batch`` all
+    take it from here."""
+    from ..ordering import FORMULATIONS as ORDER_FORMULATIONS
+    f = ORDER_FORMULATIONS.get(gating_formulation)
+    return gating_formulation if f is not None and "any_size" in f.capabilities else "auto"
+
+
 def run(program: Program, options: GatingOptions | None = None, *, formulation: str = "dp",
         time_limit_s: float | None = None, order: bool = True, gating: bool = True,
         order_time_limit_s: float = 2.0, order_workers: int = 1,
@@ -462,6 +613,11 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             # compiling numba kernels (a first run) is not charged to the budget (cli.progress)
             spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
             ob = ordering_budget_s(budget_s, program, o, formulation, gating, spent_s, time_limit_s, slow)
+            if gating and _exact(formulation):
+                # an exact gating formulation's search is part of the budget too (issue 37): the
+                # ordering leaves it a share of what it would get, at most --time-limit
+                ob -= min(math.inf if time_limit_s is None else float(time_limit_s),
+                          EXACT_GATING_SHARE * max(ob, 0.0))
             floor = stage_floor_s(program, slow)
             if ob <= floor:
                 # what the rest leaves the ordering would not pay for its build, a pass over
@@ -482,18 +638,27 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         if ordered and o.bed is None and o.bed_size_mm is None:
             # the re-ordered copy has other line numbers: the rotation line cites the user's file
             o = o.replace(bed=slicers.read_bed(program.data))
-        sol = em = rotation = None
+        sol = em = rotation = out = None
+        planned0 = _Planned(program, o.firmware)
         if gating:
-            base, sol, em, rotation = _gate(base, o, formulation, time_limit_s, notes, program.source, times)
+            if budget_s is not None and _exact(formulation):
+                time_limit_s = _gating_limit_in_budget(program, o, budget_s, t0, time_limit_s, slow, notes)
+            with times.stage("report_s"):   # the time budget's reference: the file as given
+                limit_s = budget_limit_s(program, o, planned0)
+            base, sol, em, rotation, out = _gate(base, o, formulation, time_limit_s, notes,
+                                                 program.source, times, limit_s,
+                                                 planned0 if base is program else None)
             text = em.text
         else:
             text = base.to_gcode()
         stopped = str(Stopped.INTERRUPTED) if stop_requested() else ""
     with times.stage("verify_s"):
-        out = parse(text, source=(program.source + " (output)"))
+        if out is None:
+            out = parse(text, source=(program.source + " (output)"))
         rep, extra = _verify_run(program, ordered_base, out, o, sol, ordered)
     with times.stage("report_s"):
-        figs = figures(program, out, o.firmware if sol is not None else None)
+        figs = figures(program, out, o.firmware if sol is not None else None,
+                       before_s=planned0._s if sol is not None else None)
         order_report = None
         if summarize is not None:
             # without gating ``verify`` above ran the ordering checks itself: its findings are theirs

@@ -140,7 +140,8 @@ def choose(program, requested: str = "auto", *, force: bool = False, max_added_t
     if default_budget:
         max_added_time_pct = STOCK_BUDGET_PCT if _stalls(name) else None
     budget_words = ("no time budget" if max_added_time_pct is None
-                    else f"stalls add at most {max_added_time_pct:g} % print time")
+                    else f"the print takes at most {max_added_time_pct:g} % longer than as sliced "
+                         "(planner model; stalls, re-ordering and rotation together)")
     if default_budget and max_added_time_pct is not None:
         budget_words += " (the default for stock firmware; --max-added-time-pct P or none to change)"
     said += f"; {_dialect_words(name)}, {budget_words}"

@@ -36,7 +36,7 @@ def _file_enable(program: Program, original: Program | None = None) -> np.ndarra
     return en
 
 
-def _stalls(program: Program, firmware, printer) -> np.ndarray:
+def stall_s(program: Program, firmware, printer=None) -> np.ndarray:
     """``firmware.stall_durations`` with the per-move price of a dialect whose enable line is a
     stop (Klipper's ``ENABLE=1`` flush; ``planner.stop_restart_s``), as the solver priced it."""
     fw = fwmod.get(firmware)
@@ -61,12 +61,12 @@ def energy_of(program: Program, *, firmware="3dgates", profile="paper", duration
     only, not from an added line to the motor's next step as the parsed state has them.
     ``printer``: the printer's Klipper config (the planner limits of a per-move stall price)."""
     if scheduled is not None:
-        stall = _stalls(program, firmware, printer)
+        stall = stall_s(program, firmware, printer)
         return (*scheduled_energy(program, scheduled, _file_enable(program, original), stall, profile=profile,
                                   duration_s=duration_s), float(stall.sum()))
     prof = load_profile(profile)
     coeffs = prof.coefficients(program)
-    stall = _stalls(program, firmware, printer)
+    stall = stall_s(program, firmware, printer)
     dur = (program.duration_s if duration_s is None else np.asarray(duration_s, float)) + stall
     en = np.asarray(program.enabled, bool).copy()
     motor = program.kind == Kind.MOTOR
