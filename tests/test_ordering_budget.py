@@ -373,15 +373,21 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
 
     from conftest import PROJECT_INSTANCES
     prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
-    seen = []
-    real = pipeline.solve
+    seen, greedy_s = [], []
+    real, real_greedy = pipeline.solve, pipeline.solve_greedy
 
     def spy(problem, formulation="auto", **kw):
-        if formulation != "greedy":     # (the greedy solve before the exact one)
-            seen.append(kw["budget_s"])
+        seen.append(kw["budget_s"])
         return real(problem, formulation, **kw)
 
+    def spy_greedy(problem, **kw):      # the greedy pass before the exact solve: its time
+        t = time.perf_counter()
+        out = real_greedy(problem, **kw)
+        greedy_s.append(time.perf_counter() - t)
+        return out
+
     monkeypatch.setattr(pipeline, "solve", spy)
+    monkeypatch.setattr(pipeline, "solve_greedy", spy_greedy)
     est = pipeline.FINISH_FIXED_S + pipeline.FINISH_S_PER_LINE * prog.n_lines
     res = pipeline.order_program(prog, OrderingOptions(mode="free"), budget_s=10.0)
     # a parse that took 4 s before order_program was called counts against the budget; numba
@@ -391,8 +397,9 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
     pipeline.order_program(prog, OrderingOptions(mode="free"), budget_s=10.0, started_s=started)
     not_charged = _jit.compile_s_since(started)
     pipeline.order_program(prog, OrderingOptions(mode="free"))
-    # the exact solve gets what the greedy solve before it left, at least all but its share
-    # (rewrite.order.GREEDY_SHARE)
+    # the exact solve gets what the greedy pass before it left (issue 36: greedy orders every
+    # group first, with the whole solve's budget but the guard's second stage)
+    assert len(greedy_s) == 3
     assert seen[0] <= 10.0 - est and seen[2] is None
     assert seen[1] <= 10.0 - est - 4.0 + not_charged
     assert res.ok and res.summary["budget_s"] == 10.0
@@ -400,7 +407,7 @@ def test_order_program_counts_the_budget_from_when_the_run_started(monkeypatch):
     # less the guard's second stage that greedy's answer adds after the solve, at the measured
     # slowdown of the work after it (at least 1, at most budget.MAX_SLOWDOWN)
     stage = pipeline.GUARD_STAGE_S_PER_LINE * prog.n_lines
-    assert (1.0 - pipeline.GREEDY_SHARE) * solve_budget - 4.0 * stage <= seen[0] <= solve_budget - stage
+    assert solve_budget - greedy_s[0] - 4.0 * stage <= seen[0] <= solve_budget - stage
 
 
 def test_one_slow_group_early_does_not_starve_the_groups_after_it(monkeypatch):

@@ -105,7 +105,10 @@ class BudgetPlan:
     their shares, and the runner's overrun reserve then kept every group after them from any
     search: the Cura bunny, safe mode, 3.2 s: 13 groups searched, 0 proven, 1,055 out of time."""
 
-    def __init__(self, problem: OrderingProblem, shared=None):
+    def __init__(self, problem: OrderingProblem, shared=None, matrices_made: bool = False):
+        """``matrices_made``: the groups come with their link matrices already made (the exact
+        solve after the greedy pass, ``layers.solve(greedy=...)``): a search no longer pays for
+        them."""
         w = budget_weights(problem)
         self.claims = w > 0
         n = w[self.claims]
@@ -115,7 +118,8 @@ class BudgetPlan:
         self.exact_s = exact_time_s(n)
         self.shape_s = self.exact_s * (n / EXACT_SHAPE_CURVES) ** EXACT_SHAPE_EXPONENT
         self.heuristic_s = HEURISTIC_S_PER_CURVE * n
-        if problem.pricer is not None:      # the time objective: its matrix, ~2 candidates a curve
+        if problem.pricer is not None and not matrices_made:
+            # the time objective: its matrix, ~2 candidates a curve
             self.heuristic_s = self.heuristic_s + MATRIX_S_PER_LINK * (2.0 * n) ** 2
         # per group, 1 once solved (or taken by the other process when shared with a helper)
         self.done_mask = np.zeros(problem.n_groups, np.int8) if shared is None else shared

@@ -104,14 +104,15 @@ def path_options(grp, gs: GroupSolution, backwards: bool = False) -> list:
     return opts
 
 
-def solve_backwards(runner, problem: OrderingProblem, g: int, end) -> tuple:
+def solve_backwards(runner, problem: OrderingProblem, g: int, end, greedy=None) -> tuple:
     """Group g with its end fixed (the next group's entry) and its start free: solved as
     ``Group.backwards()``. Returns (forward Group, options in forward order). Each option is
     proven for that problem: the travel into its first curve belongs to the group before, whose
-    own end is then chosen to be this path's entry (formulations/ordering.md, "Two processes")."""
+    own end is then chosen to be this path's entry (formulations/ordering.md, "Two processes").
+    ``greedy``: the greedy pass's answer for g (``runner.GreedyAnswer``), walked backwards."""
     fwd = problem.group(g, end, end)            # (its start is not used)
     back = fwd.backwards()
-    gs = runner.run(g, back)
+    gs = runner.run(g, back, greedy, backwards=True)
     back.check_order(gs.order)
     opts = [GroupSolution.make(o.order[::-1].copy(), o.objective, o.bound, o.status, o.solve_s,
                                o.formulation + "+back")

@@ -89,7 +89,10 @@ class Helper:
         self.reader.start()
 
     @classmethod
-    def start(cls, problem, formulation, time_limit_s, budget_s, t0, kwargs):
+    def start(cls, problem, formulation, time_limit_s, budget_s, t0, kwargs, greedy=None):
+        """``greedy``: per group the greedy pass's answer (``runner.GreedyAnswer``) or None:
+        the helper's warm starts and the answers of the groups it has no time for, as the main
+        process's (``runner.GroupRunner.run``)."""
         todo = groups_to_solve(problem)
         if len(todo) < HELPER_MIN_GROUPS:
             return None
@@ -102,7 +105,8 @@ class Helper:
         budget_end = None if budget_s is None else time.time() + budget_s - (time.perf_counter() - t0)
         fd, path = tempfile.mkstemp(prefix="gatesopt-helper-", suffix=".pickle")
         with os.fdopen(fd, "wb") as f:
-            pickle.dump((problem, formulation, time_limit_s, budget_end, kwargs, todo, shm.name), f)
+            pickle.dump((problem, formulation, time_limit_s, budget_end, kwargs, todo, shm.name,
+                         greedy), f)
         proc = subprocess.Popen([sys.executable, "-c", "from gatesopt.ordering.helper import main; main()",
                                  path], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE)
         return cls(proc, shm, problem.n_groups, path)
@@ -185,7 +189,7 @@ def main() -> None:
     results = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)                               # stray prints (HiGHS, numba) go to stderr
     with open(sys.argv[1], "rb") as f:
-        problem, formulation, time_limit_s, budget_end, kwargs, todo, name = pickle.load(f)
+        problem, formulation, time_limit_s, budget_end, kwargs, todo, name, greedy = pickle.load(f)
     shm = shared_memory.SharedMemory(name=name)
     # the parent owns the segment: without this the tracker would unlink it when we exit
     resource_tracker.unregister(shm._name, "shared_memory")
@@ -207,13 +211,14 @@ def main() -> None:
             if end is None:
                 end = entry.get(g + 1)
             start, guess = known_start(problem, g), None
+            ans = greedy[g] if greedy is not None else None
             if start is None and end is not None:
-                grp, opts = solve_backwards(runner, problem, g, end)
+                grp, opts = solve_backwards(runner, problem, g, end, ans)
             else:
                 if start is None:       # the file's last group: no end, no known start
                     start = guess = _slicer_start(problem, g)
                 grp = problem.group(g, start, end)
-                gs = runner.run(g, grp)
+                gs = runner.run(g, grp, ans)
                 grp.check_order(gs.order)
                 opts = path_options(grp, gs)
             runner.passed(g)

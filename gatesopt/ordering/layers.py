@@ -12,7 +12,9 @@ same end: if a heuristic's path costs more, the original order is kept.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -22,17 +24,65 @@ from .chain import end_of, look_ahead, path_options, pick_paths, rescored
 from .helper import Helper
 from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
                       OrderingSolution, path_travel_mm)
-from .runner import GroupRunner
+from .runner import GroupRunner, greedy_answer
+
+
+@dataclass(frozen=True, eq=False)
+class GreedyPass:
+    """The greedy formulation's solve of every group (``solve_greedy``), kept for the exact solve
+    after it (``solve(greedy=...)``, issue 36): ``solution`` (what ``solve(problem, "greedy")``
+    returns: the time guard's greedy file), ``answers`` (per group a ``runner.GreedyAnswer``, None
+    for a fixed group or one greedy had no time for) and ``matrices`` (per group the link matrix
+    greedy made, None where it made none): the exact solve reuses them instead of making each
+    searched group's matrix a second time (the time objective's matrices are most of what
+    passing a file's groups costs: docs/BENCHMARKS.md, "Link-cost build")."""
+
+    solution: OrderingSolution
+    answers: tuple
+    matrices: tuple
+
+    def with_matrix(self, g: int, grp):
+        """Group g as the exact chain builds it (its own start and end), with greedy's link
+        matrix where greedy made one: the matrix depends on the group's candidates only
+        (``cost.TimePricer.dense``), not on where the group starts or ends."""
+        arc = self.matrices[g]
+        c = grp.costs
+        if arc is None or c is None or c.arc is not None or arc.shape != (grp.n_cands, grp.n_cands):
+            return grp
+        return dataclasses.replace(grp, costs=dataclasses.replace(c, arc=arc))
+
+
+def solve_greedy(problem: OrderingProblem, *, time_limit_s: float = 2.0,
+                 budget_s: float | None = None, progress=None) -> GreedyPass:
+    """``solve(problem, "greedy")`` in one process, keeping per group greedy's answer and the link
+    matrix it made (``GreedyPass``)."""
+    built: list = []
+    sol = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=budget_s,
+                progress=progress, built_groups=built)
+    answers, matrices = [], []
+    for g, grp in enumerate(built):
+        gs = sol.groups[g]
+        fixed = problem.group_fixed[g] or grp.n_curves == 0
+        answers.append(None if fixed else greedy_answer(grp, gs))
+        c = grp.costs
+        matrices.append(None if fixed or c is None or getattr(c, "euclidean", False) else c.arc)
+    return GreedyPass(sol, tuple(answers), tuple(matrices))
 
 
 def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: float = 2.0,
           budget_s: float | None = None, workers: int = 1, progress=None,
+          greedy: GreedyPass | None = None, built_groups: list | None = None,
           **kwargs) -> OrderingSolution:
     """Order every group; ``time_limit_s`` is per group (exact formulations only); ``budget_s``
     caps the whole solve: each group gets at most its share of what is left (groups the DP or the
     bound settle take next to nothing). ``workers = 2``: a second process solves the chain from the
     back (``helper.Helper``) until it meets the main process. ``progress``: called as
-    ``progress(groups_done, n_groups, groups_proven)`` after each group (the CLI draws a bar)."""
+    ``progress(groups_done, n_groups, groups_proven)`` after each group (the CLI draws a bar).
+    ``greedy``: a greedy pass of the same problem (``solve_greedy``): each group starts from its
+    link matrix and greedy's path (the warm start), and a group the budget leaves no time for
+    keeps greedy's path instead of the slicer's order (``runner.OUT_OF_TIME_GREEDY``), in the
+    helper process too. ``built_groups``: a list the Group of each group is appended to, as
+    solved (``solve_greedy``)."""
     record = formulations.lookup(formulation)
     if workers not in (1, 2):
         raise OrderingOptionsError(f"workers must be 1 or 2, not {workers!r}")
@@ -50,14 +100,16 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     plans = []      # per group: (Group, options: the solver's path, the slicer's..., start, end)
     proven = 0      # re-orderable groups proven so far (for ``progress``)
     reorderable = problem.group_reorderable
-    helper = (Helper.start(problem, formulation, time_limit_s, budget_s, t0, kwargs)
+    answers = greedy.answers if greedy is not None else None
+    helper = (Helper.start(problem, formulation, time_limit_s, budget_s, t0, kwargs, answers)
               if workers == 2 else None)
     try:
         runner = GroupRunner(problem, fn, time_limit_s, budget_s, t0, kwargs,
                              shared=helper.shared if helper else None,
                              other_alive=(lambda: not helper.dead) if helper else None,
                              warm_up=(formulations.warm_up if "warm_up" in record.capabilities
-                                      else None))
+                                      else None),
+                             matrices_made=greedy is not None)
         for g in range(problem.n_groups):
             if stop_requested():        # Ctrl-C (``solvers.stop_scope``): no whole answer yet
                 raise Interrupted(f"curve ordering stopped at group {g} of {problem.n_groups}")
@@ -65,6 +117,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             if end is None and helper:
                 end = helper.entry_of(g + 1)    # the next group's path, if the helper has it
             grp = problem.group(g, pos, end)
+            if greedy is not None:
+                grp = greedy.with_matrix(g, grp)
             if problem.group_fixed[g] or grp.n_curves == 0:
                 order = np.arange(grp.n_cands)      # one candidate per curve, in the slicer's order
                 obj = grp.path_cost(order)
@@ -72,7 +126,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             else:
                 answer = helper.take(g) if helper else None
                 if answer is None:
-                    gs = runner.run(g, grp)
+                    gs = runner.run(g, grp, answers[g] if answers is not None else None)
                     grp.check_order(gs.order)
                     opts = path_options(grp, gs)
                 else:
@@ -82,6 +136,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                     for gs in opts:
                         grp.check_order(gs.order)
             plans.append((grp, opts, pos, end))
+            if built_groups is not None:
+                built_groups.append(grp)
             runner.passed(g)
             if progress is not None:
                 proven += bool(reorderable[g]) and opts[0].status == Status.OPTIMAL

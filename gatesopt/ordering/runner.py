@@ -4,12 +4,15 @@ process (``helper.main``) alike."""
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
+
+import numpy as np
 
 from .. import _jit
 from ..solvers import Status
 from .budget import (OVERHEAD_S_PER_CURVE, OVERRUN_PRIOR_CURVES, OVERRUN_S_PER_CURVE,
-                     STOP_HELPER_S, TAIL_S_PER_CURVE, BudgetPlan)
-from .problem import GroupSolution, kept_solution
+                     STOP_HELPER_S, TAIL_S_PER_CURVE, BudgetPlan, exact_time_s)
+from .problem import OPTIMAL_ABS_TOL, GroupSolution, kept_solution
 
 #: a group whose solve spent more than this compiling numba kernels (a first run after an
 #: install) and did not prove it is solved once more: its limit went to the compiler (measured:
@@ -18,6 +21,78 @@ RESOLVE_AFTER_COMPILE_S = 0.2
 #: the formulation of a group the budget left no time for (``GroupRunner.run``): the slicer's
 #: order, status fallback
 OUT_OF_TIME = "kept:out of time"
+#: the formulation of a group the budget left no time to search exactly but that the greedy pass
+#: before the exact solve had ordered (``GroupRunner.run`` with ``greedy``): its greedy path,
+#: status fallback unless its bound still closes (issue 36: never the slicer's order unsearched
+#: where greedy had an answer)
+OUT_OF_TIME_GREEDY = "greedy:out of time"
+
+
+@dataclass(frozen=True, eq=False)
+class GreedyAnswer:
+    """What the greedy pass (``layers.solve_greedy``) found for one group, as the exact solve
+    after it uses it: its path (candidate indices, forward), the cheap bound it proved, and the
+    start and end costs (per candidate) of the group as greedy solved it -- the exact chain may
+    reach the group from another start, and the bound moves by at most what those costs moved
+    (``for_group``). Small: it goes to the helper process too."""
+
+    order: np.ndarray
+    bound: float
+    start_cost: np.ndarray
+    end_cost: np.ndarray
+
+    def same_costs(self, grp, backwards: bool = False) -> bool:
+        """Whether ``grp`` starts and ends as the group greedy solved (the same start and end
+        costs: its answer there is greedy's answer here; the link matrix is the group's own)."""
+        return (not backwards and np.array_equal(self.start_cost, grp.start_cost())
+                and np.array_equal(self.end_cost, grp.end_cost()))
+
+    def for_group(self, grp, backwards: bool = False) -> GroupSolution:
+        """This path as an answer for ``grp`` (the same group of the problem, from the start the
+        exact chain gives it; ``backwards``: ``grp`` is its ``Group.backwards()`` mirror, the
+        path walked from its end), priced without making a link matrix the group does not have
+        yet (``path_cost_lazy``). Its bound: greedy's, less the most any candidate's start or end
+        cost fell -- a path's cost here is its cost there minus the start and end costs it had
+        there plus those it has here (for the mirror: no start cost, its end cost is the
+        mirror's start cost). Status optimal if that still closes, else fallback (the exact step
+        did not run)."""
+        order = self.order[::-1].copy() if backwards else self.order
+        obj = path_cost_lazy(grp, order)
+        if backwards:
+            s_new, e_new = np.zeros(grp.n_cands), np.asarray(grp.start_cost(), float)
+        else:
+            s_new, e_new = np.asarray(grp.start_cost(), float), np.asarray(grp.end_cost(), float)
+        with np.errstate(invalid="ignore"):
+            ds, de = self.start_cost - s_new, self.end_cost - e_new
+        bound = 0.0
+        if len(order) and np.all(np.isfinite(ds)) and np.all(np.isfinite(de)):
+            bound = max(0.0, self.bound - max(0.0, float(ds.max())) - max(0.0, float(de.max())))
+        status = Status.OPTIMAL if obj - bound <= OPTIMAL_ABS_TOL else Status.FALLBACK
+        return GroupSolution.make(order, obj, bound, status, 0.0,
+                                  "greedy" if status == Status.OPTIMAL else OUT_OF_TIME_GREEDY)
+
+
+def greedy_answer(grp, gs: GroupSolution) -> GreedyAnswer | None:
+    """The greedy pass's answer ``gs`` for group ``grp`` (as it solved it), None where the greedy
+    pass had no time for the group either (``OUT_OF_TIME``: the slicer's order unsearched)."""
+    if gs.formulation.startswith(OUT_OF_TIME) or len(gs.order) != grp.n_curves:
+        return None
+    return GreedyAnswer(np.asarray(gs.order, np.int64), float(gs.bound),
+                        np.asarray(grp.start_cost(), float).copy(),
+                        np.asarray(grp.end_cost(), float).copy())
+
+
+def path_cost_lazy(grp, order) -> float:
+    """``grp.path_cost(order)``, but where the group's link matrix is still to be made (a group
+    the budget leaves unsearched) its path's links are priced one by one (``LinkCosts.link``,
+    the numbers the matrix would hold) instead of making the matrix."""
+    c = grp.costs
+    order = np.asarray(order, np.int64)
+    if (c is not None and c.arc is None and c.make_arc is not None and c.link is not None
+            and len(order) > 1):
+        inner = float(np.sum(np.asarray(c.link(order[:-1], order[1:]), float)))
+        return float(c.start[order[0]]) + inner + float(c.end[order[-1]])
+    return grp.path_cost(order)
 
 
 class GroupRunner:
@@ -29,14 +104,16 @@ class GroupRunner:
     kernels)."""
 
     def __init__(self, problem, fn, time_limit_s, budget_s, t0, kwargs, shared=None,
-                 other_alive=None, warm_up=None):
+                 other_alive=None, warm_up=None, matrices_made: bool = False):
         self.problem, self.fn, self.time_limit_s, self.budget_s = problem, fn, time_limit_s, budget_s
         self.t0, self.kwargs = t0, kwargs
         self.cache = {}     # identical groups recur layer after layer (same infill, same start)
         # the budget goes by plan (BudgetPlan): a group the DP settles, a fixed group or a repeat
         # of an earlier group's geometry costs next to nothing; of the others the smallest get the
         # time an exact proof needs, the rest the greedy path's
-        self.plan = BudgetPlan(problem, shared) if budget_s is not None else None
+        # (``matrices_made``: the groups come with their link matrices, made by the greedy pass)
+        self.plan = (BudgetPlan(problem, shared, matrices_made) if budget_s is not None
+                     else None)
         # with a helper both processes spend the time left at once, while both are running
         self.other_alive = other_alive if other_alive is not None else (lambda: shared is not None)
         if warm_up is not None:
@@ -56,14 +133,31 @@ class GroupRunner:
         self.mark = time.perf_counter()     # when the caller's time since the last group began
         self.in_run_s = 0.0                 # of it, what ``run`` took
 
-    def run(self, g: int, grp) -> GroupSolution:
+    def run(self, g: int, grp, greedy: GreedyAnswer | None = None,
+            backwards: bool = False) -> GroupSolution:
+        """Group g's answer. ``greedy``: the greedy pass's answer for it (``backwards``: ``grp`` is
+        the group's mirror): the warm start of the search (``hint``), and what the group keeps
+        where the budget leaves it no time (``OUT_OF_TIME_GREEDY``; without it the slicer's
+        order, ``OUT_OF_TIME``); a greedy path whose bound closes for ``grp`` is taken as it is."""
         t_in = time.perf_counter()
         try:
-            return self._run(g, grp)
+            return self._run(g, grp, greedy, backwards)
         finally:
             self.in_run_s += time.perf_counter() - t_in
 
-    def _run(self, g: int, grp) -> GroupSolution:
+    def _late(self, grp, greedy: GreedyAnswer | None, backwards: bool) -> GroupSolution:
+        """A group the budget left no time for: greedy's path if the greedy pass had one, else
+        the slicer's order, unsearched."""
+        self.out_of_time += 1
+        t = time.perf_counter()
+        if greedy is not None:
+            gs = greedy.for_group(grp, backwards)
+            return GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status,
+                                      time.perf_counter() - t, gs.formulation)
+        return kept_solution(grp, t, OUT_OF_TIME)
+
+    def _run(self, g: int, grp, greedy: GreedyAnswer | None = None,
+             backwards: bool = False) -> GroupSolution:
         limit = self.time_limit_s
         if self.plan is not None:
             # what groups took beyond their limit so far (greedy passes, bounds, model building),
@@ -76,9 +170,9 @@ class GroupRunner:
             if wall_left - rate * grp.n_curves <= 0.0:
                 # even the cheapest answer (the greedy path, taken whatever the limit) would end
                 # after the budget: the slicer's order, unsearched (a 3 s budget on the Cura
-                # bunny's 1081 groups ran 20 s of greedy paths at limit 0 before this)
-                self.out_of_time += 1
-                return kept_solution(grp, time.perf_counter(), OUT_OF_TIME)
+                # bunny's 1081 groups ran 20 s of greedy paths at limit 0 before this); greedy's
+                # path where the greedy pass had one
+                return self._late(grp, greedy, backwards)
         share = None
         if self.plan is not None:
             cpus = 2 if self.other_alive() else 1
@@ -87,9 +181,22 @@ class GroupRunner:
             if share is None:
                 # what is left goes to smaller groups (``BudgetPlan``: smallest first where it
                 # does not pay every group's heuristic time): the slicer's order, unsearched
-                # (before its key, which makes its link matrix)
-                self.out_of_time += 1
-                return kept_solution(grp, time.perf_counter(), OUT_OF_TIME)
+                # (before its key, which makes its link matrix), or greedy's path
+                return self._late(grp, greedy, backwards)
+        kwargs = self.kwargs
+        if greedy is not None:
+            t_g = time.perf_counter()
+            gs = greedy.for_group(grp, backwards)
+            if gs.status == Status.OPTIMAL or (
+                    share is not None and share < exact_time_s(grp.n_curves)
+                    and greedy.same_costs(grp, backwards)):
+                # greedy's path proven by its bound from this start too, or a group the plan
+                # gives no exact step whose start is greedy's: the search would begin with
+                # greedy's own path and local search (one whole pass to find it a local optimum:
+                # ~1 s on a group of 618 curves at a load of 5) and have no time to better it
+                return GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status,
+                                          time.perf_counter() - t_g, gs.formulation)
+            kwargs = {**kwargs, "hint": gs.order}
         key = grp.key()
         gs = self.cache.get(key)
         if gs is not None:
@@ -100,13 +207,13 @@ class GroupRunner:
             # (with its expected overrun) before the budget does, or the file ends late
             limit = min(limit, share, max(0.0, wall_left - rate * grp.n_curves))
         t_g = time.perf_counter()
-        gs = self.fn(grp, time_limit_s=limit, **self.kwargs)
+        gs = self.fn(grp, time_limit_s=limit, **kwargs)
         compiled = _jit.compile_s_since(t_g)
         if compiled > RESOLVE_AFTER_COMPILE_S and gs.status != Status.OPTIMAL:
             # its limit went to compiling numba kernels (a first run: a kernel warm_up did not
             # load, say the directed model's): solved again with them compiled
             t_g = time.perf_counter()
-            gs = self.fn(grp, time_limit_s=limit, **self.kwargs)
+            gs = self.fn(grp, time_limit_s=limit, **kwargs)
             compiled = _jit.compile_s_since(t_g)
         took = time.perf_counter() - t_g - compiled
         self.over_s += max(0.0, took - limit)

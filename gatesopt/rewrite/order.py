@@ -17,10 +17,10 @@ import numpy as np
 from .. import _jit
 from ..ordering import formulations
 from ..ordering.groups import build
-from ..ordering.layers import solve
+from ..ordering.layers import solve, solve_greedy
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
 from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
-from ..ordering.runner import OUT_OF_TIME
+from ..ordering.runner import OUT_OF_TIME, OUT_OF_TIME_GREEDY
 from ..ordering.travel_stats import runs, travel_mask
 from ..program import Program
 from ..solvers import stop_requested
@@ -53,6 +53,20 @@ def out_of_time_groups(problem: OrderingProblem, solution: OrderingSolution) -> 
     reorderable = problem.group_reorderable
     return sum(bool(reorderable[g]) and gs.formulation.startswith(OUT_OF_TIME)
                for g, gs in enumerate(solution.groups))
+
+
+def greedy_out_of_time_groups(problem: OrderingProblem, solution: OrderingSolution) -> int:
+    """Re-orderable groups the budget left no time to search exactly that keep the greedy pass's
+    path (``runner.OUT_OF_TIME_GREEDY``)."""
+    reorderable = problem.group_reorderable
+    return sum(bool(reorderable[g]) and gs.formulation.startswith(OUT_OF_TIME_GREEDY)
+               for g, gs in enumerate(solution.groups))
+
+
+def greedy_out_of_time_note(n_groups: int, n_decided: int) -> str:
+    """The report's line for groups that keep greedy's path, unproven, for want of time."""
+    return (f"curve ordering: {n_groups:,} of {n_decided:,} re-orderable groups keep the greedy "
+            f"path, not searched exactly for want of time (a larger --budget searches them)")
 
 
 def out_of_time_note(n_groups: int, n_decided: int, solve_budget_s) -> str:
@@ -123,12 +137,6 @@ class NoTimeToOrder(Exception):
         self.solve_budget_s, self.pass_s, self.n_groups = solve_budget_s, pass_s, n_groups
 
 
-#: the share of the solve's budget the greedy solve may take before an exact formulation solves
-#: (``reorder``): the greedy answer the time guard weighs the exact one against. Greedy takes
-#: 0.03-0.5 s on most corpus files (measured, budget 8 s, load ~4), 2-4 s on the largest
-#: (cura413_xend_zigzag100, prusa25_bunny_triangles15_lh01), and does not finish real_cura591 or
-#: the Cura bunny in 8 s; what it does not use goes to the exact solve
-GREEDY_SHARE = 0.2
 #: seconds per input line of the time guard's second stage (the exact answer against the greedy
 #: stage's file: its emits and planner runs), which only a run with a greedy stage pays and the
 #: finish estimate (``FINISH_S_PER_LINE``, measured with one stage) does not hold: 5.1 us on
@@ -151,15 +159,16 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     ``finish_slow``: the work after the solve (emit, re-parse, verify) is estimated at that many
     times its quiet rates (``order_program`` measures it).
 
-    With an exact formulation and the time guard, the greedy formulation solves first, with at
-    most ``GREEDY_SHARE`` of the solve's budget (not at all where that is not twice what passing
-    the groups takes on the machine as loaded), the exact one with the rest, and the guard prints
-    per layer the slicer's, the exact or the greedy order, whichever the planner model says is faster (issue 36: never slower
-    than greedy). Greedy's answer depends on the time it gets only through the groups it reaches:
-    where it reaches them all it is the one ``--formulation greedy`` emits, and the guard's first
-    stage is that run's own guard. Where what greedy left would not pay for passing the groups
-    again, the exact solve does not run: greedy's answer is printed, its groups at best
-    "feasible" (``guard.GREEDY_TAKEN``)."""
+    With an exact formulation and the time guard (issue 36: never slower than greedy), greedy
+    orders every group first (``layers.solve_greedy``: the answer ``--formulation greedy`` gives,
+    as long as the budget pays for it), with all of the solve's budget but the guard's second
+    stage; the exact solve then gets what greedy left, starts each group from greedy's link
+    matrix and path, and a group it has no time for keeps greedy's path
+    (``runner.OUT_OF_TIME_GREEDY``), not the slicer's order. The guard prints per layer the
+    slicer's, the greedy or the exact order, whichever the planner model says is faster; its
+    first stage is the greedy run's own guard. Where what greedy left would not pay for passing
+    the groups again, the exact solve does not run: greedy's answer is printed, its groups at
+    best "feasible" (``guard.GREEDY_TAKEN``)."""
     t0 = time.perf_counter() if started_s is None else started_s
     t_b = time.perf_counter()
     problem = build(program, options or OrderingOptions())
@@ -168,9 +177,7 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
     solve_budget = solve_budget_s(budget_s, program.n_lines, spent, finish_slow)
     # what passing every group takes with no time to search them (the runner's priors), and
-    # that on this machine as loaded (``slow``, else the build's time against its quiet rate):
-    # the greedy solve first builds every group's link costs too (cura413_star_triangles20 free
-    # at a load of 12: 3.9 s for its 102 groups, every one of them out of time in its 1.8 s)
+    # that on this machine as loaded (``slow``, else the build's time against its quiet rate)
     pass_s = (slow or 1.0) * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
     loaded = (slow if slow is not None
               else max(1.0, build_s / (BUILD_S_PER_LINE * max(program.n_lines, 1))))
@@ -180,20 +187,21 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
             raise NoTimeToOrder(solve_budget, pass_s, problem.n_groups)
     greedy = None
     exact_budget = solve_budget
-    cap = None if solve_budget is None else GREEDY_SHARE * solve_budget
     if (time_guard and "exact" in formulations.lookup(formulation).capabilities
-            and (cap is None or cap >= 2.0 * greedy_pass_s)):
+            and (solve_budget is None or solve_budget >= greedy_pass_s)):
+        # the guard's second stage, which greedy's answer adds after the solve
+        stage_s = finish_slow * GUARD_STAGE_S_PER_LINE * program.n_lines
         t_g = time.perf_counter()
-        greedy = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=cap)
+        greedy = solve_greedy(problem, time_limit_s=time_limit_s,
+                              budget_s=None if solve_budget is None
+                              else max(0.0, solve_budget - stage_s))
         if solve_budget is not None:
-            # greedy's time, and the guard's second stage that its answer adds after the solve
             exact_budget = max(0.0, solve_budget - (time.perf_counter() - t_g
-                                                    - _jit.compile_s_since(t_g))
-                               - finish_slow * GUARD_STAGE_S_PER_LINE * program.n_lines)
+                                                    - _jit.compile_s_since(t_g)) - stage_s)
     if greedy is not None and (stop_requested() or (exact_budget is not None
                                                     and exact_budget < pass_s)):
         # no time left to pass the groups again (or a Ctrl-C): greedy's answer is the solve's
-        guarded = emit_guarded(program, problem, greedy, time_guard)
+        guarded = emit_guarded(program, problem, greedy.solution, time_guard)
         decided = problem.group_reorderable
         groups = tuple(greedy_taken(gs) if d else gs
                        for gs, d in zip(guarded.solution.groups, decided))
@@ -201,10 +209,11 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
         source = np.where(guarded.source == FROM_SOLVER, FROM_GREEDY, guarded.source)
         return problem, solve_budget, dataclasses.replace(guarded, solution=sol, source=source)
     solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=exact_budget,
-                     workers=workers, progress=progress)
+                     workers=workers, progress=progress, greedy=greedy)
     if greedy is not None:
-        solution = dataclasses.replace(solution, solve_s=solution.solve_s + greedy.solve_s)
-    guarded = emit_guarded(program, problem, solution, time_guard, greedy=greedy)
+        solution = dataclasses.replace(solution, solve_s=solution.solve_s + greedy.solution.solve_s)
+    guarded = emit_guarded(program, problem, solution, time_guard,
+                           greedy=None if greedy is None else greedy.solution)
     return problem, solve_budget, guarded
 
 
@@ -327,6 +336,9 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
     late = out_of_time_groups(problem, solution)
     if late:
         slower.append(out_of_time_note(late, len(decided), solve_budget_s))
+    late_greedy = greedy_out_of_time_groups(problem, solution)
+    if late_greedy:
+        slower.append(greedy_out_of_time_note(late_greedy, len(decided)))
     time_obj = problem.cost_unit == "ms"
     return {
         "objective": options.objective,
@@ -348,6 +360,9 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         "groups_fallback": counts["fallback"],
         # of the fallback groups, those the budget left no time for: the slicer's order, unsearched
         "groups_out_of_time": late,
+        # of the fallback groups, those the budget left no time to search exactly that keep the
+        # greedy pass's path (``runner.OUT_OF_TIME_GREEDY``)
+        "groups_out_of_time_greedy": late_greedy,
         # safe mode's blocks (ordering/blocks.py): segments of >= 3 islands, how many moved, how
         # many block orders were proven optimal (the slicer's order kept counts if it was proven)
         "block_segments": int(problem.block_report.get("segments", 0)),
