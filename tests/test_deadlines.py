@@ -264,6 +264,8 @@ def test_a_solve_budget_below_the_group_pass_skips_the_solve_after_the_build(mon
     monkeypatch.setattr(pipeline, "stage_floor_s", lambda program, slow=1.0: 0.0)
     monkeypatch.setattr(rorder, "OVERHEAD_S_PER_CURVE", 1e3)       # passing a group: "1000 s"
     monkeypatch.setattr(rorder, "solve", lambda *a, **k: _never(None, time_limit_s=0))
+    # (the greedy pass before the exact solve: neither is called)
+    monkeypatch.setattr(rorder, "solve_greedy", lambda *a, **k: _never(None, time_limit_s=0))
     res = pipeline.run(program, GatingOptions(rotate="none"), budget_s=10.0)
     assert res.report.ok and not res.ordered
     assert any("curve ordering skipped after its build" in n for n in res.notes), res.notes

@@ -161,8 +161,8 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
 
     With an exact formulation and the time guard (issue 36: never slower than greedy), greedy
     orders every group first (``layers.solve_greedy``: the answer ``--formulation greedy`` gives,
-    as long as the budget pays for it), with all of the solve's budget but the guard's second
-    stage; the exact solve then gets what greedy left, starts each group from greedy's link
+    as far as the budget pays for it), with all of the solve's budget; the exact solve then gets
+    what greedy left less the guard's second stage (``GUARD_STAGE_S_PER_LINE``), starts each group from greedy's link
     matrix and path, and a group it has no time for keeps greedy's path
     (``runner.OUT_OF_TIME_GREEDY``), not the slicer's order. The guard prints per layer the
     slicer's, the greedy or the exact order, whichever the planner model says is faster; its
@@ -170,32 +170,26 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     the groups again, the exact solve does not run: greedy's answer is printed, its groups at
     best "feasible" (``guard.GREEDY_TAKEN``)."""
     t0 = time.perf_counter() if started_s is None else started_s
-    t_b = time.perf_counter()
     problem = build(program, options or OrderingOptions())
-    build_s = time.perf_counter() - t_b - _jit.compile_s_since(t_b)
     # compiling numba kernels (a first run) is not the run's to budget: it counts no time
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
     solve_budget = solve_budget_s(budget_s, program.n_lines, spent, finish_slow)
-    # what passing every group takes with no time to search them (the runner's priors), and
-    # that on this machine as loaded (``slow``, else the build's time against its quiet rate)
+    # what passing every group takes with no time to search them (the runner's priors)
     pass_s = (slow or 1.0) * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
-    loaded = (slow if slow is not None
-              else max(1.0, build_s / (BUILD_S_PER_LINE * max(program.n_lines, 1))))
-    greedy_pass_s = loaded / (slow or 1.0) * pass_s
     if slow is not None and solve_budget is not None:
         if solve_budget < pass_s:
             raise NoTimeToOrder(solve_budget, pass_s, problem.n_groups)
     greedy = None
     exact_budget = solve_budget
-    if (time_guard and "exact" in formulations.lookup(formulation).capabilities
-            and (solve_budget is None or solve_budget >= greedy_pass_s)):
-        # the guard's second stage, which greedy's answer adds after the solve
-        stage_s = finish_slow * GUARD_STAGE_S_PER_LINE * program.n_lines
+    if time_guard and "exact" in formulations.lookup(formulation).capabilities:
+        # the whole budget: greedy's answer in every group comes first (what a budget that
+        # greedy uses up prints is then the greedy run's file, through one guard stage)
         t_g = time.perf_counter()
-        greedy = solve_greedy(problem, time_limit_s=time_limit_s,
-                              budget_s=None if solve_budget is None
-                              else max(0.0, solve_budget - stage_s))
+        greedy = solve_greedy(problem, time_limit_s=time_limit_s, budget_s=solve_budget)
         if solve_budget is not None:
+            # what greedy left, less the guard's second stage (the exact answer against greedy's
+            # file) that an exact solve adds after it
+            stage_s = finish_slow * GUARD_STAGE_S_PER_LINE * program.n_lines
             exact_budget = max(0.0, solve_budget - (time.perf_counter() - t_g
                                                     - _jit.compile_s_since(t_g)) - stage_s)
     if greedy is not None and (stop_requested() or (exact_budget is not None
