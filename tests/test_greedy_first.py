@@ -123,3 +123,23 @@ def test_a_starved_exact_solve_prints_no_slower_than_greedy(monkeypatch):
     s, g = res.summary, greedy.summary
     assert res.ok and s["groups_out_of_time"] == 0
     assert s["print_time_after_s"] <= g["print_time_after_s"] + pipeline.GUARD_TOL_S * prog.n_layers
+
+
+def test_the_helpers_backwards_groups_keep_greedys_path_when_late(monkeypatch):
+    """The helper process solves groups backwards (``chain.solve_backwards``: its start free, its
+    end the next group's entry); one it has no time for keeps greedy's path too, walked back and
+    returned forwards, priced as the mirror prices it (no travel into its first curve), with a
+    bound no higher than that price."""
+    from gatesopt.ordering.chain import solve_backwards
+    monkeypatch.setattr(runner._jit, "compile_s_since", lambda t: 0.0)
+    prob = from_polylines(_layers_of([20, 20], seed=5), options=OrderingOptions(mode="free"))
+    gp = layers.solve_greedy(prob)
+    end = prob.cand_anchor(1, prob.group(1, prob.origin_xy), 0)
+    r = GroupRunner(prob, _never, 2.0, 0.5, time.perf_counter() - 10.0, {})
+    fwd, opts = solve_backwards(r, prob, 0, end, gp.answers[0])
+    gs = opts[0] if opts[0].formulation.startswith(OUT_OF_TIME_GREEDY) else opts[1]
+    assert gs.formulation.startswith(OUT_OF_TIME_GREEDY) and gs.formulation.endswith("+back")
+    assert np.array_equal(gs.order, gp.answers[0].order)
+    back = fwd.backwards()
+    assert gs.objective == pytest.approx(back.path_cost(gs.order[::-1]))
+    assert gs.bound <= gs.objective
