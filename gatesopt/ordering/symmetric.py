@@ -73,6 +73,7 @@ class SymmetricModel:
         self.ev = np.zeros(0, np.int64)
         self.present = np.zeros((N, N), bool)
         self.cut_inside: list[np.ndarray] = []
+        self.no_goods = 0                   # of them, cuts of one tour (``add_no_good``)
         h = self.h = highspy.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("random_seed", 0)
@@ -148,6 +149,31 @@ class SymmetricModel:
                        c.astype(np.int32), coef[r, c])
         self.cut_inside.extend(ins)
         return K
+
+    def add_no_good(self, on: np.ndarray) -> None:
+        """The cut ``x(T) <= |T| - 1`` over the travel columns ``on`` of one tour T: every other
+        tour keeps it, T alone breaks it. Where the group prices T above the model (an edge
+        taken the dearer way round: ``travel_graph``), T is already an incumbent: the node's
+        LP bound then rises past T instead of stopping at it (formulations/ordering.md, "milp,
+        symmetric model", "direction-dependent costs"). Its row is registered with an empty
+        node mask: it crosses no cut, so a column priced in later gets no entry in it (it is
+        not in T) and the reduced costs of missing edges are untouched by its dual."""
+        cols = np.flatnonzero(on).astype(np.int32)
+        self.h.addRows(1, np.array([-highspy.kHighsInf]), np.array([len(cols) - 1.0]), len(cols),
+                       np.zeros(1, np.int32), cols, np.ones(len(cols)))
+        self.cut_inside.append(np.zeros(self.N, bool))
+        self.no_goods += 1
+
+    def priced_above(self, x: np.ndarray, lp_obj: float):
+        """(order, cost) of the path of an integral, connected LP point ``x`` if the group
+        prices it above the LP's value (by more than ``OPTIMAL_ABS_TOL``), else None."""
+        if np.any((x > COLUMN_EPS) & (x < 1 - COLUMN_EPS)):
+            return None
+        order = self.decode(x)
+        if order is None or len(order) != self.group.n_curves:
+            return None
+        obj = self.group.path_cost(order)
+        return (order, obj) if obj > lp_obj + OPTIMAL_ABS_TOL else None
 
     def seed_odd_sets(self) -> float:
         """Start the LP with the odd-set cuts ``x(δ(H)) >= 1`` of the cheapest perfect matching's
@@ -393,8 +419,19 @@ class SymmetricModel:
                 if lp_obj >= best_obj - OPTIMAL_ABS_TOL:
                     outcome = "pruned"
                     break
-                if not self.separate(x, deadline):
+                if self.separate(x, deadline):
+                    continue
+                tour = self.priced_above(x, lp_obj)
+                if tour is None:
                     break
+                # an integral path the group prices above the model (a travel edge taken the
+                # dearer way round): it is the incumbent if cheaper, and a cut excludes it alone
+                # from the node, whose other paths may cost less (``add_no_good``)
+                order, obj = tour
+                if obj < best_obj - 1e-9:
+                    best, best_obj = order, obj
+                    fix_by_reduced_cost()
+                self.add_no_good(x > 0.5)
             # (cut rounds used up: the last LP point and its value, a valid bound, are branched on)
             if outcome == "stopped":            # only an LP that proves something discards a node
                 heapq.heappush(heap, (node_bound, count, fixings))
