@@ -152,6 +152,12 @@ def cause(row) -> str:
 def measure(args) -> None:
     from gatesopt.ordering import auto, symmetric_graph
     from gatesopt.ordering.budget import exact_time_s
+    import importlib
+    for item in args.set:
+        name, value = item.split("=")
+        mod, attr = name.rsplit(".", 1)
+        setattr(importlib.import_module("gatesopt.ordering." + mod), attr, type(
+            getattr(importlib.import_module("gatesopt.ordering." + mod), attr))(float(value)))
     auto.warm_up()
     rec = Recorder()
     with open(args.out, "a") as out:
@@ -231,6 +237,8 @@ def main() -> None:
     m.add_argument("--max-groups", type=int, default=400)
     m.add_argument("--seed", type=int, default=0)
     m.add_argument("--tag", default="main")
+    m.add_argument("--set", nargs="*", default=[],
+                   help="module constants to try, e.g. symmetric.DIRECTED_FIRST=1")
     m.add_argument("--out", default=str(DEFAULT_OUT))
     r = sub.add_parser("report")
     r.add_argument("--out", default=str(DEFAULT_OUT))

@@ -597,10 +597,10 @@ class DirectedModel(SymmetricModel):
 ASYMMETRY_TOL = OPTIMAL_ABS_TOL
 
 
-def asymmetric(model: SymmetricModel) -> bool:
-    """Whether some travel edge costs otherwise one way than the other (S's and E's edges have
-    one way only)."""
-    A = model.A[2:, 2:]
+def asymmetric(arcs: np.ndarray) -> bool:
+    """Whether some travel edge costs otherwise one way than the other in the arc matrix
+    ``arcs`` (``symmetric_graph.arc_costs``; S's and E's edges have one way only)."""
+    A = arcs[2:, 2:]
     fin = np.isfinite(A) & np.isfinite(A.T)
     return bool(np.any(np.abs(A[fin] - A.T[fin]) > ASYMMETRY_TOL))
 
@@ -611,7 +611,9 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     proven optimal)."""
     best = np.asarray(incumbent, np.int64)
     best_obj = group.path_cost(best)
-    model = SymmetricModel(group, best)
+    graph = graph_and_arcs(group)
+    directed = DIRECTED and asymmetric(graph[6])
+    model = (DirectedModel if directed and DIRECTED_FIRST else SymmetricModel)(group, best, graph)
     bound = model.seed_odd_sets()
     if best_obj - bound <= OPTIMAL_ABS_TOL:
         return best, best_obj, bound, True
@@ -624,7 +626,7 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
         return best, best_obj, bound, True
     if not model.complete:
         return best, best_obj, bound, False
-    if DIRECTED and asymmetric(model):
+    if directed and not isinstance(model, DirectedModel):
         return _directed(model, best, best_obj, bound, deadline)
     return model.branch(best, best_obj, bound, deadline)
 
@@ -632,6 +634,8 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
 #: whether a group with direction-dependent costs left open by the symmetric root goes on in
 #: ``DirectedModel`` (else: the symmetric branch-and-cut)
 DIRECTED = True
+#: whether such a group starts in ``DirectedModel`` (else: the symmetric root first)
+DIRECTED_FIRST = False
 
 
 def _directed(sym: SymmetricModel, best, best_obj: float, bound: float, deadline: float):
