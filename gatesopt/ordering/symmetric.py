@@ -19,6 +19,12 @@ optimum is the optimum of the whole problem.
 The graph, the matching's odd sets and the compiled graph kernels are in ``symmetric_graph``; the
 separation of subtour and blossom cuts in ``separation``; this module holds the LP model
 (``SymmetricModel``: columns, rows, duals, pricing, root, branch-and-cut) and ``solve``.
+
+Where the group's links cost otherwise one way than the other (the time objective's copied slicer
+gaps), the symmetric model prices each edge the cheaper way round and relaxes the group: a tour
+it finds priced above its LP value is cut off alone (``SymmetricModel.add_no_good``), and a gap
+left by its root goes on in ``DirectedModel``, a column per direction and an "entered once" row
+per curve, exact for such costs (formulations/ordering.md, "Direction-dependent costs").
 """
 from __future__ import annotations
 
@@ -55,6 +61,18 @@ PRICE_PER_NODE = 1
 EXACT_BLOSSOM_SHARE = 0.25
 #: separation rounds per branch-and-cut node (then it is branched on its last LP point)
 MAX_NODE_CUT_ROUNDS = 50
+#: refine with ``DirectedModel`` when the group's arcs differ from their reverse by more than
+#: this somewhere (ms or mm; a symmetric group never needs it)
+ASYMMETRY_TOL = OPTIMAL_ABS_TOL
+#: whether a group with direction-dependent costs left open by the symmetric root goes on in
+#: ``DirectedModel`` (else: the symmetric branch-and-cut with no-good cuts). Free mode, 0.3 s
+#: per group: prusa25_ymotor_grid30_zhop 1 -> 49 of 60 sampled groups proven (docs/RESULTS.md,
+#: "Proofs on direction-dependent costs")
+DIRECTED = True
+#: whether such a group starts in ``DirectedModel`` (else: the symmetric root first, whose
+#: edges and cuts it takes). Measured at 0.3 s per group, back to back: zaxis_lightning10 51
+#: vs 54 of 57, yrod_solid100 33 vs 38 of 49 proven: off
+DIRECTED_FIRST = False
 
 
 class SymmetricModel:
@@ -592,11 +610,6 @@ class DirectedModel(SymmetricModel):
         self.add_cuts(cuts)
 
 
-#: refine with ``DirectedModel`` when the group's arcs differ from their reverse by more than
-#: this somewhere (ms or mm; a symmetric group never needs it)
-ASYMMETRY_TOL = OPTIMAL_ABS_TOL
-
-
 def asymmetric(arcs: np.ndarray) -> bool:
     """Whether some travel edge costs otherwise one way than the other in the arc matrix
     ``arcs`` (``symmetric_graph.arc_costs``; S's and E's edges have one way only)."""
@@ -629,13 +642,6 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     if directed and not isinstance(model, DirectedModel):
         return _directed(model, best, best_obj, bound, deadline)
     return model.branch(best, best_obj, bound, deadline)
-
-
-#: whether a group with direction-dependent costs left open by the symmetric root goes on in
-#: ``DirectedModel`` (else: the symmetric branch-and-cut)
-DIRECTED = True
-#: whether such a group starts in ``DirectedModel`` (else: the symmetric root first)
-DIRECTED_FIRST = False
 
 
 def _directed(sym: SymmetricModel, best, best_obj: float, bound: float, deadline: float):
