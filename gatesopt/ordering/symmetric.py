@@ -69,9 +69,8 @@ ASYMMETRY_TOL = OPTIMAL_ABS_TOL
 #: per group: prusa25_ymotor_grid30_zhop 1 -> 49 of 60 sampled groups proven (docs/RESULTS.md,
 #: "Proofs on direction-dependent costs")
 DIRECTED = True
-#: whether such a group starts in ``DirectedModel`` (else: the symmetric root first, whose
-#: edges and cuts it takes). Measured at 0.3 s per group, back to back: zaxis_lightning10 51
-#: vs 54 of 57, yrod_solid100 33 vs 38 of 49 proven: off
+#: whether such a group starts in ``DirectedModel`` (else the symmetric root first). At 0.3 s
+#: per group: zaxis_lightning10 51 (on) vs 54 (off) of 57 proven, yrod_solid100 33 vs 38 of 49
 DIRECTED_FIRST = False
 
 
@@ -167,12 +166,10 @@ class SymmetricModel:
         return len(u)
 
     def edge_x(self, x: np.ndarray) -> np.ndarray:
-        """An LP point per edge (the sum of its columns)."""
-        return x
+        return x                            # an LP point per edge (the sum of its columns)
 
     def edge_rc(self, rc: np.ndarray) -> np.ndarray:
-        """Reduced costs per edge (either end first): a missing edge may enter if below 0."""
-        return rc
+        return rc                           # per edge: a missing edge may enter if below 0
 
     def add_cuts(self, cuts) -> int:
         """Cuts given as (inside, teeth or None): for ``teeth`` None the subtour cut
@@ -326,8 +323,7 @@ class SymmetricModel:
         return rc
 
     def rc_of_rows(self, y: np.ndarray) -> np.ndarray:
-        """The cost matrix less the duals of ``extra_rows`` (none here)."""
-        return self.C
+        return self.C                       # the costs less the duals of ``extra_rows``
 
     def lp_bound(self, obj: float, rc: np.ndarray) -> float:
         """Valid lower bound from the restricted LP: obj + sum of the negative reduced costs of
