@@ -20,7 +20,9 @@ ended unproven, the cause, from the symmetric model's steps as they ran (recorde
 - ``b&c limit``: branch-and-cut ran out of time;
 - ``asym``: the symmetric model's bound meets the path's price in the model (each travel edge
   priced the cheaper way round) but not its true price: the relaxation of direction-dependent
-  link costs, not the search, is what is missing;
+  link costs, not the search, is what is missing (never where the last model that ran was
+  ``DirectedModel``, which prices each direction: there its causes are the root's and the
+  branch's; rows written before ``model`` was recorded may count such groups here);
 - ``no exact``: the limit was below ``budget.exact_time_s`` (ILS only).
 """
 from __future__ import annotations
@@ -93,7 +95,7 @@ class Recorder:
             t = time.perf_counter()
             b = orig_root(model, deadline, *a, **k)
             rec.log.update(root_s=time.perf_counter() - t, root_complete=model.complete,
-                           root_bound=b, n_nodes=model.N)
+                           root_bound=b, n_nodes=model.N, model=type(model).__name__)
             return b
 
         def branch(model, best, best_obj, bound, deadline, *a, **k):
@@ -136,7 +138,8 @@ def cause(row) -> str:
         return "directed"
     if row["limit"] < row["exact_s"]:
         return "no exact"
-    if row.get("sym_price") is not None and row["sym_price"] - row["bound"] <= 1e-3:
+    if (row.get("model") != "DirectedModel" and row.get("sym_price") is not None
+            and row["sym_price"] - row["bound"] <= 1e-3):
         return "asym"
     if "root_complete" not in row:
         return "no model"
