@@ -9,9 +9,10 @@ Per file, the groups a solve would hand to ``auto`` (not fixed, more than ``--mi
 curves, each geometry once: the runner caches exact repeats), each started where the previous
 group's greedy path ended (the start anchor as ``layers.solve`` builds it, greedy standing for
 the exact answer) and solved by ``auto.solve`` with the same fixed ``--limit`` (independent of
-the load and of the budget's plan). Per group: status, formulation, CPU seconds, and, where it
-ended unproven, the cause, from the symmetric model's steps as they ran (recorded by wrapping
-``SymmetricModel.root`` / ``branch``):
+the load and of the budget's plan; ``--limit exact``: each group its ``budget.exact_time_s``, the
+least the plan gives a group it wants proven). Per group: status, formulation, CPU seconds,
+and, where it ended unproven, the cause, from the symmetric model's steps as they ran (recorded
+by wrapping ``SymmetricModel.root`` / ``branch``, which ``DirectedModel`` inherits):
 
 - ``directed``: several candidates per curve (no symmetric model; the directed MILP's loop);
 - ``root open``: the root LP did not finish (cuts or pricing) within the limit;
@@ -177,9 +178,11 @@ def measure(args) -> None:
             for g, grp in groups:
                 rec.reset()
                 c0, t0 = cpu_s(), time.perf_counter()
-                gs = auto.solve(grp, time_limit_s=args.limit)
-                row = {"tag": args.tag, "file": file, "mode": mode, "group": int(g),
-                       "n": int(grp.n_curves), "m": int(grp.n_cands), "limit": args.limit,
+                limit = (float(exact_time_s(grp.n_curves)) if args.limit == "exact"
+                         else float(args.limit))
+                gs = auto.solve(grp, time_limit_s=limit)
+                row = {"tag": args.tag, "limit_arg": args.limit, "file": file, "mode": mode,
+                       "group": int(g), "n": int(grp.n_curves), "m": int(grp.n_cands), "limit": limit,
                        "status": str(gs.status.value if hasattr(gs.status, "value") else gs.status),
                        "formulation": gs.formulation, "objective": float(gs.objective),
                        "bound": float(gs.bound), "wall_s": time.perf_counter() - t0,
@@ -193,7 +196,7 @@ def measure(args) -> None:
                 out.flush()
             print(summary([json.loads(x) for x in open(args.out)
                            if json.loads(x)["file"] == file and json.loads(x)["tag"] == args.tag
-                           and json.loads(x)["mode"] == mode and json.loads(x)["limit"] == args.limit]),
+                           and json.loads(x)["mode"] == mode]),
                   flush=True)
 
 
@@ -210,7 +213,7 @@ def report(args) -> None:
     for r in rows:
         if args.tags and r["tag"] not in args.tags:
             continue
-        by[(r["file"], r["mode"], r["limit"], r["tag"])].append(r)
+        by[(r["file"], r["mode"], str(r.get("limit_arg", r["limit"])), r["tag"])].append(r)
     causes = ["proven", "no exact", "directed", "root open", "wide root", "b&c limit", "asym",
               "no model", "other"]
     print("| file | mode | limit s | tag | groups | " + " | ".join(causes) + " | CPU s |")
@@ -235,7 +238,9 @@ def main() -> None:
     sub = ap.add_subparsers(dest="cmd", required=True)
     m = sub.add_parser("measure")
     m.add_argument("files", nargs="+")
-    m.add_argument("--limit", type=float, default=0.5)
+    m.add_argument("--limit", default="0.5",
+                   help="seconds per group, or 'exact': budget.exact_time_s of its size, the "
+                        "least limit the budget's plan gives a group it wants proven")
     m.add_argument("--min-curves", type=int, default=13)
     m.add_argument("--max-groups", type=int, default=400)
     m.add_argument("--seed", type=int, default=0)
