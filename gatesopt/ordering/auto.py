@@ -8,7 +8,8 @@ cheapest perfect matching of the end points (``matching.py``): a bound within ~2
 on real groups and, patched into one path, often the optimum itself. Otherwise ILS, then the
 exact step of ``milp.py``
 within the per-group time limit: the symmetric model (``symmetric.py``: sparse LP with subtour and
-blossom cuts, pricing, reduced-cost fixing, branch-and-cut) for groups of open curves and
+blossom cuts, pricing, reduced-cost fixing, branch-and-cut; where links cost otherwise one way
+than the other, its directed refinement) for groups of open curves and
 fixed-seam loops up to ``SYMMETRIC_MAX_CANDS`` candidates, the directed model up to
 ``exact_max_cands``; the rest keep the ILS path with status "fallback" and the gap to the better
 of the two bounds.

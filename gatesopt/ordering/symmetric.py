@@ -19,6 +19,12 @@ optimum is the optimum of the whole problem.
 The graph, the matching's odd sets and the compiled graph kernels are in ``symmetric_graph``; the
 separation of subtour and blossom cuts in ``separation``; this module holds the LP model
 (``SymmetricModel``: columns, rows, duals, pricing, root, branch-and-cut) and ``solve``.
+
+Where the group's links cost otherwise one way than the other (the time objective's copied slicer
+gaps), the symmetric model prices each edge the cheaper way round and relaxes the group: a tour
+it finds priced above its LP value is cut off alone (``SymmetricModel.add_no_good``), and a gap
+left by its root goes on in ``DirectedModel``, a column per direction and an "entered once" row
+per curve, exact for such costs (formulations/ordering.md, "Direction-dependent costs").
 """
 from __future__ import annotations
 
@@ -34,8 +40,8 @@ from . import separation
 from . import ils
 from .problem import OPTIMAL_ABS_TOL, Group
 from .separation import COLUMN_EPS, gomory_hu_sides, residual_arcs
-from .symmetric_graph import (components, decode_edges, fixed_edges, match_edges, matching_of,
-                              odd_sets, travel_graph)
+from .symmetric_graph import (components, decode_edges, fixed_edges, graph_and_arcs, match_edges,
+                              matching_of, odd_sets)
 
 _OPT = highspy.HighsModelStatus.kOptimal
 _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
@@ -55,28 +61,50 @@ PRICE_PER_NODE = 1
 EXACT_BLOSSOM_SHARE = 0.25
 #: separation rounds per branch-and-cut node (then it is branched on its last LP point)
 MAX_NODE_CUT_ROUNDS = 50
+#: refine with ``DirectedModel`` when the group's arcs differ from their reverse by more than
+#: this somewhere (ms or mm; a symmetric group never needs it)
+ASYMMETRY_TOL = OPTIMAL_ABS_TOL
+#: whether a group with direction-dependent costs left open by the symmetric root goes on in
+#: ``DirectedModel`` (else: the symmetric branch-and-cut with no-good cuts). Free mode, 0.3 s
+#: per group: prusa25_ymotor_grid30_zhop 1 -> 49 of 60 sampled groups proven (docs/RESULTS.md,
+#: "Proofs on direction-dependent costs")
+DIRECTED = True
+#: whether such a group starts in ``DirectedModel`` (else the symmetric root first). At 0.3 s
+#: per group: zaxis_lightning10 51 (on) vs 54 (off) of 57 proven, yrod_solid100 33 vs 38 of 49
+DIRECTED_FIRST = False
 
 
 class SymmetricModel:
     """Nodes 0 = S, 1 = E, then the end points of the curves; HiGHS rows 0..N-1 are the degree
     equations ``x(δ(v)) = deg_v`` (1 beside a fixed edge, 2 for a loop's seam), the rest cuts."""
 
-    def __init__(self, group: Group, incumbent: np.ndarray):
+    #: lp_bound: each missing edge's reduced cost is counted once per orientation in the matrix
+    PAIRS_FACTOR = 0.5
+
+    def __init__(self, group: Group, incumbent: np.ndarray, graph=None):
         self.group = group
         (self.pos, self.node_curve, self.deg, self.C, self.curve_nodes,
-         self.first_cand) = travel_graph(group)
+         self.first_cand, self.A) = graph_and_arcs(group) if graph is None else graph
         N = self.N = len(self.pos)
         C = self.C
         self.fixed_u, self.fixed_v = fixed_edges(self.curve_nodes)
-        # columns (u < v) and cuts (node mask "inside", row index N + i)
+        # edges (u < v), the HiGHS columns over them (here one per edge; ``DirectedModel``: one
+        # per direction), cuts (node mask "inside", row index cut_row0 + i, teeth as node pairs)
         self.eu = np.zeros(0, np.int64)
         self.ev = np.zeros(0, np.int64)
+        self.col_edge = np.zeros(0, np.int64)
+        self.col_tail = np.zeros(0, np.int64)
+        self.col_head = np.zeros(0, np.int64)
         self.present = np.zeros((N, N), bool)
         self.cut_inside: list[np.ndarray] = []
+        self.cut_teeth: list = []           # per cut: None, or (tooth edges (u, v), fixed mask)
+        self.no_goods = 0                   # of them, cuts of one tour (``add_no_good``)
         h = self.h = highspy.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("random_seed", 0)
         h.addRows(N, self.deg, self.deg, 0, np.zeros(N, np.int32), np.zeros(0, np.int32), np.zeros(0))
+        self.cut_row0 = N
+        self.extra_rows()
         # first columns: each node's nearest neighbours, every edge at E, the incumbent's edges
         k = min(K_NEIGHBOURS, N - 1)
         # a partial selection: the full row sort took ~1 ms of the model's ~1.6 ms build on a
@@ -91,6 +119,17 @@ class SymmetricModel:
 
     # -- columns and rows -------------------------------------------------------------------
 
+    def extra_rows(self) -> None:
+        """Rows between the degree equations and the cuts (``DirectedModel``: none here)."""
+
+    def arcs_of(self, u, v, e0: int):
+        """The columns of new edges (u, v), edge indices from e0: (tail, head, edge, cost)."""
+        return u, v, np.arange(e0, e0 + len(u)), self.C[u, v]
+
+    def extra_entries(self, head):
+        """(rows, column positions) a new column has besides degree and cut rows."""
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+
     def add_columns(self, r, c) -> int:
         r, c = np.asarray(r, np.int64), np.asarray(c, np.int64)
         u, v = np.minimum(r, c), np.maximum(r, c)
@@ -100,24 +139,37 @@ class SymmetricModel:
         if len(u) == 0:
             return 0
         self.present[u, v] = self.present[v, u] = True
+        tail, head, edge, cost = self.arcs_of(u, v, len(self.eu))
         # entries: the two degree rows, and every cut row the edge crosses (coefficient 1: a new
         # column is never a blossom's tooth)
-        K = len(u)
-        rows_all, cols_all = [u, v], [np.arange(K), np.arange(K)]
+        K = len(tail)
+        rows_all, cols_all = [tail, head], [np.arange(K), np.arange(K)]
+        er, ec = self.extra_entries(head)
+        rows_all.append(er)
+        cols_all.append(ec)
         if self.cut_inside:
             ins = np.asarray(self.cut_inside)                   # (cuts, N)
-            j, r = np.nonzero((ins[:, u] != ins[:, v]).T)
-            rows_all.append(self.N + r)
+            j, r = np.nonzero((ins[:, tail] != ins[:, head]).T)
+            rows_all.append(self.cut_row0 + r)
             cols_all.append(j)
         rows_all, cols_all = np.concatenate(rows_all), np.concatenate(cols_all)
         o = np.argsort(cols_all, kind="stable")
         idx = rows_all[o].astype(np.int32)
         starts = np.searchsorted(cols_all[o], np.arange(K)).astype(np.int32)
-        self.h.addCols(K, self.C[u, v], np.zeros(K), np.ones(K), len(idx), starts, idx,
+        self.h.addCols(K, cost, np.zeros(K), np.ones(K), len(idx), starts, idx,
                        np.ones(len(idx)))
         self.eu = np.concatenate([self.eu, u])
         self.ev = np.concatenate([self.ev, v])
+        self.col_edge = np.concatenate([self.col_edge, edge])
+        self.col_tail = np.concatenate([self.col_tail, tail])
+        self.col_head = np.concatenate([self.col_head, head])
         return len(u)
+
+    def edge_x(self, x: np.ndarray) -> np.ndarray:
+        return x                            # an LP point per edge (the sum of its columns)
+
+    def edge_rc(self, rc: np.ndarray) -> np.ndarray:
+        return rc                           # per edge: a missing edge may enter if below 0
 
     def add_cuts(self, cuts) -> int:
         """Cuts given as (inside, teeth or None): for ``teeth`` None the subtour cut
@@ -129,7 +181,7 @@ class SymmetricModel:
             return 0
         K = len(cuts)
         ins = np.array([inside for inside, _ in cuts], bool)               # (cuts, nodes)
-        cross = ins[:, self.eu] != ins[:, self.ev]
+        cross = ins[:, self.eu] != ins[:, self.ev]                          # (cuts, edges)
         coef = np.ones(cross.shape)
         fixed_cross = ins[:, self.fixed_u] != ins[:, self.fixed_v]
         rhs = np.empty(K)
@@ -142,12 +194,41 @@ class SymmetricModel:
                 n_t = len(tooth_col) + int(tooth_fixed.sum())
                 rhs[i] = (1.0 - n_t - int((fixed_cross[i] & ~tooth_fixed).sum())
                           + int(tooth_fixed.sum()))
+        cross, coef = cross[:, self.col_edge], coef[:, self.col_edge]     # per column
         r, c = np.nonzero(cross)
         starts = np.searchsorted(r, np.arange(K)).astype(np.int32)
         self.h.addRows(K, rhs, np.full(K, highspy.kHighsInf), len(c), starts,
                        c.astype(np.int32), coef[r, c])
         self.cut_inside.extend(ins)
+        self.cut_teeth.extend(None if t is None else
+                              (self.eu[t[0]], self.ev[t[0]], t[1]) for _, t in cuts)
         return K
+
+    def add_no_good(self, on: np.ndarray) -> None:
+        """The cut ``x(T) <= |T| - 1`` over the travel columns ``on`` of one tour T: every other
+        tour keeps it, T alone breaks it. Where the group prices T above the model (an edge
+        taken the dearer way round: ``travel_graph``), T is already an incumbent: the node's
+        LP bound then rises past T instead of stopping at it (formulations/ordering.md, "milp,
+        symmetric model", "direction-dependent costs"). Its row is registered with an empty
+        node mask: it crosses no cut, so a column priced in later gets no entry in it (it is
+        not in T) and the reduced costs of missing edges are untouched by its dual."""
+        cols = np.flatnonzero(on).astype(np.int32)
+        self.h.addRows(1, np.array([-highspy.kHighsInf]), np.array([len(cols) - 1.0]), len(cols),
+                       np.zeros(1, np.int32), cols, np.ones(len(cols)))
+        self.cut_inside.append(np.zeros(self.N, bool))
+        self.cut_teeth.append(False)        # not passed on (``DirectedModel.take_cuts``)
+        self.no_goods += 1
+
+    def priced_above(self, x: np.ndarray, lp_obj: float):
+        """(order, cost) of the path of an integral, connected LP point ``x`` if the group
+        prices it above the LP's value (by more than ``OPTIMAL_ABS_TOL``), else None."""
+        if np.any((x > COLUMN_EPS) & (x < 1 - COLUMN_EPS)):
+            return None
+        order = self.decode(x)
+        if order is None or len(order) != self.group.n_curves:
+            return None
+        obj = self.group.path_cost(order)
+        return (order, obj) if obj > lp_obj + OPTIMAL_ABS_TOL else None
 
     def seed_odd_sets(self) -> float:
         """Start the LP with the odd-set cuts ``x(δ(H)) >= 1`` of the cheapest perfect matching's
@@ -180,11 +261,14 @@ class SymmetricModel:
         return np.asarray(out, np.int64)
 
     def columns_of(self, order: np.ndarray) -> np.ndarray:
+        """The LP point of a candidate order (its travel edges' columns at 1)."""
         e = self.tour_edges(order)
-        u, v = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
-        index = {(a, b): j for j, (a, b) in enumerate(zip(self.eu.tolist(), self.ev.tolist()))}
-        col = np.zeros(len(self.eu))
-        for a, b in zip(u.tolist(), v.tolist()):
+        if self.PAIRS_FACTOR == 0.5:            # one column per edge (u < v)
+            e = np.sort(e, axis=1)
+        index = {(a, b): j for j, (a, b) in enumerate(zip(self.col_tail.tolist(),
+                                                          self.col_head.tolist()))}
+        col = np.zeros(len(self.col_edge))
+        for a, b in e.tolist():
             col[index[a, b]] = 1.0
         return col
 
@@ -202,6 +286,7 @@ class SymmetricModel:
         the support first; a connected support gets exact subtour separation by minimum cuts and
         the odd-component blossom heuristic; if these find nothing before
         ``exact_blossoms_until`` (a ``time.perf_counter()`` value), exact blossom separation."""
+        x = self.edge_x(x)
         ncomp, lab = self.support_components(x > COLUMN_EPS)
         if ncomp > 1:
             return self.add_cuts([(lab == comp, None) for comp in range(ncomp)])
@@ -229,22 +314,26 @@ class SymmetricModel:
         where no edge exists. Cut rows cross an edge iff exactly one of its ends is inside; a
         missing edge is never a tooth (teeth are columns at 1)."""
         y = np.asarray(self.h.getSolution().row_dual)
-        yd, yc = y[:self.N], y[self.N:]
-        rc = self.C - yd[:, None] - yd[None, :]
+        yd, yc = y[:self.N], y[self.cut_row0:]
+        rc = self.rc_of_rows(y) - yd[:, None] - yd[None, :]
         if len(yc):
             act = np.abs(yc) > 1e-12
             if act.any():
                 _subtract_cut_duals(rc, np.asarray(self.cut_inside)[act], yc[act])
         return rc
 
+    def rc_of_rows(self, y: np.ndarray) -> np.ndarray:
+        return self.C                       # the costs less the duals of ``extra_rows``
+
     def lp_bound(self, obj: float, rc: np.ndarray) -> float:
         """Valid lower bound from the restricted LP: obj + sum of the negative reduced costs of
         missing edges (each x_e <= 1), halved for the symmetric duplicates."""
         miss = ~self.present & np.isfinite(rc)
         neg = np.minimum(rc[miss], 0.0)
-        return float(obj + 0.5 * neg.sum())
+        return float(obj + self.PAIRS_FACTOR * neg.sum())
 
     def price(self, rc: np.ndarray) -> int:
+        rc = self.edge_rc(rc)
         miss = ~self.present & np.isfinite(rc)
         iu, iv = np.nonzero(np.triu(miss & (rc < -1e-7), 1))
         if len(iu) == 0:
@@ -256,7 +345,7 @@ class SymmetricModel:
 
     def decode(self, x: np.ndarray) -> np.ndarray | None:
         """Candidate order from an integer point, or None if it has subtours."""
-        on = x > 0.5
+        on = self.edge_x(x) > 0.5
         ncomp, _ = self.support_components(on)
         if ncomp > 1:
             return None
@@ -271,6 +360,7 @@ class SymmetricModel:
         enters if both ends still need a travel edge and it closes no cycle) over the columns by
         ``x`` descending, then cost; what is left is joined by the cheapest edges of the whole
         graph. Gives the exact step an incumbent near the LP optimum (ILS polishes it)."""
+        x = self.edge_x(x)
         key = np.lexsort((self.C[self.eu, self.ev], -np.round(x, 6)))
         cols = key[x[key] > COLUMN_EPS]
         u, v = match_edges(self.N, self.deg.astype(np.int64), self.fixed_u, self.fixed_v,
@@ -334,13 +424,14 @@ class SymmetricModel:
         col_rc = np.asarray(h.getSolution().col_dual, float)
         n_old = len(col_rc)
         open_gap = best_obj - bound + 1e-6      # UB - LB: an edge costing more is in no better path
-        iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(rc) & (rc <= open_gap), 1))
-        if n_old + len(iu) > MAX_BRANCH_COLUMNS_PER_NODE * self.N:
+        erc = self.edge_rc(rc)
+        iu, iv = np.nonzero(np.triu(~self.present & np.isfinite(erc) & (erc <= open_gap), 1))
+        if len(self.eu) + len(iu) > MAX_BRANCH_COLUMNS_PER_NODE * self.N:
             return best, best_obj, bound, False
         self.add_columns(iu, iv)
-        col_rc = np.concatenate([col_rc, rc[self.eu[n_old:], self.ev[n_old:]]])
+        col_rc = np.concatenate([col_rc, rc[self.col_tail[n_old:], self.col_head[n_old:]]])
         root_bound = bound
-        ncol = len(self.eu)
+        ncol = len(self.col_edge)
         upper = np.ones(ncol)                   # global upper bounds (0: fixed by reduced cost)
         applied: dict[int, float] = {}          # node bounds currently set in HiGHS: col -> value
 
@@ -393,8 +484,19 @@ class SymmetricModel:
                 if lp_obj >= best_obj - OPTIMAL_ABS_TOL:
                     outcome = "pruned"
                     break
-                if not self.separate(x, deadline):
+                if self.separate(x, deadline):
+                    continue
+                tour = self.priced_above(x, lp_obj)
+                if tour is None:
                     break
+                # an integral path the group prices above the model (a travel edge taken the
+                # dearer way round): it is the incumbent if cheaper, and a cut excludes it alone
+                # from the node, whose other paths may cost less (``add_no_good``)
+                order, obj = tour
+                if obj < best_obj - 1e-9:
+                    best, best_obj = order, obj
+                    fix_by_reduced_cost()
+                self.add_no_good(x > 0.5)
             # (cut rounds used up: the last LP point and its value, a valid bound, are branched on)
             if outcome == "stopped":            # only an LP that proves something discards a node
                 heapq.heappush(heap, (node_bound, count, fixings))
@@ -422,7 +524,8 @@ class SymmetricModel:
                     best, best_obj = order, obj
                     fix_by_reduced_cost()
             # branch on the edge closest to 1/2, the longer one on ties
-            e = frac[np.lexsort((-self.C[self.eu[frac], self.ev[frac]], np.abs(x[frac] - 0.5)))[0]]
+            e = frac[np.lexsort((-self.C[self.col_tail[frac], self.col_head[frac]],
+                                 np.abs(x[frac] - 0.5)))[0]]
             for val in (1.0, 0.0):
                 heapq.heappush(heap, (lp_obj, count, fixings + ((int(e), val),)))
                 count += 1
@@ -443,16 +546,107 @@ class SymmetricModel:
         return (order, obj) if obj < best_obj - 1e-9 else (best, best_obj)
 
 
+class DirectedModel(SymmetricModel):
+    """The symmetric model's graph with a column per direction of each travel edge, priced by
+    the group's own link costs (``symmetric_graph.arc_costs``): exact where the time objective's
+    links cost otherwise one way than the other (formulations/ordering.md, "milp, symmetric
+    model", "direction-dependent costs"). Besides the degree equations, one row per curve: it is
+    entered once, ``z(δ^in(nodes of c)) = 1`` (an open curve at either end point, a loop at its
+    seam; nothing enters S, E is entered by its degree). On a tour S -> ... -> E these make every
+    travel edge's direction the path's: S's edge leaves S, so the curve it enters is entered
+    there and must leave by its other edge, and so on. Cuts (subtours, blossoms) hold for the
+    edges' sums ``x_e = z_uv + z_vu`` and are separated on them (``edge_x``); both columns of an
+    edge get its coefficient. A relaxation of nothing: its bound is a bound of the group's true
+    costs, its integral points are paths priced as the group prices them."""
+
+    PAIRS_FACTOR = 1.0
+
+    def extra_rows(self) -> None:
+        n = self.group.n_curves
+        self.h.addRows(n, np.ones(n), np.ones(n), 0, np.zeros(n, np.int32),
+                       np.zeros(0, np.int32), np.zeros(0))
+        self.cut_row0 = self.N + n
+
+    def arcs_of(self, u, v, e0: int):
+        edge = np.arange(e0, e0 + len(u))
+        fwd, bwd = np.isfinite(self.A[u, v]), np.isfinite(self.A[v, u])
+        tail = np.concatenate([u[fwd], v[bwd]])
+        head = np.concatenate([v[fwd], u[bwd]])
+        return tail, head, np.concatenate([edge[fwd], edge[bwd]]), self.A[tail, head]
+
+    def extra_entries(self, head):
+        j = np.flatnonzero(head >= 2)
+        return self.N + self.node_curve[head[j]], j
+
+    def edge_x(self, x: np.ndarray) -> np.ndarray:
+        return np.bincount(self.col_edge, weights=x, minlength=len(self.eu))
+
+    def edge_rc(self, rc: np.ndarray) -> np.ndarray:
+        return np.minimum(rc, rc.T)
+
+    def rc_of_rows(self, y: np.ndarray) -> np.ndarray:
+        y_in = np.zeros(self.N)
+        y_in[2:] = y[self.N:self.cut_row0][self.node_curve[2:]]
+        return self.A - y_in[None, :]
+
+    def take_cuts(self, model: SymmetricModel) -> None:
+        """The edges and the cuts of a symmetric model of the same group (its no-good cuts
+        excepted: a tour priced above the symmetric model may be the optimum here)."""
+        self.add_columns(model.eu, model.ev)
+        index = {(a, b): j for j, (a, b) in enumerate(zip(self.eu.tolist(), self.ev.tolist()))}
+        cuts = []
+        for inside, teeth in zip(model.cut_inside, model.cut_teeth):
+            if teeth is False:
+                continue
+            if teeth is not None:
+                tu, tv, tf = teeth
+                teeth = (np.array([index[a, b] for a, b in zip(tu.tolist(), tv.tolist())],
+                                  np.int64), tf)
+            cuts.append((inside, teeth))
+        self.add_cuts(cuts)
+
+
+def asymmetric(arcs: np.ndarray) -> bool:
+    """Whether some travel edge costs otherwise one way than the other in the arc matrix
+    ``arcs`` (``symmetric_graph.arc_costs``; S's and E's edges have one way only)."""
+    A = arcs[2:, 2:]
+    fin = np.isfinite(A) & np.isfinite(A.T)
+    return bool(np.any(np.abs(A[fin] - A.T[fin]) > ASYMMETRY_TOL))
+
+
 def solve(group: Group, incumbent: np.ndarray, deadline: float):
     """Root LP (cuts and pricing); a path built from the LP point and polished by ILS may improve
     the incumbent; then branch-and-cut if a gap is left. Returns (order, objective, bound,
     proven optimal)."""
     best = np.asarray(incumbent, np.int64)
     best_obj = group.path_cost(best)
-    model = SymmetricModel(group, best)
+    graph = graph_and_arcs(group)
+    directed = DIRECTED and asymmetric(graph[6])
+    model = (DirectedModel if directed and DIRECTED_FIRST else SymmetricModel)(group, best, graph)
     bound = model.seed_odd_sets()
     if best_obj - bound <= OPTIMAL_ABS_TOL:
         return best, best_obj, bound, True
+    bound = max(bound, model.root(
+        deadline, exact_blossoms_s=EXACT_BLOSSOM_SHARE * (deadline - time.perf_counter())))
+    if best_obj - bound > OPTIMAL_ABS_TOL and model.complete:
+        x = np.asarray(model.h.getSolution().col_value)
+        best, best_obj = model._polish(model.tour_from(x), best, best_obj, bound, deadline)
+    if best_obj - bound <= OPTIMAL_ABS_TOL:
+        return best, best_obj, bound, True
+    if not model.complete:
+        return best, best_obj, bound, False
+    if directed and not isinstance(model, DirectedModel):
+        return _directed(model, best, best_obj, bound, deadline)
+    return model.branch(best, best_obj, bound, deadline)
+
+
+def _directed(sym: SymmetricModel, best, best_obj: float, bound: float, deadline: float):
+    """The symmetric root left a gap on a group whose links cost otherwise one way than the
+    other: the same root again in ``DirectedModel`` (the symmetric model's edges and cuts to
+    start from), then its branch-and-cut. Returns as ``solve``."""
+    graph = (sym.pos, sym.node_curve, sym.deg, sym.C, sym.curve_nodes, sym.first_cand, sym.A)
+    model = DirectedModel(sym.group, best, graph=graph)
+    model.take_cuts(sym)
     bound = max(bound, model.root(
         deadline, exact_blossoms_s=EXACT_BLOSSOM_SHARE * (deadline - time.perf_counter())))
     if best_obj - bound > OPTIMAL_ABS_TOL and model.complete:

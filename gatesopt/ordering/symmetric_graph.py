@@ -63,6 +63,19 @@ def applies(group: Group) -> bool:
 
 
 def travel_graph(group: Group):
+    """See ``graph_and_arcs``: the symmetric graph (positions, curve per node, degree per node,
+    cost matrix, nodes per curve, each curve's first candidate)."""
+    return graph_and_arcs(group)[:6]
+
+
+def arc_costs(group: Group) -> np.ndarray:
+    """The travel graph's arcs (``graph_and_arcs``): cost of u -> v, leaving u's curve at u
+    and entering v's curve at v, the group's link cost; inf where no arc exists (into S, out
+    of E, within a curve). ``travel_graph``'s matrix is its minimum with its transpose."""
+    return graph_and_arcs(group)[6]
+
+
+def graph_and_arcs(group: Group):
     """The symmetric model's graph: node 0 = S, 1 = E, then the end points of each open curve
     (joined by the curve: a fixed edge) and each loop's seam. Returns (positions, curve per node
     (-1 S, -2 E), degree per node (travel edges: 1, a seam 2), cost matrix (inf where no travel
@@ -74,7 +87,9 @@ def travel_graph(group: Group):
     ways; the time objective's costs differ where one way is the slicer's own gap, copied). The
     model then relaxes the group's problem: its bound is valid, and a path it finds is priced by
     the group (``Group.path_cost``); it proves a path only where that price meets the bound.
-    Edges at S and E have one direction (S starts the path, E ends it): exact."""
+    Edges at S and E have one direction (S starts the path, E ends it): exact. Last in the
+    tuple, the arcs' own costs (``arc_costs``), which the directed refinement
+    (``symmetric.DirectedModel``) prices exactly."""
     n = group.n_curves
     cc = group.cand_curve
     counts = np.bincount(cc, minlength=n)
@@ -106,15 +121,14 @@ def travel_graph(group: Group):
     leave[opened + 1] = first_cand[~loop]
     inner = np.arange(2, N)
     D = group.arc_cost()
-    C = np.full((N, N), np.inf)
-    sub = D[leave[inner][:, None], enter[inner][None, :]]
-    C[2:, 2:] = np.minimum(sub, sub.T)
-    C[0, 2:] = C[2:, 0] = group.start_cost()[enter[inner]]
-    C[1, 2:] = C[2:, 1] = group.end_cost()[leave[inner]]     # 0: the path just ends
-    np.fill_diagonal(C, np.inf)                 # no travel edge within a curve, nor S-E
-    C[opened, opened + 1] = C[opened + 1, opened] = np.inf
-    C[0, 1] = C[1, 0] = np.inf
-    return pos, node_curve, deg, C, curve_nodes, first_cand
+    A = np.full((N, N), np.inf)                 # arcs u -> v
+    A[2:, 2:] = D[leave[inner][:, None], enter[inner][None, :]]
+    A[0, 2:] = group.start_cost()[enter[inner]]
+    A[2:, 1] = group.end_cost()[leave[inner]]   # 0: the path just ends
+    np.fill_diagonal(A, np.inf)                 # no travel edge within a curve, nor S-E
+    A[opened, opened + 1] = A[opened + 1, opened] = np.inf
+    C = np.minimum(A, A.T)
+    return pos, node_curve, deg, C, curve_nodes, first_cand, A
 
 
 def fixed_edges(curve_nodes):

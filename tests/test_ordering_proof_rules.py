@@ -1,0 +1,113 @@
+"""Proof rules of the exact step under direction-dependent link costs (issue 36; formulations/
+ordering.md, "milp, symmetric model", "direction-dependent costs"): the symmetric model prices
+each travel edge the cheaper way round, so it relaxes a group whose copied slicer gaps cost
+otherwise one way than the other. Whatever the exact step proves optimal must cost what the
+subset DP (exact for any costs) finds, on random small groups with one-way links cheaper or
+dearer, and a path priced above the model must never be called optimal by the model's bound."""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+import pytest
+
+from gatesopt.ordering import auto, dp, milp, symmetric, symmetric_graph
+from gatesopt.ordering.polylines import from_polylines
+from gatesopt.ordering.problem import OPTIMAL_ABS_TOL, LinkCosts
+from gatesopt.solvers import Status
+
+
+def asymmetric_group(seed: int, n_lines: int = 11, n_one_way: int = 8, loops: int = 0,
+                     scale: float = 1.0):
+    """A random group of open lines (and ``loops`` closed squares) whose link matrix is the
+    Euclidean one with ``n_one_way`` links changed one way only (the way the slicer printed
+    them: a copied gap), by a factor in [0.3, 1.6] (or, with ``scale`` small, by a few
+    thousandths of their cost: the near-ties the model meets on real layers)."""
+    rng = np.random.default_rng(seed)
+    polys = [rng.uniform(0, 40, (2, 2)) for _ in range(n_lines)]
+    for _ in range(loops):
+        c = rng.uniform(5, 35, 2)
+        polys.append(np.array([c, c + [3, 0], c + [3, 3], c + [0, 3], c]))
+    prob = from_polylines([polys])
+    grp = prob.group(0, prob.origin_xy)
+    arc = grp.arc_cost().copy()
+    m = grp.n_cands
+    for _ in range(n_one_way):
+        u, v = rng.integers(0, m, 2)
+        if np.isfinite(arc[u, v]):
+            f = rng.uniform(0.3, 1.6) if scale >= 1.0 else 1.0 + scale * rng.uniform(-1, 1)
+            arc[u, v] *= f
+    costs = LinkCosts(arc, grp.start_cost().copy(), grp.end_cost().copy())
+    return dataclasses.replace(grp, costs=costs)
+
+
+CASES = [(seed, scale) for seed in range(14) for scale in (1.0, 0.003)]
+
+
+@pytest.mark.parametrize("seed,scale", CASES)
+def test_symmetric_model_proves_only_the_true_optimum(seed, scale):
+    grp = asymmetric_group(seed, n_lines=10 + seed % 3, loops=seed % 2, scale=scale)
+    assert symmetric_graph.applies(grp)
+    best = dp.solve(grp).objective
+    # the slicer's order as incumbent (candidate of each curve as given)
+    start = np.array([int(np.flatnonzero(grp.cand_curve == c)[0]) for c in range(grp.n_curves)])
+    order, obj, bound, proven = symmetric.solve(grp, start, time.perf_counter() + 20.0)
+    grp.check_order(order)
+    assert obj == pytest.approx(grp.path_cost(order))
+    assert bound <= best + OPTIMAL_ABS_TOL          # a valid bound for the true costs
+    if proven:
+        assert obj <= best + OPTIMAL_ABS_TOL
+    # the full exact step (auto's: greedy, matching, ILS, model, the directed model after it)
+    gs = milp.solve(grp, time_limit_s=20.0)
+    assert gs.bound <= best + OPTIMAL_ABS_TOL
+    if gs.status == Status.OPTIMAL:
+        assert gs.objective <= best + OPTIMAL_ABS_TOL
+
+
+@pytest.mark.parametrize("directed", [False, True])
+def test_asymmetric_groups_proven_at_the_true_optimum(directed, monkeypatch):
+    """On groups where the model's cheapest tours are priced above the model (a one-way link
+    taken the dear way), the exact step proves the true optimum: in the symmetric model alone
+    (``DIRECTED`` off) the cut of each such tour (``SymmetricModel.add_no_good``) lets the
+    node's bound rise past it; with ``DirectedModel`` the root prices each direction itself."""
+    monkeypatch.setattr(symmetric, "DIRECTED", directed)
+    proven = 0
+    used = 0
+    for seed in range(30):
+        grp = asymmetric_group(100 + seed, n_lines=12, n_one_way=20, scale=0.003)
+        best = dp.solve(grp).objective
+        start = np.array([int(np.flatnonzero(grp.cand_curve == c)[0]) for c in range(grp.n_curves)])
+        no_goods = []
+        orig = symmetric.SymmetricModel.add_no_good
+
+        def spy(model, on, _orig=orig, _log=no_goods):
+            _log.append(int(on.sum()))
+            return _orig(model, on)
+
+        symmetric.SymmetricModel.add_no_good = spy
+        try:
+            order, obj, bound, ok = symmetric.solve(grp, start, time.perf_counter() + 20.0)
+        finally:
+            symmetric.SymmetricModel.add_no_good = orig
+        used += bool(no_goods)
+        if ok:
+            proven += 1
+            assert obj <= best + OPTIMAL_ABS_TOL
+    if not directed:
+        assert used >= 1      # the instances do reach a tour priced above the model
+    assert proven == 30       # and the model alone proves every one of them
+
+
+def test_auto_agrees_with_dp_on_larger_asymmetric_groups():
+    """Groups above the DP-first size (auto goes to the model, not the DP) with one-way links:
+    what auto calls optimal costs the DP's optimum."""
+    for seed in range(8):
+        grp = asymmetric_group(200 + seed, n_lines=14, n_one_way=30,
+                               scale=1.0 if seed % 2 else 0.003)
+        best = dp.solve(grp).objective
+        gs = auto.solve(grp, time_limit_s=0.0 + auto.exact_time_s(grp.n_curves) + 2.0)
+        grp.check_order(gs.order)
+        assert gs.bound <= best + OPTIMAL_ABS_TOL
+        if gs.status == Status.OPTIMAL:
+            assert gs.objective <= best + OPTIMAL_ABS_TOL
