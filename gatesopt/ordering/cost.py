@@ -37,10 +37,12 @@ import numba
 import numpy as np
 
 from .. import _planner_kernel as pk
-from ..limits import MachineLimits
+from ..limits import MachineLimits, machine_limits
 from ..program import MOTION_KINDS, Program
-from .gap_plan import (MOVE_EPS_MM, REBUILT_MAX_MOVES, W_COLS, W_F, W_J, W_JREADY, W_L,
-                       e_row, gaps_planned, junction, plan_moves_s, prep_move, same_z_s)
+from .gap_plan import (JOINED_MAX_MOVES, MOVE_EPS_MM, W_COLS, W_F, W_J, W_JREADY, W_L, e_row,
+                       end_side, gaps_planned, joined_s, junction, prep_move, reversed_gaps_ms,
+                       same_z_s)
+from .curve_time import CurveEnds
 from .gaps import REVERSE_EPS, ReversibleGaps
 from .layout import LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, Layout
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
@@ -211,14 +213,15 @@ MT_CODE, MT_ROW = 10, 11
 
 
 @numba.njit(cache=True)
-def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
+def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, co, ends):
     """Time (s) of a rebuilt travel (``gaps.rebuilt_gap``): retraction (E, at the retract feed),
     lift by the z-hop if it retracts, the straight XY travel (dx, dy), lowering, and the
     unretraction that brings the consumed gaps to their net E (or that net E alone). ``mt``:
     MoveTimes.vector(); ``style``: (retract feed, unretract feed, travel feed, z feed, hop).
     With the file's limits (``mt[MT_CODE] >= 0``) the moves are planned together, as the planner
-    plans them (``plan_moves_s``, in the work array ``w``: ``work_array()``); else each alone
-    from and to its kind's junction speed."""
+    plans them (``plan_moves_s``, in the work array ``w``: ``work_array(JOINED_MAX_MOVES)``),
+    joined to the last move of curve p and the first of curve c (sides ``po`` / ``co``,
+    ``gap_plan.joined_s``); else each alone from and to its kind's junction speed."""
     v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
     dist = np.sqrt(dx * dx + dy * dy)
     z_up = max(z0, z1)
@@ -230,6 +233,9 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
     if mt[MT_CODE] >= 0.0:
         w[:, :] = 0.0
         n = 0
+        if po >= 0:
+            w[n, :] = ends[1][p, po]
+            n += 1
         if e_r > MOVE_EPS_MM:
             w[n, 3], w[n, W_L], w[n, W_F] = -e_r, e_r, v_r
             n += 1
@@ -245,7 +251,10 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
         if e_u > MOVE_EPS_MM:
             w[n, 3], w[n, W_L], w[n, W_F] = e_u_sign * e_u, e_u, v_u
             n += 1
-        return plan_moves_s(w, n, int(mt[MT_CODE]), mt[MT_ROW:])
+        if co >= 0:
+            w[n, :] = ends[0][c, co]
+            n += 1
+        return joined_s(w, n, int(mt[MT_CODE]), mt[MT_ROW:], p, po, c, co, ends)
     t = 0.0
     if e_r > MOVE_EPS_MM:
         t += _trapezoid(e_r, min(v_r, mt[5]), mt[4], mt[6])
@@ -313,9 +322,14 @@ class TimePricer:
     copied). ``rule``: when a rebuilt travel retracts (shared with the emitter)."""
 
     def __init__(self, program: Program, lay: Layout, problem: OrderingProblem, rule: TravelRule,
-                 move: MoveTimes, step_s: np.ndarray | None = None):
+                 move: MoveTimes, step_s: np.ndarray | None = None,
+                 limits: MachineLimits | None = None, step_plan=None):
         """``step_s``: per step of ``program``, the time a copied gap's steps take (the
-        planner's, ``OrderingOptions.copied_gaps``); None: each move priced by ``move``."""
+        planner's, ``OrderingOptions.copied_gaps``); None: each move priced by ``move``.
+        ``limits``: the file's (``limits.machine_limits``; None: read here where ``move`` plans
+        with limits), for what a reversed curve's own moves add (``node_ms``). ``step_plan``:
+        the ``planner.Plan`` ``step_s`` came from (the copied gaps then carry their junctions'
+        share of the curves around them)."""
         self.rule, self.move = rule, move
         style = rule.style
         self.style_vec = np.array([style.retract_feed_mm_s, style.unretract_feed_mm_s,
@@ -345,6 +359,47 @@ class TimePricer:
         self.copy_ms = copy * MS_PER_S
         #: gaps a link may write reversed, at their own time (``gaps.ReversibleGaps``)
         self.reversible = ReversibleGaps.of(program, lay)
+        #: per curve, what printing it backwards adds to its own moves' time (ms; 0 for loops,
+        #: whose candidates move the seam): every link into a reversed candidate carries it
+        #: (``curve_time.reversed_extra_ms``)
+        #: and the moves of each curve a link joins its own to (``curve_time.CurveEnds``): a
+        #: rebuilt link is planned with the last move of the curve it leaves and the first of
+        #: the curve it enters, less what they take in their curves planned alone; a copied
+        #: gap costs, besides its steps, what the slicer's file spends on those two moves beyond
+        #: that (``CurveEnds.context_ms``), so both price the same quantity
+        #: -- with the copied gaps at the planner's time (``step_plan``); priced move by move
+        #: (``copied_gaps="moves"``) every link is its moves alone, from and to rest
+        ends = CurveEnds.empty(n)
+        if n and move.junction_code >= 0 and step_plan is not None:
+            lim = limits if limits is not None else machine_limits(program)
+            ends = CurveEnds.of(program, lim, lay.curve_s0, lay.curve_s1, problem.curve_closed)
+        self.ends = ends
+        self.node_ms = ends.node_ms
+        self.closed = np.asarray(problem.curve_closed, np.bool_)
+        self.gap_ms = self.copy_ms.copy()
+        #: a reversed gap's link: ``gap_ms`` where the curves are not joined, else its moves
+        #: backwards planned with the curves' (``gap_plan.reversed_gaps_ms``)
+        self.rev_ms = self.gap_ms
+        if n > 1 and ends.ok.any():
+            head, tail = ends.context_ms(step_plan)
+            self.copy_ms[1:] += tail[:-1] + head[1:]
+            r = self.reversible
+            a, b = np.zeros(n, np.int64), np.zeros(n, np.int64)
+            a[1:], b[1:] = lay.curve_s1[:-1], lay.curve_s0[1:]
+            kind = program.kind
+            motion = (np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype))
+                      & (program.length_mm > MOVE_EPS_MM))
+            self.rev_ms = reversed_gaps_ms(
+                r.ok, a, b, motion, np.ascontiguousarray(program.end_mm - program.start_mm),
+                np.ascontiguousarray(program.length_mm, float),
+                np.ascontiguousarray(program.feed_mm_s, float), self.closed, self.ends_args(),
+                move.junction_code, np.asarray(move.limits_row, float))
+
+    def ends_args(self) -> tuple:
+        """``ends`` for the kernels (``gap_plan.end_side``)."""
+        e = self.ends
+        return (e.head, e.tail, e.head_exit_mm_s, e.tail_entry_mm_s, e.head_ms, e.tail_ms, e.ok,
+                self.closed, self.rev_ms)
 
     def _rev_args(self) -> tuple:
         r = self.reversible
@@ -372,7 +427,7 @@ class TimePricer:
                self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
                *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec, out, need,
-               no_retract)
+               no_retract, self.node_ms, self.ends_args())
         self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
         return out.reshape(k)
 
@@ -438,7 +493,8 @@ class TimePricer:
                       self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
                       *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec,
-                      self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid)
+                      self.node_ms, self.ends_args(), self.rule.comb_cap_mm > 0 and len(grid[1]) > 0,
+                      *grid)
 
 
 class _GroupLinks:
@@ -470,10 +526,11 @@ def _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_pla
 
 
 @numba.njit(cache=True, inline="always")
-def _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt):
-    """A reversed gap's cost (ms): the gap's own time, plus the E move of the net E of c's own
-    gap, which the entry into c consumes (``gaps.reversed_gap``)."""
-    t = copy_ms[p]
+def _reversed_ms(p, c, group_first, own_net, rev_ms, style, mt):
+    """A reversed gap's cost (ms): the gap's moves backwards (``rev_ms``:
+    ``TimePricer.rev_ms``), plus the E move of the net E of c's own gap, which the entry into c
+    consumes (``gaps.reversed_gap``)."""
+    t = rev_ms[p]
     if c != group_first[c] and abs(own_net[c]) > MOVE_EPS_MM:
         t += _trapezoid(abs(own_net[c]), min(style[1], mt[5]), mt[4], mt[6]) * 1000.0
     return t
@@ -482,7 +539,7 @@ def _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt):
 @numba.njit(cache=True, inline="always")
 def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, own_net, own_r,
               own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
-              rev_start, rev_end, rule, style, mt, w):
+              rev_start, rev_end, rule, style, mt, w, ends):
     """One link's cost (ms) as emitted, mirroring ``gaps.rebuilt_gap`` and ``travel.TravelRule``,
     except the combing exemption: returns (cost, whether the exemption applies if the travel
     crosses no wall, the cost then). ``rule``: TravelRule.vector(); ``w``: ``work_array()``."""
@@ -490,7 +547,7 @@ def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, o
         return copy_ms[c], False, 0.0                   # the slicer's own gap, copied
     if p >= 0 and _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_plain,
                                  rev_start, rev_end):
-        return _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt), False, 0.0
+        return _reversed_ms(p, c, group_first, own_net, ends[8], style, mt), False, 0.0
     retract_mm, min_travel, fw_style, comb_cap = rule[0], rule[1], rule[2] > 0.5, rule[3]
     crossing = p < 0 or group_first[c] != group_first[p]
     own = c != group_first[c]
@@ -522,39 +579,53 @@ def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, o
         retract = moving and (fw_bnd or (fw_style and dist >= min_travel))
     else:
         retract = moving and r > 0.0 and (r_b > 0.0 or (retract_mm > 0.0 and dist >= min_travel))
-    t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w) * 1000.0
+    po = end_side(p, p_changed, ends)
+    co = end_side(c, c_changed, ends)
+    t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, co,
+                   ends) * 1000.0
     if retract and comb_cap > 0.0 and dist <= comb_cap and dz <= MOVE_EPS_MM:
-        return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style, w) * 1000.0
+        return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style, w, p, po, c,
+                                   co, ends) * 1000.0
     return t, False, 0.0
 
 
 @numba.njit(cache=True)
 def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
-           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, out, need, no_retract):
-    """``_link_one`` per link; the wall test is the caller's (``need``, ``no_retract``)."""
-    w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
+           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, out, need, no_retract, node,
+           ends):
+    """``_link_one`` per link, plus what a reversed curve entered adds to its own moves
+    (``node``: ``TimePricer.node_ms``); the wall test is the caller's (``need``,
+    ``no_retract``)."""
+    w = np.zeros((JOINED_MAX_MOVES, W_COLS))
     for i in range(len(nxt)):
         out[i], need[i], no_retract[i] = _link_one(
             prev[i], prev_changed[i], nxt[i], nxt_changed[i], from_xy[i, 0], from_xy[i, 1],
             to_xy[i, 0], to_xy[i, 1], z0[i], z1[i], group_first, own_net, own_r, own_fw_net,
             own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain, rev_start,
-            rev_end, rule, style, mt, w)
+            rev_end, rule, style, mt, w, ends)
+        if nxt_changed[i]:
+            out[i] += node[nxt[i]]
+            no_retract[i] += node[nxt[i]]
 
 
 @numba.njit(cache=True)
 def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
-           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, has_walls, trim, a, b, x0, y0,
-           h, nx, ny, start, items):
+           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, node, ends, has_walls, trim, a, b,
+           x0, y0, h, nx, ny, start, items):
     """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
     (``_link_one`` where the two ends lie at different heights). The wall test is made here: once
-    per pair of points (a travel and its reverse cross the same walls), memoized."""
+    per pair of points (a travel and its reverse cross the same walls), memoized. A link into a
+    reversed candidate carries what reversing adds to its curve's own moves (``node``)."""
     m = len(gc)
     out = np.empty((m, m))
-    w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
+    w = np.zeros((JOINED_MAX_MOVES, W_COLS))
+    side = np.empty(m, np.int64)        # each candidate's rows in ``ends`` (``end_side``)
+    for k in range(m):
+        side[k] = end_side(gc[k], changed[k], ends)
     memo = np.full((n_points, n_points), -1, np.int8)
     stamp = np.full(max(len(a), 1), -1, np.int64)
     tag = 0
@@ -617,14 +688,15 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                 continue
             if _reversed_link(p, changed[u], c, ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1],
                               group_first, rev_ok, rev_plain, rev_start, rev_end):
-                out[u, v] = _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt)
+                out[u, v] = (_reversed_ms(p, c, group_first, own_net, ends[8], style, mt)
+                             + (node[c] if changed[v] else 0.0))
                 continue
             if abs(z_ext[u] - z_ent[v]) > MOVE_EPS_MM or group_first[p] != group_first[c]:
                 t, need, dry = _link_one(p, changed[u], c, changed[v], ext[u, 0], ext[u, 1],
                                          ent[v, 0], ent[v, 1], z_ext[u], z_ent[v], group_first,
                                          own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r,
                                          bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
-                                         rev_start, rev_end, rule, style, mt, w)
+                                         rev_start, rev_end, rule, style, mt, w, ends)
             else:
                 dx = ent[v, 0] - ext[u, 0]
                 dy = ent[v, 1] - ext[u, 1]
@@ -638,7 +710,8 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                 if planned:
                     with_e = not use_fw[v] and retract_mm > MOVE_EPS_MM
                     t = same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v,
-                                  has_u[0 if retract else 1, v], w, code, lim_row, v_xy) * 1000.0
+                                  has_u[0 if retract else 1, v], w, code, lim_row, v_xy,
+                                  p, side[u], c, side[v], ends) * 1000.0
                     dry = -1.0          # made below where the link goes dry (no wall crossed)
                 else:
                     t_xy = _trapezoid(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
@@ -659,6 +732,6 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
             if t < 0.0:
                 t = same_z_s(dx, dy, dist, False, not use_fw[v] and retract_mm > MOVE_EPS_MM,
                               hop_on, pre, u_rows, v, has_u[1, v], w, code, lim_row,
-                              v_xy) * 1000.0
-            out[u, v] = t
+                              v_xy, p, side[u], c, side[v], ends) * 1000.0
+            out[u, v] = t + (node[c] if changed[v] else 0.0)
     return out
