@@ -40,11 +40,11 @@ from .. import _planner_kernel as pk
 from ..limits import MachineLimits, machine_limits
 from ..program import MOTION_KINDS, Program
 from .gap_plan import (JOINED_MAX_MOVES, MOVE_EPS_MM, W_COLS, W_F, W_J, W_JREADY, W_L, e_row,
-                       end_side, gaps_planned, joined_s, junction, prep_move, reversed_gaps_ms,
-                       same_z_s)
+                       end_side, gaps_planned, joined_s, junction, prep_move,
+                       reversed_gap_times_ms, same_z_s)
 from .curve_time import CurveEnds
-from .gaps import REVERSE_EPS, ReversibleGaps
-from .layout import LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, Layout
+from .gaps import REVERSE_EPS, GapFacts, ReversibleGaps
+from .layout import Layout
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
 
@@ -269,37 +269,6 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, 
     return t
 
 
-@dataclass(frozen=True, eq=False)
-class GapFacts:
-    """What the slicer's gaps before each curve hold, as ``gaps.rebuilt_gap`` sums it: per curve
-    c the gap between curve c - 1 and c (``own_*``) and the boundary gap of c's group (the gap
-    before the group's first curve, ``bnd_*``, indexed by curve too)."""
-
-    net_e: np.ndarray           # (n,) net E of the gap's moves (mm of filament)
-    retract_mm: np.ndarray      # (n,) filament its moves pull back
-    fw_net: np.ndarray          # (n,) firmware unretractions minus retractions (G11 - G10)
-    fw_retracted: np.ndarray    # (n,) bool: a G10 in the gap
-
-    @staticmethod
-    def of(program: Program, lay: Layout) -> "GapFacts":
-        n = len(lay.curve_s0)
-        l1 = lay.curve_l1
-        g0 = np.concatenate(([0], l1[:-1] + 1)) if n else np.zeros(0, np.int64)    # gap lines [g0, g1)
-        g1 = lay.curve_l0
-        step = lay.step_of_line
-        has = step >= 0
-        s = np.where(has, step, 0)
-        de = np.where(has & (lay.line_class == LINE_MOTION), program.end_mm[s, 3] - program.start_mm[s, 3], 0.0)
-
-        def span(v):
-            c = np.concatenate(([0.0], np.cumsum(v)))
-            return c[g1] - c[g0]
-        return GapFacts(span(de), span(np.where(de < 0, -de, 0.0)),
-                        np.rint(span(lay.line_class == LINE_FW_UNRETRACT)
-                                - span(lay.line_class == LINE_FW_RETRACT)).astype(np.int64),
-                        span(lay.line_class == LINE_FW_RETRACT) > 0)
-
-
 def gap_times_ms(program: Program, move: MoveTimes, lay: Layout | None = None) -> np.ndarray:
     """(n_curves - 1,) the time (ms) of each gap between two consecutive curves of ``program``
     (``layout.layout``'s curves) under ``move``: what a re-ordered file's travels cost under the
@@ -383,17 +352,8 @@ class TimePricer:
         if n > 1 and ends.ok.any():
             head, tail = ends.context_ms(step_plan)
             self.copy_ms[1:] += tail[:-1] + head[1:]
-            r = self.reversible
-            a, b = np.zeros(n, np.int64), np.zeros(n, np.int64)
-            a[1:], b[1:] = lay.curve_s1[:-1], lay.curve_s0[1:]
-            kind = program.kind
-            motion = (np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype))
-                      & (program.length_mm > MOVE_EPS_MM))
-            self.rev_ms = reversed_gaps_ms(
-                r.ok, a, b, motion, np.ascontiguousarray(program.end_mm - program.start_mm),
-                np.ascontiguousarray(program.length_mm, float),
-                np.ascontiguousarray(program.feed_mm_s, float), self.closed, self.ends_args(),
-                move.junction_code, np.asarray(move.limits_row, float))
+            self.rev_ms = reversed_gap_times_ms(program, lay, self.reversible.ok, self.ends_args(),
+                                                move.junction_code, move.limits_row)
 
     def ends_args(self) -> tuple:
         """``ends`` for the kernels (``gap_plan.end_side``)."""

@@ -13,6 +13,7 @@ import numba
 import numpy as np
 
 from .. import _planner_kernel as pk
+from ..program import MOTION_KINDS
 
 #: below this a length is no move (the writer skips axes that change by less than 1e-9 mm)
 MOVE_EPS_MM = 1e-9
@@ -282,3 +283,18 @@ def reversed_gaps_ms(ok, a, b, motion, d_all, L_all, F_all, closed, ends, code, 
             k += 1
         out[p] = joined_s(w, k, code, row, p, po, c, co, ends) * 1000.0
     return out
+
+
+def reversed_gap_times_ms(program, lay, ok, ends, code: int, limits_row) -> np.ndarray:
+    """``reversed_gaps_ms`` for the gaps between the curves of ``lay`` (``layout.Layout``) in
+    ``program``; ``ends``: ``cost.TimePricer.ends_args``."""
+    n = len(ok)
+    a, b = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    a[1:], b[1:] = lay.curve_s1[:-1], lay.curve_s0[1:]
+    kind = program.kind
+    motion = (np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype))
+              & (program.length_mm > MOVE_EPS_MM))
+    return reversed_gaps_ms(ok, a, b, motion, np.ascontiguousarray(program.end_mm - program.start_mm),
+                            np.ascontiguousarray(program.length_mm, float),
+                            np.ascontiguousarray(program.feed_mm_s, float), ends[7], ends, code,
+                            np.asarray(limits_row, float))
