@@ -24,9 +24,10 @@ that model (tests/test_ordering_cost.py checks it on emitted files). The costs a
 
 The cost is asymmetric where a copied gap cannot be reversed (a wipe, a state line, firmware
 retraction in it: priced one way only), and a rebuilt link's E moves depend on the gaps of the
-curve it enters; where every copied gap of a group is reversible and no gap has a net E, a link
-costs the same both ways (the symmetric model is then exact, not a relaxation). It breaks the
-triangle inequality where a long link retracts and two short ones do not.
+curve it enters; by default a link is also joined to the curves around it, a reversed candidate
+carries its curve's change of time and a reversed gap is planned backwards (``TimePricer``,
+formulations/ordering.md "Joined to the curves"): direction dependent under classic jerk and for
+arcs. It breaks the triangle inequality where a long link retracts and two short ones do not.
 formulations/ordering.md says which bounds rely on what.
 """
 from __future__ import annotations
@@ -42,7 +43,7 @@ from ..program import MOTION_KINDS, Program
 from .gap_plan import (JOINED_MAX_MOVES, MOVE_EPS_MM, W_COLS, W_F, W_J, W_JREADY, W_L, e_row,
                        end_side, gaps_planned, joined_s, junction, prep_move,
                        reversed_gap_times_ms, same_z_s)
-from .curve_time import CurveEnds
+from .curve_time import CurveEnds, gap_rows
 from .gaps import REVERSE_EPS, GapFacts, ReversibleGaps
 from .layout import Layout
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
@@ -213,7 +214,7 @@ MT_CODE, MT_ROW = 10, 11
 
 
 @numba.njit(cache=True)
-def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, co, ends):
+def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, co, ends, row):
     """Time (s) of a rebuilt travel (``gaps.rebuilt_gap``): retraction (E, at the retract feed),
     lift by the z-hop if it retracts, the straight XY travel (dx, dy), lowering, and the
     unretraction that brings the consumed gaps to their net E (or that net E alone). ``mt``:
@@ -221,7 +222,8 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, 
     With the file's limits (``mt[MT_CODE] >= 0``) the moves are planned together, as the planner
     plans them (``plan_moves_s``, in the work array ``w``: ``work_array(JOINED_MAX_MOVES)``),
     joined to the last move of curve p and the first of curve c (sides ``po`` / ``co``,
-    ``gap_plan.joined_s``); else each alone from and to its kind's junction speed."""
+    ``gap_plan.joined_s``), under the limits ``row`` (``TimePricer.gap_rows``); else each alone
+    from and to its kind's junction speed."""
     v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
     dist = np.sqrt(dx * dx + dy * dy)
     z_up = max(z0, z1)
@@ -254,7 +256,7 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, 
         if co >= 0:
             w[n, :] = ends[0][c, co]
             n += 1
-        return joined_s(w, n, int(mt[MT_CODE]), mt[MT_ROW:], p, po, c, co, ends)
+        return joined_s(w, n, int(mt[MT_CODE]), row, p, po, c, co, ends)
     t = 0.0
     if e_r > MOVE_EPS_MM:
         t += _trapezoid(e_r, min(v_r, mt[5]), mt[4], mt[6])
@@ -344,6 +346,15 @@ class TimePricer:
             ends = CurveEnds.of(program, lim, lay.curve_s0, lay.curve_s1, problem.curve_closed)
         self.ends = ends
         self.node_ms = ends.node_ms
+        #: the limits a rebuilt link's moves run under: those in force at the slicer's last
+        #: travel in the gap its entry consumes (the emitter keeps that gap's state lines around
+        #: its travel: PrusaSlicer's ``M204 S`` for travels, Orca's per-feature
+        #: ``SET_VELOCITY_LIMIT``), row ``gap_row[c]`` of ``row_table``; without the joined
+        #: model, the file's first (``MoveTimes.limits_row``)
+        self.row_table = np.asarray(move.limits_row, float).reshape(1, -1)
+        self.gap_row = np.zeros(n, np.int64)
+        if ends.ok.any():
+            self.row_table, self.gap_row = gap_rows(program, lay, lim)
         self.closed = np.asarray(problem.curve_closed, np.bool_)
         self.gap_ms = self.copy_ms.copy()
         #: a reversed gap's link: ``gap_ms`` where the curves are not joined, else its moves
@@ -359,7 +370,7 @@ class TimePricer:
         """``ends`` for the kernels (``gap_plan.end_side``)."""
         e = self.ends
         return (e.head, e.tail, e.head_exit_mm_s, e.tail_entry_mm_s, e.head_ms, e.tail_ms, e.ok,
-                self.closed, self.rev_ms)
+                self.closed, self.rev_ms, self.row_table, self.gap_row)
 
     def _rev_args(self) -> tuple:
         r = self.reversible
@@ -541,11 +552,12 @@ def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, o
         retract = moving and r > 0.0 and (r_b > 0.0 or (retract_mm > 0.0 and dist >= min_travel))
     po = end_side(p, p_changed, ends)
     co = end_side(c, c_changed, ends)
+    row = ends[9][ends[10][c]]          # the limits at the slicer's travel into c
     t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, co,
-                   ends) * 1000.0
+                   ends, row) * 1000.0
     if retract and comb_cap > 0.0 and dist <= comb_cap and dz <= MOVE_EPS_MM:
         return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style, w, p, po, c,
-                                   co, ends) * 1000.0
+                                   co, ends, row) * 1000.0
     return t, False, 0.0
 
 
@@ -611,22 +623,42 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
     v_xy_cap = min(v_xy, mt[1])
     # planned: the moves that do not depend on the link, prepared once (``same_z_s``)
     code = int(mt[MT_CODE])
-    lim_row = mt[MT_ROW:]
     hop_on = hop > MOVE_EPS_MM
-    pre = np.zeros((3, W_COLS))
+    # per candidate v, the limits at the slicer's travel into its curve (``TimePricer.gap_rows``),
+    # numbered locally (a group's curves mostly share one)
+    rtab, ridx = ends[9], ends[10]
+    loc = np.full(len(rtab), -1, np.int64)
+    vreg = np.zeros(m, np.int64)
+    n_loc = 0
+    for v in range(m):
+        rr = ridx[gc[v]]
+        if loc[rr] < 0:
+            loc[rr] = n_loc
+            n_loc += 1
+        vreg[v] = loc[rr]
+    rows_loc = np.zeros((max(n_loc, 1), rtab.shape[1]))
+    for rr in range(len(rtab)):
+        if loc[rr] >= 0:
+            rows_loc[loc[rr]] = rtab[rr]
+    pres = np.zeros((max(n_loc, 1), 3, W_COLS))
     u_rows = np.zeros((2, m, W_COLS))
     has_u = np.zeros((2, m), np.bool_)
     if planned:
-        if retract_mm > MOVE_EPS_MM:
-            e_row(pre, 0, -retract_mm, v_r, code, lim_row)
-        for k, dz_k in ((1, hop), (2, -hop)):
-            pre[k, 2], pre[k, W_L], pre[k, W_F] = dz_k, abs(dz_k), v_z
-            if hop_on:
-                prep_move(pre, k, code, lim_row)
-        if hop_on and retract_mm > MOVE_EPS_MM:
-            pre[1, W_J] = junction(pre, 1, code, lim_row)
-            pre[1, W_JREADY] = 1.0
+        for q in range(n_loc):
+            pre = pres[q]
+            lim_row = rows_loc[q]
+            if retract_mm > MOVE_EPS_MM:
+                e_row(pre, 0, -retract_mm, v_r, code, lim_row)
+            for k, dz_k in ((1, hop), (2, -hop)):
+                pre[k, 2], pre[k, W_L], pre[k, W_F] = dz_k, abs(dz_k), v_z
+                if hop_on:
+                    prep_move(pre, k, code, lim_row)
+            if hop_on and retract_mm > MOVE_EPS_MM:
+                pre[1, W_J] = junction(pre, 1, code, lim_row)
+                pre[1, W_JREADY] = 1.0
         for v in range(m):
+            pre = pres[vreg[v]]
+            lim_row = rows_loc[vreg[v]]
             wet = net_v[v] if use_fw[v] else net_v[v] + retract_mm
             for j, e in ((0, wet), (1, net_v[v])):
                 has_u[j, v] = abs(e) > MOVE_EPS_MM
@@ -669,8 +701,8 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                 need = retract and comb_cap > 0.0 and dist <= comb_cap
                 if planned:
                     with_e = not use_fw[v] and retract_mm > MOVE_EPS_MM
-                    t = same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v,
-                                  has_u[0 if retract else 1, v], w, code, lim_row, v_xy,
+                    t = same_z_s(dx, dy, dist, retract, with_e, hop_on, pres[vreg[v]], u_rows, v,
+                                  has_u[0 if retract else 1, v], w, code, rows_loc[vreg[v]], v_xy,
                                   p, side[u], c, side[v], ends) * 1000.0
                     dry = -1.0          # made below where the link goes dry (no wall crossed)
                 else:
@@ -691,7 +723,8 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                 t = dry
             if t < 0.0:
                 t = same_z_s(dx, dy, dist, False, not use_fw[v] and retract_mm > MOVE_EPS_MM,
-                              hop_on, pre, u_rows, v, has_u[1, v], w, code, lim_row,
+                              hop_on, pres[vreg[v]], u_rows, v, has_u[1, v], w, code,
+                              rows_loc[vreg[v]],
                               v_xy, p, side[u], c, side[v], ends) * 1000.0
             out[u, v] = t + (node[c] if changed[v] else 0.0)
     return out

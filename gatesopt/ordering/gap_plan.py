@@ -255,7 +255,8 @@ def reversed_gaps_ms(ok, a, b, motion, d_all, L_all, F_all, closed, ends, code, 
     printed so that it ends where the gap ended (backwards, or a loop as printed) and the first
     move of p - 1 entered where the gap began (``joined_s``), in ms; 0 elsewhere. The planner's
     time of a move sequence run backwards is not its time forwards (``curve_time``), nor are
-    its junctions with the curves the same."""
+    its junctions with the curves the same. Under the limits in force at the gap's travel
+    (``ends[9][ends[10][p]]``; ``row`` unused)."""
     n_c = len(ok)
     out = np.zeros(n_c)
     for p in range(1, n_c):
@@ -281,7 +282,7 @@ def reversed_gaps_ms(ok, a, b, motion, d_all, L_all, F_all, closed, ends, code, 
         if co >= 0:
             w[k, :] = ends[0][c, co]
             k += 1
-        out[p] = joined_s(w, k, code, row, p, po, c, co, ends) * 1000.0
+        out[p] = joined_s(w, k, code, ends[9][ends[10][p]], p, po, c, co, ends) * 1000.0
     return out
 
 
