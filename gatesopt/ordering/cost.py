@@ -41,7 +41,7 @@ from .. import _planner_kernel as pk
 from ..limits import MachineLimits, machine_limits
 from ..program import MOTION_KINDS, Program
 from .gap_plan import (JOINED_MAX_MOVES, MOVE_EPS_MM, W_COLS, W_F, W_J, W_JREADY, W_L, e_row,
-                       end_side, gaps_planned, joined_s, junction, prep_move,
+                       end_side, gaps_planned, joined_s, junction, regime_rows,
                        reversed_gap_times_ms, same_z_s)
 from .curve_time import CurveEnds, gap_rows
 from .gaps import REVERSE_EPS, GapFacts, ReversibleGaps
@@ -50,8 +50,7 @@ from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
 
 MS_PER_S = 1000.0
-#: the speed a Marlin 2 (junction deviation) move starts from rest at: MINIMUM_PLANNER_SPEED
-#: (Marlin planner.h; ``planner.py`` uses the same)
+#: a Marlin 2 (junction deviation) move starts from rest at MINIMUM_PLANNER_SPEED (planner.h)
 REST_SPEED_MM_S = 0.05
 
 
@@ -621,41 +620,12 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                                                + _trapezoid(abs(net + retract_mm), min(v_u, mt[5]), mt[4], mt[6]))
     t_hop = 2.0 * _trapezoid(hop, min(v_z, mt[8]), mt[7], mt[9]) if hop > 0.0 else 0.0
     v_xy_cap = min(v_xy, mt[1])
-    # planned: the moves that do not depend on the link, prepared once (``same_z_s``)
-    code = int(mt[MT_CODE])
-    hop_on = hop > MOVE_EPS_MM
-    # per candidate v, the limits at the slicer's travel into its curve (``TimePricer.gap_rows``),
-    # numbered locally (a group's curves mostly share one)
-    rtab, ridx = ends[9], ends[10]
-    loc = np.full(len(rtab), -1, np.int64)
-    vreg = np.zeros(m, np.int64)
-    n_loc = 0
-    for v in range(m):
-        rr = ridx[gc[v]]
-        if loc[rr] < 0:
-            loc[rr] = n_loc
-            n_loc += 1
-        vreg[v] = loc[rr]
-    rows_loc = np.zeros((max(n_loc, 1), rtab.shape[1]))
-    for rr in range(len(rtab)):
-        if loc[rr] >= 0:
-            rows_loc[loc[rr]] = rtab[rr]
-    pres = np.zeros((max(n_loc, 1), 3, W_COLS))
-    u_rows = np.zeros((2, m, W_COLS))
-    has_u = np.zeros((2, m), np.bool_)
+    # planned: the moves that do not depend on the link, prepared once (``same_z_s``) per
+    # candidate v and per limits regime of the group (``gap_plan.regime_rows``)
+    code, hop_on = int(mt[MT_CODE]), hop > MOVE_EPS_MM
+    vreg, rows_loc, pres = regime_rows(gc, ends, code, planned, retract_mm, v_r, hop, v_z)
+    u_rows, has_u = np.zeros((2, m, W_COLS)), np.zeros((2, m), np.bool_)
     if planned:
-        for q in range(n_loc):
-            pre = pres[q]
-            lim_row = rows_loc[q]
-            if retract_mm > MOVE_EPS_MM:
-                e_row(pre, 0, -retract_mm, v_r, code, lim_row)
-            for k, dz_k in ((1, hop), (2, -hop)):
-                pre[k, 2], pre[k, W_L], pre[k, W_F] = dz_k, abs(dz_k), v_z
-                if hop_on:
-                    prep_move(pre, k, code, lim_row)
-            if hop_on and retract_mm > MOVE_EPS_MM:
-                pre[1, W_J] = junction(pre, 1, code, lim_row)
-                pre[1, W_JREADY] = 1.0
         for v in range(m):
             pre = pres[vreg[v]]
             lim_row = rows_loc[vreg[v]]

@@ -299,3 +299,43 @@ def reversed_gap_times_ms(program, lay, ok, ends, code: int, limits_row) -> np.n
                             np.ascontiguousarray(program.length_mm, float),
                             np.ascontiguousarray(program.feed_mm_s, float), ends[7], ends, code,
                             np.asarray(limits_row, float))
+
+
+@numba.njit(cache=True)
+def regime_rows(gc, ends, code, planned, retract_mm, v_r, hop, v_z):
+    """For a group's candidates (curves ``gc``): per candidate the local number of the limits
+    regime its links run under (``ends[10]``, rows of ``ends[9]``: ``cost.TimePricer.gap_row``),
+    those rows, and per regime the retraction, lift and lowering rows prepared under it (the lift's
+    junction from the retraction made) where ``planned``."""
+    m = len(gc)
+    rtab, ridx = ends[9], ends[10]
+    loc = np.full(len(rtab), -1, np.int64)
+    vreg = np.zeros(m, np.int64)
+    n_loc = 0
+    for v in range(m):
+        rr = ridx[gc[v]]
+        if loc[rr] < 0:
+            loc[rr] = n_loc
+            n_loc += 1
+        vreg[v] = loc[rr]
+    rows_loc = np.zeros((max(n_loc, 1), rtab.shape[1]))
+    for rr in range(len(rtab)):
+        if loc[rr] >= 0:
+            rows_loc[loc[rr]] = rtab[rr]
+    pres = np.zeros((max(n_loc, 1), 3, W_COLS))
+    hop_on = hop > MOVE_EPS_MM
+    if planned:
+        for q in range(n_loc):
+            pre = pres[q]
+            lim_row = rows_loc[q]
+            if retract_mm > MOVE_EPS_MM:
+                e_row(pre, 0, -retract_mm, v_r, code, lim_row)
+            for k in (1, 2):
+                dz_k = hop if k == 1 else -hop
+                pre[k, 2], pre[k, W_L], pre[k, W_F] = dz_k, abs(dz_k), v_z
+                if hop_on:
+                    prep_move(pre, k, code, lim_row)
+            if hop_on and retract_mm > MOVE_EPS_MM:
+                pre[1, W_J] = junction(pre, 1, code, lim_row)
+                pre[1, W_JREADY] = 1.0
+    return vreg, rows_loc, pres
