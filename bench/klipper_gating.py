@@ -260,6 +260,18 @@ def decode(dump: str, cfg_text: str) -> Replay:
     return rep
 
 
+def pin_queue_metrics(rep: Replay, name: str, slots: int) -> dict:
+    """The pin's queue_digital_out messages as the MCU takes them: ``ordered`` (clocks increasing:
+    its queue is FIFO, src/gpiocmds.c) and ``lead_min_s``, the least time from a change to the
+    change ``slots`` back -- the lead each message has when serialqueue releases it at its minclock
+    (the change that many back: the module's PinQueue, or Klipper's set_digital for one slot);
+    None with no such pair."""
+    clocks = np.array([c for c, _ in rep.enable.get(name, [])], dtype=np.int64)
+    lead = clocks[slots:] - clocks[:-slots] if len(clocks) > slots else np.zeros(0, np.int64)
+    return {"changes": len(clocks), "ordered": bool(np.all(np.diff(clocks) > 0)),
+            "lead_min_s": float(lead.min()) / CLOCK_FREQ_HZ if len(lead) else None}
+
+
 def pin_metrics(rep: Replay, name: str) -> dict:
     """Steps while off, and start-ahead / end-late minima (s) of the pin changes between the
     first enable and the last disable (Klipper's own)."""

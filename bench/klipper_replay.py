@@ -648,11 +648,30 @@ class StepperReplay:
     end_late_median_s: float
     off_s: np.ndarray = field(repr=False)    # gated intervals [start, end] in s, shape (n, 2)
     while_off_s: np.ndarray = field(repr=False)  # the off intervals [start, end] that had steps
+    # the enable pin's queue (``pin_queue_leads``): least time from a change to the change 1 and
+    # 2 back (nan: no such pair), and whether the changes' clocks increase in stream order
+    pin_lead_min_s: tuple = (float("nan"), float("nan"))
+    pin_order_ok: bool = True
 
     def as_dict(self) -> dict:
         d = {k: v for k, v in dataclasses.asdict(self).items() if k not in ("off_s", "while_off_s")}
+        d["pin_lead_min_s"] = list(self.pin_lead_min_s)
         d["while_off_intervals_s"] = self.while_off_s.tolist()[:20]
         return d
+
+
+def pin_queue_leads(events: PinEvents, freq_hz: float, back=(1, 2)) -> dict:
+    """The enable pin's queue_digital_out messages as the MCU takes them (every change, Klipper's
+    own and a module's): for each k in ``back`` the least ``clock[n] - clock[n - k]`` (s). A
+    sender that keeps k changes of the pin queued releases change n when change n - k has run
+    (serialqueue.c holds a message until its minclock; Klipper's set_digital: k = 1, the module's
+    pin_queue_slots: k = 2), so this is the lead each message then has; and it is >= a spacing
+    exactly when no window of that length holds more than k changes: at most k queued on the MCU
+    at once if each message is sent that spacing ahead. ``pin_order_ok``: clocks increase in
+    stream order (src/gpiocmds.c queues a pin's changes first in, first out)."""
+    c = np.asarray(events.clock, np.int64)
+    leads = tuple(float((c[k:] - c[:-k]).min()) / freq_hz if len(c) > k else float("nan") for k in back)
+    return {"pin_lead_min_s": leads, "pin_order_ok": bool(np.all(np.diff(c) > 0))}
 
 
 def stepper_replay(name: str, rows: StepRows, off_start: np.ndarray, off_end: np.ndarray,
@@ -760,7 +779,8 @@ def replay_metrics(stream: McuStream, pins: dict[str, StepperPins]) -> Replay:
             raise ReplayError(f"{name}: enable pin {sp.enable_pin} starts at level "
                               f"{stream.initial.get(sp.enable_pin)}, expected the disabled level")
         s, e = off_intervals(ev, initial_on=False, inverted=sp.enable_inverted)
-        out[name] = stepper_replay(name, rows, s, e, stream.freq_hz)
+        out[name] = dataclasses.replace(stepper_replay(name, rows, s, e, stream.freq_hz),
+                                        **pin_queue_leads(ev, stream.freq_hz))
         if rows.n_steps and not (len(e) and e[-1] == OPEN_END and s[-1] >= rows.last[-1]):
             complete = False
         if rows.n_steps:
@@ -1039,6 +1059,10 @@ def compare(orig: Replay, out: Replay, stripped: Replay | None, report: dict, fi
         "off_time_waits_s": report.get("off_time_waits_s", {}),
         "saving_pct": report.get("saving_pct"),
         "klippy_s": orig.klippy_s + out.klippy_s, "decode_s": orig.decode_s + out.decode_s,
+        # the gated pins' queues (pin_queue_leads): least lead with 1 and 2 changes queued
+        "pin_lead_min_s": [min((v.pin_lead_min_s[i] for v in out.steppers.values() if v.gated),
+                               default=float("nan")) for i in range(2)],
+        "pin_order_ok": all(v.pin_order_ok for v in out.steppers.values()),
     }
     if stripped is not None:
         # the rewrite without its instructions (split moves, ordering, rotation) vs the original,
@@ -1163,20 +1187,23 @@ def scheduled_table(rows: list[dict]) -> str:
     best = {(r["file"], r["solve"]): r.get("saving_pct") for r in rows
             if r.get("firmware") == "3dgates" and "error" not in r}
     out = ["| file | shaper | print s | added s (%) | lines | steps while off | start-ahead min ms | "
-           "end-late min ms | gated intervals | off s replay / report | saving % | 3dgates saving % |",
-           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+           "end-late min ms | pin lead min ms, 1 / 2 back | gated intervals | off s replay / report | "
+           "saving % | 3dgates saving % |",
+           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         if r.get("firmware") not in SCHEDULED:
             continue
         if "error" in r:
-            out.append(f"| {r['file']} | {r['shaper']} | {r['error'][:120]} |" + " |" * 9)
+            out.append(f"| {r['file']} | {r['shaper']} | {r['error'][:120]} |" + " |" * 10)
             continue
         off = off_text(r)
         sav, opt = r.get("saving_pct"), best.get((r["file"], r["solve"]))
         out.append(
             f"| {r['file']} | {r['shaper']} | {r['print_s']:.1f} | {r['added_s']:+.3f} ({r['added_pct']:+.3f} %) | "
             f"{r['gating_lines']} | {sum(r['steps_while_off'].values())} | {_ms(r['start_ahead_min_s'])} | "
-            f"{_ms(r['end_late_min_s'])} | {_fmt_motors(r['gated'], str)} | {off} | "
+            f"{_ms(r['end_late_min_s'])} | {' / '.join(_ms(x) for x in r.get('pin_lead_min_s', ()))}"
+            f"{'' if r.get('pin_order_ok', True) else ' (out of order)'} | "
+            f"{_fmt_motors(r['gated'], str)} | {off} | "
             f"{'—' if sav is None else f'{sav:.2f}'} | {'—' if opt is None else f'{opt:.2f}'} |")
     return "\n".join(out)
 

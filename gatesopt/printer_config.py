@@ -18,8 +18,8 @@ writes the shaper) over the rest. This module does the same and reads:
   klippy/kinematics/extruder.py), the limits of extrude-only moves, Z-with-E moves and retractions;
 - ``[gcode_arcs]``: ``resolution`` (default 1.0 mm; without the section Klipper has no G2/G3);
 - ``[gatesopt_gating]``: ``start_ahead`` (0.0018 s), ``end_late`` (0.0010 s), ``min_off_time``
-  (0 s), ``min_pin_spacing`` (0.1 s, 0.025 .. 1), ``steppers`` ("stepper_x, stepper_y"): the
-  module's options
+  (0 s), ``min_pin_spacing`` (0.1 s, 0.025 .. 1), ``pin_queue_slots`` (2; 1 or 2), ``steppers``
+  ("stepper_x, stepper_y"): the module's options
   (integrations/klipper/gatesopt_gating.py);
 - the stepper sections present (``[stepper_x]``, ...).
 
@@ -56,6 +56,8 @@ class GatingSection:
     min_off_time_s: float = 0.0
     min_pin_spacing_s: float = 0.100    # least time between two changes of one pin (the module's
                                         # DEFAULT_PIN_SPACING_S; its docstring cites Klipper's source)
+    pin_queue_slots: int = 2            # changes of one pin queued on the MCU at once (the module's
+                                        # DEFAULT_PIN_QUEUE_SLOTS, "Pin queue")
     steppers: tuple[str, ...] = ("stepper_x", "stepper_y")
 
 
@@ -173,6 +175,20 @@ def _float(cp, section, option, default, *, above=None, minval=None, below=None,
     return v
 
 
+def _int(cp, section, option, default, *, minval, maxval, source=""):
+    """An integer option as Klipper's ``getint`` reads it (``int(text)``: no "2.0")."""
+    if not cp.has_option(section, option):
+        return default
+    text = cp.get(section, option)
+    try:
+        v = int(text)
+    except ValueError:
+        raise PrinterConfigError(f"{source}: [{section}] {option}: {text!r} is not an integer") from None
+    if not minval <= v <= maxval:
+        raise PrinterConfigError(f"{source}: [{section}] {option} = {v} must be >= {minval} and <= {maxval}")
+    return v
+
+
 def _shapers(cp, source: str) -> tuple:
     if not cp.has_section("input_shaper"):
         return ()
@@ -210,6 +226,7 @@ def _gating(cp, source: str) -> GatingSection | None:
                               source=source),
         min_pin_spacing_s=_float(cp, sec, "min_pin_spacing", d.min_pin_spacing_s, minval=0.025,
                                  below=1.000000001, source=source),
+        pin_queue_slots=_int(cp, sec, "pin_queue_slots", d.pin_queue_slots, minval=1, maxval=2, source=source),
         steppers=steppers)
 
 

@@ -199,21 +199,21 @@ def _spaced_from_the_chunk_before(problem, sol, keep: np.ndarray) -> np.ndarray:
     """``keep`` less the first off intervals of each motor that a firmware timing its own switches
     (``options.schedule``: the klipper-gating module) would skip for rule B after the chunk before.
 
-    The module sees the whole file: its rule B counts from the motor's last gated "on", which may
-    be in the chunk before, as late as that chunk's last row. So the first interval of a motor here
-    is written only if the lower-bound time from this chunk's start to its line already clears the
-    spacing (``GatingProblem.spacing_need_s``); one that does not is dropped, and the next is checked
-    the same way (within the chunk the solver's own rule B holds between those kept)."""
-    if problem.options.schedule is None or problem.options.schedule.min_spacing_s <= 0:
+    The module sees the whole file: its rule B counts from the motor's last gated interval, which
+    may be in the chunk before, its line and its "on" as late as that chunk's last row. So the first
+    interval of a motor here is written only if rule B (``GatingProblem.spacing_ok``) holds after an
+    interval whose off and on are both at this chunk's start (lower-bound clock 0); one that does
+    not is dropped, and the next is checked the same way (within the chunk the solver's own rule B
+    holds between those kept)."""
+    if not problem.has_spacing:
         return keep
     idx = problem.idle_intervals_of(sol.angle_index)
     keep = keep.copy()
     for m in np.unique(sol.off_motor[keep]):
         mine = idx[problem.idle_motor[idx] == m]
-        need = problem.spacing_need_s(int(m))
         for j in np.flatnonzero(keep & (sol.off_motor == m)):      # in time order
             i = mine[np.argmin(np.abs(problem.idle_start_s[mine] - sol.off_start_s[j]))]
-            if problem.idle_lb_off_s[i] >= need:
+            if problem.spacing_ok(int(m), 0.0, 0.0, problem.idle_lb_off_s[i], problem.idle_lb_on_s[i]):
                 break
             keep[j] = False
     return keep

@@ -12,6 +12,7 @@ module agree on when each pin is off.
 """
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import itertools
 import math
@@ -69,8 +70,16 @@ def mzv30(tmp_path_factory):
     return read_printer_config(p)
 
 
-def _options(printer=None, **kw):
-    return GatingOptions.for_firmware("klipper-gating", printer=printer, rotate="none", **kw)
+def _options(printer=None, slots=None, **kw):
+    """The dialect's options; ``slots``: the module's pin_queue_slots instead of the printer's (1:
+    rule A's floor is the spacing again, as the module takes it)."""
+    o = GatingOptions.for_firmware("klipper-gating", printer=printer, rotate="none", **kw)
+    if slots is not None:
+        sch = o.schedule
+        floor = printer.gating.min_off_time_s if printer is not None and printer.gating else 0.0
+        o = o.replace(schedule=dataclasses.replace(
+            sch, pin_queue_slots=slots, min_off_s=max(floor, sch.min_spacing_s) if slots == 1 else floor))
+    return o
 
 
 # ------------------------------------------------------------------------------------------------
@@ -85,7 +94,11 @@ def test_the_dialects_margins_and_rule_a_are_the_modules(shaped, mzv30):
         assert math.isclose(o.off_margin_s(m), gg.off_delay_s(post, o.end_late_s), rel_tol=0, abs_tol=1e-15)
         assert math.isclose(o.on_margin_s(m), gg.on_lead_s(pre, o.start_ahead_s), rel_tol=0, abs_tol=1e-15)
         need = o.off_margin_s(m) + o.on_margin_s(m) + o.schedule.min_off_s
-        assert math.isclose(need, gg.required_gap_s(pre, post, o.start_ahead_s, o.end_late_s, 0.0, 0.1),
+        assert math.isclose(need, gg.required_gap_s(pre, post, o.start_ahead_s, o.end_late_s, 0.0, 0.1,
+                                                    o.schedule.pin_queue_slots), abs_tol=1e-15)
+        o1 = _options(printer, slots=1)
+        need1 = o1.off_margin_s(m) + o1.on_margin_s(m) + o1.schedule.min_off_s
+        assert math.isclose(need1, gg.required_gap_s(pre, post, o.start_ahead_s, o.end_late_s, 0.0, 0.1, 1),
                             abs_tol=1e-15)
     assert o.schedule.min_spacing_s == pytest.approx(0.1)
     assert o.stall_off_s == o.stall_on_s == 0.0 and not o.on_line
@@ -108,27 +121,39 @@ def test_the_pin_spacing_default_and_range_are_the_modules(tmp_path):
         else:
             with pytest.raises(PrinterConfigError, match="min_pin_spacing"):
                 read_printer_config(cfg)
+    # the pin queue: two changes of a pin queued by default, 1 or 2, an integer as Klipper's getint
+    assert gg.DEFAULT_PIN_QUEUE_SLOTS == klipper_gating.PIN_QUEUE_SLOTS == GatingSection().pin_queue_slots == 2
+    assert _options().schedule.pin_queue_slots == 2 and _options().schedule.min_off_s == 0.0
+    for value, ok in (("1", True), ("2", True), ("0", False), ("3", False), ("2.0", False), ("two", False)):
+        cfg = tmp_path / "p.cfg"
+        cfg.write_text(MZV30_CFG + f"pin_queue_slots: {value}\n")
+        if ok:
+            assert read_printer_config(cfg).gating.pin_queue_slots == int(value)
+            assert _options(read_printer_config(cfg)).schedule.min_off_s == (0.1 if value == "1" else 0.0)
+        else:
+            with pytest.raises(PrinterConfigError, match="pin_queue_slots"):
+                read_printer_config(cfg)
 
 
 def test_min_pin_spacing_in_printer_cfg_sets_rules_a_and_b(tmp_path):
-    """``min_pin_spacing: 0.05`` in [gatesopt_gating]: rule A's floor and rule B's spacing are 0.05 s
-    in the gating problem (a 0.09 s idle stretch becomes an idle interval, two offs 0.06 s apart are
-    both allowed), as the module applies them."""
+    """``min_pin_spacing: 0.05`` in [gatesopt_gating] with one change in flight: rule A's floor and
+    rule B's spacing are 0.05 s in the gating problem (a 0.09 s idle stretch becomes an idle
+    interval, two offs 0.06 s apart are both allowed), as the module applies them."""
     cfg = tmp_path / "p.cfg"
     cfg.write_text("[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n"
-                   "[gatesopt_gating]\nmin_pin_spacing: 0.05\n")
+                   "[gatesopt_gating]\nmin_pin_spacing: 0.05\npin_queue_slots: 1\n")
     fast = read_printer_config(cfg)
     o = _options(fast)
     assert (o.schedule.min_off_s, o.schedule.min_spacing_s) == (0.05, 0.05)
     s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0)])
     e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0)])
     short = lambda opts: from_moves(s, e, np.array([0.05, 0.09, 0.05]), opts).n_idle_intervals
-    assert short(_options(motors=("X",))) == 0 and short(_options(fast, motors=("X",))) == 1
+    assert short(_options(motors=("X",), slots=1)) == 0 and short(_options(fast, motors=("X",))) == 1
     # rule B: X idle 0.2 s, steps 0.06 s, idle 0.2 s: both off only with the smaller spacing
     s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0)])
     e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0), (4, 10, .2, 0)])
     d = np.array([0.05, 0.2, 0.06, 0.3, 0.02, 0.05])
-    for opts, both in ((_options(), 1), (o, 2)):
+    for opts, both in ((_options(slots=1), 1), (o, 2)):
         sol = solve(from_moves(s, e, d, opts), "dp")
         assert int(np.sum(sol.off_motor == 0)) == both
 
@@ -136,12 +161,14 @@ def test_min_pin_spacing_in_printer_cfg_sets_rules_a_and_b(tmp_path):
 def test_the_pin_spacing_of_printer_cfg_is_what_solve_and_verify_use(tmp_path):
     """A file solved for ``min_pin_spacing: 0.025`` gates more than one for the default, the
     verifier derives exactly the report's off time with that printer.cfg, and without it (the
-    module's default 0.1 s) finds lines the module would skip."""
+    module's default 0.1 s) finds lines the module would skip (one change in flight, where the
+    spacing is rule A's floor too)."""
     from gatesopt.cli import main
     import json
     src, cfg = tmp_path / "in.gcode", tmp_path / "printer.cfg"
     src.write_text(GCODE)
-    base = "[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n[gatesopt_gating]\n"
+    base = ("[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n[gatesopt_gating]\n"
+            "pin_queue_slots: 1\n")
     off = {}
     for name, extra in (("default", ""), ("fast", "min_pin_spacing: 0.025\n")):
         cfg.write_text(base + extra)
@@ -157,8 +184,9 @@ def test_the_pin_spacing_of_printer_cfg_is_what_solve_and_verify_use(tmp_path):
         assert sum(s.on_s - s.off_s for s in lines) == pytest.approx(off[name], abs=1e-9)
         assert main(["verify", str(src), str(out), "--claimed", str(rep), "--printer-config", str(cfg)]) == 0
     assert off["fast"] > off["default"]
+    cfg.write_text(base)
     rep = verify(parse(GCODE.encode()), parse((tmp_path / "fast.gcode").read_text().encode()),
-                 firmware="klipper-gating")
+                 firmware="klipper-gating", printer=read_printer_config(cfg))
     assert not rep.ok and any("skips this line" in str(f) for f in rep.findings)
 
 
@@ -205,14 +233,53 @@ def _brute_force(problem):
     return best
 
 
+def _module_rule_b(problem, chosen) -> bool:
+    """Rule B as the module's protocol states it, from first principles on the lower-bound clock:
+    consecutive gated intervals i, j of a motor; one change in flight: i's on to j's off at least
+    the spacing (margins counted); two queued: i's off to j's off and i's on to j's on."""
+    o = problem.options
+    sp, k = o.schedule.min_spacing_s, o.schedule.pin_queue_slots
+    for m in set(problem.idle_motor[chosen].tolist()):
+        g = sorted(chosen[problem.idle_motor[chosen] == m], key=lambda i: problem.idle_lb_off_s[i])
+        for i, j in zip(g, g[1:]):
+            off_i, on_i = problem.idle_lb_off_s[i], problem.idle_lb_on_s[i]
+            off_j, on_j = problem.idle_lb_off_s[j], problem.idle_lb_on_s[j]
+            if k == 1 and o.on_margin_s(m) + (off_j - on_i) + o.off_margin_s(m) < sp:
+                return False
+            if k == 2 and (off_j - off_i < sp or on_j - on_i < sp):
+                return False
+    return True
+
+
+def _brute_force_rules(problem):
+    """The best energy over every subset of idle intervals that keeps ``_module_rule_b``."""
+    best = None
+    for k in range(problem.n_angles):
+        g = problem.idle_intervals_of(k)
+        for r in range(len(g) + 1):
+            for sub in itertools.combinations(g, r):
+                sub = np.array(sub, np.int64)
+                if not _module_rule_b(problem, sub):
+                    continue
+                e = score(problem, problem.idle_motor[sub], problem.idle_start_s[sub], problem.idle_end_s[sub]).energy_j
+                if best is None or e < best - 1e-9:
+                    best = e
+    return best
+
+
+@pytest.mark.parametrize("slots", [1, 2])
 @pytest.mark.parametrize("shaped", [False, True])
 @pytest.mark.parametrize("seed", range(8))
-def test_exact_solvers_equal_brute_force_under_the_modules_rules(seed, shaped, mzv30):
+def test_exact_solvers_equal_brute_force_under_the_modules_rules(seed, shaped, slots, mzv30):
+    """dp (the chain with one monotone predecessor), milp, cpsat == brute force over every subset,
+    with one change of a pin in flight and with two queued; the brute force by check_feasible and by
+    rule B written here from the protocol give the same optimum."""
     rng = np.random.default_rng(seed)
     s, e, d = _random_moves(rng, 14)
-    p = from_moves(s, e, d, _options(mzv30 if shaped else None))
+    p = from_moves(s, e, d, _options(mzv30 if shaped else None, slots=slots))
     assert p.n_idle_intervals <= 13
     best = _brute_force(p)
+    assert best == pytest.approx(_brute_force_rules(p), rel=1e-12, abs=1e-9)
     for f in EXACT:
         sol = solve(p, f, time_limit_s=30)
         assert sol.status == "optimal", (f, sol.status, sol.message)
@@ -223,31 +290,55 @@ def test_exact_solvers_equal_brute_force_under_the_modules_rules(seed, shaped, m
     assert g.energy_j >= best - 1e-9
 
 
-def test_rule_b_makes_the_optimum_skip_an_interval():
-    """X idle for 0.2 s, steps 0.02 s, idle 0.2 s again: the two offs are 0.02 s + margins apart,
-    less than 0.1 s: only one of them may be off, and every solver keeps exactly one."""
-    s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0)])
-    e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0), (4, 10, .2, 0)])
-    d = np.array([0.05, 0.2, 0.02, 0.3, 0.02, 0.05])
-    p = from_moves(s, e, d, _options())
+X_IDLE_STEP_IDLE = (
+    np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0)]),
+    np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0), (2, 10, .2, 0), (3, 10, .2, 0), (4, 10, .2, 0)]))
+
+
+def _x_offs(durations, slots, formulations=EXACT + ("greedy",)):
+    """X steps, idles (Y) ``durations[1]``, steps ``durations[2]``, idles ``durations[3]``, steps:
+    (idle intervals of X, {formulation: X intervals off}, check_feasible of both off)."""
+    s, e = X_IDLE_STEP_IDLE
+    p = from_moves(s, e, np.array(durations), _options(slots=slots))
     x = np.flatnonzero(p.idle_motor == 0)
-    assert len(x) == 2
     both = check_feasible(p, 0, p.idle_motor[x], p.idle_start_s[x], p.idle_end_s[x])
-    assert any("rule B" in v for v in both)
-    for f in EXACT + ("greedy",):
-        sol = solve(p, f)
-        assert int(np.sum(sol.off_motor == 0)) == 1, f
+    return len(x), {f: int(np.sum(solve(p, f).off_motor == 0)) for f in formulations}, both
+
+
+def test_rule_b_makes_the_optimum_skip_an_interval():
+    """One change in flight: X idle for 0.2 s, steps 0.02 s, idle 0.2 s again: the first on and the
+    second off are 0.02 s + margins apart, less than 0.1 s: only one of them may be off, and every
+    solver keeps exactly one. Two queued: the offs and the ons are 0.22 s apart, both are off."""
+    n, off, both = _x_offs([0.05, 0.2, 0.02, 0.3, 0.02, 0.05], slots=1)
+    assert n == 2 and any("rule B" in v for v in both) and set(off.values()) == {1}, off
+    n, off, both = _x_offs([0.05, 0.2, 0.02, 0.3, 0.02, 0.05], slots=2)
+    assert n == 2 and both == [] and set(off.values()) == {2}, off
+
+
+@pytest.mark.parametrize("durations,why", [
+    ([0.05, 0.2, 0.02, 0.05, 0.02, 0.05], "on after on"),     # ons 0.02 + 0.05 s apart
+    ([0.05, 0.05, 0.02, 0.2, 0.02, 0.05], "off after off"),   # offs 0.05 + 0.02 s apart
+])
+def test_rule_b_with_two_queued_changes(durations, why):
+    """Two changes of a pin queued: each change waits for the change two back, so i's off and j's
+    off, and i's on and j's on, must each be 0.1 s apart; here one pair is 0.07 s apart (the other
+    0.22 s): only one interval may be off, and every solver keeps exactly one of them."""
+    n, off, both = _x_offs(durations, slots=2)
+    assert n == 2 and any("rule B" in v for v in both) and set(off.values()) == {1}, (why, off)
 
 
 def test_rule_a_leaves_short_intervals_out():
-    """An X idle interval of 0.09 s of moves is shorter than 0.1 s + margins: not an idle interval
-    of the problem; 0.11 s is."""
-    def problem(gap_s):
+    """One change in flight: an X idle interval of 0.09 s of moves is shorter than 0.1 s + margins:
+    not an idle interval of the problem; 0.11 s is. Two queued: rule A is the margins (2.827 ms)
+    and min_off_time alone."""
+    def problem(gap_s, slots):
         s = np.array([(0, 0, .2, 0), (1, 0, .2, 0), (1, 5, .2, 0)])
         e = np.array([(1, 0, .2, 0), (1, 5, .2, 0), (2, 5, .2, 0)])
-        return from_moves(s, e, np.array([0.05, gap_s, 0.05]), _options(motors=("X",)))
-    assert problem(0.09).n_idle_intervals == 0
-    assert problem(0.11).n_idle_intervals == 1
+        return from_moves(s, e, np.array([0.05, gap_s, 0.05]), _options(motors=("X",), slots=slots))
+    assert problem(0.09, 1).n_idle_intervals == 0
+    assert problem(0.11, 1).n_idle_intervals == 1
+    assert problem(0.09, 2).n_idle_intervals == 1
+    assert problem(0.0028, 2).n_idle_intervals == 0 and problem(0.0029, 2).n_idle_intervals == 1
 
 
 # ------------------------------------------------------------------------------------------------
@@ -291,14 +382,29 @@ def test_every_emitted_line_is_gated_by_the_protocol(formulation, shaped, mzv30)
     assert "GATESOPT_GATE" in res.text and "SET_STEPPER_ENABLE" not in res.text
 
 
-def test_a_line_the_module_would_skip_is_reported():
+def test_a_line_the_module_would_skip_is_reported(tmp_path):
     prog = parse(GCODE.encode(), source="tiny.gcode")
     # after the X move of line 7 (1 mm at 20 mm/s = 0.05 s) X idles 1 mm of Y (0.05 s): too short
+    # with one change of the pin in flight (rule A's floor is then the 0.1 s spacing)
+    cfg = tmp_path / "printer.cfg"
+    cfg.write_text("[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n"
+                   "[gatesopt_gating]\npin_queue_slots: 1\n")
+    one = read_printer_config(cfg)
     text = GCODE.replace("G1 X21 E2.05 F1200\n", "G1 X21 E2.05 F1200\nGATESOPT_GATE STEPPERS=stepper_x\n")
     out = parse(text.encode(), source="bad.gcode")
-    rep = verify(prog, out, firmware="klipper-gating")
+    rep = verify(prog, out, firmware="klipper-gating", printer=one)
     assert not rep.ok
     assert any("skips this line for motor X (short)" in str(f) for f in rep.findings)
+    assert verify(prog, out, firmware="klipper-gating").ok      # two queued: rule A is the margins
+    # two queued: a second X line whose on comes 0.075 s after the first line's on (X21 0.05 s,
+    # Y30.5 0.025 s at 20 mm/s): the module skips it for the spacing, as the verifier says
+    text = GCODE.replace("G1 X20 E1 F1200\n", "G1 X20 E1 F1200\nGATESOPT_GATE STEPPERS=stepper_x\n")
+    text = text.replace("G1 X21 E2.05 F1200\nG1 Y31 E2.1 F1200\n",
+                        "G1 X21 E2.05 F1200\nGATESOPT_GATE STEPPERS=stepper_x\nG1 Y30.5 E2.1 F1200\n")
+    orig = parse(GCODE.replace("G1 Y31 E2.1 F1200\n", "G1 Y30.5 E2.1 F1200\n").encode(), source="tiny.gcode")
+    rep = verify(orig, parse(text.encode(), source="bad.gcode"), firmware="klipper-gating")
+    assert [str(f) for f in rep.findings if f.check == "timing"] and all(
+        "motor X (spacing)" in str(f) for f in rep.findings if f.check == "timing"), rep.findings
     # a line for the extruder: the module refuses it
     text = GCODE.replace("G1 X40 E3 F1200\n", "G1 X40 E3 F1200\nGATESOPT_GATE STEPPERS=extruder\n")
     rep = verify(prog, parse(text.encode(), source="bad.gcode"), firmware="klipper-gating")

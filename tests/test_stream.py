@@ -128,24 +128,41 @@ def _x_pairs_between_y_moves(n: int = 120) -> str:
     return "\n".join(out) + "\n"
 
 
+def _x_pairs_between_short_y_moves(n: int = 200) -> str:
+    """Y moves of 0.04 s (X idle) between pairs of X moves of 0.02 s: two of X's idle intervals in
+    a row have their offs (and their ons) 0.08 s apart, less than the module's 0.1 s between a
+    change of a pin and the change two back (its rule B with two queued changes), so only every
+    other one may be off; where a chunk ends between the two X moves the first interval of the
+    next chunk is 0.08 s after the last one of the chunk before."""
+    out = ["G21", "G90", "M83", "G28", "G1 Z0.2 F600", ";LAYER:0", "G1 X10 Y10 F6000"]
+    x = 10.0
+    for k in range(n):
+        out.append(f"G1 Y{12 if k % 2 == 0 else 10} E0.1 F3000")
+        for _ in range(2):
+            x += 0.5
+            out.append(f"G1 X{x:.1f} E0.02 F1500")
+    out.append("G1 X0 Y200 F6000")
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize("slots", [1, 2])
 @pytest.mark.parametrize("shaped", [False, True])
-def test_streamed_klipper_gating_is_what_the_module_gates_across_chunks(tmp_path, shaped):
+def test_streamed_klipper_gating_is_what_the_module_gates_across_chunks(tmp_path, shaped, slots):
     """gate_stream with --firmware klipper-gating: the module sees the whole file, so its rule B
-    counts from a gated "on" in the chunk before; every line of the streamed output is one the
+    counts from a gated interval in the chunk before; every line of the streamed output is one the
     module gates (the whole output read as the module reads it), with and without an input
-    shaper's window (``printer``), at several chunk sizes."""
+    shaper's window (``printer``), at several chunk sizes, with one change of a pin in flight and
+    with two queued (``pin_queue_slots``, each with a file where its rule B binds)."""
     from gatesopt.printer_config import read_printer_config
     from gatesopt.verify import verify
     from gatesopt.verify.schedule import scheduled_lines
     src = tmp_path / "pairs.gcode"
-    src.write_text(_x_pairs_between_y_moves())
-    printer = None
-    if shaped:
-        cfg = tmp_path / "printer.cfg"
-        cfg.write_text("[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n"
-                       "[input_shaper]\nshaper_type: mzv\nshaper_freq_x: 30\nshaper_freq_y: 30\n"
-                       "[gatesopt_gating]\n")
-        printer = read_printer_config(cfg)
+    src.write_text(_x_pairs_between_y_moves() if slots == 1 else _x_pairs_between_short_y_moves())
+    cfg = tmp_path / "printer.cfg"
+    cfg.write_text("[printer]\nkinematics: cartesian\nmax_velocity: 300\nmax_accel: 3000\n"
+                   + ("[input_shaper]\nshaper_type: mzv\nshaper_freq_x: 30\nshaper_freq_y: 30\n" if shaped else "")
+                   + f"[gatesopt_gating]\npin_queue_slots: {slots}\n")
+    printer = read_printer_config(cfg)
     original = parse(src)
     for chunk in (300, 333, 450, 700):
         out = tmp_path / f"out{chunk}.gcode"
@@ -158,3 +175,4 @@ def test_streamed_klipper_gating_is_what_the_module_gates_across_chunks(tmp_path
         lines = scheduled_lines(output, firmware="klipper-gating", start_ahead_s=0.0018, end_late_s=0.001,
                                 printer=printer, original=original)
         assert len(lines) > 30 and all(s.gated for s in lines)
+

@@ -138,17 +138,32 @@ class Schedule:
     start of m's next step). With ``gap`` the lower-bound time of the steps between the line and
     that next step (``planner.min_move_time_s``, arcs as the firmware's chords of
     ``arc_segment_mm``): rule A ``gap >= (end_late + off_delay) + (start_ahead + on_lead) +
-    min_off_s``; rule B: from m's previous "on" to this "off" at least ``min_spacing_s``, counted
-    as ``(start_ahead + on_lead) + (lower-bound time from the step that ended m's previous off
-    interval to the line) + (end_late + off_delay)``. A homing step or one of the file's own motor
-    lines the firmware carries out between line and next step: the firmware switches its motors
-    itself there, the interval is not gated."""
+    min_off_s``; rule B, between m's previous gated interval i and this one j, depends on how many
+    changes of one pin the firmware keeps queued (``pin_queue_slots``, K): each change waits for the
+    change K before it, and must then still have ``min_spacing_s`` of lead, so a change is at least
+    ``min_spacing_s`` after the change K back. K = 1: from i's "on" to j's "off" at least
+    ``min_spacing_s``, counted as ``(start_ahead + on_lead) + (lower-bound time from the step that
+    ended i to j's line) + (end_late + off_delay)`` (and rule A's ``min_off_s`` carries the spacing
+    of one interval's own off and on); K = 2: i's off to j's off and i's on to j's on at least
+    ``min_spacing_s`` each, counted as the lower-bound time from i's line to j's line and from the
+    step that ended i to the step that ends j (the margins are the same at both ends and cancel;
+    the step that ends j is the end of the print when m never steps again). A homing step or one
+    of the file's own motor lines the firmware carries out between line and next step: the
+    firmware switches its motors itself there, the interval is not gated, and rule B starts over
+    after it."""
 
     off_delay_s: tuple = (0.0, 0.0, 0.0, 0.0)   # beyond end-late, per motor: the firmware's own delay
     on_lead_s: tuple = (0.0, 0.0, 0.0, 0.0)     # beyond start-ahead, per motor: the firmware's own lead
     min_off_s: float = 0.0                      # rule A's floor
     min_spacing_s: float = 0.0                  # rule B
+    pin_queue_slots: int = 1                    # rule B's form: changes of one pin queued at once (1, 2)
     arc_segment_mm: float = 1.0                 # the firmware's arc chords (lower bound of an arc's time)
+
+    def __post_init__(self):
+        # K >= 3 ties a change to the interval two gated intervals back (off of j to on of j - 2):
+        # no longer a chain with one monotone predecessor, which the exact dp needs
+        if self.pin_queue_slots not in (1, 2):
+            raise FirmwareError(f"Schedule.pin_queue_slots must be 1 or 2, got {self.pin_queue_slots!r}")
 
 
 class FirmwareError(GatesoptError, ValueError):

@@ -15,18 +15,23 @@ off at ``t_end + off_delay`` (``t_end``: the end of the moves queued before the 
 (``pre``/``post``: S's step window, the input shaper's, ``gatesopt.shaper``; 25 us: Klipper's
 ``MAX_STEPCOMPRESS_ERROR``; 1 us: clock rounding) -- if rule A and rule B hold, with ``gap`` the sum
 of the moves' ``min_move_t`` (distance over speed, klippy/toolhead.py ``Move``) between the line
-and the activating move, and ``spacing`` the module's ``min_pin_spacing`` (default 0.1 s, Klipper's
-own spacing of one pin's changes: the module's docstring, "Pin spacing", cites the source):
+and the activating move, ``spacing`` the module's ``min_pin_spacing`` (default 0.1 s, Klipper's
+own lead of one pin change's message: the module's docstring, "Pin spacing", cites the source) and
+``K`` its ``pin_queue_slots`` (default 2: two changes of a pin queued on the MCU, "Pin queue"):
 
-- rule A: ``gap >= off_delay + on_lead + max(min_off_time, spacing)``;
-- rule B: ``spacing`` between the previous "on" of S and this "off": ``on_lead_prev + (the
-  min_move_t from the move that ended S's previous gated interval to the line) + off_delay >=
-  spacing``.
+- rule A: ``gap >= off_delay + on_lead + floor``, ``floor`` = ``min_off_time`` (K = 2) or
+  ``max(min_off_time, spacing)`` (K = 1);
+- rule B, between S's previous gated interval and this one: K = 1, ``spacing`` between the
+  previous "on" and this "off": ``on_lead_prev + (the min_move_t from the move that ended S's
+  previous gated interval to the line) + off_delay >= spacing``; K = 2, ``spacing`` between the
+  previous "off" and this "off" and between the previous "on" and this "on" (min_move_t sums
+  from line to line and from activating move to activating move).
 
 What this module declares to the gating model (``Schedule``; ``gatesopt.gating`` honours it, the
 verifier derives the intervals from the lines with its own code): the firmware's own delay and lead
-per motor, rule A's floor ``min_off_s`` = max(min_off_time, spacing), rule B's ``spacing``
-(both from the printer.cfg's ``[gatesopt_gating]`` section, the module's defaults without one), the lower bound of ``min_move_t`` (``planner.min_move_time_s``: L / F, arcs as
+per motor, rule A's floor ``min_off_s``, rule B's ``spacing`` and ``pin_queue_slots`` (all from the
+printer.cfg's ``[gatesopt_gating]`` section, the module's defaults without one), the lower bound of
+``min_move_t`` (``planner.min_move_time_s``: L / F, arcs as
 Klipper's chords), no more than ``MAX_OFF_DELAY_S`` of delay, and the planner time model with
 Klipper's rules and the printer's limits (``--printer-config``), so that reported times and
 off-times are what Klipper plans.
@@ -47,6 +52,7 @@ from .klipper import KLIPPER_STALL_S, PLANNER, STEPPER_NAMES
 CLOCK_SLACK_S = 1e-6          # pin and step times are MCU clocks: rounding
 STEP_EARLY_S = 25e-6          # stepcompress may send a step this much early (MAX_STEPCOMPRESS_ERROR)
 PIN_SPACING_S = 0.100         # the module's DEFAULT_PIN_SPACING_S: between two changes of one pin
+PIN_QUEUE_SLOTS = 2           # the module's DEFAULT_PIN_QUEUE_SLOTS: changes of one pin queued at once
 MAX_OFF_DELAY_S = 0.050       # the module skips an interval whose off would come later than this
 #: issue 34: the module adds no time (no flush, no dwell, no split move), so what a rotation adds to
 #: the planned print is all klipper-gating adds; --rotate auto keeps 0 deg where the planner says a
@@ -121,10 +127,13 @@ class KlipperGating(Firmware):
                                 f"{MAX_OFF_DELAY_S} s: it would gate nothing")
         sec = printer.gating if printer is not None else None
         spacing = sec.min_pin_spacing_s if sec is not None else PIN_SPACING_S
-        min_off = max(sec.min_off_time_s if sec is not None else 0.0, spacing)
+        slots = sec.pin_queue_slots if sec is not None else PIN_QUEUE_SLOTS
+        min_off = sec.min_off_time_s if sec is not None else 0.0
+        if slots == 1:      # one change in flight: an interval's own on waits for its off
+            min_off = max(min_off, spacing)
         arc = printer.arc_resolution_mm if printer is not None and printer.arc_resolution_mm else 1.0
         return Schedule(off_delay_s=off_extra, on_lead_s=on_extra, min_off_s=min_off,
-                        min_spacing_s=spacing, arc_segment_mm=arc)
+                        min_spacing_s=spacing, pin_queue_slots=slots, arc_segment_mm=arc)
 
 
 DIALECT = KlipperGating(

@@ -59,17 +59,16 @@ def keep_spacing(problem: GatingProblem, chosen: np.ndarray) -> np.ndarray:
     per motor, in time order, an interval stays only at the spacing from the last one kept (the
     paper's algorithm knows no such rule; this is the least change that makes its answer one the
     firmware carries out)."""
-    o = problem.options
-    if o.schedule is None or o.schedule.min_spacing_s <= 0 or not len(chosen):
+    if not problem.has_spacing or not len(chosen):
         return chosen
     keep = np.ones(len(chosen), bool)
     for m in np.unique(problem.idle_motor[chosen]):
-        need = problem.spacing_need_s(int(m))
-        last_on = -np.inf
+        last = None
         for i in np.flatnonzero(problem.idle_motor[chosen] == m):
             g = chosen[i]
-            if problem.idle_lb_off_s[g] - last_on >= need:
-                last_on = problem.idle_lb_on_s[g]
+            if last is None or problem.spacing_ok(int(m), problem.idle_lb_off_s[last], problem.idle_lb_on_s[last],
+                                                  problem.idle_lb_off_s[g], problem.idle_lb_on_s[g]):
+                last = g
             else:
                 keep[i] = False
     return chosen[keep]

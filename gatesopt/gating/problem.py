@@ -146,14 +146,42 @@ class GatingProblem:
         lo, hi = np.searchsorted(self.idle_angle, [angle_index, angle_index + 1])
         return np.arange(lo, hi)
 
-    def spacing_need_s(self, motor: int) -> float:
-        """Rule B of a firmware that times its switches (``options.schedule``): two off intervals
-        i before j of ``motor`` may both be off only if ``idle_lb_off_s[j] - idle_lb_on_s[i]`` is at
-        least this; -inf without such a rule."""
+    def spacing_need_s(self, motor: int) -> tuple[float, float, float]:
+        """Rule B of a firmware that times its switches (``options.schedule``), as three needs on the
+        lower-bound clock (-inf: no such need). Off intervals i before j of ``motor``, consecutive
+        among those off, may both be off only if
+
+            idle_lb_off_s[j] - idle_lb_on_s[i]  >= on_off    (K = 1: i's on to j's off)
+            idle_lb_off_s[j] - idle_lb_off_s[i] >= off_off   (K = 2: i's off to j's off)
+            idle_lb_on_s[j]  - idle_lb_on_s[i]  >= on_on     (K = 2: i's on to j's on)
+
+        with K the firmware's ``Schedule.pin_queue_slots`` (each change of a pin at least
+        ``min_spacing_s`` after the change K back); returns (on_off, off_off, on_on). Each side only
+        grows going back from j (``chain_predecessors``)."""
         o = self.options
+        none = -math.inf
         if o.schedule is None or o.schedule.min_spacing_s <= 0:
-            return -math.inf
-        return o.schedule.min_spacing_s - o.on_margin_s(motor) - o.off_margin_s(motor) + RULE_EPS_S
+            return none, none, none
+        sp = o.schedule.min_spacing_s
+        if o.schedule.pin_queue_slots == 1:
+            return sp - o.on_margin_s(motor) - o.off_margin_s(motor) + RULE_EPS_S, none, none
+        # K = 2: the same margin at both ends of each difference (per motor constants)
+        return none, sp + RULE_EPS_S, sp + RULE_EPS_S
+
+    def spacing_ok(self, motor: int, off_i, on_i, off_j, on_j, tol_s: float = 0.0):
+        """Rule B (``spacing_need_s``) between an off interval (lower-bound clock ``off_i``,
+        ``on_i``) and the next one off of the same motor (``off_j``, ``on_j``); arrays broadcast.
+        ``tol_s``: slack granted (a check of someone else's sums)."""
+        on_off, off_off, on_on = self.spacing_need_s(motor)
+        off_j, on_j = np.asarray(off_j, float), np.asarray(on_j, float)
+        return ((off_j - on_i >= on_off - tol_s) & (off_j - off_i >= off_off - tol_s)
+                & (on_j - on_i >= on_on - tol_s))
+
+    @property
+    def has_spacing(self) -> bool:
+        """A firmware schedule with rule B (``spacing_need_s``)."""
+        o = self.options
+        return o.schedule is not None and o.schedule.min_spacing_s > 0
 
     @property
     def separable(self) -> bool:
@@ -210,18 +238,22 @@ def readonly(a) -> np.ndarray:
 
 def chain_predecessors(problem: GatingProblem, chain: np.ndarray) -> np.ndarray:
     """Rule B over ``chain`` (idle intervals of one angle and motor, in time order): p[j] = the
-    number of chain members before j that may be off together with j (they are chain[:p[j]]: the
-    spacing only grows going back). ``p[j] == j`` for every j without rule B."""
+    number of chain members before j that may be off together with j (they are chain[:p[j]]: each
+    of rule B's differences only grows going back, ``GatingProblem.spacing_need_s``). ``p[j] == j``
+    for every j without rule B."""
     chain = np.asarray(chain, np.int64)
     k = len(chain)
     if k == 0:
         return np.zeros(0, np.int64)
-    need = problem.spacing_need_s(int(problem.idle_motor[chain[0]]))
-    if not np.isfinite(need):
-        return np.arange(k, dtype=np.int64)
-    on = problem.idle_lb_on_s[chain]
-    p = np.searchsorted(on, problem.idle_lb_off_s[chain] - need, side="right")
-    return np.minimum(p, np.arange(k)).astype(np.int64)
+    on_off, off_off, on_on = problem.spacing_need_s(int(problem.idle_motor[chain[0]]))
+    off, on = problem.idle_lb_off_s[chain], problem.idle_lb_on_s[chain]
+    p = np.arange(k, dtype=np.int64)
+    # the members i with (j's clock - i's clock) >= need are those whose clock is at most
+    # j's clock - need: a prefix, both clocks being non-decreasing along the chain
+    for mine, theirs, need in ((off, on, on_off), (off, off, off_off), (on, on, on_on)):
+        if np.isfinite(need):
+            p = np.minimum(p, np.searchsorted(theirs, mine - need, side="right"))
+    return p.astype(np.int64)
 
 
 # ------------------------------------------------------------------------------------------------

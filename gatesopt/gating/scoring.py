@@ -243,16 +243,17 @@ def check_feasible(problem: GatingProblem, angle_index: int, off_motor, off_star
 def _spacing_violations(problem: GatingProblem, angle_index: int, motor: int, a, b) -> list[str]:
     """Rule B of a firmware schedule between consecutive off intervals (a, b) of ``motor``, each
     one of the problem's idle intervals."""
-    need = problem.spacing_need_s(motor)
-    if not np.isfinite(need) or len(a) < 2:
+    if not problem.has_spacing or len(a) < 2:
         return []
     g = np.flatnonzero((problem.idle_angle == angle_index) & (problem.idle_motor == motor))
     j = np.searchsorted(problem.idle_start_s[g], a)
     if np.any(j >= len(g)) or np.any(np.abs(problem.idle_start_s[g[np.minimum(j, len(g) - 1)]] - a) > 1e-9):
         return [f"motor {AXES[motor]}: an off interval that is no idle interval under the firmware's schedule"]
     g = g[j]
-    gap = problem.idle_lb_off_s[g[1:]] - problem.idle_lb_on_s[g[:-1]]
-    if np.any(gap < need - 1e-12):
-        return [f"motor {AXES[motor]}: rule B: an off within {problem.options.schedule.min_spacing_s:g} s "
-                f"of the previous on"]
+    off, on = problem.idle_lb_off_s[g], problem.idle_lb_on_s[g]
+    if not np.all(problem.spacing_ok(motor, off[:-1], on[:-1], off[1:], on[1:], tol_s=1e-12)):
+        sch = problem.options.schedule
+        what = ("an off within {:g} s of the previous on" if sch.pin_queue_slots == 1 else
+                "an off or an on within {:g} s of the one before the previous change")
+        return [f"motor {AXES[motor]}: rule B: " + what.format(sch.min_spacing_s)]
     return []

@@ -12,8 +12,12 @@ order, with ``lb`` the lower-bound time of each step (``planner.min_move_time_s`
   S itself between the line and its next step (homing, the file's own motor lines it carries out),
   and (``repeated``) where an earlier line's interval of S is still open;
 - rule A (``short``): ``sum(lb) line..t_next >= off_delay + on_lead + min_off_s``;
-- rule B (``spacing``): after a gated interval of S ended at step q (and no switch of the firmware's
-  own since), ``on_lead + sum(lb) q..line + off_delay >= min_spacing_s``;
+- rule B (``spacing``), after S's previous gated interval (its line at row r', ended at step q';
+  no switch of the firmware's own since), by the number K of changes of one pin the firmware keeps
+  queued (``Schedule.pin_queue_slots``; each change comes at least ``min_spacing_s`` after the
+  change K back): K = 1, ``on_lead + sum(lb) q'..line + off_delay >= min_spacing_s``; K = 2,
+  ``sum(lb) r'..line >= min_spacing_s`` (off after off) and ``sum(lb) q'..t_next >= min_spacing_s``
+  (on after on; t_next the end of the print when S never steps again);
 - ``off_delay = end_late + Schedule.off_delay_s[S]`` (``margins``: at most ``MAX_OFF_DELAY_S``),
   ``on_lead = start_ahead + Schedule.on_lead_s[S]``;
 - S is off over ``[t_line + off_delay, t_next - on_lead]``.
@@ -109,6 +113,8 @@ def scheduled_lines(output: Program, *, firmware, start_ahead_s: float, end_late
         need_a = off_delay + on_lead + sched.min_off_s - RULE_TOL_S
         open_until = -1           # the next step of the last line's interval (-1: none open)
         anchor = None             # step that ended the last gated interval (rule B)
+        anchor_line = None        # that interval's line (rule B with two queued changes)
+        queued = sched.pin_queue_slots
         for r in sel.tolist():
             j = int(np.searchsorted(step_rows, r))
             q = int(step_rows[j]) if j < len(step_rows) else n
@@ -126,16 +132,27 @@ def scheduled_lines(output: Program, *, firmware, start_ahead_s: float, end_late
                 reason = "margins"
             elif lb[q] - lb[r] < need_a:
                 reason = "short"
-            elif anchor is not None and on_lead + (lb[r] - lb[anchor]) + off_delay < sched.min_spacing_s - RULE_TOL_S:
+            elif anchor is not None and _too_close(queued, sched.min_spacing_s - RULE_TOL_S, on_lead, off_delay,
+                                                   lb[anchor_line], lb[anchor], lb[r], lb[q]):
                 reason = "spacing"
             if reason:
                 out.append(ScheduledLine(r, m, False, reason, np.nan, np.nan))
                 continue
-            anchor = q
+            anchor, anchor_line = q, r
             t_on = start[q] - on_lead if q < n else start[n]
             out.append(ScheduledLine(r, m, True, "", float(start[r] + off_delay), float(t_on)))
     out.sort(key=lambda s: (s.row, s.motor))
     return out
+
+
+def _too_close(queued: int, spacing_s: float, on_lead: float, off_delay: float, lb_line_prev: float,
+               lb_next_prev: float, lb_line: float, lb_next: float) -> bool:
+    """Rule B between the previous gated interval (line, next step) and this one: one change of the
+    pin waits for the change ``queued`` back (the pin's queue) and then needs ``spacing_s`` of lead."""
+    if queued == 1:       # the on before, then this off
+        return on_lead + (lb_line - lb_next_prev) + off_delay < spacing_s
+    # two queued: the off before this off, the on before this on (the same margins at both ends)
+    return lb_line - lb_line_prev < spacing_s or lb_next - lb_next_prev < spacing_s
 
 
 def check_schedule(output: Program, lines: list[ScheduledLine], *, max_findings: int = 10) -> list[Finding]:

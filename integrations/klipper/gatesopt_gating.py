@@ -40,27 +40,37 @@ Times are Klipper print times in seconds. For one GATESOPT_GATE line and one nam
   move's speed limit) of the moves queued after the line and before the activating move,
   extrude-only moves included. Dwells, heater waits and other time are not counted.
   ``spacing`` is the option ``min_pin_spacing`` (default ``DEFAULT_PIN_SPACING_S``, 0.100 s):
-  the least time between two changes of one pin (see "Pin spacing" below). ``min_sched`` is the
-  MCU's ``min_schedule_time()`` (0.100 s): the least lead of an event over the MCU's clock now.
+  the least lead of a pin change's message (see "Pin spacing" below); ``K`` is the option
+  ``pin_queue_slots`` (default ``DEFAULT_PIN_QUEUE_SLOTS``, 2): how many changes of one pin may
+  be queued on the MCU at once, each change coming at least ``spacing`` after the change ``K``
+  back (see "Pin queue" below). ``min_sched`` is the MCU's ``min_schedule_time()`` (0.100 s):
+  the least lead of an event over the MCU's clock now.
 * S is switched off for the interval only if all of these hold, else it stays on and the
   interval is counted as skipped:
 
   - gating is enabled for S (``SET_GATESOPT_GATING``), Klipper has S enabled, and S is not
     already switched off by an earlier line;
-  - rule A (off time): ``gap >= off_delay + on_lead + max(min_off_time, spacing)``;
-  - rule B (spacing from this module's previous "on" of S): ``since_on + off_delay >=
-    spacing``, where ``since_on = on_lead_prev + (sum of min_move_t of the moves from the
-    activating move that ended the previous gated interval of S up to the line)``; there is
-    no rule B before the first gated interval or after Klipper itself enabled S;
+  - rule A (off time): ``gap >= off_delay + on_lead + floor``, ``floor = max(min_off_time,
+    spacing)`` with K = 1 (the on waits for the off), ``min_off_time`` with K = 2;
+  - rule B, from S's previous gated interval (there is none before the first gated interval,
+    after Klipper itself switched S, or after a forced on): K = 1, from its "on" to this "off":
+    ``since_on + off_delay >= spacing``, where ``since_on = on_lead_prev + (sum of min_move_t of
+    the moves from the activating move that ended the previous gated interval of S up to the
+    line)``; K = 2, from its "off" to this "off" and from its "on" to this "on":
+    ``(sum of min_move_t of the moves from the previous gated line to this line) + off_delay -
+    off_delay_prev >= spacing`` and ``since_on + gap - on_lead >= spacing`` (the second is proven
+    as rule A is, as moves arrive: the off waits for it);
   - ``off_delay <= MAX_OFF_DELAY_S`` (Klipper's M84/SET_STEPPER_ENABLE dwell 0.1 s after the
     last move; an off must come before any of Klipper's own pin changes);
   - real time: ``t_off >= estimated_print_time + min_sched`` and ``t_off >= (time of the previous
     change of this pin) + spacing`` when the off is scheduled (in Klipper's batch mode,
     ``klippy.py -o``, the estimated print time is always 0, so only the second part applies).
 
-* The off is scheduled as soon as both ``t_end`` is known and rule A is proven (the gap only
-  grows as moves arrive), the on when the activating move leaves the look-ahead. The on always
-  comes after the off (rule A) and never before ``t_off + spacing``.
+* The off is scheduled as soon as both ``t_end`` is known and rule A (and with K = 2 the on's
+  rule B) is proven (the gap only grows as moves arrive), the on when the activating move leaves
+  the look-ahead. The on always comes after the off (rule A); with K = 1 never before ``t_off +
+  spacing``; with K = 2 never before the previous on plus ``spacing``, which the module checks in
+  real time too before it sends the off (``t_end + gap - on_lead >= last change + spacing``).
 
 Pin spacing (why 0.1 s, from Klipper's source)
 ----------------------------------------------
@@ -83,9 +93,62 @@ host and link known to be fast may set less, down to ``MIN_PIN_SPACING_S`` (0.02
 ``MIN_RTO``: a block lost once is sent again no sooner, so a smaller spacing fails on one
 retransmission). The solver must be given the same value (gatesopt reads it from the printer.cfg).
 
+Pin queue (pin_queue_slots: two changes of one pin queued on the MCU)
+---------------------------------------------------------------------
+
+With Klipper's own ``set_digital`` a pin has one change in flight: the message for a change waits
+(minclock) until the previous change has run, so an interval's off and on are at least ``spacing``
+apart (rule A's floor) and an off at least ``spacing`` after the previous on. That costs most of
+the saving a 0.1 s spacing takes (gatesopt's docs/RESULTS.md, "Klipper: the pin spacing"). The MCU
+keeps a queue per pin: src/gpiocmds.c ``command_queue_digital_out`` allocates a node of the shared
+move queue (``move_alloc``) and pushes it on the pin's own queue (``move_queue_push``);
+``digital_load_event`` pops one at its clock and re-arms its timer for the next queued one. So
+with ``pin_queue_slots: 2`` (the default) this module:
+
+* reserves one more move-queue slot per gated enable pin (``mcu.request_move_queue_slot()``, from a
+  config callback of each MCU, which runs in ``MCUConfigHelper._finalize_config`` before
+  ``_connect`` reads ``_reserved_move_slots`` and gives the steppers ``move_count`` less all
+  reserved slots, klippy/mcu.py): each gated pin owns two slots, its own (``MCU_digital_out.
+  _build_config``) and this one;
+* replaces that pin's ``set_digital`` with ``PinQueue.set_digital``, which sends the same
+  ``queue_digital_out`` on the pin's own command queue with ``minclock`` = the clock of the pin's
+  change two back instead of the last one, and keeps ``_last_clock`` as Klipper does. Every change
+  of the pin goes through it, Klipper's own auto-enable and M84 included.
+
+Why that is safe (the same argument Klipper makes for one slot, with two):
+
+* the MCU never holds more than two changes of the pin, so the move queue never overflows:
+  serialqueue.c (``check_upcoming_queues``) releases a message only once the MCU clock at its
+  arrival has passed its minclock, first in, first out within the pin's command queue; change n
+  is released after change n - 2 has run, so at most changes n - 1 and n are queued, in the two
+  slots reserved for the pin (the steppers' share, ``move_count`` less every reserved slot, is
+  untouched);
+* every message still gets ``spacing`` of lead after its minclock event: rule B (K = 2) keeps
+  each off ``spacing`` after the previous off and each on ``spacing`` after the previous on, and
+  the changes of one pin alternate off, on, off, on, so the change two back is exactly that one
+  (Klipper's own changes count as changes: the real-time check ``_earliest_event`` takes the
+  change two back whatever its source); a message that arrived after its clock would shut the
+  MCU down ("Timer too close", src/sched.c ``sched_add_timer``, when it is first in the pin's
+  queue; when it is not, ``digital_load_event`` re-arms for it, and a clock already long past
+  ends in "Rescheduled timer in the past", src/generic/armcm_timer.c): the same lead Klipper
+  gives one change in flight;
+* the clocks of one pin only increase (the on of an interval after its off by rule A, the next
+  off after that on: the activating move ends before the next line), as the MCU's first in,
+  first out pin queue needs; the stepper enable pins have no max_duration
+  (stepper_enable.py ``setup_max_duration(0.)``), so ``command_queue_digital_out``'s
+  max_duration check never fires.
+
+``pin_queue_slots: 1`` is Klipper's own ``set_digital`` and reserves nothing. More than two
+queued changes would let an off come less than ``spacing`` after the previous on and tie a change
+to the interval two gated intervals back (the change three back of an off is the on before the
+previous off): the solver's exact chain (one monotone predecessor per interval) would no longer
+hold; 1 and 2 are the values accepted. ``PinQueue`` uses four attributes of Klipper's
+``MCU_digital_out`` (``DIGITAL_OUT_ATTRS``); a Klipper without them is refused at start-up.
+
 What it refuses: at start-up (config error) a listed stepper that is not a kinematic stepper of
-the toolhead, a stepper with no enable pin (TMC "virtual enable") or with a shared enable pin; at
-the command (G-code error) an unknown or ungateable name and malformed parameters.
+the toolhead, a stepper with no enable pin (TMC "virtual enable") or with a shared enable pin, a
+``pin_queue_slots`` other than 1 or 2 or one Klipper's digital_out cannot be sent with; at the
+command (G-code error) an unknown or ungateable name and malformed parameters.
 
 Klipper's bookkeeping: the pin is switched through the stepper's ``StepperEnablePin``
 (``set_disable``/``set_enable``, reference counted); Klipper's ``EnableTracking`` keeps saying
@@ -117,6 +180,10 @@ MAX_OFF_DELAY_S = 0.050
 DEFAULT_PIN_SPACING_S = 0.100
 MIN_PIN_SPACING_S = 0.025
 MAX_PIN_SPACING_S = 1.0
+# Changes of one enable pin queued on the MCU at once ("Pin queue"): 1 is Klipper's own
+# MCU_digital_out; 2 reserves one more move-queue slot per gated pin
+DEFAULT_PIN_QUEUE_SLOTS = 2
+MAX_PIN_QUEUE_SLOTS = 2
 DEFAULT_STEPPERS = "stepper_x, stepper_y"
 # Skips of one reason written to klippy.log before the rest are only counted
 LOG_SKIPS_PER_REASON = 20
@@ -137,10 +204,15 @@ def on_lead_s(pre_active_s, start_ahead_s):
     return pre_active_s + start_ahead_s + STEP_EARLY_S + CLOCK_SLACK_S
 
 def required_gap_s(pre_active_s, post_active_s, start_ahead_s, end_late_s,
-                   min_off_s, pin_spacing_s):
-    """Rule A: the least sum of min_move_t that proves an interval may be gated."""
+                   min_off_s, pin_spacing_s, pin_queue_slots=1):
+    """Rule A: the least sum of min_move_t that proves an interval may be gated.
+    With one change of the pin in flight its on waits for its off ("Pin
+    queue"): the off time is at least the spacing too."""
+    floor = min_off_s
+    if pin_queue_slots == 1:
+        floor = max(min_off_s, pin_spacing_s)
     return (off_delay_s(post_active_s, end_late_s)
-            + on_lead_s(pre_active_s, start_ahead_s) + max(min_off_s, pin_spacing_s))
+            + on_lead_s(pre_active_s, start_ahead_s) + floor)
 
 def gate_times(t_end, t_next, pre_active_s, post_active_s, start_ahead_s,
                end_late_s):
@@ -191,10 +263,12 @@ def enable_refusal(name, kinematic_names, tracking):
 
 class _Interval:
     """One GATESOPT_GATE line for one stepper."""
-    def __init__(self, pre_s, post_s):
+    def __init__(self, pre_s, post_s, line_cum_s):
         self.gap_s = 0.
         self.pre_s = pre_s
         self.post_s = post_s
+        self.line_cum_s = line_cum_s  # cum_s at the line (rule B, two queued)
+        self.on_anchor = None     # (cum_s, on_lead) of the previous gated on
         self.t_end = None
         self.t_off = self.t_on = None
         self.state = "open"   # open | pending | off | done | skipped | cancelled
@@ -214,9 +288,12 @@ class _Gate:
         self.off_iv = None        # interval whose off was sent and on not yet
         self.pin_off = False      # this module holds the pin off (count 0)
         self.owe_count = False    # Klipper disabled while gated: count is -1
-        self.last_event_pt = None
+        self.recent_pt = []       # print times of the pin's last changes, any
+                                  # source, newest last (pin_queue_slots kept)
         self.anchor_cum_s = None  # rule B: cum_s at the last activating move
         self.anchor_lead_s = 0.   # rule B: on_lead of that on
+        self.anchor_line_cum_s = None  # rule B (two queued): cum_s at the
+        self.anchor_delay_s = 0.       # last gated line, and its off_delay
         self.safety_armed = False
         self.gated = 0
         self.off_time_s = 0.
@@ -233,10 +310,15 @@ class GatingCore:
     est_print_time(pin) -> the MCU's estimated print time now
     min_sched_s: the MCU's min_schedule_time() (least lead of an event over the MCU's clock)
     pin_spacing_s: least time between two changes of one pin (None: min_sched_s)
+    pin_queue_slots: changes of one pin queued on the MCU at once (1 or 2; the
+      pins must then be sent by a PinQueue of as many slots)
     """
     def __init__(self, toolhead, gates, margins, est_print_time, min_sched_s,
                  start_ahead_s, end_late_s, min_off_s, respond=None,
-                 pin_spacing_s=None):
+                 pin_spacing_s=None, pin_queue_slots=1):
+        if pin_queue_slots not in (1, 2):
+            raise ValueError("pin_queue_slots must be 1 or 2")
+        self.pin_queue_slots = pin_queue_slots
         self.toolhead = toolhead
         self.margins = margins
         self.est_print_time = est_print_time
@@ -279,11 +361,14 @@ class GatingCore:
                          n == LOG_SKIPS_PER_REASON
                          and "; further '%s' skips only counted" % reason or "")
     # Pin changes (the only places that touch the pin)
+    def _note_change(self, g, print_time):
+        g.recent_pt.append(print_time)
+        del g.recent_pt[:-self.pin_queue_slots]
     def _pin_off(self, g, print_time):
         assert not g.pin_off
         g.pin.set_disable(print_time)
         g.pin_off = True
-        g.last_event_pt = print_time
+        self._note_change(g, print_time)
         if not g.safety_armed:
             g.safety_armed = True
             g.stepper.add_active_callback(
@@ -292,12 +377,17 @@ class GatingCore:
         assert g.pin_off
         g.pin.set_enable(print_time)
         g.pin_off = False
-        g.last_event_pt = print_time
+        self._note_change(g, print_time)
     def _earliest_event(self, g):
-        """Earliest print time a new change of g's pin may be scheduled."""
+        """Earliest print time a new change of g's pin may be scheduled: its
+        message waits for the change pin_queue_slots back ("Pin queue") and
+        then needs the spacing of lead; never before the last change."""
         t = self.est_print_time(g.pin) + self.min_sched_s
-        if g.last_event_pt is not None:
-            t = max(t, g.last_event_pt + self.pin_spacing_s)
+        k = self.pin_queue_slots
+        if len(g.recent_pt) >= k:
+            t = max(t, g.recent_pt[-k] + self.pin_spacing_s)
+        if g.recent_pt:
+            t = max(t, g.recent_pt[-1])
         return t
     # G-code line
     def command_gate(self, names):
@@ -316,7 +406,7 @@ class GatingCore:
                 self._skip(g, None, "repeated")
                 continue
             pre, post = self._margins(g)
-            iv = _Interval(pre, post)
+            iv = _Interval(pre, post, self.cum_s)
             g.open = iv
             g.live = [v for v in g.live if v.state in ("open", "pending")]
             g.live.append(iv)
@@ -325,19 +415,41 @@ class GatingCore:
             if delay > MAX_OFF_DELAY_S:
                 self._skip(g, iv, "margins", "post_active + end_late = %.4f s"
                            % (delay,))
-            elif (g.anchor_cum_s is not None
+            elif (self.pin_queue_slots == 1 and g.anchor_cum_s is not None
                   and (self.cum_s - g.anchor_cum_s + g.anchor_lead_s + delay
                        < self.pin_spacing_s)):
                 self._skip(g, iv, "spacing", "%.4f s after the last on"
                            % (self.cum_s - g.anchor_cum_s + g.anchor_lead_s
                               + delay,))
+            elif (self.pin_queue_slots == 2
+                  and g.anchor_line_cum_s is not None
+                  and (self.cum_s - g.anchor_line_cum_s + delay
+                       - g.anchor_delay_s < self.pin_spacing_s)):
+                self._skip(g, iv, "spacing", "%.4f s after the last off"
+                           % (self.cum_s - g.anchor_line_cum_s + delay
+                              - g.anchor_delay_s,))
+            elif self.pin_queue_slots == 2 and g.anchor_cum_s is not None:
+                # the on's rule is proven with the gap, as rule A
+                iv.on_anchor = (g.anchor_cum_s, g.anchor_lead_s)
             self.toolhead.register_lookahead_callback(
                 (lambda pt, g=g, iv=iv: self._t_end(g, iv, pt)))
-    def _proven(self, g, iv):
+    def _unproven(self, g, iv):
+        """None when the moves seen prove the interval: rule A, and with two
+        queued changes the spacing of this on from the previous on (on the
+        lower-bound clock: cum_s at the activating move is line_cum_s +
+        gap_s); else (skip reason, detail) for when no more moves come."""
         pre, post = self._margins(g, iv)
-        return iv.gap_s >= required_gap_s(pre, post, self.start_ahead_s,
-                                          self.end_late_s, self.min_off_s,
-                                          self.pin_spacing_s)
+        if iv.gap_s < required_gap_s(pre, post, self.start_ahead_s,
+                                     self.end_late_s, self.min_off_s,
+                                     self.pin_spacing_s, self.pin_queue_slots):
+            return "short", "%.4f s of moves" % (iv.gap_s,)
+        if iv.on_anchor is not None:
+            anchor_cum, anchor_lead = iv.on_anchor
+            since_on = (iv.line_cum_s + iv.gap_s - anchor_cum + anchor_lead
+                        - on_lead_s(pre, self.start_ahead_s))
+            if since_on < self.pin_spacing_s:
+                return "spacing", "on %.4f s after the last on" % (since_on,)
+        return None
     # Moves (every move entering the look-ahead queue)
     def note_move(self, move):
         dt = move.min_move_t
@@ -360,16 +472,22 @@ class GatingCore:
         g.open = None
         iv.closed = True
         if iv.state == "open":
-            if not self._proven(g, iv):
-                self._skip(g, iv, "short", "%.4f s of moves" % (iv.gap_s,))
+            why = self._unproven(g, iv)
+            if why is not None:
+                self._skip(g, iv, *why)
                 return
-            # Proven, t_end not known yet: the off goes out at t_end
+            # Proven: the off goes out at t_end (now if t_end is known and
+            # only real time held it back)
             iv.state = "pending"
+            if iv.t_end is not None:
+                self._try_off(g, iv)
         if iv.state not in ("pending", "off"):
             return
         pre, post = self._margins(g, iv)
         g.anchor_cum_s = self.cum_s
         g.anchor_lead_s = on_lead_s(pre, self.start_ahead_s)
+        g.anchor_line_cum_s = iv.line_cum_s
+        g.anchor_delay_s = off_delay_s(post, self.end_late_s)
         self.toolhead.register_lookahead_callback(
             (lambda pt, g=g, iv=iv, m=move: self._t_next(g, iv, m, pt)))
     def _t_end(self, g, iv, print_time):
@@ -377,11 +495,12 @@ class GatingCore:
         if iv.state == "open" or iv.state == "pending":
             self._try_off(g, iv)
     def _try_off(self, g, iv):
-        if not self._proven(g, iv):
+        why = self._unproven(g, iv)
+        if why is not None:
             if iv.state == "pending":
                 # proven at the activating move, no longer with a wider
                 # window read since: the interval is final, and too short
-                self._skip(g, iv, "short", "%.4f s of moves" % (iv.gap_s,))
+                self._skip(g, iv, *why)
             return
         if not g.tracking.is_motor_enabled():
             self._skip(g, iv, "motor_off")
@@ -393,6 +512,19 @@ class GatingCore:
             self._skip(g, iv, "late", "off at %.6f, earliest %.6f"
                        % (t_off, earliest))
             return
+        if self.pin_queue_slots == 2 and g.recent_pt:
+            # The on will wait for the pin's last change before this off
+            # (its change two back) and needs the spacing of lead: proven in
+            # real time, the next step being at least gap_s after t_end.
+            # Implied by the rule on the lower-bound clock (_unproven) unless a
+            # change was tied to no move (_drop_anchors) or came late
+            t_on_min = iv.t_end + iv.gap_s - on_lead_s(pre, self.start_ahead_s)
+            if t_on_min < g.recent_pt[-1] + self.pin_spacing_s:
+                if iv.closed:
+                    self._skip(g, iv, "spacing", "on at %.6f at the earliest,"
+                               " %.6f after the last change"
+                               % (t_on_min, t_on_min - g.recent_pt[-1]))
+                return
         iv.t_off = t_off
         iv.state = "off"
         g.off_iv = iv
@@ -445,14 +577,14 @@ class GatingCore:
             self.respond("!! " + msg)
         self._cancel_open(g)
         iv.closed = True
-        g.anchor_cum_s = None
+        self._drop_anchors(g)
         self._finish(g, iv, t_on)
     # Klipper's own enable/disable of a stepper (EnableTracking state callback)
     def _klipper_state(self, g, print_time, is_enable):
         if is_enable:
             self._settle_count(g)
-            g.last_event_pt = print_time
-            g.anchor_cum_s = None
+            self._note_change(g, print_time)
+            self._drop_anchors(g)
             return
         self._cancel_open(g)
         if g.off_iv is not None:
@@ -464,7 +596,12 @@ class GatingCore:
             g.pin_off = False
             g.owe_count = True
         else:
-            g.last_event_pt = print_time
+            self._note_change(g, print_time)
+    def _drop_anchors(self, g):
+        """Rule B starts over: the pin's last change is tied to no move (a
+        change of Klipper's own, a forced on); only real time counts."""
+        g.anchor_cum_s = None
+        g.anchor_line_cum_s = None
     def _settle_count(self, g):
         if g.owe_count:
             g.owe_count = False
@@ -512,7 +649,7 @@ class GatingCore:
             g.forced_on += 1
             # rule B counts from a move; this on is tied to none: from now
             # on only its real time spacing is checked
-            g.anchor_cum_s = None
+            self._drop_anchors(g)
             count += 1
             last_on = max(last_on, t_on)
         if count:
@@ -550,6 +687,55 @@ class GatingCore:
 
 
 ######################################################################
+# Pin queue: several changes of one enable pin queued on the MCU
+######################################################################
+
+# MCU_digital_out's own attributes the queue sends with (klippy/mcu.py at
+# 84104bb: the oid, the queue_digital_out command, the inversion, the clock
+# of the last change its set_digital sent)
+DIGITAL_OUT_ATTRS = ('_oid', '_set_cmd', '_invert', '_last_clock')
+
+class PinQueue:
+    """Sends the changes of one MCU_digital_out with minclock = the clock of
+    its change `slots` back, not the last one ("Pin queue" above). Installed
+    as that pin's set_digital, so every change of the pin, Klipper's own
+    (auto-enable, M84) and this module's, goes through it, and the pin's
+    _last_clock stays what Klipper's set_digital keeps there."""
+    def __init__(self, out, slots):
+        self.out = out
+        self.slots = slots
+        self.mcu = out.get_mcu()
+        self.clocks = [out._last_clock]   # clock 0: none yet (as Klipper)
+        self.sent = 0
+        self.min_lead_s = None            # least reqclock - minclock sent
+    def set_digital(self, print_time, value):
+        out = self.out
+        clock = self.mcu.print_time_to_clock(print_time)
+        hist = self.clocks
+        minclock = hist[-self.slots] if len(hist) >= self.slots else 0
+        out._set_cmd.send([out._oid, clock, (not not value) ^ out._invert],
+                          minclock=minclock, reqclock=clock)
+        out._last_clock = clock
+        hist.append(clock)
+        del hist[:-self.slots]
+        self.sent += 1
+        if minclock:
+            lead = float(clock - minclock) / self.mcu.seconds_to_clock(1.)
+            if self.min_lead_s is None or lead < self.min_lead_s:
+                self.min_lead_s = lead
+
+def pin_queue_refusal(out):
+    """Why a digital_out cannot be sent through a PinQueue (a message), or
+    None."""
+    missing = [a for a in DIGITAL_OUT_ATTRS if not hasattr(out, a)]
+    if missing:
+        return ("this Klipper's MCU_digital_out has no %s (written against"
+                " klippy/mcu.py of 2025); set pin_queue_slots: 1"
+                % (", ".join(missing),))
+    return None
+
+
+######################################################################
 # Klipper glue: config, commands, events
 ######################################################################
 
@@ -571,7 +757,20 @@ class GatesoptGating:
         self.pin_spacing_s = config.getfloat(
             'min_pin_spacing', DEFAULT_PIN_SPACING_S, minval=MIN_PIN_SPACING_S,
             maxval=MAX_PIN_SPACING_S)
+        self.pin_queue_slots = config.getint(
+            'pin_queue_slots', DEFAULT_PIN_QUEUE_SLOTS, minval=1,
+            maxval=MAX_PIN_QUEUE_SLOTS)
         self.section = config.get_name()
+        self.queues = {}
+        self.reserved = {}        # id(MCU_digital_out) -> extra slots reserved
+        if self.pin_queue_slots > 1:
+            # The move-queue slots must be requested before the MCU reads
+            # their count (mcu.py MCUConfigHelper._connect, after its config
+            # callbacks): from a config callback of every MCU, where every
+            # stepper and its enable pin exist
+            for mcu_name, mcu in printer.lookup_objects('mcu'):
+                mcu.register_config_callback(
+                    (lambda mcu=mcu: self._reserve_slots(mcu)))
         self.toolhead = None
         self.core = None
         self.gcode = printer.lookup_object('gcode')
@@ -590,6 +789,40 @@ class GatesoptGating:
         self.gcode.register_command("GATESOPT_GATING_STATUS",
                                     self.cmd_GATESOPT_GATING_STATUS,
                                     desc=self.cmd_GATESOPT_GATING_STATUS_help)
+    def _reserve_slots(self, mcu):
+        """One more move-queue slot per extra queued change of each gated
+        enable pin on this MCU (a pin refused at connect gets none)."""
+        stepper_enable = self.printer.lookup_object('stepper_enable', None)
+        if stepper_enable is None:
+            return
+        for name in self.names:
+            try:
+                tracking = stepper_enable.lookup_enable(name)
+            except self.printer.config_error:
+                continue
+            out = getattr(tracking.enable, 'mcu_enable', None)
+            if (out is None or not tracking.has_dedicated_enable()
+                    or out.get_mcu() is not mcu or id(out) in self.reserved):
+                continue
+            for i in range(self.pin_queue_slots - 1):
+                mcu.request_move_queue_slot()
+            self.reserved[id(out)] = self.pin_queue_slots - 1
+    def _install_pin_queues(self, gates):
+        for name in self.names:
+            out = gates[name][1].enable.mcu_enable
+            why = pin_queue_refusal(out)
+            if why is None and self.reserved.get(id(out)) != \
+                    self.pin_queue_slots - 1:
+                why = ("no move-queue slot was reserved for its enable pin"
+                       " (the MCU's config was built before this module's"
+                       " callback ran)")
+            if why is not None:
+                raise self.printer.config_error(
+                    "[%s] pin_queue_slots: %d: %s: %s"
+                    % (self.section, self.pin_queue_slots, name, why))
+            q = PinQueue(out, self.pin_queue_slots)
+            out.set_digital = q.set_digital
+            self.queues[name] = q
     def _handle_connect(self):
         # The toolhead is created after every config section, and an enable
         # pin is known to be shared only once every stepper is: check here
@@ -607,6 +840,8 @@ class GatesoptGating:
                 raise self.printer.config_error("[%s] %s"
                                                 % (self.section, why))
             gates[name] = (kin_steppers[name], tracking)
+        if self.pin_queue_slots > 1:
+            self._install_pin_queues(gates)
         lookahead = getattr(self.toolhead, 'lookahead', None)
         if lookahead is None or not hasattr(lookahead, 'add_move'):
             raise self.printer.config_error(
@@ -621,7 +856,8 @@ class GatesoptGating:
             self.toolhead, gates, stepper_margins, est_print_time,
             mcu.min_schedule_time(), self.start_ahead_s, self.end_late_s,
             self.min_off_s, respond=self.gcode.respond_raw,
-            pin_spacing_s=self.pin_spacing_s)
+            pin_spacing_s=self.pin_spacing_s,
+            pin_queue_slots=self.pin_queue_slots)
         # Every move Klipper plans passes here, after all transforms and
         # speed limits (toolhead.move and drip moves)
         orig_add_move = lookahead.add_move
@@ -697,12 +933,22 @@ class GatesoptGating:
                             s['intervals_gated'], s['off_time_s'],
                             skipped or "none", s['late_enables'],
                             s['forced_on']))
+        for name in sorted(self.queues):
+            q = self.queues[name]
+            lines.append("%s: pin queue %d, %d changes sent, least lead %s"
+                         % (name, q.slots, q.sent, q.min_lead_s is None
+                            and "-" or "%.4f s" % (q.min_lead_s,)))
         lines.append("late safety enables: %d" % (st['late_safety_enables'],))
         gcmd.respond_info("\n".join(lines))
     def get_status(self, eventtime):
         if self.core is None:
             return {}
-        return self.core.status()
+        st = self.core.status()
+        st['pin_queue_slots'] = self.pin_queue_slots
+        for name, q in self.queues.items():
+            st['steppers'][name]['pin_changes_sent'] = q.sent
+            st['steppers'][name]['pin_lead_min_s'] = q.min_lead_s
+        return st
 
 def stepper_margins(stepper):
     """(pre_active_s, post_active_s) of a stepper's current kinematics."""
