@@ -196,3 +196,36 @@ def test_a_reversed_arc_costs_what_the_planner_says_backwards():
     node = prob.pricer.node_ms
     assert np.abs(node).max() > 50.0                    # 67-146 ms on this file's arcs
     assert np.all(node[prob.curve_closed] == 0.0)       # loops move their seam, not direction
+
+
+@pytest.mark.parametrize("name,mode", [("real_prusa240_m486_arcwelder", "free"),
+                                       ("real_orca230_arcs", "safe")])
+def test_the_link_matrix_prices_each_link_as_one_by_one(name, mode):
+    """A group's matrix (``cost._dense``: moves prepared once per candidate and per limits
+    regime) and the links priced one by one (``cost._link_one``, what a path is re-priced with)
+    agree on every pair, with the curves' end moves, reversed curves, reversed gaps and the
+    limits at each travel (real_orca230_arcs: a Klipper file that sets the acceleration per
+    feature)."""
+    prog = _corpus(name)
+    prob = build(prog, OrderingOptions(mode=mode))
+    pr = prob.pricer
+    assert pr.ends.ok.any()
+    checked = 0
+    for g in range(prob.n_groups):
+        if not prob.group_reorderable[g] or checked > 5000:
+            continue
+        grp = prob.group(g, prob.origin_xy)
+        if not grp.dense or grp.n_cands > 80:
+            continue
+        D = grp.arc_cost()
+        curves = prob.source_curves(prob.group_curves(g))[grp.cand_curve]
+        changed = grp.cand_reversed | (grp.cand_seam != 0)
+        u, v = (x.ravel() for x in np.meshgrid(np.arange(grp.n_cands), np.arange(grp.n_cands),
+                                                indexing="ij"))
+        ok = grp.cand_curve[u] != grp.cand_curve[v]
+        u, v = u[ok], v[ok]
+        one = pr.links_ms(curves[u], changed[u], grp.cand_exit_xy[u], curves[v], changed[v],
+                          grp.cand_entry_xy[v])
+        np.testing.assert_allclose(D[u, v], one, atol=1e-6)
+        checked += len(u)
+    assert checked > 500

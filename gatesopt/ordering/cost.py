@@ -293,13 +293,12 @@ class TimePricer:
 
     def __init__(self, program: Program, lay: Layout, problem: OrderingProblem, rule: TravelRule,
                  move: MoveTimes, step_s: np.ndarray | None = None,
-                 limits: MachineLimits | None = None, step_plan=None):
+                 limits: MachineLimits | None = None, step_plan=None, ends=None):
         """``step_s``: per step of ``program``, the time a copied gap's steps take (the
         planner's, ``OrderingOptions.copied_gaps``); None: each move priced by ``move``.
-        ``limits``: the file's (``limits.machine_limits``; None: read here where ``move`` plans
-        with limits), for what a reversed curve's own moves add (``node_ms``). ``step_plan``:
-        the ``planner.Plan`` ``step_s`` came from (the copied gaps then carry their junctions'
-        share of the curves around them)."""
+        ``limits``: the file's (None: read here where needed). ``step_plan``: the
+        ``planner.Plan`` ``step_s`` came from: the links are then joined to the curves
+        (``ends``: ``curve_time.CurveEnds`` of these curves, None: made here)."""
         self.rule, self.move = rule, move
         style = rule.style
         self.style_vec = np.array([style.retract_feed_mm_s, style.unretract_feed_mm_s,
@@ -339,9 +338,11 @@ class TimePricer:
         #: that (``CurveEnds.context_ms``), so both price the same quantity
         #: -- with the copied gaps at the planner's time (``step_plan``); priced move by move
         #: (``copied_gaps="moves"``) every link is its moves alone, from and to rest
-        ends = CurveEnds.empty(n)
-        if n and move.junction_code >= 0 and step_plan is not None:
-            lim = limits if limits is not None else machine_limits(program)
+        joined = n and move.junction_code >= 0 and step_plan is not None
+        lim = limits if limits is not None or not joined else machine_limits(program)
+        if not joined:
+            ends = CurveEnds.empty(n)
+        elif ends is None:
             ends = CurveEnds.of(program, lim, lay.curve_s0, lay.curve_s1, problem.curve_closed)
         self.ends = ends
         self.node_ms = ends.node_ms
@@ -373,9 +374,8 @@ class TimePricer:
 
     def _rev_args(self) -> tuple:
         r = self.reversible
-        return (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
+        return r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy)
 
-    # -- links ----------------------------------------------------------------------------------
     def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
         """Cost (ms) of each link prev[i] -> nxt[i] (problem curves; prev -1: the head comes from
         no known curve) leaving at ``from_xy`` and entering at ``to_xy``."""

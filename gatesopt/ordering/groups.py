@@ -140,6 +140,7 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
     if options.objective == "time":
         step_plan = plan(program) if options.copied_gaps == "planner" else None
         problem = with_pricer(program, problem, step_plan)
+        first_pricer = problem.pricer
     if options.mode == "safe" and options.blocks:
         # islands and labelled objects. Not in free mode: its groups choose their own entry, which
         # a block order fixed on the slicer's first and last curves does not see (moving the
@@ -148,16 +149,19 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
                                                              wall_like))
         if problem.base is not None and options.objective == "time":
             # priced again on the groups the islands' new order made (blocks.permuted)
-            base = with_pricer(program, problem.base, step_plan)
+            # (the curves' own end moves and times do not depend on the groups: made once)
+            base = with_pricer(program, problem.base, step_plan, first_pricer.ends)
             problem = dataclasses.replace(problem, base=base, pricer=base.pricer)
     return problem
 
 
-def with_pricer(program: Program, problem: OrderingProblem, step_plan=None) -> OrderingProblem:
+def with_pricer(program: Program, problem: OrderingProblem, step_plan=None,
+                ends=None) -> OrderingProblem:
     """``problem`` with the time objective's link costs (``cost.TimePricer``): the rule the
     emitter follows (``travel.TravelRule``, read from the file's own travels) and the planner's
     limits for each move (``cost.MoveTimes``, ``limits.machine_limits``). ``step_plan``: the
-    program's ``planner.Plan`` where it was made already (copied gaps are priced from it)."""
+    program's ``planner.Plan`` where it was made already (copied gaps are priced from it);
+    ``ends``: its ``curve_time.CurveEnds`` where made already."""
     lay = problem.layout
     rule = TravelRule.of(program, problem, lay)
     lim = machine_limits(program)
@@ -167,4 +171,4 @@ def with_pricer(program: Program, problem: OrderingProblem, step_plan=None) -> O
     step_s = None if step_plan is None else step_plan.duration_s
     return dataclasses.replace(problem, cost_unit=COST_UNIT["time"],
                                pricer=TimePricer(program, lay, problem, rule, move, step_s, lim,
-                                                 step_plan))
+                                                 step_plan, ends))
