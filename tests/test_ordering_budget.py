@@ -3,6 +3,7 @@ the compiled kernels that replaced library calls (nearest-neighbour scan, union-
 each against the behaviour it must keep."""
 from __future__ import annotations
 
+import dataclasses
 import sys
 
 import numpy as np
@@ -106,14 +107,32 @@ def test_plan_learns_what_proofs_use_of_their_exact_time():
     assert plan.limit(2, left) < exact[150]
 
 
-def test_plan_scales_down_when_even_the_heuristic_share_does_not_fit():
-    sizes = [40, 50]
+def test_plan_funds_the_smallest_groups_first_when_even_the_heuristic_share_does_not_fit():
+    # what is left pays less than every group's heuristic time: the smallest group gets all of
+    # it, the larger none (None: the slicer's order, unsearched), instead of each a share too
+    # thin for the greedy path that runs whatever its limit
+    sizes = [50, 40]
     prob = from_polylines(_layers_of(sizes, seed=1), options=OrderingOptions(mode="free"))
     plan = budget.BudgetPlan(prob)
-    heur = [budget.HEURISTIC_S_PER_CURVE * n for n in sizes]
-    left = 0.5 * sum(heur)
-    assert plan.limit(0, left) == pytest.approx(heur[0] * 0.5)
-    assert plan.limit(0, left) + plan.limit(1, left) == pytest.approx(left)
+    heur = {n: budget.HEURISTIC_S_PER_CURVE * n for n in sizes}
+    left = 0.5 * sum(heur.values())
+    assert heur[40] <= left < _charge(40, plan.used_ratio)      # no exact time fits
+    assert plan.limit(1, left) == pytest.approx(left)           # 40 curves: heuristic, all of it
+    assert plan.limit(0, left) is None                          # 50 curves: none
+    # with every heuristic time paid the plan is as before: the 50 gets its heuristic share
+    left = sum(heur.values()) + 0.001
+    assert plan.limit(0, left) == pytest.approx(heur[50] * left / sum(heur.values()))
+
+
+def test_plan_counts_the_time_objectives_link_matrix_in_a_groups_heuristic_time():
+    lines = _layers_of([30], seed=3)
+    plain = budget.BudgetPlan(from_polylines(lines, options=OrderingOptions(mode="free")))
+    assert plain.heuristic_s[0] == pytest.approx(budget.HEURISTIC_S_PER_CURVE * 30)
+    priced = dataclasses.replace(from_polylines(lines, options=OrderingOptions(mode="free")),
+                                 pricer=object())
+    plan = budget.BudgetPlan(priced)
+    assert plan.heuristic_s[0] == pytest.approx(budget.HEURISTIC_S_PER_CURVE * 30
+                                                + budget.MATRIX_S_PER_LINK * 60 ** 2)
 
 
 def test_budgeted_solve_gives_small_groups_the_exact_time_first(monkeypatch):

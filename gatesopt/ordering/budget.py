@@ -23,6 +23,13 @@ MIN_SYMMETRIC_S_PER_CURVE = 0.002
 #: what a group costs in the plan without an exact step, per curve: the greedy path and the
 #: matching's bound and path (``auto._matching_path``), measured (docs/BENCHMARKS.md)
 HEURISTIC_S_PER_CURVE = 8e-5
+#: making a group's time-objective link matrix (``cost._dense``, on first use: inside the group's
+#: search since ``problem.LinkCosts.make_arc``), per link (m^2 for m candidates): measured 0.22 us
+#: per link on the Cura bunny's 1,070 re-orderable groups (24.1 M links, 5.2 s CPU at load 8;
+#: docs/BENCHMARKS.md, "Link-cost build"). Part of what any search of the group costs: the plan
+#: adds it to a time-objective group's heuristic time. (The travel objective's matrix is one
+#: numpy expression: not counted)
+MATRIX_S_PER_LINK = 1.5e-7
 #: what the main process spends outside the solvers, kept out of a budget: per curve still to
 #: come, building its group and taking the helper's answers; per curve of the file, the chain DP
 #: and the travel totals after the last group; and stopping the helper process. The first two
@@ -30,8 +37,11 @@ HEURISTIC_S_PER_CURVE = 8e-5
 #: scales both by it. Measured (cProfile, CPU seconds, budget 3 s on the Cura bunny's 67,356
 #: curves, time objective, machine loaded): passing the 2,446 groups 4.4 s (building their link
 #: costs 3.5 s of it), ``pick_paths`` 0.83 s; the earlier 6e-6 and 2e-6 predate the time
-#: objective's link costs, and the solve ran ~2 s past its budget on building groups alone
-OVERHEAD_S_PER_CURVE = 3e-5
+#: objective's link costs, and the solve ran ~2 s past its budget on building groups alone.
+#: Since a group's link matrix is made on first use (``problem.LinkCosts.make_arc``: in the
+#: solver's time, not the pass) and its start and end links in one call, passing those groups
+#: took 0.38 s CPU (load 8; docs/BENCHMARKS.md, "Link-cost build")
+OVERHEAD_S_PER_CURVE = 8e-6
 TAIL_S_PER_CURVE = 6e-6
 STOP_HELPER_S = 0.05
 #: what a group takes beyond its limit (the greedy path and the cheap bound run whatever the
@@ -79,12 +89,21 @@ def budget_weights(problem: OrderingProblem) -> np.ndarray:
 
 class BudgetPlan:
     """How a shared budget is spent (module docstring). Of the groups still to come, the smallest
-    get ``exact_time_s(n)``, the rest ``HEURISTIC_S_PER_CURVE * n``. Most proofs take a fraction
+    get ``exact_time_s(n)``, the rest ``HEURISTIC_S_PER_CURVE * n`` (plus, on the time
+    objective, ``MATRIX_S_PER_LINK`` per link of their matrix). Most proofs take a fraction
     of their exact time, the smaller the group the smaller, so the plan charges an exact group a
     shape of its size (``shape_s``, at most its exact time) times the ratio measured so far
     (``used_ratio``). Each group's limit is its exact or heuristic time scaled by time left / time
     planned, so what finished early flows to the groups after it, and every re-plan promotes the
-    next smallest."""
+    next smallest.
+
+    Where what is left does not pay even every group's heuristic time, the groups are funded
+    smallest first: as many exact times as it pays, then as many heuristic times of the next
+    smallest as the rest pays, and the largest get none (``limit`` None: the slicer's order,
+    unsearched). Spreading it thin over every group instead (the plan before) let the first large
+    groups of the chain (a file's bottom layers) run their greedy paths and matrices far past
+    their shares, and the runner's overrun reserve then kept every group after them from any
+    search: the Cura bunny, safe mode, 3.2 s: 13 groups searched, 0 proven, 1,055 out of time."""
 
     def __init__(self, problem: OrderingProblem, shared=None):
         w = budget_weights(problem)
@@ -96,6 +115,8 @@ class BudgetPlan:
         self.exact_s = exact_time_s(n)
         self.shape_s = self.exact_s * (n / EXACT_SHAPE_CURVES) ** EXACT_SHAPE_EXPONENT
         self.heuristic_s = HEURISTIC_S_PER_CURVE * n
+        if problem.pricer is not None:      # the time objective: its matrix, ~2 candidates a curve
+            self.heuristic_s = self.heuristic_s + MATRIX_S_PER_LINK * (2.0 * n) ** 2
         # per group, 1 once solved (or taken by the other process when shared with a helper)
         self.done_mask = np.zeros(problem.n_groups, np.int8) if shared is None else shared
         self.rank = np.empty(problem.n_groups, np.int64)
@@ -117,20 +138,33 @@ class BudgetPlan:
     def pending_curves(self) -> float:
         return float(self.curves[self.pending].sum())
 
-    def limit(self, g: int, left_s: float) -> float:
-        """Time for group ``g`` out of ``left_s`` seconds left for it and the groups after it."""
+    def limit(self, g: int, left_s: float) -> float | None:
+        """Time for group ``g`` out of ``left_s`` seconds left for it and the groups after it;
+        None: none (what is left is spent on smaller groups: the class docstring)."""
         if not self.claims[g]:
             return left_s          # DP, repeat: takes next to nothing, capped by what is left
         pending = self.pending
         pending[self.rank[g]] = True
         h = self.heuristic_s[pending]
-        e = np.minimum(self.used_ratio * self.shape_s[pending], self.exact_s[pending])
-        # the longest prefix (smallest groups) that can have its exact time, the rest heuristic
-        cost = np.cumsum(np.maximum(e, h) - h) + h.sum()
-        n_exact = int(np.searchsorted(cost, left_s, side="right"))
-        planned = cost[n_exact - 1] if n_exact else h.sum()
+        e = np.maximum(np.minimum(self.used_ratio * self.shape_s[pending], self.exact_s[pending]), h)
         i = int(self.rank[g])
         pos = int(np.count_nonzero(pending[:i]))        # g's place among the pending groups
+        if h.sum() <= left_s:
+            # every group its heuristic time, and the longest prefix (smallest groups) that the
+            # rest pays its exact time
+            cost = np.cumsum(e - h) + h.sum()
+            n_exact = int(np.searchsorted(cost, left_s, side="right"))
+            planned = cost[n_exact - 1] if n_exact else h.sum()
+        else:
+            # not even that: smallest first, exact times, then heuristic times, then nothing
+            cost = np.cumsum(e)
+            n_exact = int(np.searchsorted(cost, left_s, side="right"))
+            spent = cost[n_exact - 1] if n_exact else 0.0
+            rest = np.cumsum(h[n_exact:])
+            n_heur = int(np.searchsorted(rest, left_s - spent, side="right"))
+            planned = spent + (rest[n_heur - 1] if n_heur else 0.0)
+            if pos >= n_exact + n_heur:
+                return None
         mine = self.exact_s[i] if pos < n_exact else self.heuristic_s[i]
         return float(mine * left_s / planned) if planned > 0 else left_s
 

@@ -33,6 +33,7 @@ formulations/ordering.md says which bounds rely on what.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numba
 import numpy as np
@@ -365,6 +366,11 @@ class TimePricer:
             self.copy_ms[1:] += tail[:-1] + head[1:]
             self.rev_ms = reversed_gap_times_ms(program, lay, self.reversible.ok, self.ends_args(),
                                                 move.junction_code, move.limits_row)
+        # the kernels' constant arguments, made once (per call costs: most of passing a group)
+        r = self.reversible
+        self._rev = (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
+        self._rule_vec = rule.vector()
+        self._ends = self.ends_args()
 
     def ends_args(self) -> tuple:
         """``ends`` for the kernels (``gap_plan.end_side``)."""
@@ -372,9 +378,6 @@ class TimePricer:
         return (e.head, e.tail, e.head_exit_mm_s, e.tail_entry_mm_s, e.head_ms, e.tail_ms, e.ok,
                 self.closed, self.rev_ms, self.row_table, self.gap_row)
 
-    def _rev_args(self) -> tuple:
-        r = self.reversible
-        return r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy)
 
     def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
         """Cost (ms) of each link prev[i] -> nxt[i] (problem curves; prev -1: the head comes from
@@ -387,19 +390,25 @@ class TimePricer:
         nxt_changed = np.broadcast_to(np.asarray(nxt_changed, bool), k).ravel()
         from_xy = np.broadcast_to(np.asarray(from_xy, float), k + (2,)).reshape(-1, 2)
         to_xy = np.broadcast_to(np.asarray(to_xy, float), k + (2,)).reshape(-1, 2)
+        return self._links_flat(prev, prev_changed, np.ascontiguousarray(from_xy), nxt,
+                                nxt_changed, np.ascontiguousarray(to_xy)).reshape(k)
+
+    def _links_flat(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
+        """``links_ms`` of links given as flat arrays of one length (int64, bool, contiguous
+        (n, 2) floats): no broadcasting (``group_costs``' one call per group)."""
         z0 = np.where(prev >= 0, self.z_exit[np.maximum(prev, 0)], self.z_entry[nxt])
         z1 = self.z_entry[nxt]
         out = np.empty(len(nxt))
         need = np.zeros(len(nxt), bool)
         no_retract = np.empty(len(nxt))
-        _links(prev, prev_changed, nxt, nxt_changed, np.ascontiguousarray(from_xy),
-               np.ascontiguousarray(to_xy), z0, z1, self.group_first, self.own.net_e,
-               self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
-               self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-               *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec, out, need,
-               no_retract, self.node_ms, self.ends_args())
-        self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
-        return out.reshape(k)
+        _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, self.group_first,
+               self.own.net_e, self.own.retract_mm, self.own.fw_net, self.own.fw_retracted,
+               self.bnd.net_e, self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted,
+               self.copy_ms, *self._rev, self._rule_vec, self.style_vec, self.move_vec, out,
+               need, no_retract, self.node_ms, self._ends)
+        if need.any():
+            self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
+        return out
 
     def _exempt(self, out, need, no_retract, nxt, from_xy, to_xy) -> None:
         """Links that retract only because no combing test was made: those that cross no wall of
@@ -415,7 +424,9 @@ class TimePricer:
 
     def anchor_link(self, a: Anchor, b: Anchor) -> float:
         """Cost (ms) of the travel from anchor ``a`` into anchor ``b`` (program curves)."""
-        return float(self.links_ms(a.curve, a.changed, a.xy, b.curve, b.changed, b.xy))
+        xy = np.array([np.asarray(a.xy, float)[:2], np.asarray(b.xy, float)[:2]])
+        return float(self._links_flat(np.array([a.curve]), np.array([a.changed]), xy[:1],
+                                      np.array([b.curve]), np.array([b.changed]), xy[1:])[0])
 
     def order_cost(self, order, changed, entry_xy, exit_xy) -> float:
         """Cost (ms) of the travels between consecutive curves of ``order`` (the file's prefix,
@@ -431,20 +442,36 @@ class TimePricer:
         end anchors in program curves too)."""
         gc = np.asarray(curves, np.int64)[grp.cand_curve]
         changed = np.asarray(grp.cand_reversed, bool) | (np.asarray(grp.cand_seam) != 0)
-        s = self.links_ms(start.curve, start.changed, start.xy, gc, changed, grp.cand_entry_xy)
+        m = grp.n_cands
         if end is None:
-            e = np.zeros(grp.n_cands)
+            sxy = np.asarray(start.xy, float).reshape(1, 2)
+            s = self._links_flat(np.full(m, start.curve, np.int64), np.full(m, start.changed),
+                                 np.repeat(sxy, m, axis=0), gc, changed,
+                                 np.ascontiguousarray(grp.cand_entry_xy, float))
+            e = np.zeros(m)
             direct = 0.0
         else:
-            e = self.links_ms(gc, changed, grp.cand_exit_xy, end.curve, end.changed, end.xy)
-            direct = float(self.links_ms(start.curve, start.changed, start.xy, end.curve,
-                                         end.changed, end.xy)) if end.curve >= 0 else 0.0
+            # start, direct (into a curve only) and end links in one call: the same numbers
+            k = int(end.curve >= 0)
+            prev = np.concatenate([np.full(m + k, start.curve, np.int64), gc])
+            prev_ch = np.concatenate([np.full(m + k, start.changed), changed])
+            nxt = np.concatenate([gc, np.full(k + m, end.curve, np.int64)])
+            nxt_ch = np.concatenate([changed, np.full(k + m, end.changed)])
+            sxy = np.asarray(start.xy, float).reshape(1, 2)
+            exy = np.asarray(end.xy, float).reshape(1, 2)
+            from_xy = np.concatenate([np.repeat(sxy, m + k, axis=0), grp.cand_exit_xy])
+            to_xy = np.concatenate([grp.cand_entry_xy, np.repeat(exy, k + m, axis=0)])
+            both = self._links_flat(prev, prev_ch, from_xy, nxt, nxt_ch, to_xy)
+            s, e = both[:m], both[m + k:]
+            direct = float(both[m]) if k else 0.0
         link = _GroupLinks(self, gc, changed, grp.cand_exit_xy, grp.cand_entry_xy)
-        arc = self.dense(grp, gc, changed) if grp.n_cands <= DENSE_MAX_CANDS else None
-        return LinkCosts(arc, s, e, link, direct)
+        # made on first use (``LinkCosts.matrix``): a fixed or unsearched group makes none
+        make = partial(self.dense, grp, gc, changed) if grp.n_cands <= DENSE_MAX_CANDS else None
+        return LinkCosts(None, s, e, link, direct, make)
 
-    def dense(self, grp: Group, gc, changed) -> np.ndarray:
-        """The group's (m, m) link matrix (``_dense``)."""
+    def dense(self, grp: Group, gc, changed, mirror: bool = True) -> np.ndarray:
+        """The group's (m, m) link matrix (``_dense``; ``mirror=False``: each link priced itself,
+        the same matrix bit for bit, the tests' reference)."""
         m = grp.n_cands
         ent = np.ascontiguousarray(grp.cand_entry_xy, float)
         ext = np.ascontiguousarray(grp.cand_exit_xy, float)
@@ -458,13 +485,14 @@ class TimePricer:
         # a loop's two-way "exit" is its seam, as is its entry; a reversed curve's z comes from
         # its other end (z is constant along a curve outside spiral-vase layers, which are kept)
         return _dense(gc, np.asarray(changed, np.bool_), ent, ext,
-                      np.asarray(grp.cand_curve, np.int64), pid[:m], pid[m:], int(pid.max()) + 1 if m else 0,
+                      np.asarray(grp.cand_curve, np.int64), np.asarray(grp.cand_flip, np.int64),
+                      pid[:m], pid[m:], int(pid.max()) + 1 if m else 0,
                       self.z_entry[gc], self.z_exit[gc], self.group_first, self.own.net_e,
                       self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
-                      *self._rev_args(), self.rule.vector(), self.style_vec, self.move_vec,
-                      self.node_ms, self.ends_args(), self.rule.comb_cap_mm > 0 and len(grid[1]) > 0,
-                      *grid)
+                      *self._rev, self._rule_vec, self.style_vec, self.move_vec,
+                      self.node_ms, self._ends, self.rule.comb_cap_mm > 0 and len(grid[1]) > 0,
+                      *grid, mirror)
 
 
 class _GroupLinks:
@@ -474,6 +502,14 @@ class _GroupLinks:
     def __init__(self, pricer: TimePricer, gc, changed, exit_xy, entry_xy):
         self.pricer, self.gc, self.changed = pricer, gc, changed
         self.exit_xy, self.entry_xy = exit_xy, entry_xy
+
+    def copied_only(self, u, v) -> np.ndarray | None:
+        """``copy_ms`` (as ``_dense`` and ``_link_one`` give) if every link u[i] -> v[i] is the
+        slicer's own gap, copied (v's curve right after u's, both as printed); else None."""
+        gu, gv = self.gc[u], self.gc[v]
+        if ((gv == gu + 1) & ~self.changed[u] & ~self.changed[v]).all():
+            return self.pricer.copy_ms[gv]
+        return None
 
     def __call__(self, u, v):
         u, v = np.asarray(u, np.int64), np.asarray(v, np.int64)
@@ -581,18 +617,32 @@ def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_f
 
 
 @numba.njit(cache=True)
-def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
+def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
            rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, node, ends, has_walls, trim, a, b,
-           x0, y0, h, nx, ny, start, items):
+           x0, y0, h, nx, ny, start, items, mirror):
     """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
     (``_link_one`` where the two ends lie at different heights). The wall test is made here: once
     per pair of points (a travel and its reverse cross the same walls), memoized. A link into a
-    reversed candidate carries what reversing adds to its curve's own moves (``node``)."""
+    reversed candidate carries what reversing adds to its curve's own moves (``node``).
+
+    ``mirror``: a rebuilt link at one height and its mirror flip(v) -> flip(u) (the same two
+    points the other way round, ``_mirror_of``) are priced once where neither is joined to a
+    curve's moves (``end_side`` -1 at all four ends: the curves' ends unknown, as under
+    ``copied_gaps="moves"`` or without the file's limits, or loops entered at a moved seam) and
+    both run under one limits regime (``gap_plan.regime_rows``): the price then depends on the
+    direction through |dx|, |dy| only (per-axis caps, jerk and safe speeds take |u_axis|; the
+    junctions with E-only and Z-only moves are right angles), the same number bit for bit. A
+    joined link is not its mirror's price: it is planned with the last move of the curve it
+    leaves and the first of the one it enters, and the mirror's are those moves backwards, under
+    the regime of the other curve; on real groups about a quarter to a half of the mirrored
+    links differ, by up to ~30 ms (tests/test_ordering_cost_build.py; docs/BENCHMARKS.md,
+    "Link-cost build"). (``node`` is added per link, not mirrored.)"""
     m = len(gc)
     out = np.empty((m, m))
+    done = np.zeros((m, m), np.bool_)     # priced as the mirror of a link before it
     w = np.zeros((JOINED_MAX_MOVES, W_COLS))
     side = np.empty(m, np.int64)        # each candidate's rows in ``ends`` (``end_side``)
     for k in range(m):
@@ -641,6 +691,8 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                 u_rows[0, v, W_JREADY] = 1.0
     for u in range(m):
         for v in range(m):
+            if done[u, v]:
+                continue
             if local[u] == local[v]:
                 out[u, v] = np.inf
                 continue
@@ -697,4 +749,30 @@ def _dense(gc, changed, ent, ext, local, pid_ent, pid_ext, n_points, z_ent, z_ex
                               rows_loc[vreg[v]],
                               v_xy, p, side[u], c, side[v], ends) * 1000.0
             out[u, v] = t + (node[c] if changed[v] else 0.0)
+            if (mirror and side[u] < 0 and side[v] < 0 and abs(z_ext[u] - z_ent[v]) <= MOVE_EPS_MM
+                    and group_first[p] == group_first[c]):
+                fu, fv = flip[u], flip[v]
+                # unjoined both ways, under one limits regime: what makes the two prices equal
+                if (side[fu] < 0 and side[fv] < 0 and vreg[fu] == vreg[v]
+                        and _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v,
+                                       use_fw, group_first, rev_ok, rev_plain, rev_start, rev_end)):
+                    out[fv, fu] = t + (node[gc[fu]] if changed[fu] else 0.0)
+                    done[fv, fu] = True
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v, use_fw, group_first,
+               rev_ok, rev_plain, rev_start, rev_end):
+    """Whether the link flip(v) -> flip(u) of ``_dense`` is priced as the rebuilt link u -> v
+    at one height (both in its generic branch): the same two points the other way round, neither
+    the slicer's gap copied nor a gap reversed, both ends at one height, and the entered curves'
+    own gaps alike (net E and firmware retraction: what the unretraction into each costs)."""
+    p2, c2 = gc[fv], gc[fu]
+    if (ext[fv, 0] != ent[v, 0] or ext[fv, 1] != ent[v, 1] or ent[fu, 0] != ext[u, 0]
+            or ent[fu, 1] != ext[u, 1] or net_v[fu] != net_v[v] or use_fw[fu] != use_fw[v]
+            or (p2 == c2 - 1 and not changed[fv] and not changed[fu])
+            or abs(z_ext[fv] - z_ent[fu]) > MOVE_EPS_MM):
+        return False
+    return not _reversed_link(p2, changed[fv], c2, ext[fv, 0], ext[fv, 1], ent[fu, 0], ent[fu, 1],
+                              group_first, rev_ok, rev_plain, rev_start, rev_end)

@@ -115,6 +115,39 @@ class LinkCosts:
     end: np.ndarray
     link: object = None         # callable (u, v) -> costs, for groups without ``arc``
     direct: float = 0.0         # from the start straight on to the end (a group without curves)
+    #: callable () -> the (m, m) matrix, made on first use (``matrix``) where ``arc`` is None: a
+    #: group no solver searches (a fixed group, one the budget left no time for) never pays for
+    #: it. The time objective's matrix is the largest per-group cost of passing a file's groups
+    #: (~0.1-0.3 us a link, m^2 links; docs/BENCHMARKS.md, "Link-cost build")
+    make_arc: object = None
+
+    @property
+    def has_matrix(self) -> bool:
+        """Whether the group has (or makes on first use) a dense link matrix."""
+        return self.arc is not None or self.make_arc is not None
+
+    def matrix(self) -> np.ndarray | None:
+        """The dense link matrix, made now if it was left for first use (None: the group has
+        none, its links are priced one by one)."""
+        if self.arc is None and self.make_arc is not None:
+            # a frozen dataclass: the matrix is written once, past __setattr__
+            object.__setattr__(self, "arc", self.make_arc())
+        return self.arc
+
+    def links(self, u, v) -> np.ndarray:
+        """Costs of the links u[i] -> v[i] (candidate indices). Where the matrix is still to be
+        made, links that are all the slicer's own gaps, copied (a fixed group's path, the
+        slicer's order of a group left unsearched), are read without making it: the matrix
+        holds exactly those numbers for them (``cost._dense``: ``copy_ms``)."""
+        if self.arc is None and self.make_arc is not None:
+            copied = getattr(self.link, "copied_only", None)
+            out = copied(u, v) if copied is not None else None
+            if out is not None:
+                return out
+            self.matrix()
+        if self.arc is not None:
+            return self.arc[u, v]
+        return np.asarray(self.link(u, v), float)
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,7 +182,7 @@ class Group:
     @property
     def dense(self) -> bool:
         """Whether the group has a link matrix (``arc_cost``): up to DENSE_MAX_CANDS candidates."""
-        return self._costs().arc is not None
+        return self._costs().has_matrix
 
     def _costs(self) -> LinkCosts:
         if self.costs is None:
@@ -163,7 +196,7 @@ class Group:
 
     def arc_cost(self) -> np.ndarray:
         """(m, m) cost from candidate u's exit to candidate v's entry; inf within one curve."""
-        arc = self._costs().arc
+        arc = self._costs().matrix()
         if arc is None:
             raise ValueError(f"group of {self.n_cands} candidates has no dense link matrix")
         return arc
@@ -174,11 +207,7 @@ class Group:
 
     def link_cost(self, u, v) -> np.ndarray:
         """Costs of the links u[i] -> v[i] (candidate indices)."""
-        c = self._costs()
-        u, v = np.asarray(u, np.int64), np.asarray(v, np.int64)
-        if c.arc is not None:
-            return c.arc[u, v]
-        return np.asarray(c.link(u, v), float)
+        return self._costs().links(np.asarray(u, np.int64), np.asarray(v, np.int64))
 
     def path_cost(self, order: np.ndarray) -> float:
         """Cost of the open path visiting candidates ``order`` (one per curve) from the start
@@ -209,7 +238,7 @@ class Group:
                  np.zeros(2) - 1e9 if self.end_xy is None else self.end_xy]
         c = self.costs
         if c is not None and not getattr(c, "euclidean", False):
-            parts += [c.start, c.end] + ([c.arc] if c.arc is not None else [])
+            parts += [c.start, c.end] + ([c.matrix()] if c.has_matrix else [])
         q = np.concatenate([np.ravel(np.rint(np.nan_to_num(np.asarray(a, float), posinf=-1.0) * 1e4))
                             for a in parts]).astype(np.int64)
         return q.tobytes() + self.cand_curve.tobytes()
@@ -226,7 +255,7 @@ class Group:
             raise ValueError("a group without an end point has no backwards problem")
         c = self._costs()
         link = None if c.link is None else _Mirrored(c.link)
-        mirror = LinkCosts(None if c.arc is None else np.ascontiguousarray(c.arc.T), c.end.copy(),
+        mirror = LinkCosts(None if not c.has_matrix else np.ascontiguousarray(c.matrix().T), c.end.copy(),
                            np.zeros(self.n_cands), link)
         return Group(np.asarray(self.end_xy, float).copy(), self.cand_curve, self.cand_exit_xy,
                      self.cand_entry_xy, self.cand_flip, self.n_curves, self.layer, self.label,
@@ -421,6 +450,48 @@ class OrderingProblem:
         start_xy, end_xy = start.xy, (None if end is None else end.xy)
         curves = self.group_curves(g)
         fixed = bool(self.group_fixed[g])
+        if fixed or not self.options.move_seams:
+            cc, ent, ext, flip, rev, seam = self._candidates(curves, fixed)
+        else:
+            cc, ent, ext, flip, rev, seam = self._candidates_loop(curves, fixed)
+        grp = Group(np.asarray(start_xy, float).copy(), cc, ent, ext, flip, len(curves),
+                    int(self.group_layer[g]), self.group_label[g] if self.group_label else "",
+                    rev, seam, None if end_xy is None else np.asarray(end_xy, float).copy())
+        if self.pricer is None:
+            return grp
+        return dataclasses.replace(grp, costs=self.pricer.group_costs(
+            self.source_curves(curves), grp, self._source_anchor(start), self._source_anchor(end)))
+
+    def _candidates(self, curves, fixed: bool) -> tuple:
+        """A group's candidates (module docstring) where each loop keeps its seam: per curve in
+        order, one candidate (a fixed group's curve, a loop entered and left at its seam) or two
+        (an open curve forward, then reversed). Arrays throughout, as ``_candidates_loop``
+        makes them one curve at a time (the same candidates, in the same order): passing a
+        file's ~2,000 groups of ~30 curves cost ~0.4 s in that loop."""
+        n = len(curves)
+        two = np.zeros(n, bool) if fixed else ~np.asarray(self.curve_closed[curves], bool)
+        cnt = 1 + two.astype(np.int64)
+        first = np.cumsum(cnt) - cnt
+        m = int(cnt.sum())
+        cc = np.repeat(np.arange(n, dtype=np.int64), cnt)
+        rev = np.zeros(m, bool)
+        rev[first[two] + 1] = True
+        a, b = self.curve_start_xy[curves], self.curve_end_xy[curves]
+        ent, ext = a[cc], b[cc]
+        ent[rev], ext[rev] = b[cc[rev]], a[cc[rev]]
+        loop = np.flatnonzero(~two) if not fixed else np.zeros(0, np.int64)
+        if len(loop):
+            # a loop is entered and left at its seam: its first vertex
+            p = self.points_xy[self.curve_point_start[curves[loop]]]
+            ent[first[loop]] = p
+            ext[first[loop]] = p
+        flip = np.arange(m, dtype=np.int64)
+        flip[first[two]], flip[first[two] + 1] = first[two] + 1, first[two]
+        return (cc, np.asarray(ent, float).reshape(m, 2), np.asarray(ext, float).reshape(m, 2),
+                flip, rev, np.zeros(m, np.int64))
+
+    def _candidates_loop(self, curves, fixed: bool) -> tuple:
+        """``_candidates`` one curve at a time, with ``move_seams``' several seams per loop."""
         cc, ent, ext, flip, rev, seam = [], [], [], [], [], []
         for local, c in enumerate(curves):
             a, b = self.curve_start_xy[c], self.curve_end_xy[c]
@@ -437,16 +508,9 @@ class OrderingProblem:
                 cc += [local, local]; ent += [a, b]; ext += [b, a]; flip += [k0 + 1, k0]
                 rev += [False, True]; seam += [0, 0]
         m = len(cc)
-        grp = Group(np.asarray(start_xy, float).copy(), np.asarray(cc, np.int64),
-                    np.asarray(ent, float).reshape(m, 2), np.asarray(ext, float).reshape(m, 2),
-                    np.asarray(flip, np.int64), len(curves), int(self.group_layer[g]),
-                    self.group_label[g] if self.group_label else "",
-                    np.asarray(rev, bool), np.asarray(seam, np.int64),
-                    None if end_xy is None else np.asarray(end_xy, float).copy())
-        if self.pricer is None:
-            return grp
-        return dataclasses.replace(grp, costs=self.pricer.group_costs(
-            self.source_curves(curves), grp, self._source_anchor(start), self._source_anchor(end)))
+        return (np.asarray(cc, np.int64), np.asarray(ent, float).reshape(m, 2),
+                np.asarray(ext, float).reshape(m, 2), np.asarray(flip, np.int64),
+                np.asarray(rev, bool), np.asarray(seam, np.int64))
 
     def _source_anchor(self, a: "Anchor | None") -> "Anchor | None":
         """An anchor with its curve in the program's numbering (the pricer's)."""

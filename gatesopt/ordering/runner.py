@@ -79,18 +79,26 @@ class GroupRunner:
                 # bunny's 1081 groups ran 20 s of greedy paths at limit 0 before this)
                 self.out_of_time += 1
                 return kept_solution(grp, time.perf_counter(), OUT_OF_TIME)
+        share = None
+        if self.plan is not None:
+            cpus = 2 if self.other_alive() else 1
+            left = max(0.0, cpus * wall_left - rate * self.plan.pending_curves())
+            share = self.plan.limit(g, left)
+            if share is None:
+                # what is left goes to smaller groups (``BudgetPlan``: smallest first where it
+                # does not pay every group's heuristic time): the slicer's order, unsearched
+                # (before its key, which makes its link matrix)
+                self.out_of_time += 1
+                return kept_solution(grp, time.perf_counter(), OUT_OF_TIME)
         key = grp.key()
         gs = self.cache.get(key)
         if gs is not None:
             return GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status, 0.0,
                                       gs.formulation + "+cached")
         if self.plan is not None:
-            cpus = 2 if self.other_alive() else 1
-            left = max(0.0, cpus * wall_left - rate * self.plan.pending_curves())
             # the two processes pool their time, but one group runs on one of them: it must end
             # (with its expected overrun) before the budget does, or the file ends late
-            limit = min(limit, self.plan.limit(g, left),
-                        max(0.0, wall_left - rate * grp.n_curves))
+            limit = min(limit, share, max(0.0, wall_left - rate * grp.n_curves))
         t_g = time.perf_counter()
         gs = self.fn(grp, time_limit_s=limit, **self.kwargs)
         compiled = _jit.compile_s_since(t_g)

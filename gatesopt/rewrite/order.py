@@ -82,16 +82,17 @@ FINISH_FIXED_S = 0.15
 BUILD_S_PER_LINE = 7e-6
 
 
-def solve_budget_s(budget_s: float | None, n_lines: int, spent_s: float) -> float | None:
+def solve_budget_s(budget_s: float | None, n_lines: int, spent_s: float,
+                   slow: float = 1.0) -> float | None:
     """What a budget for the whole run leaves the solve: ``budget_s`` less what is spent
     (``spent_s``: parse, build) and an estimate of what is to come after the solve
-    (``FINISH_S_PER_LINE`` per line of the file, ``FINISH_FIXED_S``), never below 0: with
-    nothing left every group keeps the slicer's order (``runner.OUT_OF_TIME``). (It once kept
-    a quarter of the budget however little was left: a late answer by design.) None (no budget)
-    stays None."""
+    (``FINISH_S_PER_LINE`` per line of the file, ``FINISH_FIXED_S``, at ``slow`` times those
+    quiet rates: ``rewrite.budget.slowdown_factor``), never below 0: with nothing left every
+    group keeps the slicer's order (``runner.OUT_OF_TIME``). (It once kept a quarter of the
+    budget however little was left: a late answer by design.) None (no budget) stays None."""
     if budget_s is None:
         return None
-    left = budget_s - spent_s - FINISH_FIXED_S - FINISH_S_PER_LINE * n_lines
+    left = budget_s - spent_s - slow * (FINISH_FIXED_S + FINISH_S_PER_LINE * n_lines)
     return max(0.0, left)
 
 
@@ -122,19 +123,21 @@ class NoTimeToOrder(Exception):
 def reorder(program: Program, options: OrderingOptions | None = None, *,
             formulation: str = "auto", time_limit_s: float = 2.0,
             budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
-            progress=None, started_s: float | None = None, slow: float | None = None):
+            progress=None, started_s: float | None = None, slow: float | None = None,
+            finish_slow: float = 1.0):
     """build -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
     ``started_s``, default now) -> ``emit_guarded``, without verifying (``order_program`` does;
     ``rewrite.pipeline.run`` verifies its own output). Returns (problem, the solve's budget, solution,
     text, parsed output, layers the time guard put back). ``slow`` (``budget.slowdown_factor``;
     None: never): raise ``NoTimeToOrder`` after the build where the solve's budget would not pay
     for passing the groups at ``slow`` times the runner's priors (every group would keep the
-    slicer's order, late)."""
+    slicer's order, late). ``finish_slow``: the work after the solve (emit, re-parse, verify) is
+    estimated at that many times its quiet rates (``order_program`` measures it)."""
     t0 = time.perf_counter() if started_s is None else started_s
     problem = build(program, options or OrderingOptions())
     # compiling numba kernels (a first run) is not the run's to budget: it counts no time
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
-    solve_budget = solve_budget_s(budget_s, program.n_lines, spent)
+    solve_budget = solve_budget_s(budget_s, program.n_lines, spent, finish_slow)
     if slow is not None and solve_budget is not None:
         pass_s = slow * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
         if solve_budget < pass_s:
@@ -149,20 +152,26 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
                   formulation: str = "auto", time_limit_s: float = 2.0,
                   budget_s: float | None = None, workers: int = 1,
                   time_guard: bool = True, progress=None,
-                  started_s: float | None = None) -> OrderResult:
+                  started_s: float | None = None, slow: float = 1.0) -> OrderResult:
     """Re-order ``program``'s curves and verify the result (see module docstring).
     ``budget_s``: about how long the whole run may take, from ``started_s`` (a
     ``time.perf_counter()`` reading, e.g. taken before the file was parsed; default: now) to the
     verified result; the solve gets what ``solve_budget_s`` leaves it.
     ``time_guard``: a layer whose re-ordered print takes longer than the slicer's (planner
     model) keeps the slicer's order.
-    ``progress``: passed to ``ordering.layers.solve`` (called after each group)."""
+    ``progress``: passed to ``ordering.layers.solve`` (called after each group).
+    ``slow``: under a budget the work after the solve is estimated at that many times its quiet
+    rates: the wall / CPU seconds the machine gave the run so far (``rewrite.budget.
+    slowdown_factor``, as ``gatesopt solve`` measures it; ``cli.order`` passes it). A budget too
+    short for searching keeps every group's order unsearched (``runner.OUT_OF_TIME``): passing
+    them costs ~9 us per curve (the Cura bunny's 67,356: 0.61 s CPU)."""
     program.check_rewritable()
     t0 = time.perf_counter() if started_s is None else started_s
     options = options or OrderingOptions()
     problem, solve_budget, solution, text, out, slower_layers = reorder(
         program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
-        workers=workers, time_guard=time_guard, progress=progress, started_s=t0)
+        workers=workers, time_guard=time_guard, progress=progress, started_s=t0,
+        finish_slow=slow)
     findings = tuple(check(program, out))
     summary = order_summary(program, out, problem, solution, options, slower_layers, findings,
                             formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
