@@ -13,7 +13,8 @@ import pytest
 import gatesopt
 from gatesopt.ordering import OrderingOptions, build, emit, solve
 from gatesopt.ordering import auto, cpsat, dp, milp
-from gatesopt.ordering.cost import MoveTimes, gap_times_ms, trapezoid_s
+from gatesopt.ordering.cost import MoveTimes, gap_times_ms
+from gatesopt.ordering.move_times import trapezoid_s
 from gatesopt.ordering.problem import Anchor
 from gatesopt.verify.ordering import check
 

@@ -1,6 +1,6 @@
 """A rebuilt travel's moves planned as the planner plans them (issue 36; formulations/ordering.md,
 "Cost model"): the kernels ``cost._rebuilt_s`` and ``cost._dense`` price a link with, and
-``cost.MoveTimes.gaps_s`` prices a file's gaps with. Each move gets its nominal speed,
+``move_times.MoveTimes.gaps_s`` prices a file's gaps with. Each move gets its nominal speed,
 acceleration and safe speed by its kind and the per-axis caps (``prep_move``, as
 ``_planner_kernel.prepare_moves``), the junctions between them the firmware's rule
 (``_planner_kernel.junction_speed``), then the look-ahead passes and trapezoids

@@ -19,7 +19,8 @@ from ..limits import machine_limits
 from ..program import Kind, Program
 from ..planner import plan
 from ..slicers import FIXED_FEATURE
-from .cost import MoveTimes, TimePricer
+from .cost import TimePricer
+from .move_times import MoveTimes
 from .layout import Layout, layout
 from .blocks import CurveGroups, order_blocks
 from .problem import CLOSED_TOL_MM, COST_UNIT, OrderingOptions, OrderingProblem, group_starts
@@ -159,7 +160,7 @@ def with_pricer(program: Program, problem: OrderingProblem, step_plan=None,
                 ends=None) -> OrderingProblem:
     """``problem`` with the time objective's link costs (``cost.TimePricer``): the rule the
     emitter follows (``travel.TravelRule``, read from the file's own travels) and the planner's
-    limits for each move (``cost.MoveTimes``, ``limits.machine_limits``). ``step_plan``: the
+    limits for each move (``move_times.MoveTimes``, ``limits.machine_limits``). ``step_plan``: the
     program's ``planner.Plan`` where it was made already (copied gaps are priced from it);
     ``ends``: its ``curve_time.CurveEnds`` where made already."""
     lay = problem.layout
