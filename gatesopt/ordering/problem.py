@@ -56,7 +56,7 @@ class OrderingOptions:
     move_seams: bool = False            # closed loops may start at another vertex
     seam_candidates: int = 16           # with move_seams: vertices tried per loop (evenly spread, seam included)
     #: what a link between two curves costs (formulations/ordering.md, "Cost model"): "time", the
-    #: time the travel takes as emitted (its moves under ``cost.MoveTimes``, retraction, z-hop and
+    #: time the travel takes as emitted (its moves under ``move_times.MoveTimes``, retraction, z-hop and
     #: the slicer's own copied gaps included; in ms), or "travel", its length (mm, Fleming Eq. 1)
     objective: str = "time"
     #: safe mode: re-order whole islands and labelled objects of a layer as blocks (``blocks.py``)
