@@ -24,36 +24,8 @@ import numpy as np
 from .. import _planner_kernel as pk
 from . import gap_plan as gp
 from ..limits import MachineLimits
-from ..program import MOTION_KINDS, Kind, Program, X, Y, Z, E
-
-
-def _arc_data(program: Program, steps: np.ndarray, L: np.ndarray, backwards: bool):
-    """Unit tangents (X Y Z E per mm) at the start and end of the arcs ``steps`` as printed
-    (``backwards``: from its end to its start, turning the other way, E still forward) and the
-    signed turn of one firmware arc segment -- the planner's arc model."""
-    d = program.end_mm[steps] - program.start_mm[steps]
-    c = program.arc_center_mm[steps]
-    sign = np.where(program.arc_ccw[steps], 1.0, -1.0)
-    ends = (program.start_mm[steps, :2], program.end_mm[steps, :2])
-    dz = d[:, Z]
-    if backwards:
-        sign, ends, dz = -sign, ends[::-1], -dz
-    safe_l = np.maximum(L, 1e-12)
-    xy_frac = np.sqrt(np.maximum(L * L - dz ** 2, 0.0)) / safe_l
-    out = []
-    for pt in ends:
-        r = pt - c
-        n = np.maximum(np.hypot(r[:, 0], r[:, 1]), 1e-12)
-        u = np.empty((len(steps), 4))
-        u[:, X] = -sign * r[:, 1] / n * xy_frac
-        u[:, Y] = sign * r[:, 0] / n * xy_frac
-        u[:, Z] = dz / safe_l
-        u[:, E] = d[:, E] / safe_l
-        out.append(u)
-    rs = ends[0] - c
-    R = np.maximum(np.hypot(rs[:, 0], rs[:, 1]), 1e-9)
-    phi = sign * np.minimum(pk.ARC_SEGMENT_MM, L) / R
-    return out[0], out[1], phi
+from ..planner import arc_tangents, move_geometry
+from ..program import MOTION_KINDS, Kind, Program
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,7 +57,9 @@ def _alone(program: Program, lim: MachineLimits, s0: np.ndarray, s1: np.ndarray,
                            + [np.zeros(0, np.int64)]).astype(np.int64)
     owner = np.repeat(np.arange(n), lengths)
     kind = program.kind[steps]
-    keep = np.isin(kind, np.asarray(MOTION_KINDS, kind.dtype)) & (program.length_mm[steps] > 0)
+    klipper = lim.firmware == "klipper"
+    length, is_arc = move_geometry(program, klipper)     # as planner.plan moves each step
+    keep = np.isin(kind, np.asarray(MOTION_KINDS, kind.dtype)) & (length[steps] > 0)
     steps, owner = steps[keep], owner[keep]
     if backwards:
         # each curve's moves in reverse order (owner ascending, position descending)
@@ -96,12 +70,15 @@ def _alone(program: Program, lim: MachineLimits, s0: np.ndarray, s1: np.ndarray,
     d = (program.end_mm[steps] - program.start_mm[steps]).astype(float)
     if backwards:
         d[:, :3] = -d[:, :3]
-    L = program.length_mm[steps].astype(float)
-    arc = program.kind[steps] == Kind.ARC
+    L = length[steps].astype(float)
+    arc = is_arc[steps]
     arc_row = np.full(m, -1, np.int64)
     ai = np.flatnonzero(arc)
     arc_row[ai] = np.arange(len(ai))
-    arc_us, arc_ue, arc_phi = _arc_data(program, steps[ai], L[ai], backwards)
+    # the planner's own arc model (Klipper's chords under Klipper's rules), printed backwards or not
+    arc_us, arc_ue, arc_phi, arc_seg, arc_path = arc_tangents(program, steps[ai], L[ai], klipper, backwards)
+    if klipper and len(ai):
+        L[ai] = arc_path
     stop_before = np.ones(m, np.bool_)
     stop_before[1:] = owner[1:] != owner[:-1]
     change_line, table = lim.regimes()
@@ -109,7 +86,7 @@ def _alone(program: Program, lim: MachineLimits, s0: np.ndarray, s1: np.ndarray,
     code = pk.JUNCTION_CODE[lim.junction]
     vnom, acc, safe, vj, _ = pk.prepare_moves(
         code, d, L, program.feed_mm_s[steps].astype(float), arc_row, arc_us, arc_ue, arc_phi,
-        stop_before, regime, np.ascontiguousarray(table))
+        arc_seg, stop_before, regime, np.ascontiguousarray(table))
     if m and not (np.all(np.isfinite(acc) & (acc > 0)) and np.all(np.isfinite(vnom) & (vnom > 0))):
         return None         # the planner refuses such a file; nothing to price here
     # each curve ends at rest: the passes stop before every curve's first move, and a move
