@@ -144,6 +144,19 @@ def junction_speed_rows(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row_p, row
 
 
 @njit(cache=True)
+def _axis_capped(v, ua, row, col, e_caps):
+    """``v`` (a speed or an acceleration along unit vector ``ua``) capped so that no axis
+    exceeds its own limit ``row[col + ax]`` (M203 / M201 per axis); E only where ``e_caps``."""
+    for ax in range(4):
+        if ax == 3 and not e_caps:
+            continue
+        u = abs(ua[ax])
+        if u > 0.0 and v * u > row[col + ax]:
+            v = row[col + ax] / u
+    return v
+
+
+@njit(cache=True)
 def nominal_speed_accel(code, ua, feed, length, has_e, e_only, no_xy, retract, row):
     """A move's nominal speed (mm/s) and acceleration (mm/s^2) by its kind and the firmware's
     caps: ``ua`` its unit vector X Y Z E (signs ignored), ``feed`` its requested speed, ``length`` its path
@@ -164,12 +177,7 @@ def nominal_speed_accel(code, ua, feed, length, has_e, e_only, no_xy, retract, r
     # M203 per-axis feedrate caps (the Z caps are Klipper's max_z_velocity * move_d / |dz|,
     # klippy/kinematics/cartesian.py check_move), Klipper max_velocity, minimum segment
     # time (M205 B)
-    for ax in range(4):
-        if ax == 3 and not e_caps:
-            continue
-        u = abs(ua[ax])
-        if u > 0.0 and f * u > row[C_MAX_FEED + ax]:
-            f = row[C_MAX_FEED + ax] / u
+    f = _axis_capped(f, ua, row, C_MAX_FEED, e_caps)
     # an extrude-only move keeps its requested speed on Klipper (toolhead.py Move: no
     # max_velocity for it), capped by max_extrude_only_velocity above
     if f > row[C_MAX_VELOCITY] and not (code == SCV and e_only):
@@ -189,13 +197,7 @@ def nominal_speed_accel(code, ua, feed, length, has_e, e_only, no_xy, retract, r
         a = row[C_ACCEL_PRINT]
     else:
         a = row[C_ACCEL_TRAVEL]
-    for ax in range(4):
-        if ax == 3 and not e_caps:
-            continue
-        u = abs(ua[ax])
-        if u > 0.0 and a * u > row[C_MAX_ACCEL + ax]:
-            a = row[C_MAX_ACCEL + ax] / u
-    return f, a
+    return f, _axis_capped(a, ua, row, C_MAX_ACCEL, e_caps)
 
 
 @njit(cache=True)

@@ -129,6 +129,11 @@ class NoTimeToOrder(Exception):
 #: (cura413_xend_zigzag100, prusa25_bunny_triangles15_lh01), and does not finish real_cura591 or
 #: the Cura bunny in 8 s; what it does not use goes to the exact solve
 GREEDY_SHARE = 0.2
+#: seconds per input line of the time guard's second stage (the exact answer against the greedy
+#: stage's file: its emits and planner runs), which only a run with a greedy stage pays and the
+#: finish estimate (``FINISH_S_PER_LINE``, measured with one stage) does not hold: 5.1 us on
+#: real_cura591 (44,755 lines: 0.14 s one stage, 0.36 s two), quiet machine
+GUARD_STAGE_S_PER_LINE = 6e-6
 
 
 def reorder(program: Program, options: OrderingOptions | None = None, *,
@@ -181,8 +186,10 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
         t_g = time.perf_counter()
         greedy = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=cap)
         if solve_budget is not None:
+            # greedy's time, and the guard's second stage that its answer adds after the solve
             exact_budget = max(0.0, solve_budget - (time.perf_counter() - t_g
-                                                    - _jit.compile_s_since(t_g)))
+                                                    - _jit.compile_s_since(t_g))
+                               - finish_slow * GUARD_STAGE_S_PER_LINE * program.n_lines)
     if greedy is not None and (stop_requested() or (exact_budget is not None
                                                     and exact_budget < pass_s)):
         # no time left to pass the groups again (or a Ctrl-C): greedy's answer is the solve's
