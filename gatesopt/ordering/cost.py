@@ -46,6 +46,7 @@ from .curve_time import CurveEnds, gap_rows
 from .gaps import REVERSE_EPS, GapFacts, ReversibleGaps
 from .layout import Layout
 from .move_times import MT_CODE, MoveTimes, trapezoid_one_s
+from .._planner_kernel import JERK, SCV
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
 
@@ -123,6 +124,28 @@ def gap_times_ms(program: Program, move: MoveTimes, lay: Layout | None = None) -
     return move.gaps_s(program, lay.curve_s1[:-1], lay.curve_s0[1:]) * MS_PER_S
 
 
+def reversal_symmetric(code: int) -> bool:
+    """Whether the planner's junction rule ``code`` (``_planner_kernel.JUNCTION_CODE``) gives a
+    move sequence run backwards (order and directions reversed) the same time: Klipper's
+    (``toolhead.py`` ``Move.calc_junction``: the junction's limits are symmetric in the two
+    moves, accelerations are symmetric trapezoids, the smoothed look-ahead accelerates and
+    decelerates at one ``accel_to_decel``); not Marlin's classic jerk (``planner.cpp``: the
+    exit speeds scaled to the smaller nominal speed, the entered block's safe speed) nor its
+    junction deviation (the entered block's acceleration, the entered move's length in
+    ``JD_HANDLE_SMALL_SEGMENTS``)."""
+    return code == SCV
+
+
+def joins(policy: str, code: int) -> bool:
+    """Whether links are joined to the curves' moves (``OrderingOptions.joined_links``) under
+    the junction rule ``code``: "symmetric" under every rule but Marlin's classic jerk (where a
+    joined link and its mirror differ by its junction rule, not by the print: measured on
+    cura413_star_triangles20 89 % of the mirrored pairs, 1.6 ms apart on average, up to 10 ms,
+    and the symmetric model, which relaxes each edge to the cheaper direction, proved 0 of its
+    99 groups against 95 unjoined)."""
+    return policy == "all" or (policy == "symmetric" and code != JERK)
+
+
 class TimePricer:
     """The time objective's link costs for one Program-built problem (module docstring).
 
@@ -178,8 +201,12 @@ class TimePricer:
         #: that (``CurveEnds.context_ms``), so both price the same quantity
         #: -- with the copied gaps at the planner's time (``step_plan``); priced move by move
         #: (``copied_gaps="moves"``) every link is its moves alone, from and to rest
-        joined = n and move.junction_code >= 0 and step_plan is not None
-        lim = limits if limits is not None or not joined else machine_limits(program)
+        self.closed = np.asarray(problem.curve_closed, np.bool_)
+        #: -- which links are joined: ``OrderingOptions.joined_links`` (``joins``)
+        code = move.junction_code
+        planned = bool(n) and code >= 0 and step_plan is not None
+        joined = planned and joins(problem.options.joined_links, code)
+        lim = limits if limits is not None or not planned else machine_limits(program)
         if not joined:
             ends = CurveEnds.empty(n)
         elif ends is None:
@@ -189,13 +216,19 @@ class TimePricer:
         #: the limits a rebuilt link's moves run under: those in force at the slicer's last
         #: travel in the gap its entry consumes (the emitter keeps that gap's state lines around
         #: its travel: PrusaSlicer's ``M204 S`` for travels, Orca's per-feature
-        #: ``SET_VELOCITY_LIMIT``), row ``gap_row[c]`` of ``row_table``; without the joined
-        #: model, the file's first (``MoveTimes.limits_row``)
+        #: ``SET_VELOCITY_LIMIT``), row ``gap_row[c]`` of ``row_table``, joined or not; with
+        #: the copied gaps priced move by move, the file's first (``MoveTimes.limits_row``)
         self.row_table = np.asarray(move.limits_row, float).reshape(1, -1)
         self.gap_row = np.zeros(n, np.int64)
-        if ends.ok.any():
+        if planned:
             self.row_table, self.gap_row = gap_rows(program, lay, lim)
-        self.closed = np.asarray(problem.curve_closed, np.bool_)
+        #: the junction rule is the same run backwards (``reversal_symmetric``): a joined link
+        #: between open curves and its mirror are one price (``_dense`` prices them once)
+        self.mirror_joined = joined and reversal_symmetric(code)
+        #: per curve: its boundary moves printed backwards are its boundary moves run backwards
+        #: (``CurveEnds.reversal_ok``; not so where one is an arc Klipper chords from its own
+        #: start, the chords then differ)
+        self.mirror_ok = ends.reversal_ok() & ~self.closed if self.mirror_joined else np.zeros(n, bool)
         self.gap_ms = self.copy_ms.copy()
         #: a reversed gap's link: ``gap_ms`` where the curves are not joined, else its moves
         #: backwards planned with the curves' (``gap_plan.reversed_gaps_ms``)
@@ -205,6 +238,16 @@ class TimePricer:
             self.copy_ms[1:] += tail[:-1] + head[1:]
             self.rev_ms = reversed_gap_times_ms(program, lay, self.reversible.ok, self.ends_args(),
                                                 move.junction_code, move.limits_row)
+            if self.mirror_joined:
+                # a gap between two open curves written backwards, left from the one reversed
+                # into the other reversed, is the copied link's moves run backwards: under a
+                # rule the same both ways its time is the copied gap's in the file (the
+                # planner's, look-ahead beyond the two boundary moves included), the price of
+                # its mirror, the copied link (``reversed_gaps_ms`` would plan it with the two
+                # boundary moves only: up to ~0.5 ms apart on the Klipper corpus files)
+                both_open = np.zeros(n, bool)
+                both_open[1:] = ~self.closed[1:] & ~self.closed[:-1] & ends.ok[1:] & ends.ok[:-1]
+                self.rev_ms = np.where(both_open & self.reversible.ok, self.copy_ms, self.rev_ms)
         # the kernels' constant arguments, made once (per call costs: most of passing a group)
         r = self.reversible
         self._rev = (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
@@ -331,7 +374,7 @@ class TimePricer:
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
                       *self._rev, self._rule_vec, self.style_vec, self.move_vec,
                       self.node_ms, self._ends, self.rule.comb_cap_mm > 0 and len(grid[1]) > 0,
-                      *grid, mirror)
+                      *grid, mirror, self.mirror_ok)
 
 
 class _GroupLinks:
@@ -459,7 +502,7 @@ def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_f
 def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
            rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, node, ends, has_walls, trim, a, b,
-           x0, y0, h, nx, ny, start, items, mirror):
+           x0, y0, h, nx, ny, start, items, mirror, mirror_ok):
     """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
@@ -473,12 +516,16 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
     ``copied_gaps="moves"`` or without the file's limits, or loops entered at a moved seam) and
     both run under one limits regime (``gap_plan.regime_rows``): the price then depends on the
     direction through |dx|, |dy| only (per-axis caps, jerk and safe speeds take |u_axis|; the
-    junctions with E-only and Z-only moves are right angles), the same number bit for bit. A
-    joined link is not its mirror's price: it is planned with the last move of the curve it
-    leaves and the first of the one it enters, and the mirror's are those moves backwards, under
-    the regime of the other curve; on real groups about a quarter to a half of the mirrored
-    links differ, by up to ~30 ms (tests/test_ordering_cost_build.py; docs/BENCHMARKS.md,
-    "Link-cost build"). (``node`` is added per link, not mirrored.)"""
+    junctions with E-only and Z-only moves are right angles), the same number bit for bit.
+    ``mirror_ok`` (``TimePricer.mirror_ok``: the rule is the same run backwards, Klipper's, and
+    the curve's boundary moves backwards are its own reversed) extends it to links joined to open
+    curves (``_mirrorable``) that carry no lone prime: the mirror's planned sequence is
+    then the link's run backwards (the curve's last move backwards is its first move reversed,
+    the retraction and lift before the travel as the unretraction and lowering after it), the
+    same time up to rounding (tests/test_ordering_cost_mirror.py), priced once. A link joined to a
+    loop is not its mirror's price (the loop is left along its last move and entered along its
+    first), nor is any joined link under Marlin's rules (``reversal_symmetric``). (``node`` is
+    added per link, not mirrored.)"""
     m = len(gc)
     out = np.empty((m, m))
     done = np.zeros((m, m), np.bool_)     # priced as the mirror of a link before it
@@ -588,16 +635,32 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                               rows_loc[vreg[v]],
                               v_xy, p, side[u], c, side[v], ends) * 1000.0
             out[u, v] = t + (node[c] if changed[v] else 0.0)
-            if (mirror and side[u] < 0 and side[v] < 0 and abs(z_ext[u] - z_ent[v]) <= MOVE_EPS_MM
-                    and group_first[p] == group_first[c]):
+            if (mirror and _mirrorable(u, side, flip, gc, mirror_ok)
+                    and _mirrorable(v, side, flip, gc, mirror_ok)
+                    and abs(z_ext[u] - z_ent[v]) <= MOVE_EPS_MM and group_first[p] == group_first[c]):
                 fu, fv = flip[u], flip[v]
-                # unjoined both ways, under one limits regime: what makes the two prices equal
-                if (side[fu] < 0 and side[fv] < 0 and vreg[fu] == vreg[v]
+                # unjoined both ways, or joined to open curves under a rule the same backwards,
+                # under one limits regime: what makes the two prices equal
+                # (joined: no lone prime, whose one E-only move -- a stop under Klipper -- sits
+                # before the curve entered both ways, so the mirror is not the link backwards)
+                if (vreg[fu] == vreg[v] and (abs(net_v[v]) <= MOVE_EPS_MM
+                                             or (side[u] < 0 and side[v] < 0))
                         and _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v,
                                        use_fw, group_first, rev_ok, rev_plain, rev_start, rev_end)):
                     out[fv, fu] = t + (node[gc[fu]] if changed[fu] else 0.0)
                     done[fv, fu] = True
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _mirrorable(k, side, flip, gc, mirror_ok):
+    """Whether candidate k's end of a link allows ``_dense``'s mirror: neither k nor its flip is
+    joined to its curve's moves, or both are, to an open curve whose boundary moves printed
+    backwards are its own run backwards (``mirror_ok``: ``TimePricer.mirror_ok``, only under a
+    rule the same both ways)."""
+    if side[k] < 0 and side[flip[k]] < 0:
+        return True
+    return side[k] >= 0 and side[flip[k]] >= 0 and mirror_ok[gc[k]]
 
 
 @numba.njit(cache=True, inline="always")

@@ -176,6 +176,29 @@ class CurveEnds:
         out.node_ms[np.asarray(closed, bool)] = 0.0
         return out
 
+    def reversal_ok(self, rtol: float = 1e-9) -> np.ndarray:
+        """Per curve: its boundary moves printed backwards (orientation 1) are those printed as
+        the slicer printed them (orientation 0) run backwards -- the same length, nominal speed,
+        acceleration and safe speed, the XYZ direction reversed, the speed caps and times planned
+        alone the same -- so that a link joined to it backwards is its mirror's run backwards
+        (``cost._mirrorable``). Not so where a boundary move is an arc Klipper chords from its
+        own start (the chords of the two orientations differ), nor under a rule whose alone
+        plans differ by direction."""
+        ok = self.ok.copy()
+        scal = (gp.W_L, gp.W_V, gp.W_A, gp.W_SAFE)
+        for a, b in ((self.tail[:, 0], self.head[:, 1]), (self.head[:, 0], self.tail[:, 1])):
+            for col in scal:
+                ok &= np.isclose(a[:, col], b[:, col], rtol=rtol, atol=1e-12)
+            ok &= np.isclose(a[:, gp.W_U:gp.W_U + 3], -b[:, gp.W_U:gp.W_U + 3], rtol=0,
+                             atol=1e-12).all(axis=1)
+            ok &= np.isclose(a[:, gp.W_U + 3], b[:, gp.W_U + 3], rtol=0, atol=1e-12)
+        for a, b in ((self.tail_entry_mm_s[:, 0], self.head_exit_mm_s[:, 1]),
+                     (self.head_exit_mm_s[:, 0], self.tail_entry_mm_s[:, 1]),
+                     (self.tail_ms[:, 0], self.head_ms[:, 1]),
+                     (self.head_ms[:, 0], self.tail_ms[:, 1])):
+            ok &= np.isclose(a, b, rtol=rtol, atol=1e-12)
+        return ok
+
     def context_ms(self, pl) -> tuple[np.ndarray, np.ndarray]:
         """(head, tail): per curve, what its head / tail move (half a one-move curve) takes in
         the slicer's file as planned (``pl``: ``planner.Plan`` of the program) less what it

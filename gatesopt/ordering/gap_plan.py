@@ -133,8 +133,19 @@ def klipper_smoothing(w, n, row):
     stop[0] = True
     cap = pk.klipper_cruise_cap(w[:n, W_L].copy(), w[:n, W_A].copy(), a_s, w[:n, W_V].copy(),
                                 w[:n, W_J].copy(), stop)
+    # and the window run backwards: Klipper's flush assigns a run's smoothed peak from its end,
+    # so the caps of a window and of the same moves backwards differ by a few 0.1 ms at its short
+    # boundary moves (a Klipper queue is not cut there; the window is). The lower of the two
+    # caps, so that a link and its mirror -- the link run backwards where the rule is the same
+    # both ways (``cost._dense``) -- are one price
+    vj_b = np.empty(n)
+    vj_b[0] = 0.0
+    for j in range(1, n):
+        vj_b[j] = w[n - j, W_J]
+    cap_b = pk.klipper_cruise_cap(w[:n, W_L][::-1].copy(), w[:n, W_A][::-1].copy(),
+                                  a_s[::-1].copy(), w[:n, W_V][::-1].copy(), vj_b, stop)
     for k in range(n):
-        w[k, W_V] = cap[k]
+        w[k, W_V] = min(cap[k], cap_b[n - 1 - k])
 
 
 #: ``plan_moves_s``'s work array: columns per move (a rebuilt travel has at most 5 moves)
