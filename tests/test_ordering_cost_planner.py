@@ -75,8 +75,10 @@ def _rebuilt_links(prog, prob, sol, same_layer_only=True):
 
 
 def test_a_rebuilt_travel_costs_what_the_planner_plans():
+    # classic jerk: joined only on request (``joined_links="all"``; the default prices each
+    # link its own moves under this rule: test_ordering_cost_mirror.py)
     prog = gatesopt.parse(mk3_layers())
-    prob = build(prog, OrderingOptions(mode="free"))
+    prob = build(prog, OrderingOptions(mode="free", joined_links="all"))
     sol = solve(prob, "auto")
     rows = _rebuilt_links(prog, prob, sol)
     assert len(rows) >= 3                       # the layer was re-ordered: travels rebuilt
@@ -176,7 +178,7 @@ def test_a_re_ordered_layer_changes_by_what_the_model_priced(name, mode, tol_ms)
     layer of real_prusa240 (reversed arcs; 3 layers priced faster printed > 5 ms slower) and 70.2
     ms on real_kirimoto30 (5 such layers)."""
     prog = _corpus(name)
-    prob = build(prog, OrderingOptions(mode=mode))
+    prob = build(prog, OrderingOptions(mode=mode, joined_links="all"))
     pp = prob.program_problem
     sol = solve(prob, "greedy")
     rows = _layer_changes_ms(prog, pp, sol)
@@ -192,7 +194,7 @@ def test_a_reversed_arc_costs_what_the_planner_says_backwards():
     an arc printed backwards takes another time; the link into a reversed candidate carries the
     difference (``node_ms``), measured on the curve alone both ways."""
     prog = _corpus("real_prusa240_m486_arcwelder")
-    prob = build(prog, OrderingOptions(mode="free"))
+    prob = build(prog, OrderingOptions(mode="free", joined_links="all"))
     node = prob.pricer.node_ms
     assert np.abs(node).max() > 50.0                    # 67-146 ms on this file's arcs
     assert np.all(node[prob.curve_closed] == 0.0)       # loops move their seam, not direction
@@ -207,7 +209,7 @@ def test_the_link_matrix_prices_each_link_as_one_by_one(name, mode):
     limits at each travel (real_orca230_arcs: a Klipper file that sets the acceleration per
     feature)."""
     prog = _corpus(name)
-    prob = build(prog, OrderingOptions(mode=mode))
+    prob = build(prog, OrderingOptions(mode=mode, joined_links="all"))
     pr = prob.pricer
     assert pr.ends.ok.any()
     checked = 0
