@@ -43,7 +43,7 @@ def _sample(prob, n=14, max_cands=300):
 def test_a_joined_link_is_its_mirrors_price_under_klipper(name):
     prob = build(gatesopt.parse(SHARED_INSTANCES / name), OrderingOptions(mode="free"))
     pr = prob.pricer
-    assert pr.mirror_joined and pr.ends.ok.any()
+    assert pr.joined and pr.mirror_joined and pr.ends.ok.any()
     joined_pairs = 0
     for g, grp in _sample(prob):
         gc = prob.source_curves(prob.group_curves(g))[grp.cand_curve]
@@ -109,7 +109,7 @@ def test_classic_jerk_links_are_one_price_both_ways_by_default(mode):
     prog = gatesopt.parse(SHARED_INSTANCES / "cura413_star_triangles20.gcode.gz")
     prob = build(prog, OrderingOptions(mode=mode))
     pr = prob.pricer
-    assert pr.move.junction_code == 0 and not pr.ends.ok.any() and not pr.mirror_joined
+    assert pr.move.junction_code == 0 and not pr.joined and not pr.mirror_joined
     # the travels keep the limits in force at each gap (not joined, still planned)
     assert len(pr.row_table) >= 1
     pairs = 0

@@ -60,7 +60,7 @@ def _rebuilt_links(prog, prob, sol, same_layer_only=True):
     model = prob.pricer.links_ms(order[:-1], changed[:-1], b[:-1], order[1:], changed[1:], a[1:])
     model = model - np.where(changed[1:], prob.pricer.node_ms[order[1:]], 0.0)
     head = tail = np.zeros(len(order))
-    if prob.pricer.ends.ok.any():
+    if prob.pricer.joined and prob.pricer.ends.ok.any():
         ends = CurveEnds.of(out, machine_limits(out), lay.curve_s0, lay.curve_s1,
                             prob.curve_closed[order])
         head, tail = ends.context_ms(pl)

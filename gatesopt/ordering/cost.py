@@ -207,11 +207,14 @@ class TimePricer:
         planned = bool(n) and code >= 0 and step_plan is not None
         joined = planned and joins(problem.options.joined_links, code)
         lim = limits if limits is not None or not planned else machine_limits(program)
-        if not joined:
+        if not planned:
             ends = CurveEnds.empty(n)
         elif ends is None:
             ends = CurveEnds.of(program, lim, lay.curve_s0, lay.curve_s1, problem.curve_closed)
-        self.ends = ends
+        #: the curves' boundary moves and times (``CurveEnds``), made wherever the moves are
+        #: planned: a reversed curve's ``node_ms`` is priced joined or not (ArcWelder arcs under
+        #: classic jerk: up to 140 ms, real_prusa240); the links join them where ``joined``
+        self.ends, self.joined = ends, bool(joined)
         self.node_ms = ends.node_ms
         #: the limits a rebuilt link's moves run under: those in force at the slicer's last
         #: travel in the gap its entry consumes (the emitter keeps that gap's state lines around
@@ -233,7 +236,7 @@ class TimePricer:
         #: a reversed gap's link: ``gap_ms`` where the curves are not joined, else its moves
         #: backwards planned with the curves' (``gap_plan.reversed_gaps_ms``)
         self.rev_ms = self.gap_ms
-        if n > 1 and ends.ok.any():
+        if n > 1 and joined and ends.ok.any():
             head, tail = ends.context_ms(step_plan)
             self.copy_ms[1:] += tail[:-1] + head[1:]
             self.rev_ms = reversed_gap_times_ms(program, lay, self.reversible.ok, self.ends_args(),
@@ -257,7 +260,8 @@ class TimePricer:
     def ends_args(self) -> tuple:
         """``ends`` for the kernels (``gap_plan.end_side``)."""
         e = self.ends
-        return (e.head, e.tail, e.head_exit_mm_s, e.tail_entry_mm_s, e.head_ms, e.tail_ms, e.ok,
+        ok = e.ok if self.joined else np.zeros_like(e.ok)   # unjoined: no end is joined
+        return (e.head, e.tail, e.head_exit_mm_s, e.tail_entry_mm_s, e.head_ms, e.tail_ms, ok,
                 self.closed, self.rev_ms, self.row_table, self.gap_row)
 
 
