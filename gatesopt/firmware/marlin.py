@@ -14,12 +14,18 @@ the halves of a retraction drains the queue in the middle of it (a stop more, an
 paused for the drain), and what the planner makes of the two halves was not measured; the line goes
 after (off) or before (on) the whole move, which only keeps the motor on longer.
 
-The stall of a disable is a full stop. Under the paper's time model (T = L / F, no acceleration)
-a full stop has no meaning; ``MARLIN_STOP_S`` stands for it: decelerating from v to 0 and
-accelerating back costs v/(2a) + v/(2a) = v/a over moving at v throughout, at a typical print
-speed of 50 mm/s and Marlin's common printing acceleration of 1000 mm/s^2 0.05 s (an assumption,
-stated once; ``stall_durations(..., planner=...)`` replaces it with the planner's stop where the
-caller has one).
+The stall of a disable is a full stop, priced per move where it stands (``disable_is_stop``, as
+Klipper's ``ENABLE=0`` flush is): ``planner.stop_restart_s`` at the line -- v / (2 a) to stop from
+the speed the planner reaches there plus v / (2 a) to get back to it, with the file's own limits
+-- and nothing on top (``disable_fixed_s`` 0: ``M18`` dwells nowhere, the drain is the stop). A
+stop where the head is nearly at rest (a retraction, a layer change) costs next to nothing, one in
+the middle of a fast infill line up to v / a. Before this (2026-11-26) every ``M18`` was charged
+``MARLIN_STOP_S`` = 0.05 s, an assumed v / a (50 mm/s at 1000 mm/s^2): the planner measured the
+stops where gating put them far lower (cura413_star_triangles20: 20.7 s charged, 0.28 s added to
+the print), so the 1 % budget left most of the saving unused. ``MARLIN_STOP_S`` stays the
+constant the gating kernel prices first (``GatingOptions.stall_off_s``); the per-move price
+replaces it before any choice (``gating.problem._per_move_stalls``), and the verifier prices the
+output the same way (``verify.energy.stall_s``).
 
 Planner rules (``gatesopt.limits``, ``gatesopt.planner``): Marlin 2.x Configuration.h defaults
 (DEFAULT_MAX_FEEDRATE {300,300,5,25}, DEFAULT_MAX_ACCELERATION {3000,3000,100,10000},
@@ -53,4 +59,5 @@ DIALECT = Firmware(
     executes=frozenset({"M17", "M18", "M84"}),
     description="Marlin 2.x: M18 drains the queue (full stop), M17 enables at parse time",
     rank=1, detect_words=("M17", "M18"), detect_rank=20,
-    no_drain_words=frozenset({"M17"}), stall_is_stop=True, split_moves="kinematic", planner=PLANNER)
+    no_drain_words=frozenset({"M17"}), stall_is_stop=True, split_moves="kinematic", planner=PLANNER,
+    disable_is_stop=True, disable_fixed_s=0.0)   # the drain is the stop: priced per move

@@ -2,7 +2,8 @@
 
 ``M18 X`` waits for standstill and marks X not homed; the next X move is refused by default. X/Y/Z
 gating is refused with a message; only E may be gated. The disable stall is a full stop, priced as
-Marlin's (``marlin.MARLIN_STOP_S``).
+a fixed ``marlin.MARLIN_STOP_S`` (Marlin's own is priced per move; RepRapFirmware's planner was
+not checked, so its stop is not).
 
 Planner rules: an assumption (RepRapFirmware's compiled defaults were not checked): the
 M203 X6000 Y6000 Z300 E10000 (mm/min) example of its G-code documentation, M201 500, M566

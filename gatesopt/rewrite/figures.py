@@ -59,7 +59,7 @@ def stalls_s(program: Program, firmware: str, time_model: str) -> np.ndarray:
     """Per-step firmware stall seconds of ``program``'s own motor lines in ``firmware``, on top of
     ``time_model``'s durations: "planner", what its durations leave out (Klipper's dwells; a
     queue drain is in them already), as ``print_time_s`` counts; "paper", every stall as the
-    verifier and the energy model price it (``verify.energy.stall_s``: Marlin's 0.05 s stop)."""
+    verifier and the energy model price it (``verify.energy.stall_s``: Marlin's stop priced per move)."""
     if time_model == "planner":
         return fwmod.stall_durations(program, firmware, planner=_no_stall, enable_price=_no_enable_stop)
     return stall_s(program, firmware)

@@ -354,8 +354,8 @@ def budget_limit_s(program: Program, o: GatingOptions, planned: _Planned | None 
 def _budget_on_print(problem, planned: _Planned, limit_s: float | None):
     """``problem`` with its stall budget (``max_added_time_s``, in the problem's own seconds) set
     to what ``limit_s`` leaves above the planned print time of the program it was built on. The
-    problem prices a stall by its firmware's model (Marlin's 0.05 s per full stop, Klipper's
-    planner stop and dwells), which the planner's time of the output need not match exactly:
+    problem prices a stall by its firmware's model (Marlin's full stop and Klipper's
+    planner stop plus dwells, priced per move), which the planner's time of the output need not match exactly:
     ``_within_limit`` checks the output and tightens the budget where it is over."""
     if limit_s is None or problem.options.max_added_time_pct is None or problem.time_before_s <= 0:
         return problem

@@ -38,10 +38,11 @@ def _file_enable(program: Program, original: Program | None = None) -> np.ndarra
 
 def stall_s(program: Program, firmware, printer=None) -> np.ndarray:
     """``firmware.stall_durations`` with the per-move price of a dialect whose enable line is a
-    stop (Klipper's ``ENABLE=1`` flush; ``planner.stop_restart_s``), as the solver priced it."""
+    stop (Klipper's ``ENABLE=1`` flush; ``planner.stop_restart_s``) or whose disable line is one
+    (Marlin's ``M18`` drain, Klipper's ``ENABLE=0``), as the solver priced it."""
     fw = fwmod.get(firmware)
     price = None
-    if fw.enable_is_stop:
+    if fw.enable_is_stop or fw.disable_is_stop:
         price = enable_price(fw.planner.family if fw.planner is not None else None, printer)
     return fwmod.stall_durations(program, fw, enable_price=price, printer=printer)
 
