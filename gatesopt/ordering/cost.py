@@ -224,7 +224,14 @@ class TimePricer:
         self.row_table = np.asarray(move.limits_row, float).reshape(1, -1)
         self.gap_row = np.zeros(n, np.int64)
         if planned:
-            self.row_table, self.gap_row = gap_rows(program, lay, lim)
+            table, row = gap_rows(program, lay, lim)
+            # one row per distinct set of limits (a file that restates them per feature, as
+            # Orca's SET_VELOCITY_LIMIT, has thousands of regimes and a handful of values): the
+            # same prices, and ``_dense`` mirrors and prepares per distinct row
+            key = np.nan_to_num(table, nan=-1.0, posinf=-2.0, neginf=-3.0)
+            _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            self.row_table = np.ascontiguousarray(table[first])
+            self.gap_row = np.asarray(inv, np.int64).ravel()[row]
         #: the junction rule is the same run backwards (``reversal_symmetric``): a joined link
         #: between open curves and its mirror are one price (``_dense`` prices them once)
         self.mirror_joined = joined and reversal_symmetric(code)
