@@ -236,7 +236,8 @@ def durations(program: Program, model: str = "paper", limits: MachineLimits | No
     raise TimeModelError(f"unknown time model {model!r} (choose from {', '.join(TIME_MODELS)})")
 
 
-def _arc_tangents(program: Program, steps: np.ndarray, L: np.ndarray, klipper: bool = False):
+def arc_tangents(program: Program, steps: np.ndarray, L: np.ndarray, klipper: bool = False,
+                 backwards: bool = False):
     """Unit tangents (X Y Z E per mm of path) at the start and end of the arcs ``steps``, the
     signed turn angle of one firmware arc segment (ARC_SEGMENT_MM / R; CCW positive), one
     segment's length, and the arcs' path lengths.
@@ -245,11 +246,18 @@ def _arc_tangents(program: Program, steps: np.ndarray, L: np.ndarray, klipper: b
     resolution))`` chords of sweep / n each (``L`` the helix length, Klipper's ``mm_of_travel``),
     Z and E split evenly; the "tangents" are then the first and the last chord's directions (the
     start tangent turned by half a chord's angle, the end tangent turned back by it), the segment
-    a chord, the path the sum of the chords."""
-    d = program.end_mm[steps] - program.start_mm[steps]
+    a chord, the path the sum of the chords.
+
+    ``backwards``: the arcs printed from their end to their start (a re-ordered curve, priced by
+    ``ordering.curve_time``): turning the other way, Z the other way, E still forward."""
+    d = np.array(program.end_mm[steps] - program.start_mm[steps], dtype=float)
     c = program.arc_center_mm[steps]
     sign = np.where(program.arc_ccw[steps], 1.0, -1.0)
-    rs = program.start_mm[steps, :2] - c
+    ends = (program.start_mm[steps, :2], program.end_mm[steps, :2])
+    if backwards:
+        sign, ends = -sign, ends[::-1]
+        d[:, Z] = -d[:, Z]
+    rs = ends[0] - c
     R = np.maximum(np.hypot(rs[:, 0], rs[:, 1]), 1e-9)
     if klipper:
         n_seg = np.maximum(1.0, np.floor(L / ARC_SEGMENT_MM))
@@ -271,7 +279,7 @@ def _arc_tangents(program: Program, steps: np.ndarray, L: np.ndarray, klipper: b
         path = L
         phi = sign * seg / R
     out = []
-    for pt, rot in zip((program.start_mm[steps, :2], program.end_mm[steps, :2]), turn):
+    for pt, rot in zip(ends, turn):
         r = pt - c
         n = np.maximum(np.hypot(r[:, 0], r[:, 1]), 1e-12)
         tx, ty = -sign * r[:, 1] / n, sign * r[:, 0] / n
@@ -303,17 +311,12 @@ def drains_queue(program: Program) -> np.ndarray:
     return out
 
 
-def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
-    """The planner time model for every step of ``program`` (see module docstring)."""
-    if limits is None:
-        limits = machine_limits(program)
-    n = program.n_steps
-    kind = program.kind
-    klipper = limits.firmware == "klipper"
+def move_geometry(program: Program, klipper: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(n_steps,) path length and arc flag of every step as the firmware moves it: under
+    Klipper a target-is-start arc is a straight move to its target (``null_arcs``)."""
     length = np.array(program.length_mm, dtype=float)
-    is_arc = kind == Kind.ARC
+    is_arc = program.kind == Kind.ARC
     if klipper and is_arc.any():
-        # a target-is-start arc Klipper moves straight to its target (``null_arcs``)
         rows = np.flatnonzero(is_arc)
         null = rows[fwklipper.null_arcs(program, rows)]
         if len(null):
@@ -321,6 +324,17 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
             straight = np.sqrt((dd[:, :3] ** 2).sum(axis=1))
             length[null] = np.where(straight > 0, straight, np.abs(dd[:, 3]))
             is_arc[null] = False
+    return length, is_arc
+
+
+def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
+    """The planner time model for every step of ``program`` (see module docstring)."""
+    if limits is None:
+        limits = machine_limits(program)
+    n = program.n_steps
+    kind = program.kind
+    klipper = limits.firmware == "klipper"
+    length, is_arc = move_geometry(program, klipper)
     motion = np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype)) & (length > 0)
     idx = np.flatnonzero(motion)
     m = len(idx)
@@ -335,7 +349,7 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
     arc_row = np.full(m, -1, dtype=np.int64)
     ai = np.flatnonzero(arc)
     arc_row[ai] = np.arange(len(ai))
-    arc_us, arc_ue, arc_phi, arc_seg, arc_path = _arc_tangents(program, idx[ai], L[ai], klipper)
+    arc_us, arc_ue, arc_phi, arc_seg, arc_path = arc_tangents(program, idx[ai], L[ai], klipper)
     if klipper and len(ai):
         L[ai] = arc_path            # Klipper moves along the chords
         length[idx[ai]] = arc_path

@@ -13,7 +13,8 @@ import pytest
 import gatesopt
 from gatesopt.ordering import OrderingOptions, build, emit, solve
 from gatesopt.ordering import auto, cpsat, dp, milp
-from gatesopt.ordering.cost import MoveTimes, gap_times_ms, trapezoid_s
+from gatesopt.ordering.cost import MoveTimes, gap_times_ms
+from gatesopt.ordering.move_times import trapezoid_s
 from gatesopt.ordering.problem import Anchor
 from gatesopt.verify.ordering import check
 
@@ -108,10 +109,13 @@ def test_model_cost_is_the_emitted_travels_time(variant, seed, mode):
 
 @pytest.mark.parametrize("variant", [0, 1, 4])
 def test_copied_gaps_cost_the_planners_time(variant):
-    """By default the slicer's own gaps cost what the planner says they take in the input; the
-    slicer's whole order then costs exactly the planner's time of its gaps; priced as a rebuilt
-    travel is (``copied_gaps="moves"``: each gap's moves planned together from and to rest,
-    ``MoveTimes.gaps_s``) they cost the same within 1 % (the gap's ends meet curves)."""
+    """By default the slicer's own gaps cost what the planner says they take in the input
+    (``gap_ms``), plus what the input spends on the curves' moves they meet beyond those moves'
+    time in their curves planned alone (``copy_ms``: the junctions' share, which a rebuilt link
+    prices too, ``curve_time.CurveEnds``); the slicer's whole order costs the sum of that;
+    priced as a rebuilt travel is (``copied_gaps="moves"``: each gap's moves planned together
+    from and to rest, ``MoveTimes.gaps_s``) the gaps cost the same within 1 % (their ends meet
+    curves)."""
     from gatesopt.planner import plan
     prog = gatesopt.parse(slicer_gcode(1, **VARIANTS[variant]))
     prob = build(prog, OrderingOptions(mode="free"))
@@ -119,11 +123,16 @@ def test_copied_gaps_cost_the_planners_time(variant):
     lay = prob.layout
     d = plan(prog).duration_s
     gaps = sum(d[a:b].sum() for a, b in zip(lay.curve_s1[:-1].tolist(), lay.curve_s0[1:].tolist()))
-    assert prob.pricer.copy_ms[1:].sum() == pytest.approx(1000.0 * gaps, rel=1e-9)
-    assert prob.pricer.copy_ms.sum() == pytest.approx(moves.pricer.copy_ms.sum(), rel=0.01)
+    assert prob.pricer.gap_ms[1:].sum() == pytest.approx(1000.0 * gaps, rel=1e-9)
+    assert prob.pricer.gap_ms.sum() == pytest.approx(moves.pricer.copy_ms.sum(), rel=0.01)
+    head, tail = prob.pricer.ends.context_ms(plan(prog))
+    share = tail[:-1].sum() + head[1:].sum()
+    assert abs(share) > 1.0                     # the junctions with the curves do cost something
+    assert prob.pricer.copy_ms[1:].sum() == pytest.approx(1000.0 * gaps + share, rel=1e-9)
     n = prob.n_curves
     ident, no = np.arange(n), np.zeros(n, bool)
-    assert prob.order_cost(ident, no, np.zeros(n, np.int64)) == pytest.approx(1000.0 * gaps, rel=1e-9)
+    assert prob.order_cost(ident, no, np.zeros(n, np.int64)) == pytest.approx(
+        prob.pricer.copy_ms[1:].sum(), rel=1e-9)
 
 
 def test_combing_file_is_read_as_combing():

@@ -28,8 +28,11 @@ HEURISTIC_S_PER_CURVE = 8e-5
 #: per link on the Cura bunny's 1,070 re-orderable groups (24.1 M links, 5.2 s CPU at load 8;
 #: docs/BENCHMARKS.md, "Link-cost build"). Part of what any search of the group costs: the plan
 #: adds it to a time-objective group's heuristic time. (The travel objective's matrix is one
-#: numpy expression: not counted)
-MATRIX_S_PER_LINK = 1.5e-7
+#: numpy expression: not counted.) With the links joined to the curves (each planned with the
+#: curves' end moves, no mirror: ``cost._dense``) a link costs ~2.2x that: every link priced
+#: itself 7.40 -> 15.6 s CPU (safe, 24.2 M links) and 11.06 -> 24.0 s (free, 37.3 M), 0.64 us a
+#: link at load 2-5 (docs/BENCHMARKS.md, "Link-cost build"); 1.5e-7 scaled by that ratio
+MATRIX_S_PER_LINK = 3.3e-7
 #: what the main process spends outside the solvers, kept out of a budget: per curve still to
 #: come, building its group and taking the helper's answers; per curve of the file, the chain DP
 #: and the travel totals after the last group; and stopping the helper process. The first two

@@ -24,201 +24,45 @@ that model (tests/test_ordering_cost.py checks it on emitted files). The costs a
 
 The cost is asymmetric where a copied gap cannot be reversed (a wipe, a state line, firmware
 retraction in it: priced one way only), and a rebuilt link's E moves depend on the gaps of the
-curve it enters; where every copied gap of a group is reversible and no gap has a net E, a link
-costs the same both ways (the symmetric model is then exact, not a relaxation). It breaks the
-triangle inequality where a long link retracts and two short ones do not.
+curve it enters; by default a link is also joined to the curves around it, a reversed candidate
+carries its curve's change of time and a reversed gap is planned backwards (``TimePricer``,
+formulations/ordering.md "Joined to the curves"): direction dependent under classic jerk and for
+arcs. It breaks the triangle inequality where a long link retracts and two short ones do not.
 formulations/ordering.md says which bounds rely on what.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from functools import partial
 
 import numba
 import numpy as np
 
-from .. import _planner_kernel as pk
-from ..limits import MachineLimits
-from ..program import MOTION_KINDS, Program
-from .gap_plan import (MOVE_EPS_MM, REBUILT_MAX_MOVES, W_COLS, W_F, W_J, W_JREADY, W_L,
-                       e_row, gaps_planned, junction, plan_moves_s, prep_move, same_z_s)
+from ..limits import MachineLimits, machine_limits
+from ..program import Program
+from .gap_plan import (JOINED_MAX_MOVES, MOVE_EPS_MM, W_COLS, W_F, W_J, W_JREADY, W_L, e_row,
+                       end_side, joined_s, junction, regime_rows,
+                       reversed_gap_times_ms, same_z_s)
+from .curve_time import CurveEnds, gap_rows
 from .gaps import REVERSE_EPS, GapFacts, ReversibleGaps
 from .layout import Layout
+from .move_times import MT_CODE, MoveTimes, trapezoid_one_s
+from .._planner_kernel import JERK, SCV
 from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
 
 MS_PER_S = 1000.0
-#: the speed a Marlin 2 (junction deviation) move starts from rest at: MINIMUM_PLANNER_SPEED
-#: (Marlin planner.h; ``planner.py`` uses the same)
-REST_SPEED_MM_S = 0.05
-
-
-@dataclass(frozen=True)
-class MoveTimes:
-    """Per move kind: acceleration (mm/s^2), speed cap (mm/s) and the junction speed a move
-    starts and ends at (mm/s). A move of length L at nominal speed v takes the trapezoid
-    ``trapezoid_s`` from and to that junction speed.
-
-    The junction speed: under classic jerk (Marlin ``CLASSIC_JERK``, Prusa firmware) a move may
-    start from rest at its axis jerk (the planner's "safe speed", ``planner.py``); under junction
-    deviation and Klipper's square corner velocity a move started from rest starts at ~0 (and
-    Klipper starts and ends extruder-only moves at rest)."""
-
-    xy_accel_mm_s2: float = 1000.0
-    xy_cap_mm_s: float = np.inf
-    xy_junction_mm_s: float = 0.0
-    wipe_accel_mm_s2: float = 1000.0      # a move with E steps (a wipe): the print acceleration
-    e_accel_mm_s2: float = 1000.0
-    e_cap_mm_s: float = np.inf
-    e_junction_mm_s: float = 0.0
-    z_accel_mm_s2: float = 100.0
-    z_cap_mm_s: float = np.inf
-    z_junction_mm_s: float = 0.0
-    #: the planner's junction rule (``_planner_kernel.JUNCTION_CODE``) and the limits in force
-    #: (``limits.KEYS`` order): a rebuilt travel's moves are then planned together, as the
-    #: planner plans them (``plan_moves_s``); -1: each move alone, from and to its junction speed
-    junction_code: int = -1
-    limits_row: tuple = ()
-
-    @staticmethod
-    def from_limits(lim: MachineLimits) -> "MoveTimes":
-        """The limits in force at the file's first motion step (``limits.machine_limits``)."""
-        acc, feed, jerk = lim.max_accel_mm_s2, lim.max_feed_mm_s, lim.jerk_mm_s
-
-        def finite_min(*v):
-            v = [float(x) for x in v if np.isfinite(x) and x > 0]
-            return min(v) if v else np.inf
-
-        def junction(*axes):
-            if lim.junction == "deviation":
-                return REST_SPEED_MM_S
-            if lim.junction != "jerk":
-                return 0.0
-            v = [float(jerk[a]) for a in axes if np.isfinite(jerk[a])]
-            return min(v) if v else 0.0
-        v_cap = lim.max_velocity_mm_s
-        return MoveTimes(
-            xy_accel_mm_s2=finite_min(lim.accel_travel_mm_s2, acc[0], acc[1]),
-            xy_cap_mm_s=finite_min(feed[0], feed[1], v_cap),
-            xy_junction_mm_s=junction(0, 1),
-            wipe_accel_mm_s2=finite_min(lim.accel_print_mm_s2, acc[0], acc[1]),
-            e_accel_mm_s2=finite_min(lim.accel_retract_mm_s2, acc[3]),
-            e_cap_mm_s=finite_min(feed[3]),
-            e_junction_mm_s=0.0 if lim.firmware == "klipper" else junction(3),
-            z_accel_mm_s2=finite_min(lim.accel_travel_mm_s2, acc[2]),
-            z_cap_mm_s=finite_min(feed[2], v_cap),
-            z_junction_mm_s=junction(2),
-            junction_code=pk.JUNCTION_CODE.get(lim.junction, -1),
-            limits_row=tuple(float(x) for x in lim.vector()))
-
-    def xy_s(self, length_mm, feed_mm_s):
-        return trapezoid_s(length_mm, np.minimum(feed_mm_s, self.xy_cap_mm_s), self.xy_accel_mm_s2,
-                           self.xy_junction_mm_s)
-
-    def e_s(self, length_mm, feed_mm_s):
-        return trapezoid_s(length_mm, np.minimum(feed_mm_s, self.e_cap_mm_s), self.e_accel_mm_s2,
-                           self.e_junction_mm_s)
-
-    def z_s(self, length_mm, feed_mm_s):
-        return trapezoid_s(length_mm, np.minimum(feed_mm_s, self.z_cap_mm_s), self.z_accel_mm_s2,
-                           self.z_junction_mm_s)
-
-    def steps_s(self, program: Program, steps) -> np.ndarray:
-        """Time of each of ``steps`` (non-extruding moves: a gap's travel, retraction, z-hop,
-        wipe) under this model; 0 for steps that are not motion."""
-        steps = np.asarray(steps, np.int64)
-        d = program.end_mm[steps] - program.start_mm[steps]
-        xy = np.hypot(d[:, 0], d[:, 1])
-        feed = program.feed_mm_s[steps]
-        kind = program.kind[steps]
-        length = program.length_mm[steps]
-        out = np.zeros(len(steps))
-        motion = np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype))
-        e_only = motion & (xy <= MOVE_EPS_MM) & (np.abs(d[:, 2]) <= MOVE_EPS_MM)
-        z_only = motion & (xy <= MOVE_EPS_MM) & ~e_only
-        planar = motion & ~e_only & ~z_only
-        wipe = planar & (np.abs(d[:, 3]) > 0)
-        travel = planar & ~wipe
-        out[e_only] = self.e_s(np.abs(d[e_only, 3]), feed[e_only])
-        out[z_only] = self.z_s(np.abs(d[z_only, 2]), feed[z_only])
-        out[travel] = self.xy_s(length[travel], feed[travel])
-        out[wipe] = trapezoid_s(length[wipe], np.minimum(feed[wipe], self.xy_cap_mm_s),
-                                self.wipe_accel_mm_s2, self.xy_junction_mm_s)
-        return out
-
-    def gaps_s(self, program: Program, a, b) -> np.ndarray:
-        """Time (s) of each gap ``steps a[i]:b[i]`` of ``program`` (its motion steps: travel,
-        retraction, z-hop, wipe): with the file's limits planned together as the planner plans
-        them (``plan_moves_s``, from and to rest: the curves around a gap are not part of it),
-        the way a rebuilt travel is priced; else each move alone (``steps_s``)."""
-        a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
-        if self.junction_code < 0:
-            steps = np.concatenate([np.arange(x, y) for x, y in zip(a.tolist(), b.tolist())]
-                                   + [np.zeros(0, np.int64)])
-            owner = np.repeat(np.arange(len(a)), b - a)
-            return np.bincount(owner, weights=self.steps_s(program, steps), minlength=len(a))
-        kind = program.kind
-        motion = (np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype))
-                  & (program.length_mm > MOVE_EPS_MM))
-        d = np.ascontiguousarray(program.end_mm - program.start_mm)
-        return gaps_planned(a, b, motion, d, np.ascontiguousarray(program.length_mm, float),
-                             np.ascontiguousarray(program.feed_mm_s, float), self.junction_code,
-                             np.asarray(self.limits_row, float))
-
-    def vector(self) -> np.ndarray:
-        """The parameters in field order (for the compiled kernels): the ten per-kind values,
-        the junction code, then the limits row (``MT_ROW`` on)."""
-        return np.array([self.xy_accel_mm_s2, self.xy_cap_mm_s, self.xy_junction_mm_s,
-                         self.wipe_accel_mm_s2, self.e_accel_mm_s2, self.e_cap_mm_s,
-                         self.e_junction_mm_s, self.z_accel_mm_s2, self.z_cap_mm_s,
-                         self.z_junction_mm_s, float(self.junction_code), *self.limits_row], float)
-
-
-def trapezoid_s(length_mm, speed_mm_s, accel_mm_s2, junction_mm_s):
-    """Time (s) of a move of ``length_mm`` that starts and ends at ``junction_mm_s`` and may
-    reach ``speed_mm_s`` accelerating at ``accel_mm_s2``: a trapezoid, or a triangle where it is
-    too short to reach that speed (planner.py; Marlin ``calculate_trapezoid_for_block``)."""
-    L = np.asarray(length_mm, float)
-    shape = np.broadcast_shapes(L.shape, np.shape(speed_mm_s))
-    L = np.ascontiguousarray(np.broadcast_to(L, shape)).ravel()
-    v = np.ascontiguousarray(np.broadcast_to(np.asarray(speed_mm_s, float), shape)).ravel()
-    out = _trapezoids(L, v, float(accel_mm_s2), float(junction_mm_s)).reshape(shape)
-    return out if out.ndim else float(out)
 
 
 @numba.njit(cache=True)
-def _trapezoids(L, v, a, vj):
-    out = np.empty(len(L))
-    for i in range(len(L)):
-        out[i] = _trapezoid(L[i], v[i], a, vj)
-    return out
-
-
-@numba.njit(cache=True, inline="always")
-def _trapezoid(L, v, a, vj):
-    if L <= 0.0 or v <= 0.0:
-        return 0.0
-    if not np.isfinite(a) or a <= 0.0:
-        return L / v
-    v0 = min(vj, v)
-    d_acc = (v * v - v0 * v0) / (2.0 * a)
-    if L >= 2.0 * d_acc:
-        return 2.0 * (v - v0) / a + (L - 2.0 * d_acc) / v
-    return 2.0 * (np.sqrt(v0 * v0 + a * L) - v0) / a
-
-
-#: where ``MoveTimes.vector()`` holds the junction code and the limits row
-MT_CODE, MT_ROW = 10, 11
-
-
-@numba.njit(cache=True)
-def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
+def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, co, ends, row):
     """Time (s) of a rebuilt travel (``gaps.rebuilt_gap``): retraction (E, at the retract feed),
     lift by the z-hop if it retracts, the straight XY travel (dx, dy), lowering, and the
     unretraction that brings the consumed gaps to their net E (or that net E alone). ``mt``:
     MoveTimes.vector(); ``style``: (retract feed, unretract feed, travel feed, z feed, hop).
     With the file's limits (``mt[MT_CODE] >= 0``) the moves are planned together, as the planner
-    plans them (``plan_moves_s``, in the work array ``w``: ``work_array()``); else each alone
+    plans them (``plan_moves_s``, in the work array ``w``: ``work_array(JOINED_MAX_MOVES)``),
+    joined to the last move of curve p and the first of curve c (sides ``po`` / ``co``,
+    ``gap_plan.joined_s``), under the limits ``row`` (``TimePricer.gap_rows``); else each alone
     from and to its kind's junction speed."""
     v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
     dist = np.sqrt(dx * dx + dy * dy)
@@ -231,6 +75,9 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
     if mt[MT_CODE] >= 0.0:
         w[:, :] = 0.0
         n = 0
+        if po >= 0:
+            w[n, :] = ends[1][p, po]
+            n += 1
         if e_r > MOVE_EPS_MM:
             w[n, 3], w[n, W_L], w[n, W_F] = -e_r, e_r, v_r
             n += 1
@@ -246,18 +93,21 @@ def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w):
         if e_u > MOVE_EPS_MM:
             w[n, 3], w[n, W_L], w[n, W_F] = e_u_sign * e_u, e_u, v_u
             n += 1
-        return plan_moves_s(w, n, int(mt[MT_CODE]), mt[MT_ROW:])
+        if co >= 0:
+            w[n, :] = ends[0][c, co]
+            n += 1
+        return joined_s(w, n, int(mt[MT_CODE]), row, p, po, c, co, ends)
     t = 0.0
     if e_r > MOVE_EPS_MM:
-        t += _trapezoid(e_r, min(v_r, mt[5]), mt[4], mt[6])
+        t += trapezoid_one_s(e_r, min(v_r, mt[5]), mt[4], mt[6])
     if e_u > MOVE_EPS_MM:
-        t += _trapezoid(e_u, min(v_u, mt[5]), mt[4], mt[6])
+        t += trapezoid_one_s(e_u, min(v_u, mt[5]), mt[4], mt[6])
     if z_up - z0 > MOVE_EPS_MM:
-        t += _trapezoid(z_up - z0, min(v_z, mt[8]), mt[7], mt[9])
+        t += trapezoid_one_s(z_up - z0, min(v_z, mt[8]), mt[7], mt[9])
     if dist > MOVE_EPS_MM:
-        t += _trapezoid(dist, min(v_xy, mt[1]), mt[0], mt[2])
+        t += trapezoid_one_s(dist, min(v_xy, mt[1]), mt[0], mt[2])
     if abs(z_up - z1) > MOVE_EPS_MM:
-        t += _trapezoid(abs(z_up - z1), min(v_z, mt[8]), mt[7], mt[9])
+        t += trapezoid_one_s(abs(z_up - z1), min(v_z, mt[8]), mt[7], mt[9])
     return t
 
 
@@ -274,6 +124,28 @@ def gap_times_ms(program: Program, move: MoveTimes, lay: Layout | None = None) -
     return move.gaps_s(program, lay.curve_s1[:-1], lay.curve_s0[1:]) * MS_PER_S
 
 
+def reversal_symmetric(code: int) -> bool:
+    """Whether the planner's junction rule ``code`` (``_planner_kernel.JUNCTION_CODE``) gives a
+    move sequence run backwards (order and directions reversed) the same time: Klipper's
+    (``toolhead.py`` ``Move.calc_junction``: the junction's limits are symmetric in the two
+    moves, accelerations are symmetric trapezoids, the smoothed look-ahead accelerates and
+    decelerates at one ``accel_to_decel``); not Marlin's classic jerk (``planner.cpp``: the
+    exit speeds scaled to the smaller nominal speed, the entered block's safe speed) nor its
+    junction deviation (the entered block's acceleration, the entered move's length in
+    ``JD_HANDLE_SMALL_SEGMENTS``)."""
+    return code == SCV
+
+
+def joins(policy: str, code: int) -> bool:
+    """Whether links are joined to the curves' moves (``OrderingOptions.joined_links``) under
+    the junction rule ``code``: "symmetric" under every rule but Marlin's classic jerk (where a
+    joined link and its mirror differ by its junction rule, not by the print: measured on
+    cura413_star_triangles20 89 % of the mirrored pairs, 1.6 ms apart on average, up to 10 ms,
+    and the symmetric model, which relaxes each edge to the cheaper direction, proved 0 of its
+    99 groups against 95 unjoined)."""
+    return policy == "all" or (policy == "symmetric" and code != JERK)
+
+
 class TimePricer:
     """The time objective's link costs for one Program-built problem (module docstring).
 
@@ -283,9 +155,13 @@ class TimePricer:
     copied). ``rule``: when a rebuilt travel retracts (shared with the emitter)."""
 
     def __init__(self, program: Program, lay: Layout, problem: OrderingProblem, rule: TravelRule,
-                 move: MoveTimes, step_s: np.ndarray | None = None):
+                 move: MoveTimes, step_s: np.ndarray | None = None,
+                 limits: MachineLimits | None = None, step_plan=None, ends=None):
         """``step_s``: per step of ``program``, the time a copied gap's steps take (the
-        planner's, ``OrderingOptions.copied_gaps``); None: each move priced by ``move``."""
+        planner's, ``OrderingOptions.copied_gaps``); None: each move priced by ``move``.
+        ``limits``: the file's (None: read here where needed). ``step_plan``: the
+        ``planner.Plan`` ``step_s`` came from: the links are then joined to the curves
+        (``ends``: ``curve_time.CurveEnds`` of these curves, None: made here)."""
         self.rule, self.move = rule, move
         style = rule.style
         self.style_vec = np.array([style.retract_feed_mm_s, style.unretract_feed_mm_s,
@@ -315,12 +191,87 @@ class TimePricer:
         self.copy_ms = copy * MS_PER_S
         #: gaps a link may write reversed, at their own time (``gaps.ReversibleGaps``)
         self.reversible = ReversibleGaps.of(program, lay)
+        #: per curve, what printing it backwards adds to its own moves' time (ms; 0 for loops,
+        #: whose candidates move the seam): every link into a reversed candidate carries it
+        #: (``curve_time.reversed_extra_ms``)
+        #: and the moves of each curve a link joins its own to (``curve_time.CurveEnds``): a
+        #: rebuilt link is planned with the last move of the curve it leaves and the first of
+        #: the curve it enters, less what they take in their curves planned alone; a copied
+        #: gap costs, besides its steps, what the slicer's file spends on those two moves beyond
+        #: that (``CurveEnds.context_ms``), so both price the same quantity
+        #: -- with the copied gaps at the planner's time (``step_plan``); priced move by move
+        #: (``copied_gaps="moves"``) every link is its moves alone, from and to rest
+        self.closed = np.asarray(problem.curve_closed, np.bool_)
+        #: -- which links are joined: ``OrderingOptions.joined_links`` (``joins``)
+        code = move.junction_code
+        planned = bool(n) and code >= 0 and step_plan is not None
+        joined = planned and joins(problem.options.joined_links, code)
+        lim = limits if limits is not None or not planned else machine_limits(program)
+        if not planned:
+            ends = CurveEnds.empty(n)
+        elif ends is None:
+            ends = CurveEnds.of(program, lim, lay.curve_s0, lay.curve_s1, problem.curve_closed)
+        #: the curves' boundary moves and times (``CurveEnds``), made wherever the moves are
+        #: planned: a reversed curve's ``node_ms`` is priced joined or not (ArcWelder arcs under
+        #: classic jerk: up to 140 ms, real_prusa240); the links join them where ``joined``
+        self.ends, self.joined = ends, bool(joined)
+        self.node_ms = ends.node_ms
+        #: the limits a rebuilt link's moves run under: those in force at the slicer's last
+        #: travel in the gap its entry consumes (the emitter keeps that gap's state lines around
+        #: its travel: PrusaSlicer's ``M204 S`` for travels, Orca's per-feature
+        #: ``SET_VELOCITY_LIMIT``), row ``gap_row[c]`` of ``row_table``, joined or not; with
+        #: the copied gaps priced move by move, the file's first (``MoveTimes.limits_row``)
+        self.row_table = np.asarray(move.limits_row, float).reshape(1, -1)
+        self.gap_row = np.zeros(n, np.int64)
+        if planned:
+            table, row = gap_rows(program, lay, lim)
+            # one row per distinct set of limits (a file that restates them per feature, as
+            # Orca's SET_VELOCITY_LIMIT, has thousands of regimes and a handful of values): the
+            # same prices, and ``_dense`` mirrors and prepares per distinct row
+            key = np.nan_to_num(table, nan=-1.0, posinf=-2.0, neginf=-3.0)
+            _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            self.row_table = np.ascontiguousarray(table[first])
+            self.gap_row = np.asarray(inv, np.int64).ravel()[row]
+        #: the junction rule is the same run backwards (``reversal_symmetric``): a joined link
+        #: between open curves and its mirror are one price (``_dense`` prices them once)
+        self.mirror_joined = joined and reversal_symmetric(code)
+        #: per curve: its boundary moves printed backwards are its boundary moves run backwards
+        #: (``CurveEnds.reversal_ok``; not so where one is an arc Klipper chords from its own
+        #: start, the chords then differ)
+        self.mirror_ok = ends.reversal_ok() & ~self.closed if self.mirror_joined else np.zeros(n, bool)
+        self.gap_ms = self.copy_ms.copy()
+        #: a reversed gap's link: ``gap_ms`` where the curves are not joined, else its moves
+        #: backwards planned with the curves' (``gap_plan.reversed_gaps_ms``)
+        self.rev_ms = self.gap_ms
+        if n > 1 and joined and ends.ok.any():
+            head, tail = ends.context_ms(step_plan)
+            self.copy_ms[1:] += tail[:-1] + head[1:]
+            self.rev_ms = reversed_gap_times_ms(program, lay, self.reversible.ok, self.ends_args(),
+                                                move.junction_code, move.limits_row)
+            if self.mirror_joined:
+                # a gap between two open curves written backwards, left from the one reversed
+                # into the other reversed, is the copied link's moves run backwards: under a
+                # rule the same both ways its time is the copied gap's in the file (the
+                # planner's, look-ahead beyond the two boundary moves included), the price of
+                # its mirror, the copied link (``reversed_gaps_ms`` would plan it with the two
+                # boundary moves only: up to ~0.5 ms apart on the Klipper corpus files)
+                both_open = np.zeros(n, bool)
+                both_open[1:] = ~self.closed[1:] & ~self.closed[:-1] & ends.ok[1:] & ends.ok[:-1]
+                self.rev_ms = np.where(both_open & self.reversible.ok, self.copy_ms, self.rev_ms)
         # the kernels' constant arguments, made once (per call costs: most of passing a group)
         r = self.reversible
         self._rev = (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
         self._rule_vec = rule.vector()
+        self._ends = self.ends_args()
 
-    # -- links ----------------------------------------------------------------------------------
+    def ends_args(self) -> tuple:
+        """``ends`` for the kernels (``gap_plan.end_side``)."""
+        e = self.ends
+        ok = e.ok if self.joined else np.zeros_like(e.ok)   # unjoined: no end is joined
+        return (e.head, e.tail, e.head_exit_mm_s, e.tail_entry_mm_s, e.head_ms, e.tail_ms, ok,
+                self.closed, self.rev_ms, self.row_table, self.gap_row)
+
+
     def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
         """Cost (ms) of each link prev[i] -> nxt[i] (problem curves; prev -1: the head comes from
         no known curve) leaving at ``from_xy`` and entering at ``to_xy``."""
@@ -347,7 +298,7 @@ class TimePricer:
                self.own.net_e, self.own.retract_mm, self.own.fw_net, self.own.fw_retracted,
                self.bnd.net_e, self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted,
                self.copy_ms, *self._rev, self._rule_vec, self.style_vec, self.move_vec, out,
-               need, no_retract)
+               need, no_retract, self.node_ms, self._ends)
         if need.any():
             self._exempt(out, need, no_retract, nxt, from_xy, to_xy)
         return out
@@ -433,7 +384,8 @@ class TimePricer:
                       self.own.retract_mm, self.own.fw_net, self.own.fw_retracted, self.bnd.net_e,
                       self.bnd.retract_mm, self.bnd.fw_net, self.bnd.fw_retracted, self.copy_ms,
                       *self._rev, self._rule_vec, self.style_vec, self.move_vec,
-                      self.rule.comb_cap_mm > 0 and len(grid[1]) > 0, *grid, mirror)
+                      self.node_ms, self._ends, self.rule.comb_cap_mm > 0 and len(grid[1]) > 0,
+                      *grid, mirror, self.mirror_ok)
 
 
 class _GroupLinks:
@@ -473,19 +425,20 @@ def _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_pla
 
 
 @numba.njit(cache=True, inline="always")
-def _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt):
-    """A reversed gap's cost (ms): the gap's own time, plus the E move of the net E of c's own
-    gap, which the entry into c consumes (``gaps.reversed_gap``)."""
-    t = copy_ms[p]
+def _reversed_ms(p, c, group_first, own_net, rev_ms, style, mt):
+    """A reversed gap's cost (ms): the gap's moves backwards (``rev_ms``:
+    ``TimePricer.rev_ms``), plus the E move of the net E of c's own gap, which the entry into c
+    consumes (``gaps.reversed_gap``)."""
+    t = rev_ms[p]
     if c != group_first[c] and abs(own_net[c]) > MOVE_EPS_MM:
-        t += _trapezoid(abs(own_net[c]), min(style[1], mt[5]), mt[4], mt[6]) * 1000.0
+        t += trapezoid_one_s(abs(own_net[c]), min(style[1], mt[5]), mt[4], mt[6]) * 1000.0
     return t
 
 
 @numba.njit(cache=True, inline="always")
 def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, own_net, own_r,
               own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
-              rev_start, rev_end, rule, style, mt, w):
+              rev_start, rev_end, rule, style, mt, w, ends):
     """One link's cost (ms) as emitted, mirroring ``gaps.rebuilt_gap`` and ``travel.TravelRule``,
     except the combing exemption: returns (cost, whether the exemption applies if the travel
     crosses no wall, the cost then). ``rule``: TravelRule.vector(); ``w``: ``work_array()``."""
@@ -493,7 +446,7 @@ def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, o
         return copy_ms[c], False, 0.0                   # the slicer's own gap, copied
     if p >= 0 and _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_plain,
                                  rev_start, rev_end):
-        return _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt), False, 0.0
+        return _reversed_ms(p, c, group_first, own_net, ends[8], style, mt), False, 0.0
     retract_mm, min_travel, fw_style, comb_cap = rule[0], rule[1], rule[2] > 0.5, rule[3]
     crossing = p < 0 or group_first[c] != group_first[p]
     own = c != group_first[c]
@@ -525,46 +478,72 @@ def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, o
         retract = moving and (fw_bnd or (fw_style and dist >= min_travel))
     else:
         retract = moving and r > 0.0 and (r_b > 0.0 or (retract_mm > 0.0 and dist >= min_travel))
-    t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w) * 1000.0
+    po = end_side(p, p_changed, ends)
+    co = end_side(c, c_changed, ends)
+    row = ends[9][ends[10][c]]          # the limits at the slicer's travel into c
+    t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, co,
+                   ends, row) * 1000.0
     if retract and comb_cap > 0.0 and dist <= comb_cap and dz <= MOVE_EPS_MM:
-        return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style, w) * 1000.0
+        return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style, w, p, po, c,
+                                   co, ends, row) * 1000.0
     return t, False, 0.0
 
 
 @numba.njit(cache=True)
 def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
-           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, out, need, no_retract):
-    """``_link_one`` per link; the wall test is the caller's (``need``, ``no_retract``)."""
-    w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
+           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, out, need, no_retract, node,
+           ends):
+    """``_link_one`` per link, plus what a reversed curve entered adds to its own moves
+    (``node``: ``TimePricer.node_ms``); the wall test is the caller's (``need``,
+    ``no_retract``)."""
+    w = np.zeros((JOINED_MAX_MOVES, W_COLS))
     for i in range(len(nxt)):
         out[i], need[i], no_retract[i] = _link_one(
             prev[i], prev_changed[i], nxt[i], nxt_changed[i], from_xy[i, 0], from_xy[i, 1],
             to_xy[i, 0], to_xy[i, 1], z0[i], z1[i], group_first, own_net, own_r, own_fw_net,
             own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain, rev_start,
-            rev_end, rule, style, mt, w)
+            rev_end, rule, style, mt, w, ends)
+        if nxt_changed[i]:
+            out[i] += node[nxt[i]]
+            no_retract[i] += node[nxt[i]]
 
 
 @numba.njit(cache=True)
 def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent, z_ext, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
-           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, has_walls, trim, a, b, x0, y0,
-           h, nx, ny, start, items, mirror):
+           rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, node, ends, has_walls, trim, a, b,
+           x0, y0, h, nx, ny, start, items, mirror, mirror_ok):
     """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
     (``_link_one`` where the two ends lie at different heights). The wall test is made here: once
-    per pair of points (a travel and its reverse cross the same walls), memoized.
+    per pair of points (a travel and its reverse cross the same walls), memoized. A link into a
+    reversed candidate carries what reversing adds to its curve's own moves (``node``).
 
     ``mirror``: a rebuilt link at one height and its mirror flip(v) -> flip(u) (the same two
-    points the other way round, ``_mirror_of``) are priced once: the price depends on the
+    points the other way round, ``_mirror_of``) are priced once where neither is joined to a
+    curve's moves (``end_side`` -1 at all four ends: the curves' ends unknown, as under
+    ``copied_gaps="moves"`` or without the file's limits, or loops entered at a moved seam) and
+    both run under one limits regime (``gap_plan.regime_rows``): the price then depends on the
     direction through |dx|, |dy| only (per-axis caps, jerk and safe speeds take |u_axis|; the
-    junctions with E-only and Z-only moves are right angles), so it is the same number, bit for
-    bit (tests/test_ordering_cost_build.py; docs/BENCHMARKS.md, "Link-cost build")."""
+    junctions with E-only and Z-only moves are right angles), the same number bit for bit.
+    ``mirror_ok`` (``TimePricer.mirror_ok``: the rule is the same run backwards, Klipper's, and
+    the curve's boundary moves backwards are its own reversed) extends it to links joined to open
+    curves (``_mirrorable``) that carry no lone prime: the mirror's planned sequence is
+    then the link's run backwards (the curve's last move backwards is its first move reversed,
+    the retraction and lift before the travel as the unretraction and lowering after it), the
+    same time up to rounding (tests/test_ordering_cost_mirror.py), priced once. A link joined to a
+    loop is not its mirror's price (the loop is left along its last move and entered along its
+    first), nor is any joined link under Marlin's rules (``reversal_symmetric``). (``node`` is
+    added per link, not mirrored.)"""
     m = len(gc)
     out = np.empty((m, m))
     done = np.zeros((m, m), np.bool_)     # priced as the mirror of a link before it
-    w = np.zeros((REBUILT_MAX_MOVES, W_COLS))
+    w = np.zeros((JOINED_MAX_MOVES, W_COLS))
+    side = np.empty(m, np.int64)        # each candidate's rows in ``ends`` (``end_side``)
+    for k in range(m):
+        side[k] = end_side(gc[k], changed[k], ends)
     memo = np.full((n_points, n_points), -1, np.int8)
     stamp = np.full(max(len(a), 1), -1, np.int64)
     tag = 0
@@ -583,29 +562,20 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
             net, r_i, fw_net, fw_ret = own_net[c], own_r[c], own_fw_net[c], own_fw[c]
         net_v[v] = net
         use_fw[v] = fw_net == 0 and (fw_ret or (fw_style and r_i <= 0.0))
-        e_dry[v] = _trapezoid(abs(net), min(v_u, mt[5]), mt[4], mt[6]) if abs(net) > MOVE_EPS_MM else 0.0
-        e_wet[v] = e_dry[v] if use_fw[v] else (_trapezoid(retract_mm, min(v_r, mt[5]), mt[4], mt[6])
-                                               + _trapezoid(abs(net + retract_mm), min(v_u, mt[5]), mt[4], mt[6]))
-    t_hop = 2.0 * _trapezoid(hop, min(v_z, mt[8]), mt[7], mt[9]) if hop > 0.0 else 0.0
+        e_dry[v] = trapezoid_one_s(abs(net), min(v_u, mt[5]), mt[4], mt[6]) if abs(net) > MOVE_EPS_MM else 0.0
+        e_wet[v] = e_dry[v] if use_fw[v] else (trapezoid_one_s(retract_mm, min(v_r, mt[5]), mt[4], mt[6])
+                                               + trapezoid_one_s(abs(net + retract_mm), min(v_u, mt[5]), mt[4], mt[6]))
+    t_hop = 2.0 * trapezoid_one_s(hop, min(v_z, mt[8]), mt[7], mt[9]) if hop > 0.0 else 0.0
     v_xy_cap = min(v_xy, mt[1])
-    # planned: the moves that do not depend on the link, prepared once (``same_z_s``)
-    code = int(mt[MT_CODE])
-    lim_row = mt[MT_ROW:]
-    hop_on = hop > MOVE_EPS_MM
-    pre = np.zeros((3, W_COLS))
-    u_rows = np.zeros((2, m, W_COLS))
-    has_u = np.zeros((2, m), np.bool_)
+    # planned: the moves that do not depend on the link, prepared once (``same_z_s``) per
+    # candidate v and per limits regime of the group (``gap_plan.regime_rows``)
+    code, hop_on = int(mt[MT_CODE]), hop > MOVE_EPS_MM
+    vreg, rows_loc, pres = regime_rows(gc, ends, code, planned, retract_mm, v_r, hop, v_z)
+    u_rows, has_u = np.zeros((2, m, W_COLS)), np.zeros((2, m), np.bool_)
     if planned:
-        if retract_mm > MOVE_EPS_MM:
-            e_row(pre, 0, -retract_mm, v_r, code, lim_row)
-        for k, dz_k in ((1, hop), (2, -hop)):
-            pre[k, 2], pre[k, W_L], pre[k, W_F] = dz_k, abs(dz_k), v_z
-            if hop_on:
-                prep_move(pre, k, code, lim_row)
-        if hop_on and retract_mm > MOVE_EPS_MM:
-            pre[1, W_J] = junction(pre, 1, code, lim_row)
-            pre[1, W_JREADY] = 1.0
         for v in range(m):
+            pre = pres[vreg[v]]
+            lim_row = rows_loc[vreg[v]]
             wet = net_v[v] if use_fw[v] else net_v[v] + retract_mm
             for j, e in ((0, wet), (1, net_v[v])):
                 has_u[j, v] = abs(e) > MOVE_EPS_MM
@@ -629,14 +599,15 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                 continue
             if _reversed_link(p, changed[u], c, ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1],
                               group_first, rev_ok, rev_plain, rev_start, rev_end):
-                out[u, v] = _reversed_ms(p, c, group_first, own_net, copy_ms, style, mt)
+                out[u, v] = (_reversed_ms(p, c, group_first, own_net, ends[8], style, mt)
+                             + (node[c] if changed[v] else 0.0))
                 continue
             if abs(z_ext[u] - z_ent[v]) > MOVE_EPS_MM or group_first[p] != group_first[c]:
                 t, need, dry = _link_one(p, changed[u], c, changed[v], ext[u, 0], ext[u, 1],
                                          ent[v, 0], ent[v, 1], z_ext[u], z_ent[v], group_first,
                                          own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r,
                                          bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
-                                         rev_start, rev_end, rule, style, mt, w)
+                                         rev_start, rev_end, rule, style, mt, w, ends)
             else:
                 dx = ent[v, 0] - ext[u, 0]
                 dy = ent[v, 1] - ext[u, 1]
@@ -649,11 +620,12 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                 need = retract and comb_cap > 0.0 and dist <= comb_cap
                 if planned:
                     with_e = not use_fw[v] and retract_mm > MOVE_EPS_MM
-                    t = same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v,
-                                  has_u[0 if retract else 1, v], w, code, lim_row, v_xy) * 1000.0
+                    t = same_z_s(dx, dy, dist, retract, with_e, hop_on, pres[vreg[v]], u_rows, v,
+                                  has_u[0 if retract else 1, v], w, code, rows_loc[vreg[v]], v_xy,
+                                  p, side[u], c, side[v], ends) * 1000.0
                     dry = -1.0          # made below where the link goes dry (no wall crossed)
                 else:
-                    t_xy = _trapezoid(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
+                    t_xy = trapezoid_one_s(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
                     dry = (t_xy + e_dry[v]) * 1000.0
                     t = (t_xy + e_wet[v] + t_hop) * 1000.0 if retract else dry
             if need and has_walls:
@@ -670,16 +642,36 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                 t = dry
             if t < 0.0:
                 t = same_z_s(dx, dy, dist, False, not use_fw[v] and retract_mm > MOVE_EPS_MM,
-                              hop_on, pre, u_rows, v, has_u[1, v], w, code, lim_row,
-                              v_xy) * 1000.0
-            out[u, v] = t
-            if mirror and abs(z_ext[u] - z_ent[v]) <= MOVE_EPS_MM and group_first[p] == group_first[c]:
+                              hop_on, pres[vreg[v]], u_rows, v, has_u[1, v], w, code,
+                              rows_loc[vreg[v]],
+                              v_xy, p, side[u], c, side[v], ends) * 1000.0
+            out[u, v] = t + (node[c] if changed[v] else 0.0)
+            if (mirror and _mirrorable(u, side, flip, gc, mirror_ok)
+                    and _mirrorable(v, side, flip, gc, mirror_ok)
+                    and abs(z_ext[u] - z_ent[v]) <= MOVE_EPS_MM and group_first[p] == group_first[c]):
                 fu, fv = flip[u], flip[v]
-                if _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v, use_fw,
-                              group_first, rev_ok, rev_plain, rev_start, rev_end):
-                    out[fv, fu] = t
+                # unjoined both ways, or joined to open curves under a rule the same backwards,
+                # under one limits regime: what makes the two prices equal
+                # (joined: no lone prime, whose one E-only move -- a stop under Klipper -- sits
+                # before the curve entered both ways, so the mirror is not the link backwards)
+                if (vreg[fu] == vreg[v] and (abs(net_v[v]) <= MOVE_EPS_MM
+                                             or (side[u] < 0 and side[v] < 0))
+                        and _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v,
+                                       use_fw, group_first, rev_ok, rev_plain, rev_start, rev_end)):
+                    out[fv, fu] = t + (node[gc[fu]] if changed[fu] else 0.0)
                     done[fv, fu] = True
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _mirrorable(k, side, flip, gc, mirror_ok):
+    """Whether candidate k's end of a link allows ``_dense``'s mirror: neither k nor its flip is
+    joined to its curve's moves, or both are, to an open curve whose boundary moves printed
+    backwards are its own run backwards (``mirror_ok``: ``TimePricer.mirror_ok``, only under a
+    rule the same both ways)."""
+    if side[k] < 0 and side[flip[k]] < 0:
+        return True
+    return side[k] >= 0 and side[flip[k]] >= 0 and mirror_ok[gc[k]]
 
 
 @numba.njit(cache=True, inline="always")

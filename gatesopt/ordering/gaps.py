@@ -103,6 +103,37 @@ class ReversibleGaps:
                 and abs(entry_xy[1] - self.end_xy[c, 1]) <= REVERSE_EPS)
 
 
+@dataclass(frozen=True, eq=False)
+class GapFacts:
+    """What the slicer's gaps before each curve hold, as ``rebuilt_gap`` sums it: per curve
+    c the gap between curve c - 1 and c (``own_*``) and the boundary gap of c's group (the gap
+    before the group's first curve, ``bnd_*``, indexed by curve too)."""
+
+    net_e: np.ndarray           # (n,) net E of the gap's moves (mm of filament)
+    retract_mm: np.ndarray      # (n,) filament its moves pull back
+    fw_net: np.ndarray          # (n,) firmware unretractions minus retractions (G11 - G10)
+    fw_retracted: np.ndarray    # (n,) bool: a G10 in the gap
+
+    @staticmethod
+    def of(program: Program, lay: Layout) -> "GapFacts":
+        n = len(lay.curve_s0)
+        l1 = lay.curve_l1
+        g0 = np.concatenate(([0], l1[:-1] + 1)) if n else np.zeros(0, np.int64)    # gap lines [g0, g1)
+        g1 = lay.curve_l0
+        step = lay.step_of_line
+        has = step >= 0
+        s = np.where(has, step, 0)
+        de = np.where(has & (lay.line_class == LINE_MOTION), program.end_mm[s, 3] - program.start_mm[s, 3], 0.0)
+
+        def span(v):
+            c = np.concatenate(([0.0], np.cumsum(v)))
+            return c[g1] - c[g0]
+        return GapFacts(span(de), span(np.where(de < 0, -de, 0.0)),
+                        np.rint(span(lay.line_class == LINE_FW_UNRETRACT)
+                                - span(lay.line_class == LINE_FW_RETRACT)).astype(np.int64),
+                        span(lay.line_class == LINE_FW_RETRACT) > 0)
+
+
 @dataclass
 class _GapLines:
     """The lines of the consumed gaps by where they go around our travel (``_sort_lines``), and
@@ -302,34 +333,3 @@ def reversed_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets
                  bool(p.relative_e[int(lay.curve_s0[c])]))
     for i in g.pre + g.mid + g.post + g.late:
         w.copy_line(i)
-
-
-@dataclass(frozen=True, eq=False)
-class GapFacts:
-    """What the slicer's gaps before each curve hold, as ``gaps.rebuilt_gap`` sums it: per curve
-    c the gap between curve c - 1 and c (``own_*``) and the boundary gap of c's group (the gap
-    before the group's first curve, ``bnd_*``, indexed by curve too)."""
-
-    net_e: np.ndarray           # (n,) net E of the gap's moves (mm of filament)
-    retract_mm: np.ndarray      # (n,) filament its moves pull back
-    fw_net: np.ndarray          # (n,) firmware unretractions minus retractions (G11 - G10)
-    fw_retracted: np.ndarray    # (n,) bool: a G10 in the gap
-
-    @staticmethod
-    def of(program: Program, lay: Layout) -> "GapFacts":
-        n = len(lay.curve_s0)
-        l1 = lay.curve_l1
-        g0 = np.concatenate(([0], l1[:-1] + 1)) if n else np.zeros(0, np.int64)    # gap lines [g0, g1)
-        g1 = lay.curve_l0
-        step = lay.step_of_line
-        has = step >= 0
-        s = np.where(has, step, 0)
-        de = np.where(has & (lay.line_class == LINE_MOTION), program.end_mm[s, 3] - program.start_mm[s, 3], 0.0)
-
-        def span(v):
-            c = np.concatenate(([0.0], np.cumsum(v)))
-            return c[g1] - c[g0]
-        return GapFacts(span(de), span(np.where(de < 0, -de, 0.0)),
-                        np.rint(span(lay.line_class == LINE_FW_UNRETRACT)
-                                - span(lay.line_class == LINE_FW_RETRACT)).astype(np.int64),
-                        span(lay.line_class == LINE_FW_RETRACT) > 0)

@@ -19,7 +19,8 @@ from ..limits import machine_limits
 from ..program import Kind, Program
 from ..planner import plan
 from ..slicers import FIXED_FEATURE
-from .cost import MoveTimes, TimePricer
+from .cost import TimePricer
+from .move_times import MoveTimes
 from .layout import Layout, layout
 from .blocks import CurveGroups, order_blocks
 from .problem import CLOSED_TOL_MM, COST_UNIT, OrderingOptions, OrderingProblem, group_starts
@@ -136,10 +137,11 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
         group_fixed=np.asarray(gfixed, bool), group_label=tuple(glabel), origin_xy=origin,
         options=options, cost_unit=COST_UNIT[options.objective],
         curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), layout=lay)
-    step_s = None
+    step_plan = None
     if options.objective == "time":
-        step_s = plan(program).duration_s if options.copied_gaps == "planner" else None
-        problem = with_pricer(program, problem, step_s)
+        step_plan = plan(program) if options.copied_gaps == "planner" else None
+        problem = with_pricer(program, problem, step_plan)
+        first_pricer = problem.pricer
     if options.mode == "safe" and options.blocks:
         # islands and labelled objects. Not in free mode: its groups choose their own entry, which
         # a block order fixed on the slicer's first and last curves does not see (moving the
@@ -148,20 +150,26 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
                                                              wall_like))
         if problem.base is not None and options.objective == "time":
             # priced again on the groups the islands' new order made (blocks.permuted)
-            base = with_pricer(program, problem.base, step_s)
+            # (the curves' own end moves and times do not depend on the groups: made once)
+            base = with_pricer(program, problem.base, step_plan, first_pricer.ends)
             problem = dataclasses.replace(problem, base=base, pricer=base.pricer)
     return problem
 
 
-def with_pricer(program: Program, problem: OrderingProblem,
-                step_s: np.ndarray | None = None) -> OrderingProblem:
+def with_pricer(program: Program, problem: OrderingProblem, step_plan=None,
+                ends=None) -> OrderingProblem:
     """``problem`` with the time objective's link costs (``cost.TimePricer``): the rule the
     emitter follows (``travel.TravelRule``, read from the file's own travels) and the planner's
-    limits for each move (``cost.MoveTimes``, ``limits.machine_limits``)."""
+    limits for each move (``move_times.MoveTimes``, ``limits.machine_limits``). ``step_plan``: the
+    program's ``planner.Plan`` where it was made already (copied gaps are priced from it);
+    ``ends``: its ``curve_time.CurveEnds`` where made already."""
     lay = problem.layout
     rule = TravelRule.of(program, problem, lay)
-    move = MoveTimes.from_limits(machine_limits(program))
-    if step_s is None and problem.options.copied_gaps == "planner":
-        step_s = plan(program).duration_s
+    lim = machine_limits(program)
+    move = MoveTimes.from_limits(lim)
+    if step_plan is None and problem.options.copied_gaps == "planner":
+        step_plan = plan(program)
+    step_s = None if step_plan is None else step_plan.duration_s
     return dataclasses.replace(problem, cost_unit=COST_UNIT["time"],
-                               pricer=TimePricer(program, lay, problem, rule, move, step_s))
+                               pricer=TimePricer(program, lay, problem, rule, move, step_s, lim,
+                                                 step_plan, ends))

@@ -39,6 +39,8 @@ CLOSED_TOL_MM = 1e-3
 #: time where they are 1 um of travel)
 OBJECTIVES = ("time", "travel")
 COST_UNIT = {"time": "ms", "travel": "mm"}
+#: ``OrderingOptions.joined_links``
+JOINED_LINKS = ("symmetric", "all", "none")
 #: groups above this many candidates get no dense link matrix (m^2 doubles: 2000 -> 32 MB); their
 #: solvers work on the XY points (``greedy``'s Euclidean kernels) and the path is priced link by link
 DENSE_MAX_CANDS = 2000
@@ -56,7 +58,7 @@ class OrderingOptions:
     move_seams: bool = False            # closed loops may start at another vertex
     seam_candidates: int = 16           # with move_seams: vertices tried per loop (evenly spread, seam included)
     #: what a link between two curves costs (formulations/ordering.md, "Cost model"): "time", the
-    #: time the travel takes as emitted (its moves under ``cost.MoveTimes``, retraction, z-hop and
+    #: time the travel takes as emitted (its moves under ``move_times.MoveTimes``, retraction, z-hop and
     #: the slicer's own copied gaps included; in ms), or "travel", its length (mm, Fleming Eq. 1)
     objective: str = "time"
     #: safe mode: re-order whole islands and labelled objects of a layer as blocks (``blocks.py``)
@@ -67,6 +69,15 @@ class OrderingOptions:
     #: junction speed, as a rebuilt travel is priced (a combed gap of many short moves then costs
     #: ~25 % more than it takes: cura413_xend_zigzag100, 874.7 s vs 680.8 s over the file)
     copied_gaps: str = "planner"
+    #: which links are planned joined to the moves of the curves around them (formulations/
+    #: ordering.md, "Cost model", "Joined to the curves"; with ``copied_gaps="planner"``):
+    #: "symmetric" (the default) where the firmware's junction rule is the same run backwards
+    #: (Klipper's square-corner velocity, Marlin's junction deviation), so that a link and its
+    #: mirror keep one price where the physics gives them one, and under Marlin's classic jerk
+    #: each link its own moves (its travel's limits, the copied gaps at the planner's time);
+    #: "all": joined under every rule (classic jerk too: a link and its mirror then differ);
+    #: "none": never joined
+    joined_links: str = "symmetric"
 
     def __post_init__(self):
         if self.mode not in ("safe", "free"):
@@ -75,6 +86,9 @@ class OrderingOptions:
             raise OrderingOptionsError(f"objective must be 'time' or 'travel', not {self.objective!r}")
         if self.copied_gaps not in ("planner", "moves"):
             raise OrderingOptionsError(f"copied_gaps must be 'planner' or 'moves', not {self.copied_gaps!r}")
+        if self.joined_links not in JOINED_LINKS:
+            raise OrderingOptionsError(f"joined_links must be one of {', '.join(JOINED_LINKS)}, "
+                                       f"not {self.joined_links!r}")
         if self.seam_candidates < 1:
             raise OrderingOptionsError("seam_candidates must be >= 1")
 
