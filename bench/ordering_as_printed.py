@@ -368,7 +368,10 @@ def run_all(args) -> None:
     run(argparse.Namespace(files="*", extra=args.extra, no_extra=False, extra_files="*",
                            modes="safe,free", formulations="auto,greedy", time_limit=2.0,
                            budget=args.budget, workers=args.workers, out=str(out)))
-    cmd = "python bench/ordering_as_printed.py all" + (f" --write {args.write}" if args.write else "")
+    cmd = ("python bench/ordering_as_printed.py all"
+           + (f" --workers {args.workers}" if args.workers != 1 else "")
+           + (f" --budget {args.budget:g}" if args.budget != 10.0 else "")
+           + (f" --write {args.write}" if args.write else ""))
     report(argparse.Namespace(out=str(out), write=args.write, command_line=cmd))
 
 
