@@ -53,25 +53,17 @@ class GreedyPass:
 
 
 def solve_greedy(problem: OrderingProblem, *, time_limit_s: float = 2.0,
-                 budget_s: float | None = None, workers: int = 1, progress=None) -> GreedyPass:
-    """``solve(problem, "greedy", workers=workers)``, keeping per group greedy's answer and the
-    link matrix it made (``GreedyPass``). With ``workers = 2`` the helper process solves the chain
-    from the back as a ``--formulation greedy`` run's does (a budget-bound file reaches as many
-    groups as that run: the Cura bunny's safe mode, 10 s, two processes: auto 45,070 s against
-    greedy 44,959 s with a one-process greedy pass); a group the helper solved keeps its path but
-    no bound (the helper solved it from another start: its bound is not this start's) and no
-    matrix (the helper made it)."""
+                 budget_s: float | None = None, progress=None) -> GreedyPass:
+    """``solve(problem, "greedy")`` in one process, keeping per group greedy's answer and the link
+    matrix it made (``GreedyPass``)."""
     built: list = []
-    sol = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=budget_s, workers=workers,
+    sol = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=budget_s,
                 progress=progress, built_groups=built)
     answers, matrices = [], []
-    for g, (grp, here) in enumerate(built):
+    for g, grp in enumerate(built):
         gs = sol.groups[g]
         fixed = problem.group_fixed[g] or grp.n_curves == 0
-        answer = None if fixed else greedy_answer(grp, gs)
-        if answer is not None and not here:
-            answer = dataclasses.replace(answer, bound=0.0)
-        answers.append(answer)
+        answers.append(None if fixed else greedy_answer(grp, gs))
         c = grp.costs
         matrices.append(None if fixed or c is None or getattr(c, "euclidean", False) else c.arc)
     return GreedyPass(sol, tuple(answers), tuple(matrices))
@@ -89,8 +81,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     ``greedy``: a greedy pass of the same problem (``solve_greedy``): each group starts from its
     link matrix and greedy's path (the warm start), and a group the budget leaves no time for
     keeps greedy's path instead of the slicer's order (``runner.OUT_OF_TIME_GREEDY``), in the
-    helper process too. ``built_groups``: a list (Group, solved in this process?) of each group
-    is appended to, as solved (``solve_greedy``)."""
+    helper process too. ``built_groups``: a list the Group of each group is appended to, as
+    solved (``solve_greedy``)."""
     record = formulations.lookup(formulation)
     if workers not in (1, 2):
         raise OrderingOptionsError(f"workers must be 1 or 2, not {workers!r}")
@@ -127,7 +119,6 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             grp = problem.group(g, pos, end)
             if greedy is not None:
                 grp = greedy.with_matrix(g, grp)
-            answer = None       # the helper's answer for group g, where it solved it
             if problem.group_fixed[g] or grp.n_curves == 0:
                 order = np.arange(grp.n_cands)      # one candidate per curve, in the slicer's order
                 obj = grp.path_cost(order)
@@ -146,7 +137,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                         grp.check_order(gs.order)
             plans.append((grp, opts, pos, end))
             if built_groups is not None:
-                built_groups.append((grp, answer is None))
+                built_groups.append(grp)
             runner.passed(g)
             if progress is not None:
                 proven += bool(reorderable[g]) and opts[0].status == Status.OPTIMAL
