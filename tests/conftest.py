@@ -5,6 +5,8 @@ import csv
 import gzip
 from pathlib import Path
 
+import numpy as np
+
 import pytest
 from hypothesis import settings
 
@@ -19,6 +21,23 @@ settings.load_profile("default")
 REPO = Path(__file__).resolve().parents[1]
 SHARED_INSTANCES = REPO.parent / "shared" / "instances"
 PROJECT_INSTANCES = REPO / "instances"
+
+
+def random_line_layers(sizes, seed=0):
+    """One group per layer, random open lines (no two groups alike): ``from_polylines`` input for
+    the ordering's budget tests."""
+    rng = np.random.default_rng(seed)
+    return [[rng.uniform(0, 60, (2, 2)) for _ in range(n)] for n in sizes]
+
+
+def slicer_order(grp) -> np.ndarray:
+    """The candidates of ``grp`` that print each curve as the slicer did (forwards, first seam)."""
+    return np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
+
+
+def never_solve(grp, *, time_limit_s, **kw):
+    """A formulation's ``solve`` that must not be called: the budget has ended."""
+    raise AssertionError(f"a solver was called with {time_limit_s} s after the budget ended")
 
 
 def shared_files() -> list[Path]:

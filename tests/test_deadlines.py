@@ -18,6 +18,7 @@ from gatesopt.ordering.runner import OUT_OF_TIME, GroupRunner
 from gatesopt.solvers import Formulation, Status
 
 from test_ordering import random_problem
+from conftest import never_solve, random_line_layers, slicer_order
 
 
 class FakeClock:
@@ -34,32 +35,19 @@ class FakeClock:
         return types.SimpleNamespace(perf_counter=self.perf_counter)
 
 
-def _layers_of(sizes, seed=0):
-    rng = np.random.default_rng(seed)
-    return [[rng.uniform(0, 60, (2, 2)) for _ in range(n)] for n in sizes]
-
-
-def _slicer_order(grp) -> np.ndarray:
-    return np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
-
-
-def _never(grp, *, time_limit_s, **kw):
-    raise AssertionError(f"a solver was called with {time_limit_s} s after the budget ended")
-
-
 def test_a_group_after_the_budget_is_not_searched(monkeypatch):
     """A runner whose budget has ended answers with the slicer's order at once, status fallback
     (nothing proven: bound 0), and counts it; the solver is never called."""
     # numba compiling in the last 10 s (a fresh worker's first kernels) is not charged to the
     # budget (runner._jit.compile_s_since): none here, so the budget has surely ended
     monkeypatch.setattr(runner._jit, "compile_s_since", lambda t: 0.0)
-    prob = from_polylines(_layers_of([30], seed=1), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers([30], seed=1), options=OrderingOptions(mode="free"))
     grp = prob.group(0, prob.origin_xy)
-    r = GroupRunner(prob, _never, 2.0, 0.5, time.perf_counter() - 10.0, {})
+    r = GroupRunner(prob, never_solve, 2.0, 0.5, time.perf_counter() - 10.0, {})
     gs = r.run(0, grp)
     assert gs.status == Status.FALLBACK and gs.formulation == OUT_OF_TIME
-    assert np.array_equal(gs.order, _slicer_order(grp))
-    assert gs.bound == 0.0 and gs.objective == pytest.approx(grp.path_cost(_slicer_order(grp)))
+    assert np.array_equal(gs.order, slicer_order(grp))
+    assert gs.bound == 0.0 and gs.objective == pytest.approx(grp.path_cost(slicer_order(grp)))
     assert r.out_of_time == 1
 
 
@@ -73,13 +61,13 @@ def test_limits_come_out_of_what_is_left_and_stop_at_the_budget(monkeypatch):
     monkeypatch.setattr(runner, "time", clock.module())
     # (compiling spans are real-clock readings: none on the fake one)
     monkeypatch.setattr(runner._jit, "compile_s_since", lambda t: 0.0)
-    prob = from_polylines(_layers_of([40] * 12, seed=2), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers([40] * 12, seed=2), options=OrderingOptions(mode="free"))
     given = []
 
     def uses_its_limit(grp, *, time_limit_s, **kw):
         given.append(time_limit_s)
         clock.now += time_limit_s + 0.01
-        order = _slicer_order(grp)
+        order = slicer_order(grp)
         return GroupSolution.make(order, grp.path_cost(order), 0.0, Status.FALLBACK, time_limit_s, "stand-in")
 
     budget_s, t0 = 0.2, clock.now
@@ -101,8 +89,8 @@ def test_the_time_between_groups_is_measured_and_reserved(monkeypatch):
     clock = FakeClock()
     monkeypatch.setattr(runner, "time", clock.module())
     monkeypatch.setattr(runner._jit, "compile_s_since", lambda t: 0.0)
-    prob = from_polylines(_layers_of([20, 20, 20], seed=3), options=OrderingOptions(mode="free"))
-    r = GroupRunner(prob, _never, 2.0, 100.0, clock.now, {})
+    prob = from_polylines(random_line_layers([20, 20, 20], seed=3), options=OrderingOptions(mode="free"))
+    r = GroupRunner(prob, never_solve, 2.0, 100.0, clock.now, {})
     prior = r.rest_s(0)
     assert r.pass_rate() == pytest.approx(budget.OVERHEAD_S_PER_CURVE)
     clock.now += 1.0                    # the caller took 1 s to pass group 0 (20 curves)
@@ -119,10 +107,10 @@ def test_layers_solve_with_no_budget_left_calls_no_solver(monkeypatch):
     of time, and the solution is the slicer's print order."""
     import sys
     this = sys.modules[__name__]
-    monkeypatch.setattr(this, "solve", _never, raising=False)
+    monkeypatch.setattr(this, "solve", never_solve, raising=False)
     monkeypatch.setitem(formulations.FORMULATIONS, "auto",
                         Formulation("auto", __name__, capabilities=frozenset({"look_ahead"})))
-    prob = from_polylines(_layers_of([25, 30, 18], seed=4), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers([25, 30, 18], seed=4), options=OrderingOptions(mode="free"))
     sol = layers.solve(prob, "auto", time_limit_s=2.0, budget_s=0.0)
     assert all(gs.formulation.startswith(OUT_OF_TIME) for gs in sol.groups)
     assert all(gs.status == Status.FALLBACK for gs in sol.groups)
@@ -135,7 +123,7 @@ def test_auto_runs_no_exact_step_once_its_limit_is_spent(monkeypatch):
     it is not started (it once got 50 ms whatever was left) and the group is a fallback."""
     auto.warm_up()
     called = []
-    monkeypatch.setattr(milp, "solve", lambda *a, **k: called.append(k) or _never(None, time_limit_s=0))
+    monkeypatch.setattr(milp, "solve", lambda *a, **k: called.append(k) or never_solve(None, time_limit_s=0))
     reached = 0
     for seed in range(12):
         grp = random_problem(900 + seed, 40, closed_share=0.0).group(0, np.zeros(2))
@@ -244,7 +232,7 @@ def test_a_budget_below_the_ordering_floor_skips_the_ordering(monkeypatch):
     floor = rorder.stage_floor_s(program)
     assert floor > 0 and rorder.stage_floor_s(program, 3.0) > floor     # slower machine, more
     monkeypatch.setattr(pipeline, "ordering_budget_s", lambda *a, **k: 0.9 * floor)
-    monkeypatch.setattr(pipeline, "_order_curves", lambda *a, **k: _never(None, time_limit_s=0))
+    monkeypatch.setattr(pipeline, "_order_curves", lambda *a, **k: never_solve(None, time_limit_s=0))
     res = pipeline.run(program, GatingOptions(rotate="none"), budget_s=10.0)
     assert res.report.ok and not res.ordered and "ordering_s" not in res.times
     assert any("curve ordering skipped" in n and f"{floor:.1f} s its build" in n for n in res.notes)
@@ -263,9 +251,9 @@ def test_a_solve_budget_below_the_group_pass_skips_the_solve_after_the_build(mon
     program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
     monkeypatch.setattr(pipeline, "stage_floor_s", lambda program, slow=1.0: 0.0)
     monkeypatch.setattr(rorder, "OVERHEAD_S_PER_CURVE", 1e3)       # passing a group: "1000 s"
-    monkeypatch.setattr(rorder, "solve", lambda *a, **k: _never(None, time_limit_s=0))
+    monkeypatch.setattr(rorder, "solve", lambda *a, **k: never_solve(None, time_limit_s=0))
     # (the greedy pass before the exact solve: neither is called)
-    monkeypatch.setattr(rorder, "solve_greedy", lambda *a, **k: _never(None, time_limit_s=0))
+    monkeypatch.setattr(rorder, "solve_greedy", lambda *a, **k: never_solve(None, time_limit_s=0))
     res = pipeline.run(program, GatingOptions(rotate="none"), budget_s=10.0)
     assert res.report.ok and not res.ordered
     assert any("curve ordering skipped after its build" in n for n in res.notes), res.notes
@@ -312,7 +300,7 @@ def test_cpsat_past_its_deadline_after_the_build_does_not_search(monkeypatch):
         clock.now += 100.0
         return real(*a)
     monkeypatch.setattr(cpsat, "_add_share_cuts", slow_cuts)
-    monkeypatch.setattr(cpsat, "run_native", lambda *a, **k: _never(None, time_limit_s=0))
+    monkeypatch.setattr(cpsat, "run_native", lambda *a, **k: never_solve(None, time_limit_s=0))
     sol = cpsat.solve(problem, time_limit_s=5.0)
     assert "not searched" in sol.message
     assert sol.status == Status.OPTIMAL or sol.stopped == Stopped.TIME_LIMIT

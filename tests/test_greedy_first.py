@@ -19,20 +19,7 @@ from gatesopt.ordering.runner import OUT_OF_TIME, OUT_OF_TIME_GREEDY, GroupRunne
 from gatesopt.rewrite import order as pipeline
 from gatesopt.solvers import Formulation, Status
 
-from conftest import PROJECT_INSTANCES
-
-
-def _layers_of(sizes, seed=0):
-    rng = np.random.default_rng(seed)
-    return [[rng.uniform(0, 60, (2, 2)) for _ in range(n)] for n in sizes]
-
-
-def _slicer_order(grp) -> np.ndarray:
-    return np.flatnonzero(~grp.cand_reversed & (grp.cand_seam == 0))
-
-
-def _never(grp, *, time_limit_s, **kw):
-    raise AssertionError(f"a solver was called with {time_limit_s} s after the budget ended")
+from conftest import PROJECT_INSTANCES, never_solve, random_line_layers, slicer_order
 
 
 def test_a_late_group_keeps_greedys_path_not_the_slicers(monkeypatch):
@@ -40,21 +27,21 @@ def test_a_late_group_keeps_greedys_path_not_the_slicers(monkeypatch):
     fallback, formulation naming greedy) and never calls the solver; without greedy's answer it
     is the slicer's order, as before."""
     monkeypatch.setattr(runner._jit, "compile_s_since", lambda t: 0.0)
-    prob = from_polylines(_layers_of([30], seed=1), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers([30], seed=1), options=OrderingOptions(mode="free"))
     grp = prob.group(0, prob.origin_xy)
     gp = layers.solve_greedy(prob)
     ans = gp.answers[0]
-    r = GroupRunner(prob, _never, 2.0, 0.5, time.perf_counter() - 10.0, {})
+    r = GroupRunner(prob, never_solve, 2.0, 0.5, time.perf_counter() - 10.0, {})
     gs = r.run(0, grp, ans)
     assert np.array_equal(gs.order, gp.solution.groups[0].order)
     assert gs.formulation in (OUT_OF_TIME_GREEDY, "greedy")
     assert gs.objective == pytest.approx(grp.path_cost(gs.order))
-    assert gs.objective < grp.path_cost(_slicer_order(grp))     # (random lines: greedy is better)
+    assert gs.objective < grp.path_cost(slicer_order(grp))     # (random lines: greedy is better)
     # the same start as greedy's: greedy's bound, so greedy's gap
     assert gs.bound == pytest.approx(min(gp.solution.groups[0].bound, gs.objective))
     assert gs.status in (Status.FALLBACK, Status.OPTIMAL) and r.out_of_time == 1
     kept = r.run(0, grp)
-    assert kept.formulation == OUT_OF_TIME and np.array_equal(kept.order, _slicer_order(grp))
+    assert kept.formulation == OUT_OF_TIME and np.array_equal(kept.order, slicer_order(grp))
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -63,7 +50,7 @@ def test_greedys_bound_moves_with_the_start(seed):
     lowered by the most any start cost fell: never above the true optimum (the DP's)."""
     from gatesopt.ordering import dp
     rng = np.random.default_rng(seed)
-    prob = from_polylines(_layers_of([8], seed=seed), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers([8], seed=seed), options=OrderingOptions(mode="free"))
     there = prob.group(0, rng.uniform(0, 60, 2))
     ans = greedy_answer(there, formulations.group_solver("greedy")(there))
     here = prob.group(0, rng.uniform(0, 60, 2))
@@ -77,10 +64,10 @@ def test_the_exact_solve_with_no_time_prints_greedys_paths(monkeypatch):
     group has greedy's path (none keeps the slicer's order unsearched), and the chain costs no more
     than greedy's own solution."""
     this = sys.modules[__name__]
-    monkeypatch.setattr(this, "solve", _never, raising=False)
+    monkeypatch.setattr(this, "solve", never_solve, raising=False)
     monkeypatch.setitem(formulations.FORMULATIONS, "stand-in",
                         Formulation("stand-in", __name__, capabilities=frozenset({"look_ahead"})))
-    prob = from_polylines(_layers_of([25, 30, 18], seed=4), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers([25, 30, 18], seed=4), options=OrderingOptions(mode="free"))
     gp = layers.solve_greedy(prob)
     sol = layers.solve(prob, "stand-in", time_limit_s=2.0, budget_s=0.0, greedy=gp)
     reorderable = prob.group_reorderable
@@ -132,10 +119,10 @@ def test_the_helpers_backwards_groups_keep_greedys_path_when_late(monkeypatch):
     bound no higher than that price."""
     from gatesopt.ordering.chain import solve_backwards
     monkeypatch.setattr(runner._jit, "compile_s_since", lambda t: 0.0)
-    prob = from_polylines(_layers_of([20, 20], seed=5), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers([20, 20], seed=5), options=OrderingOptions(mode="free"))
     gp = layers.solve_greedy(prob)
     end = prob.cand_anchor(1, prob.group(1, prob.origin_xy), 0)
-    r = GroupRunner(prob, _never, 2.0, 0.5, time.perf_counter() - 10.0, {})
+    r = GroupRunner(prob, never_solve, 2.0, 0.5, time.perf_counter() - 10.0, {})
     fwd, opts = solve_backwards(r, prob, 0, end, gp.answers[0])
     gs = opts[0] if opts[0].formulation.startswith(OUT_OF_TIME_GREEDY) else opts[1]
     assert gs.formulation.startswith(OUT_OF_TIME_GREEDY) and gs.formulation.endswith("+back")

@@ -16,6 +16,7 @@ from gatesopt.ordering.runner import GroupRunner
 from gatesopt.solvers import Formulation
 
 from test_ordering import random_problem
+from conftest import random_line_layers
 
 
 def _stand_in(monkeypatch, name: str, fn) -> None:
@@ -25,12 +26,6 @@ def _stand_in(monkeypatch, name: str, fn) -> None:
     monkeypatch.setattr(sys.modules[__name__], "solve", fn, raising=False)
     monkeypatch.setitem(formulations.FORMULATIONS, name,
                         Formulation(name, __name__, capabilities=frozenset({"look_ahead"})))
-
-
-def _layers_of(sizes, seed=0):
-    """One group per layer, random open lines (no two groups alike)."""
-    rng = np.random.default_rng(seed)
-    return [[rng.uniform(0, 60, (2, 2)) for _ in range(n)] for n in sizes]
 
 
 def _shape(n):
@@ -44,7 +39,7 @@ def _charge(n, ratio):
 
 def test_plan_charges_an_exact_group_by_a_shape_that_grows_faster_than_its_exact_time():
     sizes = [150, 20]
-    prob = from_polylines(_layers_of(sizes, seed=2), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers(sizes, seed=2), options=OrderingOptions(mode="free"))
     plan = budget.BudgetPlan(prob)
     # small groups use a smaller share of their exact time than large ones (measured on the
     # corpus): one learnt ratio, applied to a shape growing with n, charges them less
@@ -61,7 +56,7 @@ def test_plan_charges_an_exact_group_by_a_shape_that_grows_faster_than_its_exact
 
 def test_plan_gives_the_smallest_groups_their_exact_time_first():
     sizes = [80, 20, 150, 30, 5, 60]          # 5 curves: the DP's, no claim on the budget
-    prob = from_polylines(_layers_of(sizes), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers(sizes), options=OrderingOptions(mode="free"))
     plan = budget.BudgetPlan(prob)
     exact = {n: float(auto.exact_time_s(n)) for n in sizes}
     heur = {n: budget.HEURISTIC_S_PER_CURVE * n for n in sizes}
@@ -85,7 +80,7 @@ def test_plan_gives_the_smallest_groups_their_exact_time_first():
 
 def test_plan_learns_what_proofs_use_of_their_exact_time():
     sizes = [80, 20, 150, 30, 60]
-    prob = from_polylines(_layers_of(sizes, seed=4), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers(sizes, seed=4), options=OrderingOptions(mode="free"))
     plan = budget.BudgetPlan(prob)
     exact = {n: float(auto.exact_time_s(n)) for n in sizes}
     heur = {n: budget.HEURISTIC_S_PER_CURVE * n for n in sizes}
@@ -112,7 +107,7 @@ def test_plan_funds_the_smallest_groups_first_when_even_the_heuristic_share_does
     # it, the larger none (None: the slicer's order, unsearched), instead of each a share too
     # thin for the greedy path that runs whatever its limit
     sizes = [50, 40]
-    prob = from_polylines(_layers_of(sizes, seed=1), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers(sizes, seed=1), options=OrderingOptions(mode="free"))
     plan = budget.BudgetPlan(prob)
     heur = {n: budget.HEURISTIC_S_PER_CURVE * n for n in sizes}
     left = 0.5 * sum(heur.values())
@@ -125,7 +120,7 @@ def test_plan_funds_the_smallest_groups_first_when_even_the_heuristic_share_does
 
 
 def test_plan_counts_the_time_objectives_link_matrix_in_a_groups_heuristic_time():
-    lines = _layers_of([30], seed=3)
+    lines = random_line_layers([30], seed=3)
     plain = budget.BudgetPlan(from_polylines(lines, options=OrderingOptions(mode="free")))
     assert plain.heuristic_s[0] == pytest.approx(budget.HEURISTIC_S_PER_CURVE * 30)
     priced = dataclasses.replace(from_polylines(lines, options=OrderingOptions(mode="free")),
@@ -139,7 +134,7 @@ def test_budgeted_solve_gives_small_groups_the_exact_time_first(monkeypatch):
     # a budget that pays for the exact step on the small groups only: what each group is given
     # (recorded by a stand-in for auto that answers at once), not how long anything took
     sizes = [200, 20, 200, 22, 24]
-    prob = from_polylines(_layers_of(sizes, seed=2), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers(sizes, seed=2), options=OrderingOptions(mode="free"))
     given = {}
 
     def record(grp, *, time_limit_s, **kw):     # the slicer's order, at once
@@ -159,7 +154,7 @@ def test_a_group_never_gets_more_than_the_wall_clock_time_left(monkeypatch):
     # one group runs in one process: its limit must end before the budget, less what the main
     # process needs for the groups after it (a group of 150 curves alone would get ~2x 0.5 s)
     sizes = [150, 3, 3]
-    prob = from_polylines(_layers_of(sizes, seed=3), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers(sizes, seed=3), options=OrderingOptions(mode="free"))
     given = []
 
     def record(grp, *, time_limit_s, **kw):
@@ -417,7 +412,7 @@ def test_one_slow_group_early_does_not_starve_the_groups_after_it(monkeypatch):
     # and the next four were given no time at all
     import time
     sizes = [150] + [20] * 60
-    prob = from_polylines(_layers_of(sizes, seed=4), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers(sizes, seed=4), options=OrderingOptions(mode="free"))
     given = []
 
     def record(grp, *, time_limit_s, **kw):
@@ -439,7 +434,7 @@ def test_one_slow_group_early_does_not_starve_the_groups_after_it(monkeypatch):
 def test_a_fallback_group_runs_ils_only_when_its_limit_leaves_time_for_it(monkeypatch):
     from gatesopt.ordering import ils
     auto.warm_up()          # a first call loading the kernels would pass any deadline by itself
-    prob = from_polylines(_layers_of([60], seed=7), options=OrderingOptions(mode="free"))
+    prob = from_polylines(random_line_layers([60], seed=7), options=OrderingOptions(mode="free"))
     grp = prob.group(0, prob.origin_xy)
     calls = []
     real = ils.improve_ils
