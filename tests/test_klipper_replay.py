@@ -444,6 +444,32 @@ def test_klippy_errors_come_back_with_klippys_message(klippy):
         klippy.run(kr.printer_config(), "G1 X10 F600\n")
 
 
+#: the bench printer's extruder (printer.cfg: 16 microsteps x 200 per 34.406 mm rotation
+#: distance; max_extrude_only_accel by Klipper's default, max_accel 3000 mm/s^2 x 4 x nozzle
+#: diameter^2 / filament area = 798 mm/s^2) takes this long from rest to its first step, half a step on (0.5 * a * t^2): an E-only
+#: move starting (or ending) at rest puts its first (last) step that far inside it
+E_ACCEL_MM_S2 = 3000 * 4 * 0.4 ** 2 / (math.pi * 0.875 ** 2)
+E_HALF_STEP_S = math.sqrt(2 * (0.5 / (16 * 200 / 34.406)) / E_ACCEL_MM_S2)
+
+
+def _planned_from_first_e_s(text: str, source: str, tmp_path) -> tuple[str, float]:
+    """(the bench printer.cfg, gatesopt's planned time of ``text`` on it from the start of its
+    first move with E to the end): what Klipper's planned steps of the same text span, from the
+    first extruder step to the last, plus half an E step at each end (``E_HALF_STEP_S``)."""
+    from gatesopt import parse
+    from gatesopt.limits import machine_limits
+    from gatesopt.planner import plan
+    from gatesopt.printer_config import read_printer_config
+    cfg_text = kr.printer_config()
+    cfg = tmp_path / "printer.cfg"
+    cfg.write_text(cfg_text)
+    prog = parse(text, source=source)
+    pl = plan(prog, machine_limits(prog, printer=read_printer_config(cfg)))
+    ms = pl.move_step
+    first_e = int(np.flatnonzero(prog.end_mm[ms, 3] != prog.start_mm[ms, 3])[0])
+    return cfg_text, float(pl.duration_s[ms[first_e]:].sum())
+
+
 # layer changes as slicers write them: retract, Z hop, travel, Z down, unretract, print
 LAYERS = "G90\nM83\nG1 Z1 F600\nG1 X20 Y20 F6000\nG1 E1 F1800\nG1 X60 E2 F1800\n" + "".join(
     f"G1 E-0.8 F2100\nG1 Z{1.2 + 0.2 * i:.1f} F720\nG1 X{20 + 5 * i} Y{40 + 5 * i} F9000\n"
@@ -458,22 +484,9 @@ def test_planner_times_z_and_extrude_only_moves_as_klipper(klippy, tmp_path):
     # retraction ending at rest). Each end is one half E step off the move's boundary
     # (0.5 * 798 * t^2 = half of 1 / 93.0 mm). Timed at 3000 mm/s^2 the 14 extrude-only moves were
     # 29 ms shorter each (the 0.058 s per layer change seen on the corpus).
-    from gatesopt import parse
-    from gatesopt.limits import machine_limits
-    from gatesopt.planner import plan
-    from gatesopt.printer_config import read_printer_config
-    cfg_text = kr.printer_config()
-    cfg = tmp_path / "printer.cfg"
-    cfg.write_text(cfg_text)
+    cfg_text, ours = _planned_from_first_e_s(LAYERS, "layers.gcode", tmp_path)
     rep = klippy.run(cfg_text, kr.replay_text(LAYERS)[0])
-    prog = parse(LAYERS, source="layers.gcode")
-    pl = plan(prog, machine_limits(prog, printer=read_printer_config(cfg)))
-    ms = pl.move_step
-    first_e = int(np.flatnonzero(prog.end_mm[ms, 3] != prog.start_mm[ms, 3])[0])
-    ours = float(pl.duration_s[ms[first_e]:].sum())
-    e_accel = 3000 * 4 * 0.4 ** 2 / (math.pi * 0.875 ** 2)
-    t_half = math.sqrt(2 * (0.5 / (16 * 200 / 34.406)) / e_accel)
-    assert rep.print_s == pytest.approx(ours - 2 * t_half, abs=2e-3)
+    assert rep.print_s == pytest.approx(ours - 2 * E_HALF_STEP_S, abs=2e-3)
 
 
 def test_replay_text_gives_m83_to_a_file_that_leaves_relative_e_to_its_start_macro():
@@ -508,23 +521,10 @@ def test_a_file_without_m83_is_replayed_as_gatesopt_reads_it(klippy, tmp_path):
     # rest) is then gatesopt's less half an E step at each end; replayed in Klipper's default
     # absolute E, each print move after an unretract is a 5.9 mm retraction at
     # max_extrude_only_accel / |E per mm| and the print takes far longer
-    from gatesopt import parse
-    from gatesopt.limits import machine_limits
-    from gatesopt.planner import plan
-    from gatesopt.printer_config import read_printer_config
-    cfg_text = kr.printer_config()
-    cfg = tmp_path / "printer.cfg"
-    cfg.write_text(cfg_text)
-    prog = parse(UNDECLARED_RELATIVE, source="kiri.gcode")
-    pl = plan(prog, machine_limits(prog, printer=read_printer_config(cfg)))
-    ms = pl.move_step
-    first_e = int(np.flatnonzero(prog.end_mm[ms, 3] != prog.start_mm[ms, 3])[0])
-    ours = float(pl.duration_s[ms[first_e]:].sum())
-    e_accel = 3000 * 4 * 0.4 ** 2 / (math.pi * 0.875 ** 2)
-    t_half = math.sqrt(2 * (0.5 / (16 * 200 / 34.406)) / e_accel)
+    cfg_text, ours = _planned_from_first_e_s(UNDECLARED_RELATIVE, "kiri.gcode", tmp_path)
     assert kr.relative_e_undeclared(UNDECLARED_RELATIVE)
     rep = klippy.run(cfg_text, kr.replay_text(UNDECLARED_RELATIVE)[0])
-    assert rep.print_s == pytest.approx(ours - 2 * t_half, abs=2e-3)
+    assert rep.print_s == pytest.approx(ours - 2 * E_HALF_STEP_S, abs=2e-3)
     absolute = klippy.run(cfg_text, kr.replay_text(UNDECLARED_RELATIVE, relative_e=False)[0])
     assert absolute.print_s > ours + 0.1
 
@@ -544,19 +544,6 @@ def test_planner_times_arcs_as_klipper(klippy, tmp_path):
     # last (E-only moves from and to rest at both ends: half an E step each, as above). Before
     # Klipper's arc rules (chords, their average speed, the spiral lift that does not turn, each
     # move's own junction deviation) the planner had this 0.27 s longer than Klipper (2.335 vs 2.064 s)
-    from gatesopt import parse
-    from gatesopt.limits import machine_limits
-    from gatesopt.planner import plan
-    from gatesopt.printer_config import read_printer_config
-    cfg_text = kr.printer_config()
-    cfg = tmp_path / "printer.cfg"
-    cfg.write_text(cfg_text)
+    cfg_text, ours = _planned_from_first_e_s(ARCS, "arcs.gcode", tmp_path)
     rep = klippy.run(cfg_text, kr.replay_text(ARCS)[0])
-    prog = parse(ARCS, source="arcs.gcode")
-    pl = plan(prog, machine_limits(prog, printer=read_printer_config(cfg)))
-    ms = pl.move_step
-    first_e = int(np.flatnonzero(prog.end_mm[ms, 3] != prog.start_mm[ms, 3])[0])
-    ours = float(pl.duration_s[ms[first_e]:].sum())
-    e_accel = 3000 * 4 * 0.4 ** 2 / (math.pi * 0.875 ** 2)
-    t_half = math.sqrt(2 * (0.5 / (16 * 200 / 34.406)) / e_accel)
-    assert rep.print_s == pytest.approx(ours - 2 * t_half, abs=5e-3)
+    assert rep.print_s == pytest.approx(ours - 2 * E_HALF_STEP_S, abs=5e-3)
