@@ -147,6 +147,30 @@ def test_original_line_with_the_very_text_gating_writes(fw, end):
     _solve_and_check(make_gcode(end=(end, "M84")), fw)
 
 
+@pytest.mark.parametrize("fw", ["marlin", "reprap"])
+def test_no_interval_spans_the_files_own_m17(fw):
+    """E, idle from the file's start to its first extrusion, may be switched off at the start
+    (where Marlin's stop costs nothing: no move before it) -- but the start G-code's own ``M17``
+    enables every motor on the way, so an off line before it switches nothing off for the rest of
+    the interval. Regression: ``--motors E`` on Marlin put ``M18 E`` before ``G28`` / ``M17`` and
+    claimed E off until its ``M17 E``; the verifier counted E on from the ``M17``, the solve failed
+    its own verification (claim 1280.796 J, recomputed 1280.844 J). Each interval now ends before a
+    line where the firmware switches its motor itself (``gating.problem._barrier_cum``)."""
+    text = make_gcode(start=("M17",), end=("M84",))
+    prog = parse(text)
+    opts = GatingOptions.for_firmware(fw, motors=("E",))
+    prob = build(prog, opts)
+    own_m17 = [r for r in (prog.kind == Kind.MOTOR).nonzero()[0]
+               if prog.line_text(int(prog.line[r])).strip() == "M17"]
+    assert len(own_m17) == 1
+    r17 = int(own_m17[0])
+    spans = (prob.idle_prev_row < r17) & (prob.idle_next_row > r17)
+    assert not spans.any(), "an idle interval across the file's own M17"
+    res = run(prog, opts, order=False)
+    assert res.report.ok, [str(f) for f in res.report.findings]
+    assert res.solution.energy_j == pytest.approx(res.report.energy_j, rel=1e-8, abs=0)
+
+
 @pytest.mark.parametrize("formulation", ["greedy", "dp", "milp", "cpsat"])
 def test_every_formulation_claims_the_verified_energy_with_klipper_m17(formulation):
     text = make_gcode(start=("M17", "M84"), end=("M84",))

@@ -235,7 +235,10 @@ def test_gating_costs_and_stalls():
     m = firmware.stall_durations(p, "marlin")
     np.testing.assert_allclose(m[motor], [0.0, firmware.get("marlin").stall_off_s, 0.0, 0.0])
     assert firmware.stall_durations(p, "3dgates").sum() == 0.0
-    assert firmware.stall_durations(p, "marlin", planner=lambda prog, r: 0.5)[motor[1]] == 0.5
+    # a disable that is a full stop takes the caller's price where it has a planner: Marlin's per
+    # move (``disable_is_stop``), RepRapFirmware's per line (``stall_is_stop``)
+    assert firmware.stall_durations(p, "marlin", enable_price=lambda prog, rows: [0.5] * len(rows))[motor[1]] == 0.5
+    assert firmware.stall_durations(p, "reprap", planner=lambda prog, r: 0.5)[motor[1]] == 0.5
 
 
 def test_unsplittable_step_moves_switch_to_safe_side():

@@ -40,7 +40,6 @@ from ..program import AXES
 from . import Firmware, PlannerRules
 
 MARLIN_STOP_S = 0.05
-MARLIN_ACCEL_MM_S2 = 1000.0
 INF = math.inf
 
 PLANNER = PlannerRules(
@@ -59,5 +58,5 @@ DIALECT = Firmware(
     executes=frozenset({"M17", "M18", "M84"}),
     description="Marlin 2.x: M18 drains the queue (full stop), M17 enables at parse time",
     rank=1, detect_words=("M17", "M18"), detect_rank=20,
-    no_drain_words=frozenset({"M17"}), stall_is_stop=True, split_moves="kinematic", planner=PLANNER,
+    no_drain_words=frozenset({"M17"}), split_moves="kinematic", planner=PLANNER,
     disable_is_stop=True, disable_fixed_s=0.0)   # the drain is the stop: priced per move

@@ -380,7 +380,7 @@ class _Timing:
     dur: np.ndarray                 # (n,)
     stall_w: np.ndarray             # (n,) power of a stall at each step
     lb_cum_s: np.ndarray | None     # (n+1,) cumulative ``planner.min_move_time_s``; None: no schedule
-    barrier_cum: np.ndarray | None  # (n+1, 4) cumulative count of steps where the firmware switches a
+    barrier_cum: np.ndarray         # (n+1, 4) cumulative count of steps where the firmware switches a
                                     # motor itself (homing, the file's own motor lines it carries out)
     whole: np.ndarray               # (n,) bool: steps no line may split (``timeline.whole_steps``;
                                     # none under a schedule: its lines go between steps)
@@ -460,7 +460,12 @@ def _idle_table(o: GatingOptions, t: _Timing, group_rate_w: dict, steps_list, an
                 out["idle_lb_off_s"] = t.lb_cum_s[np.minimum(prev + 1, n)]
                 out["idle_lb_on_s"] = t.lb_cum_s[np.minimum(nxt, n)]
             else:
-                out["idle_lb_off_s"] = out["idle_lb_on_s"] = np.zeros(len(prev))
+                # an interval across a line where the firmware switches m itself is not one
+                # (``_barrier_cum``); under a schedule ``_schedule_keep`` drops it
+                keep = (t.barrier_cum[np.minimum(nxt, n), m]
+                        == t.barrier_cum[np.minimum(prev + 1, n), m])
+                out = {nm: v[keep] for nm, v in out.items()}
+                out["idle_lb_off_s"] = out["idle_lb_on_s"] = np.zeros(int(keep.sum()))
             parts.append((k, m, out))
     res = {nm: np.concatenate([p[2][nm] for p in parts]) for nm in parts[0][2]}
     res["idle_angle"] = np.concatenate([np.full(len(p[2]["idle_start_s"]), p[0], np.int32) for p in parts])
@@ -545,24 +550,36 @@ def time_model_durations(program: Program, o: GatingOptions) -> np.ndarray:
     return program.duration_s
 
 
-def _timing(program: Program, o: GatingOptions, start_s, dur, stall_w) -> _Timing:
-    """The timeline, and a schedule's lower-bound clock and the steps where the firmware switches
-    motors itself: homing, and the file's own motor lines it carries out (``Firmware.reads``)."""
-    if o.schedule is None:
-        # steps no line may split (not moves; moves the dialect does not split: ``split_moves``)
-        whole = np.ascontiguousarray(whole_steps(program.steps_motor(), program.kind, o.split_moves))
-        return _Timing(start_s, dur, stall_w, None, None, whole)
-    lb = min_move_time_s(program, o.schedule.arc_segment_mm)
+def _barrier_cum(program: Program, o: GatingOptions, enables_only: bool) -> np.ndarray:
+    """(n+1, 4) cumulative count, per motor, of the steps where the firmware switches that motor
+    itself: homing, and the file's own motor lines it carries out (``Firmware.reads``; with
+    ``enables_only`` only those that switch it on: a start G-code ``M17`` enables every motor,
+    while an own disable inside an off interval leaves the motor as the interval has it). No idle
+    interval may span one: the motor is on after it whatever the interval's lines say, and what
+    the verifier prices would not be the claim."""
     barrier = np.zeros((program.n_steps, 4), bool)
     barrier[program.kind == Kind.HOME] = True
     fw = fw_mod.get(o.firmware)
-    rows = np.flatnonzero(program.kind == Kind.MOTOR)
-    for r in rows.tolist():
+    for r in np.flatnonzero(program.kind == Kind.MOTOR).tolist():
         parsed = fw.reads(program.line_text(int(program.line[r])))
-        if parsed is not None:
+        if parsed is not None and (parsed[0] or not enables_only):
             barrier[r, [AXES.index(m) for m in parsed[1]]] = True
     cum = np.zeros((program.n_steps + 1, 4), np.int64)
     cum[1:] = np.cumsum(barrier, axis=0)
+    return cum
+
+
+def _timing(program: Program, o: GatingOptions, start_s, dur, stall_w) -> _Timing:
+    """The timeline, the steps where the firmware switches motors itself (``_barrier_cum``) and
+    a schedule's lower-bound clock."""
+    # a schedule's module switches nothing across any own line (formulations/gating.md §9); a
+    # stock dialect's off interval only not across an own enable
+    cum = _barrier_cum(program, o, enables_only=o.schedule is None)
+    if o.schedule is None:
+        # steps no line may split (not moves; moves the dialect does not split: ``split_moves``)
+        whole = np.ascontiguousarray(whole_steps(program.steps_motor(), program.kind, o.split_moves))
+        return _Timing(start_s, dur, stall_w, None, cum, whole)
+    lb = min_move_time_s(program, o.schedule.arc_segment_mm)
     return _Timing(start_s, dur, stall_w, np.concatenate(([0.0], np.cumsum(lb))), cum,
                    np.zeros(program.n_steps, bool))
 
