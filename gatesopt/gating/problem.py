@@ -552,13 +552,16 @@ def time_model_durations(program: Program, o: GatingOptions) -> np.ndarray:
 
 def _barrier_cum(program: Program, o: GatingOptions, enables_only: bool) -> np.ndarray:
     """(n+1, 4) cumulative count, per motor, of the steps where the firmware switches that motor
-    itself: homing, and the file's own motor lines it carries out (``Firmware.reads``; with
-    ``enables_only`` only those that switch it on: a start G-code ``M17`` enables every motor,
-    while an own disable inside an off interval leaves the motor as the interval has it). No idle
-    interval may span one: the motor is on after it whatever the interval's lines say, and what
-    the verifier prices would not be the claim."""
+    itself: homing, and the file's own motor lines it carries out (``Firmware.reads``). With
+    ``enables_only`` (a stock dialect, whose lines switch at once) only the own lines that switch
+    it on: a start G-code ``M17`` enables every motor, while an own disable inside an off interval
+    leaves the motor as the interval has it, and homing enables only the axes it homes, which step
+    (Marlin's ``G28``, Klipper's homing rails; the extruder is not one). No idle interval may span
+    one: the motor is on after it whatever the interval's lines say, and what the verifier prices
+    would not be the claim."""
     barrier = np.zeros((program.n_steps, 4), bool)
-    barrier[program.kind == Kind.HOME] = True
+    if not enables_only:
+        barrier[program.kind == Kind.HOME] = True
     fw = fw_mod.get(o.firmware)
     for r in np.flatnonzero(program.kind == Kind.MOTOR).tolist():
         parsed = fw.reads(program.line_text(int(program.line[r])))
