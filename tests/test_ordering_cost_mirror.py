@@ -3,9 +3,8 @@ flip(v) -> flip(u), the same two points the other way round. Where the firmware'
 is the same run backwards (Klipper), a link joined to two open curves and its mirror are one
 sequence of moves run both ways, so one price: checked on real layers with every link priced
 itself, and the matrix that prices such pairs once is that reference. Under Marlin's classic jerk
-``joined_links="symmetric"`` prices each link its own moves: every pair one price, so the
-symmetric model's edge is exact there; the default joins them too (their pairs then differ, and
-the directed model proves such groups: tests/test_ordering_cost_jerk.py)."""
+the default prices each link its own moves (``OrderingOptions.joined_links``): every pair one
+price, so the symmetric model's edge is exact there."""
 from __future__ import annotations
 
 import numpy as np
@@ -106,9 +105,9 @@ def test_klipper_window_takes_the_same_time_backwards():
 
 @needs_shared
 @pytest.mark.parametrize("mode", ["safe", "free"])
-def test_classic_jerk_links_unjoined_are_one_price_both_ways(mode):
+def test_classic_jerk_links_are_one_price_both_ways_by_default(mode):
     prog = gatesopt.parse(SHARED_INSTANCES / "cura413_star_triangles20.gcode.gz")
-    prob = build(prog, OrderingOptions(mode=mode, joined_links="symmetric"))
+    prob = build(prog, OrderingOptions(mode=mode))
     pr = prob.pricer
     assert pr.move.junction_code == 0 and not pr.joined and not pr.mirror_joined
     # the travels keep the limits in force at each gap (not joined, still planned)
@@ -121,9 +120,8 @@ def test_classic_jerk_links_unjoined_are_one_price_both_ways(mode):
         np.testing.assert_allclose(D[u, v], D[fv, fu], rtol=0, atol=1e-9)
         pairs += len(u)
     assert pairs >= 1000
-    # joined (``"all"``, the default): most pairs differ by the jerk rule's junctions
-    alljoined = build(prog, OrderingOptions(mode=mode))
-    assert alljoined.pricer.joined and not alljoined.pricer.mirror_joined
+    # joined (``"all"``, the previous default): most pairs differ by the jerk rule's junctions
+    alljoined = build(prog, OrderingOptions(mode=mode, joined_links="all"))
     g, grp = _sample(alljoined, n=3)[0]
     D = grp.arc_cost()
     u, v, fv, fu = _pairs(grp)

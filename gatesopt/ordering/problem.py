@@ -71,19 +71,13 @@ class OrderingOptions:
     copied_gaps: str = "planner"
     #: which links are planned joined to the moves of the curves around them (formulations/
     #: ordering.md, "Cost model", "Joined to the curves"; with ``copied_gaps="planner"``):
-    #: "all" (the default): under every junction rule. Marlin's classic jerk included: its
-    #: junction speed is at most the smaller nominal speed of the two blocks (planner.cpp,
-    #: ``vmax_junction = _MIN(block->nominal_speed, previous_nominal_speed)``), so a travel
-    #: leaving a slow perimeter starts at the perimeter's speed, not at its own safe speed; a
-    #: link priced as its own moves was up to 3.8 ms short per rebuilt travel against the
-    #: planner, and proven orders printed slower (real_cura410_cubic layer 13: priced 29.5 ms
-    #: faster, printed 11.4 ms slower; prusa25_bunny_triangles15_lh01: 36 proven groups in 25
-    #: layers put back by the time guard -> 2 in 2, at a 40 s budget). A joined link and its mirror differ under
-    #: that rule; the directed model proves such groups (``symmetric.DirectedModel``).
-    #: "symmetric": joined where the rule is the same run backwards (Klipper's square-corner
-    #: velocity, Marlin's junction deviation), each link its own moves under classic jerk (the
-    #: default before the directed proofs); "none": never joined
-    joined_links: str = "all"
+    #: "symmetric" (the default) where the firmware's junction rule is the same run backwards
+    #: (Klipper's square-corner velocity, Marlin's junction deviation), so that a link and its
+    #: mirror keep one price where the physics gives them one, and under Marlin's classic jerk
+    #: each link its own moves (its travel's limits, the copied gaps at the planner's time);
+    #: "all": joined under every rule (classic jerk too: a link and its mirror then differ);
+    #: "none": never joined
+    joined_links: str = "symmetric"
 
     def __post_init__(self):
         if self.mode not in ("safe", "free"):
