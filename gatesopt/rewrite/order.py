@@ -236,11 +236,12 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
         workers=workers, time_guard=time_guard, progress=progress, started_s=t0,
         finish_slow=slow)
     solution, text, out, slower_layers = guarded
-    findings = tuple(check(program, out))
+    findings = tuple(check(program, out, problem.program_problem.layout))
     summary = order_summary(program, out, problem, solution, options, slower_layers, findings,
                             formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
                             solve_budget_s=solve_budget, workers=workers,
-                            wall_s=time.perf_counter() - t0, greedy_layers=guarded.greedy_layers)
+                            wall_s=time.perf_counter() - t0, greedy_layers=guarded.greedy_layers,
+                            planned_s=guarded.planned_s)
     return OrderResult(program, problem, solution, text, out, findings, summary)
 
 
@@ -317,13 +318,15 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
                   solution: OrderingSolution, options: OrderingOptions, slower_layers,
                   findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
                   solve_budget_s: float | None, workers: int, wall_s: float,
-                  with_figures: bool = True, greedy_layers: int = 0) -> dict:
+                  with_figures: bool = True, greedy_layers: int = 0,
+                  planned_s: tuple = (None, None)) -> dict:
     """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` has it under
     ``"ordering"``): the figures of the input and the output (``rewrite.figures``: travel,
     travels and retractions measured on the parsed files, print time under the planner model;
     ``with_figures`` False leaves them to the caller, whose own output they would describe), the
-    solver's model travel, how each group and layer was solved."""
-    fig = figures(program, out) if with_figures else None
+    solver's model travel, how each group and layer was solved. ``planned_s``: both files'
+    per-step planner durations where the time guard has them (``guard.Guarded.planned_s``)."""
+    fig = figures(program, out, planned_s=planned_s) if with_figures else None
     layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
     sizes = np.diff(problem.group_curve_start)
     slower = _slower_notes(fig, slower_layers)
