@@ -90,8 +90,13 @@ def kept_slower_note(n_layers: int) -> str:
 #: budget (cura413_xend_zigzag100 free; the bunny 8.97-9.12 s over four runs). Before the guard
 #: was memoised the bunny took 17.3-19.8 us and a run at 16-17 us reached 10.06 s; the emit alone
 #: varies by ~+-25 % between runs on this shared machine, hence the margin. The rest of a small
-#: file is a few tenths of a second whatever its rate
-FINISH_S_PER_LINE = 15e-6
+#: file is a few tenths of a second whatever its rate. Then 15 us; since the verifier sorts by one
+#: key, the report reuses the guard's planner runs and the emit copies lines from per-program
+#: lists (bench/after_solve.py), the same runs' work after the solve takes 0.62-0.79 of its CPU
+#: time (budget 10, workers 1, same machine and hour, CPU us per line before -> after:
+#: cura413_xend_zigzag100 free, 7 emits, 25.5 -> 19.7; the bunny safe 7.8 -> 6.0, free 15.4 ->
+#: 9.6; prusa25_xend_honey25_acp free 12.5 -> 9.9; real_ideamaker420 free 39 -> 28), so 0.8 x 15
+FINISH_S_PER_LINE = 12e-6
 #: and per file, whatever its size (imports on first use, the report)
 FINISH_FIXED_S = 0.15
 #: building the ordering problem (``ordering.groups.build``), per input line: ``reorder`` measures
@@ -140,8 +145,9 @@ class NoTimeToOrder(Exception):
 #: seconds per input line of the time guard's second stage (the exact answer against the greedy
 #: stage's file: its emits and planner runs), which only a run with a greedy stage pays and the
 #: finish estimate (``FINISH_S_PER_LINE``, measured with one stage) does not hold: 5.1 us on
-#: real_cura591 (44,755 lines: 0.14 s one stage, 0.36 s two), quiet machine
-GUARD_STAGE_S_PER_LINE = 6e-6
+#: real_cura591 (44,755 lines: 0.14 s one stage, 0.36 s two), quiet machine; then 6 us, lowered
+#: by the ratio ``FINISH_S_PER_LINE`` was (its emits, parses and planner runs are the same work)
+GUARD_STAGE_S_PER_LINE = 5e-6
 
 
 def reorder(program: Program, options: OrderingOptions | None = None, *,
