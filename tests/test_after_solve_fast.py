@@ -13,6 +13,7 @@ import pytest
 import gatesopt
 from gatesopt.ordering import OrderingOptions, build, solve
 from gatesopt.ordering.writer import E_WORD, e_word_split, line_texts
+from gatesopt.planner import plan, planned_durations_s
 from gatesopt.rewrite.figures import figures
 from gatesopt.rewrite.guard import emit_guarded, keep_layers, step_times_s
 from gatesopt.verify.ordering import _layers_differing, _sorted_rows, unique_pairs
@@ -58,6 +59,9 @@ def test_guarded_text_states_and_durations_as_before(name, mode):
         before_s, after_s = gd.planned_s
         assert np.array_equal(before_s, step_times_s(prog))
         assert np.array_equal(after_s, step_times_s(gd.output))
+        # the durations-only entry of the planner is the planner's own computation
+        assert np.array_equal(plan(gd.output).duration_s, after_s)
+        assert np.array_equal(planned_durations_s(prog), plan(prog).duration_s)
         assert repr(float(after_s.sum())) == total
         assert figures(prog, gd.output, planned_s=gd.planned_s) == figures(prog, gd.output)
 

@@ -40,7 +40,7 @@ from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
 from ..ordering.problem import GroupSolution, OrderingProblem, OrderingSolution
 from ..parse import parse
-from ..planner import plan
+from ..planner import planned_durations_s
 from ..program import Program
 from ..solvers import Status
 
@@ -83,7 +83,7 @@ class Guarded:
 def step_times_s(program: Program) -> np.ndarray:
     """Per step, its time under the planner model (``planner.plan``: acceleration, junction
     speeds, the file's machine limits): what the time guard and the report's print time use."""
-    return plan(program).duration_s
+    return planned_durations_s(program)
 
 
 def layer_times_s(program: Program, durations_s: np.ndarray | None = None) -> np.ndarray:
