@@ -232,7 +232,7 @@ def durations(program: Program, model: str = "paper", limits: MachineLimits | No
     if model == "paper":
         return program.duration_s
     if model == "planner":
-        return plan(program, limits).duration_s
+        return planned_durations_s(program, limits)
     raise TimeModelError(f"unknown time model {model!r} (choose from {', '.join(TIME_MODELS)})")
 
 
@@ -329,9 +329,39 @@ def move_geometry(program: Program, klipper: bool) -> tuple[np.ndarray, np.ndarr
 
 def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
     """The planner time model for every step of ``program`` (see module docstring)."""
+    (dur, idx, limits, length, entry, exit_, peak, t_acc, t_cruise, t_dec, acc, vnom, vfree, vj,
+     vj_free, safe, stop_before, barrier) = _profile(program, limits)
+    n, m = program.n_steps, len(idx)
+    # the speeds the trapezoids use (Klipper's set_junction clips them to the cruise cap)
+    entry = np.minimum(entry, vnom)
+    exit_ = np.minimum(exit_, vnom)
+
+    def full(vals, fill=0.0):
+        out = np.full(n, fill)
+        out[idx] = vals
+        return out
+
+    step_move = np.full(n, -1, dtype=np.int64)
+    step_move[idx] = np.arange(m)
+    return Plan(duration_s=dur, entry_mm_s=full(entry), cruise_mm_s=full(peak), exit_mm_s=full(exit_),
+                accel_s=full(t_acc), cruise_s=full(t_cruise), decel_s=full(t_dec),
+                accel_mm_s2=full(acc), length_mm=length,
+                nominal_mm_s=full(vnom), limits=limits, free_mm_s=full(vfree), move_step=idx,
+                step_move=step_move,
+                _vj=vj, _vj_free=vj_free, _safe=safe, _stop_before=stop_before, _barrier=barrier)
+
+
+def planned_durations_s(program: Program, limits: MachineLimits | None = None) -> np.ndarray:
+    """``plan(program, limits).duration_s`` without the rest of the ``Plan`` (its per-step speed
+    arrays): what the time guard and the reports' print times read (the same computation)."""
+    return _profile(program, limits)[0]
+
+
+def _profile(program: Program, limits: MachineLimits | None):
+    """The planner's computation (``plan``): per step its duration, and per move the kernels'
+    speeds and times."""
     if limits is None:
         limits = machine_limits(program)
-    n = program.n_steps
     kind = program.kind
     klipper = limits.firmware == "klipper"
     length, is_arc = move_geometry(program, klipper)
@@ -387,27 +417,12 @@ def plan(program: Program, limits: MachineLimits | None = None) -> Plan:
 
     entry, exit_, peak, t_acc, t_cruise, t_dec = _k.plan_moves(
         L, acc, vnom, vj, safe, stop_before)
-    # the speeds the trapezoids use (Klipper's set_junction clips them to the cruise cap)
-    entry = np.minimum(entry, vnom)
-    exit_ = np.minimum(exit_, vnom)
-
-    def full(vals, fill=0.0):
-        out = np.full(n, fill)
-        out[idx] = vals
-        return out
-
     dur = np.array(program.duration_s, dtype=float, copy=True)
     zero_motion = np.isin(kind, np.asarray(MOTION_KINDS, dtype=kind.dtype)) & ~motion
     dur[zero_motion] = 0.0
     dur[idx] = t_acc + t_cruise + t_dec
-    step_move = np.full(n, -1, dtype=np.int64)
-    step_move[idx] = np.arange(m)
-    return Plan(duration_s=dur, entry_mm_s=full(entry), cruise_mm_s=full(peak), exit_mm_s=full(exit_),
-                accel_s=full(t_acc), cruise_s=full(t_cruise), decel_s=full(t_dec),
-                accel_mm_s2=full(acc), length_mm=length,
-                nominal_mm_s=full(vnom), limits=limits, free_mm_s=full(vfree), move_step=idx,
-                step_move=step_move,
-                _vj=vj, _vj_free=vj_free, _safe=safe, _stop_before=stop_before, _barrier=barrier)
+    return (dur, idx, limits, length, entry, exit_, peak, t_acc, t_cruise, t_dec, acc, vnom, vfree,
+            vj, vj_free, safe, stop_before, barrier)
 
 
 def stop_restart_s(p: Plan, rows, split=False) -> np.ndarray:

@@ -160,7 +160,8 @@ class _Plan:
         self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
         self.changed = (rev | (seam != 0)).tolist()
         (self.group_first, self.layer, self.l0, self.l1, self.feature, self.req,
-         self.curve_state, self.block, self.run, self.closes, self.close_set) = per_curve
+         self.curve_state, self.block, self.run, self.closes, self.close_set, self.s0,
+         self.feed0, self.has_f) = per_curve
 
     @staticmethod
     def per_curve(p: Program, problem: OrderingProblem, lay: Layout) -> tuple:
@@ -181,7 +182,9 @@ class _Plan:
         run, closes, close_set = _runs(p, lay)
         return (problem.group_curve_start[gidx].tolist(), problem.curve_layer.tolist(),
                 l0.tolist(), l1.tolist(), p.feature[lay.curve_s0].tolist(), req, curve_state,
-                block, run, closes, close_set)
+                block, run, closes, close_set, lay.curve_s0.tolist(),
+                p.feed_mm_s[lay.curve_s0].tolist(),
+                {})     # per curve asked: whether its first line sets F itself (``_curve``)
 
     def gap_lines(self, c: int) -> range:
         """The original lines between curve c - 1 and curve c."""
@@ -254,25 +257,33 @@ def _emit_curve(plan: _Plan, w: Writer, k: int, prev: int) -> int:
     if fi >= 0 and w.feature != p.feature_names[fi]:
         w.write(f"{lay.feature_prefix}{p.feature_names[fi]}")
         w.feature = p.feature_names[fi]
-    _curve(w, p, lay, c, plan.rev[c], plan.seam[c], plan.block[c])
+    reverse, seam = plan.rev[c], plan.seam[c]
+    if not reverse and seam == 0:
+        # (the per-curve lists: numpy scalar indexing was a fifth of this path)
+        feed = plan.feed0[c]
+        if w.feed is None or abs(w.feed - feed) > 1e-9:
+            # the first move may rely on a modal F set before it: set it explicitly
+            has_f = plan.has_f.get(c)
+            if has_f is None:
+                has_f = plan.has_f[c] = bool(F_WORD.search(
+                    w.texts[int(p.line[plan.s0[c]])].split(";")[0]))
+            if not has_f:
+                w.write(f"G1 F{gcode_number(feed * 60.0, 3)}")
+                w.feed = feed
+        l0, l1, block = plan.l0[c], plan.l1[c], plan.block[c]
+        if block is not None and w.copy_steps(l0, l1, *block):
+            return c
+        for i in range(l0, l1 + 1):
+            w.copy_line(i)
+        return c
+    _curve(w, p, lay, c, reverse, seam)
     return c
 
 
-def _curve(w: Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int,
-           block=None) -> None:
+def _curve(w: Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> None:
+    """Curve c printed backwards (``reverse``) or from vertex ``seam``, move by move (in its
+    own order and direction ``_emit_curve`` copies it)."""
     a, b = int(lay.curve_s0[c]), int(lay.curve_s1[c])
-    if not reverse and seam == 0:
-        if w.feed is None or abs(w.feed - p.feed_mm_s[a]) > 1e-9:
-            # the first move may rely on a modal F set before it: set it explicitly
-            if not F_WORD.search(p.line_text(int(p.line[a])).split(";")[0]):
-                w.write(f"G1 F{gcode_number(p.feed_mm_s[a] * 60.0, 3)}")
-                w.feed = float(p.feed_mm_s[a])
-        l0, l1 = int(lay.curve_l0[c]), int(lay.curve_l1[c])
-        if block is not None and w.copy_steps(l0, l1, *block):
-            return
-        for i in range(l0, l1 + 1):
-            w.copy_line(i)
-        return
     # neutral commands inside the curve (progress M73, messages M117) are not moves: written
     # move by move the curve would lose them, so they go first, in their order
     cmd = w.command_lines

@@ -200,7 +200,7 @@ def _sort_lines(w: Writer, p: Program, line_sets) -> _GapLines:
                     fw_boundary = fw_boundary or boundary
                 else:
                     fw_net += 1
-            if not boundary and cls[j] == LINE_NEUTRAL and TYPE_OR_WIPE.match(p.line_text(i)):
+            if not boundary and cls[j] == LINE_NEUTRAL and TYPE_OR_WIPE.match(w.texts[i]):
                 continue
             (pre if j < split_r else mid if j < split_t else post if j < split_u else late).append(i)
     return _GapLines(pre, mid, post, late, gap, net, r_boundary, r_internal, boundary_retracted,

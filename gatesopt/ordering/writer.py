@@ -47,7 +47,8 @@ class Writer:
         self.feature = None
         (self.line_cls, self.line_step, self.line_de, self.line_travel, self.step_relative_e,
          self.step_feed, self.step_logical_e, self.step_end_xyz, self.layer_lines, self.arc_steps,
-         self.command_lines, self.command_set, self.step_moves) = lists or self.per_line(program, lay)
+         self.command_lines, self.command_set, self.step_moves, self.texts,
+         self.e_split) = lists or self.per_line(program, lay)
         # neutral commands written so far: the k-th one written is the original's k-th (below)
         self.n_commands = 0
 
@@ -70,11 +71,11 @@ class Writer:
                 frozenset(program.layer_line.tolist()),
                 frozenset(np.flatnonzero(program.kind == Kind.ARC).tolist()),
                 commands, frozenset(commands),
-                np.isin(program.kind, MOTION_KINDS).tolist())
+                np.isin(program.kind, MOTION_KINDS).tolist(), line_texts(program),
+                {})     # per line whose E word was re-numbered: its text around the number
 
     # -- copying original lines -------------------------------------------------------------
     def copy_line(self, i: int) -> None:
-        p = self.p
         if i in self.command_set:
             # progress (M73) and messages (M117) travel with the next curve, so a re-ordered
             # layer would write them in another order: printers would show progress stepping
@@ -82,7 +83,7 @@ class Writer:
             # command written is the original's k-th, whichever curve carries it
             i = self.command_lines[self.n_commands]
             self.n_commands += 1
-        text = p.line_text(i)
+        text = self.texts[i]
         s = self.line_step[i]
         cls = self.line_cls[i]
         if s >= 0:
@@ -93,11 +94,11 @@ class Writer:
             if not self.step_relative_e[s] and self.step_moves[s]:
                 want = new_e - self.e_off
                 if abs(want - self.step_logical_e[s]) > 1e-7:
-                    code, sep, comment = text.partition(";")
-                    m = E_WORD.search(code)
-                    if m:
-                        code = code[:m.start(2)] + gcode_number(want, 6) + code[m.end(2):]
-                        text = code + sep + comment
+                    around = self.e_split.get(i, False)
+                    if around is False:
+                        around = self.e_split[i] = e_word_split(text)
+                    if around is not None:
+                        text = around[0] + gcode_number(want, 6) + around[1]
             self.e = new_e
             self.xyz = self.step_end_xyz[s]     # replaced, never written in place
             self.feed = self.step_feed[s]
@@ -225,6 +226,27 @@ class Writer:
                     words += f" {ax}{gcode_number(b[k] - off[k], 5)}"
         self.write(f"{cmd}{words} E{gcode_number(e_val, 6)}{self._f(float(p.feed_mm_s[s]))}")
         self.xyz = b[:3].copy()
+
+
+def line_texts(program: Program) -> list[str]:
+    """Every line of ``program`` as ``Program.line_text`` gives it (with its line ending), made
+    once per program: the emit copies most lines, several times under the time guard."""
+    data, ls = program.data, program.line_start.tolist()
+    if data.isascii():
+        # one decode; a character is a byte, so the byte offsets cut the text where they cut the data
+        text = data.decode("ascii")
+        return [text[a:b] for a, b in zip(ls[:-1], ls[1:])]
+    return [data[a:b].decode("utf-8", "surrogateescape") for a, b in zip(ls[:-1], ls[1:])]
+
+
+def e_word_split(text: str):
+    """(the line before its E word's number, the line after it) of a move's line, None where its
+    code (before any ';') has no E word: ``copy_line`` writes a re-numbered E between them."""
+    code, sep, comment = text.partition(";")
+    m = E_WORD.search(code)
+    if m is None:
+        return None
+    return code[:m.start(2)], code[m.end(2):] + sep + comment
 
 
 def feature_of_comment(text: str, prefix: str):

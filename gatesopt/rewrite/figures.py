@@ -47,10 +47,13 @@ def _no_enable_stop(program: Program, rows):
     return [0.0] * len(rows)    # the same for an enable line that stops (Klipper): its restart stays
 
 
-def print_time_s(program: Program, firmware: str = "3dgates") -> float:
+def print_time_s(program: Program, firmware: str = "3dgates",
+                 planned_s: np.ndarray | None = None) -> float:
     """The print time of ``program`` under the planner model, firmware dwells included (module
-    docstring): every step of the file, heat-up waits and homing at their profile durations."""
-    planned = durations(program, "planner")
+    docstring): every step of the file, heat-up waits and homing at their profile durations.
+    ``planned_s``: ``planner.plan(program).duration_s``, where the caller has it (the time
+    guard planned the file already)."""
+    planned = durations(program, "planner") if planned_s is None else planned_s
     stall = fwmod.stall_durations(program, firmware, planner=_no_stall, enable_price=_no_enable_stop)
     return float(planned.sum() + stall.sum())
 
@@ -98,15 +101,16 @@ def file_firmware(program: Program) -> str:
 
 
 def figures(before: Program, after: Program, firmware: str | None = None,
-            before_s: float | None = None) -> dict:
+            before_s: float | None = None, planned_s: tuple = (None, None)) -> dict:
     """The report keys of both files: ``print_time_before_s`` / ``_after_s`` / ``_change_pct``
     with ``print_time_model``, and ``travel_before_mm`` / ``_after_mm`` / ``_change_pct``,
     ``travels_*``, ``retractions_*``. ``firmware``: the dialect the output's motor lines are in
     (None: the file's own, ``file_firmware``); ``before_s``: ``before``'s print time in that
-    firmware where the caller has it already."""
+    firmware where the caller has it already; ``planned_s``: both files' per-step planner
+    durations where the caller has them (``print_time_s``; None: planned here)."""
     firmware = firmware or file_firmware(before)
-    tb = print_time_s(before, firmware) if before_s is None else float(before_s)
-    ta = print_time_s(after, firmware)
+    tb = print_time_s(before, firmware, planned_s[0]) if before_s is None else float(before_s)
+    ta = print_time_s(after, firmware, planned_s[1])
     mb, ma = travel(before), travel(after)
     return {
         "print_time_before_s": tb, "print_time_after_s": ta, "print_time_change_pct": pct(ta, tb),

@@ -40,7 +40,7 @@ from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
 from ..ordering.problem import GroupSolution, OrderingProblem, OrderingSolution
 from ..parse import parse
-from ..planner import plan
+from ..planner import planned_durations_s
 from ..program import Program
 from ..solvers import Status
 
@@ -67,6 +67,9 @@ class Guarded:
     output: Program
     kept: np.ndarray
     source: np.ndarray
+    #: per step, the planner's durations (``step_times_s``) of the input and of ``output``, where
+    #: the guard planned them (the report's print times reuse them: ``figures.figures``), else None
+    planned_s: tuple = (None, None)
 
     def __iter__(self):     # (solution, text, output, kept), as the guard returned it before
         return iter((self.solution, self.text, self.output, self.kept))
@@ -80,7 +83,7 @@ class Guarded:
 def step_times_s(program: Program) -> np.ndarray:
     """Per step, its time under the planner model (``planner.plan``: acceleration, junction
     speeds, the file's machine limits): what the time guard and the report's print time use."""
-    return plan(program).duration_s
+    return planned_durations_s(program)
 
 
 def layer_times_s(program: Program, durations_s: np.ndarray | None = None) -> np.ndarray:
@@ -118,7 +121,7 @@ def layer_parts_s(program: Program, durations_s: np.ndarray | None = None):
 
 
 def mix_layers(problem: OrderingProblem, base: OrderingSolution | None, solution: OrderingSolution,
-               states) -> OrderingSolution:
+               states, with_cost: bool = True) -> OrderingSolution:
     """Per layer, ``solution``'s order where ``states`` is 1, else ``base``'s (None: the slicer's
     order and direction); each group's answer from the solution its layer is taken from (from
     ``solution`` where ``base`` is None). A layer's curves are one contiguous block of the print
@@ -141,8 +144,17 @@ def mix_layers(problem: OrderingProblem, base: OrderingSolution | None, solution
     order = np.where(take, solution.curve_order, order)
     rev = np.where(take, solution.curve_reversed, rev)          # per curve: take is per layer too
     seam = np.where(take, solution.curve_seam, seam)
-    return dataclasses.replace(solution, curve_order=order, curve_reversed=rev, curve_seam=seam,
-                               groups=groups, travel_after_mm=model_travel_mm(pp, order, rev, seam),
+    mixed = dataclasses.replace(solution, curve_order=order, curve_reversed=rev, curve_seam=seam,
+                                groups=groups)
+    return with_model_cost(problem, mixed) if with_cost else mixed
+
+
+def with_model_cost(problem: OrderingProblem, solution: OrderingSolution) -> OrderingSolution:
+    """``solution`` with its model travel and cost (``travel_after_mm``, ``cost_after``) figured
+    for its own order (``mix_layers`` without them: the guard's measured files need neither)."""
+    pp = problem.program_problem
+    order, rev, seam = solution.curve_order, solution.curve_reversed, solution.curve_seam
+    return dataclasses.replace(solution, travel_after_mm=model_travel_mm(pp, order, rev, seam),
                                cost_after=pp.order_cost(order, rev, seam))
 
 
@@ -270,7 +282,7 @@ def _stage(program: Program, problem: OrderingProblem, base: _Measured, solution
         return base, zero
 
     def measured(states) -> _Measured:
-        sol = mix_layers(problem, base.solution, solution, states)
+        sol = mix_layers(problem, base.solution, solution, states, with_cost=False)
         text, out = emitted(sol)
         return _Measured(sol, text, out, step_times_s(out))
     states1 = changed.astype(np.int64)
@@ -340,10 +352,12 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
                          emitted)
     best, _ = _stage(program, problem, base, solution,
                      differing_layers(problem, base.solution, solution, L), emitted)
+    planned = (slicer.durations_s, best.durations_s)
     if best.solution is None:
         # the slicer's file throughout: emitted as the solution with every layer put back
         sol = keep_layers(problem, solution, np.arange(L))
         best = _Measured(sol, *emitted(sol), slicer.durations_s)
+        planned = (slicer.durations_s, None)     # (that text was not planned: its own plan)
     # per layer where its order comes from, by what it prints: the solver's answer wherever the
     # layer prints it (also where that is the slicer's or the greedy order)
     final = best.solution
@@ -356,10 +370,10 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
         decided = problem.group_reorderable
         groups = tuple((greedy_taken(gg) if d else gg) if t else gs
                        for gs, gg, t, d in zip(solution.groups, greedy.groups, at, decided))
-    sol = dataclasses.replace(final, groups=groups, formulation=solution.formulation,
-                              solve_s=solution.solve_s)
+    sol = dataclasses.replace(with_model_cost(problem, final), groups=groups,
+                              formulation=solution.formulation, solve_s=solution.solve_s)
     kept = np.flatnonzero(changed_layers(problem, solution)[:L] & (source == FROM_SLICER))
-    return Guarded(sol, best.text, best.output, kept, source)
+    return Guarded(sol, best.text, best.output, kept, source, planned)
 
 
 def _alternate(changed: np.ndarray, has: np.ndarray):

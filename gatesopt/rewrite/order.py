@@ -90,8 +90,13 @@ def kept_slower_note(n_layers: int) -> str:
 #: budget (cura413_xend_zigzag100 free; the bunny 8.97-9.12 s over four runs). Before the guard
 #: was memoised the bunny took 17.3-19.8 us and a run at 16-17 us reached 10.06 s; the emit alone
 #: varies by ~+-25 % between runs on this shared machine, hence the margin. The rest of a small
-#: file is a few tenths of a second whatever its rate
-FINISH_S_PER_LINE = 15e-6
+#: file is a few tenths of a second whatever its rate. Then 15 us; since the verifier sorts by one
+#: key, the report reuses the guard's planner runs and the emit copies lines from per-program
+#: lists (bench/after_solve.py), the same runs' work after the solve takes 0.62-0.79 of its CPU
+#: time (budget 10, workers 1, same machine and hour, CPU us per line before -> after:
+#: cura413_xend_zigzag100 free, 7 emits, 25.5 -> 19.7; the bunny safe 7.8 -> 6.0, free 15.4 ->
+#: 9.6; prusa25_xend_honey25_acp free 12.5 -> 9.9; real_ideamaker420 free 39 -> 28), so 0.8 x 15
+FINISH_S_PER_LINE = 12e-6
 #: and per file, whatever its size (imports on first use, the report)
 FINISH_FIXED_S = 0.15
 #: building the ordering problem (``ordering.groups.build``), per input line: ``reorder`` measures
@@ -140,8 +145,9 @@ class NoTimeToOrder(Exception):
 #: seconds per input line of the time guard's second stage (the exact answer against the greedy
 #: stage's file: its emits and planner runs), which only a run with a greedy stage pays and the
 #: finish estimate (``FINISH_S_PER_LINE``, measured with one stage) does not hold: 5.1 us on
-#: real_cura591 (44,755 lines: 0.14 s one stage, 0.36 s two), quiet machine
-GUARD_STAGE_S_PER_LINE = 6e-6
+#: real_cura591 (44,755 lines: 0.14 s one stage, 0.36 s two), quiet machine; then 6 us, lowered
+#: by the ratio ``FINISH_S_PER_LINE`` was (its emits, parses and planner runs are the same work)
+GUARD_STAGE_S_PER_LINE = 5e-6
 
 
 def reorder(program: Program, options: OrderingOptions | None = None, *,
@@ -236,11 +242,12 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
         workers=workers, time_guard=time_guard, progress=progress, started_s=t0,
         finish_slow=slow)
     solution, text, out, slower_layers = guarded
-    findings = tuple(check(program, out))
+    findings = tuple(check(program, out, problem.program_problem.layout))
     summary = order_summary(program, out, problem, solution, options, slower_layers, findings,
                             formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
                             solve_budget_s=solve_budget, workers=workers,
-                            wall_s=time.perf_counter() - t0, greedy_layers=guarded.greedy_layers)
+                            wall_s=time.perf_counter() - t0, greedy_layers=guarded.greedy_layers,
+                            planned_s=guarded.planned_s)
     return OrderResult(program, problem, solution, text, out, findings, summary)
 
 
@@ -317,13 +324,15 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
                   solution: OrderingSolution, options: OrderingOptions, slower_layers,
                   findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
                   solve_budget_s: float | None, workers: int, wall_s: float,
-                  with_figures: bool = True, greedy_layers: int = 0) -> dict:
+                  with_figures: bool = True, greedy_layers: int = 0,
+                  planned_s: tuple = (None, None)) -> dict:
     """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` has it under
     ``"ordering"``): the figures of the input and the output (``rewrite.figures``: travel,
     travels and retractions measured on the parsed files, print time under the planner model;
     ``with_figures`` False leaves them to the caller, whose own output they would describe), the
-    solver's model travel, how each group and layer was solved."""
-    fig = figures(program, out) if with_figures else None
+    solver's model travel, how each group and layer was solved. ``planned_s``: both files'
+    per-step planner durations where the time guard has them (``guard.Guarded.planned_s``)."""
+    fig = figures(program, out, planned_s=planned_s) if with_figures else None
     layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
     sizes = np.diff(problem.group_curve_start)
     slower = _slower_notes(fig, slower_layers)
