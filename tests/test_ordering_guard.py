@@ -263,3 +263,19 @@ def test_on_real_files_the_exact_run_is_never_slower_than_the_greedy_run(name, m
     taken = [gs for g, gs in enumerate(sol.groups) if decided[g] and gs.formulation == guard.GREEDY_TAKEN]
     assert all(gs.status != "optimal" for gs in taken)
     assert (exact.summary["layers_greedy"] > 0) == bool(taken)
+
+
+def test_a_layer_put_back_counts_among_the_re_orderable_layers():
+    # the report's "kept slower of re-orderable": every layer the guard put back had a change in
+    # it, so it is one of the re-orderable layers, even where that change was one curve's
+    # direction and no group of >= 2 curves (fresh tall__prusa_mk3s reported 3 of 0)
+    from gatesopt.rewrite import order as pipeline
+    prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
+    res = pipeline.order_program(prog, OrderingOptions(mode="free"))
+    prob, sol = res.problem, res.solution
+    rows, _, counts, decided = pipeline._solve_counts(prob, sol, np.zeros(0, np.int64))
+    nothing = [r["layer"] for r in rows if r["status"] == "kept"]   # nothing decided in it
+    assert nothing, "a layer with nothing decided in it is needed"
+    _, _, with_one, _ = pipeline._solve_counts(prob, sol, np.array([nothing[0]]))
+    assert with_one["reorderable"] == counts["reorderable"] + 1
+    assert res.summary["layers_kept_slower"] <= res.summary["layers_reorderable"]

@@ -302,9 +302,11 @@ def _solve_counts(problem: OrderingProblem, solution: OrderingSolution, slower_l
             if lay is not None and row["layer"] < len(lay.layer_why) and lay.layer_keep[row["layer"]]:
                 why = lay.layer_why[row["layer"]]
             row["kept_why"] = why or KEPT_NOTHING
-    # layers with a group of >= 2 curves to decide, or whose islands moved as blocks
-    lay_counts["reorderable"] = len({int(problem.group_layer[g]) for g, _ in decided}
-                                    | set(np.unique(problem.curve_layer[moved]).tolist()))
+    # layers with something decided in them: a group of >= 2 curves, islands moved as blocks, a
+    # one-curve group turned, or a change the time guard put back (the layers "kept slower" are
+    # counted among these: tall__prusa_mk3s reported 3 kept slower of 0 whose only change was a
+    # curve's direction)
+    lay_counts["reorderable"] = len(decided_layers | put_back)
     return layers, counts, lay_counts, decided
 
 
