@@ -223,6 +223,12 @@ class GroupRunner:
         self.cache[key] = gs
         return gs
 
+    def matrix_made(self, g: int) -> None:
+        """Group g's link matrix was made elsewhere (``matrix_helper``): the plan charges its
+        search without it."""
+        if self.plan is not None:
+            self.plan.matrix_made(g)
+
     def pass_rate(self) -> float:
         """Seconds per curve the caller spends between groups (``passed``), as measured so far
         on this run (so on this machine as loaded), from the prior ``OVERHEAD_S_PER_CURVE``."""
