@@ -64,6 +64,7 @@ def test_greedy_on_random_layers_is_the_same_with_two_workers(monkeypatch, seed)
 def small_helper(monkeypatch):
     """A matrix helper even for a file of 9 groups (the project's instances are small)."""
     monkeypatch.setattr(matrix_helper, "MATRIX_HELPER_MIN_GROUPS", 2)
+    monkeypatch.setattr(matrix_helper, "MATRIX_HELPER_MIN_S", 0.0)
 
 
 def _helper_first(monkeypatch) -> None:
@@ -106,10 +107,9 @@ def test_greedy_on_a_real_file_is_the_same_with_two_workers(small_helper, monkey
 
 
 @needs_shared
-def test_greedy_on_a_corpus_file_is_the_same_with_two_workers(monkeypatch):
-    """As above on a corpus file with enough groups for the helper as shipped."""
+def test_greedy_on_a_corpus_file_is_the_same_with_two_workers(small_helper, monkeypatch):
+    """As above on a corpus file (54 groups)."""
     prob = _real(SHARED_INSTANCES / "real_ideamaker420.gcode", "free")
-    assert len(matrix_helper.matrix_groups(prob)) >= matrix_helper.MATRIX_HELPER_MIN_GROUPS
     _check_greedy_pass(prob, layers.solve_greedy(prob, workers=1), monkeypatch)
 
 
@@ -134,7 +134,13 @@ def test_the_matrices_handed_over_are_those_made_here(small_helper):
         assert np.array_equal(matrix_helper.with_arc(there, arc).arc_cost(), there.arc_cost())
 
 
-def test_no_helper_without_a_time_objective():
+def test_no_helper_without_a_time_objective_or_matrices_worth_one(monkeypatch):
     prob = from_polylines(random_line_layers([10] * 20), options=OrderingOptions(mode="free"))
     assert matrix_helper.matrix_groups(prob) == []
+    assert matrix_helper.MatrixHelper.start(prob) is None
+    # a real file whose matrices are planned at well under MATRIX_HELPER_MIN_S (enough groups)
+    monkeypatch.setattr(matrix_helper, "MATRIX_HELPER_MIN_GROUPS", 2)
+    prob = _real(PROJECT_INSTANCES / "cyl_grid.gcode", "free")
+    todo = matrix_helper.matrix_groups(prob)
+    assert 0 < matrix_helper.planned_matrix_s(prob, todo) < matrix_helper.MATRIX_HELPER_MIN_S
     assert matrix_helper.MatrixHelper.start(prob) is None

@@ -148,6 +148,11 @@ class BudgetPlan:
     def pending_curves(self) -> float:
         return float(self.curves[self.pending].sum())
 
+    def pending_matrix_s(self) -> float:
+        """What making the pending groups' link matrices is planned to take (0 where they are
+        made already): all a matrix-making helper process can take off the main process."""
+        return float(self.matrix_s[self.pending].sum())
+
     def limit(self, g: int, left_s: float) -> float | None:
         """Time for group ``g`` out of ``left_s`` seconds left for it and the groups after it;
         None: none (what is left is spent on smaller groups: the class docstring)."""

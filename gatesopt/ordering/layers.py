@@ -114,8 +114,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
               if workers == 2 and not one_chain else None)
     maker = MatrixHelper.start(problem) if workers == 2 and one_chain else None
     try:
-        # with the matrix helper the main process solves alone, but the plan's time per group
-        # counts the matrix that the helper makes alongside: both spend the time left at once
+        # with the matrix helper the main process solves alone; the plan counts the helper's
+        # time as far as the pending groups' matrices go (``GroupRunner.other_makes_matrices``)
         other_alive = ((lambda: not helper.dead) if helper else
                        (lambda: not maker.dead) if maker else None)
         runner = GroupRunner(problem, fn, time_limit_s, budget_s, t0, kwargs,
@@ -123,7 +123,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                              other_alive=other_alive,
                              warm_up=(formulations.warm_up if "warm_up" in record.capabilities
                                       else None),
-                             matrices_made=greedy is not None)
+                             matrices_made=greedy is not None,
+                             other_makes_matrices=maker is not None)
         for g in range(problem.n_groups):
             if stop_requested():        # Ctrl-C (``solvers.stop_scope``): no whole answer yet
                 raise Interrupted(f"curve ordering stopped at group {g} of {problem.n_groups}")

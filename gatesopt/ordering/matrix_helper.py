@@ -33,11 +33,18 @@ import threading
 
 import numpy as np
 
+from .budget import MATRIX_S_PER_LINK
 from .problem import Anchor
 
 #: fewer groups than this with a matrix to make: no helper (a fresh interpreter's start, ~1.5 s
 #: with the imports and kernels, would not pay); ``helper.HELPER_MIN_GROUPS`` for the chain helper
 MATRIX_HELPER_MIN_GROUPS = 16
+#: nor where making every matrix is planned to take less than this (``budget.MATRIX_S_PER_LINK``,
+#: ~2 candidates a curve): the main process would have made them all before the helper has
+#: started, and starting it (the problem written to a file, a process spawned) is the main
+#: process's time. real_ideamaker420, free: 53 matrices of 2 MB, the pass 0.28 s with one worker,
+#: 0.75 s with a helper that never arrived
+MATRIX_HELPER_MIN_S = 1.0
 #: a group's state in the shared bytes: nobody has taken it / the helper makes it / sent it
 FREE, BUILDING, SENT = 0, 1, 2
 _HEAD = struct.Struct("<qq")        # group, rows (the matrix is rows x rows float64)
@@ -51,6 +58,13 @@ def matrix_groups(problem) -> list[int]:
         return []
     return [g for g in range(problem.n_groups)
             if not problem.group_fixed[g] and len(problem.group_curves(g)) >= 2]
+
+
+def planned_matrix_s(problem, todo) -> float:
+    """What making the matrices of groups ``todo`` is planned to take (``budget.MATRIX_S_PER_LINK``
+    per link, ~2 candidates a curve: what the budget plan charges)."""
+    n = np.diff(problem.group_curve_start)[np.asarray(todo, np.int64)].astype(float)
+    return float(MATRIX_S_PER_LINK * np.sum((2.0 * n) ** 2))
 
 
 def with_arc(grp, arc):
@@ -90,7 +104,7 @@ class MatrixHelper:
     def start(cls, problem):
         """The helper for ``problem``, or None where it would not pay (``matrix_groups``)."""
         todo = matrix_groups(problem)
-        if len(todo) < MATRIX_HELPER_MIN_GROUPS:
+        if len(todo) < MATRIX_HELPER_MIN_GROUPS or planned_matrix_s(problem, todo) < MATRIX_HELPER_MIN_S:
             return None
         from multiprocessing import shared_memory
         shm = shared_memory.SharedMemory(create=True, size=16 + problem.n_groups)
