@@ -44,6 +44,7 @@ def add_arguments(p) -> None:
                         "solve gets what an estimate of the rest leaves (groups share it)")
     p.add_argument("--workers", type=int, choices=(1, 2), default=default_workers(),
                    help="processes: 2 lets a second one solve the chain of groups from the back "
+                        "(greedy: make the link matrices, greedy's paths stay one process's) "
                         "(default: 2 if this machine has 2 cores or more)")
     p.add_argument("--allow-slower-layers", action="store_true",
                    help="keep a layer's new order even if its rebuilt travels (retractions, "

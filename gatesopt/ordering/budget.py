@@ -121,9 +121,12 @@ class BudgetPlan:
         self.exact_s = exact_time_s(n)
         self.shape_s = self.exact_s * (n / EXACT_SHAPE_CURVES) ** EXACT_SHAPE_EXPONENT
         self.heuristic_s = HEURISTIC_S_PER_CURVE * n
+        #: per claim, what making its matrix adds to its heuristic time (0: made already)
+        self.matrix_s = np.zeros(len(n))
         if problem.pricer is not None and not matrices_made:
             # the time objective: its matrix, ~2 candidates a curve
-            self.heuristic_s = self.heuristic_s + MATRIX_S_PER_LINK * (2.0 * n) ** 2
+            self.matrix_s = MATRIX_S_PER_LINK * (2.0 * n) ** 2
+            self.heuristic_s = self.heuristic_s + self.matrix_s
         # per group, 1 once solved (or taken by the other process when shared with a helper)
         self.done_mask = np.zeros(problem.n_groups, np.int8) if shared is None else shared
         self.rank = np.empty(problem.n_groups, np.int64)
@@ -144,6 +147,11 @@ class BudgetPlan:
 
     def pending_curves(self) -> float:
         return float(self.curves[self.pending].sum())
+
+    def pending_matrix_s(self) -> float:
+        """What making the pending groups' link matrices is planned to take (0 where they are
+        made already): all a matrix-making helper process can take off the main process."""
+        return float(self.matrix_s[self.pending].sum())
 
     def limit(self, g: int, left_s: float) -> float | None:
         """Time for group ``g`` out of ``left_s`` seconds left for it and the groups after it;
@@ -181,6 +189,14 @@ class BudgetPlan:
         if self.claims[g] and limit_s >= self.exact_s[self.rank[g]]:
             self.exact_used_s += used_s
             self.exact_planned_s += float(self.shape_s[self.rank[g]])
+
+    def matrix_made(self, g: int) -> None:
+        """Group ``g``'s link matrix was made by another process (``matrix_helper``): its
+        heuristic time no longer counts it."""
+        if self.claims[g]:
+            i = self.rank[g]
+            self.heuristic_s[i] -= self.matrix_s[i]
+            self.matrix_s[i] = 0.0
 
     def done(self, g: int) -> None:
         self.done_mask[g] = 1

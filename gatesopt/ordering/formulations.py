@@ -11,6 +11,10 @@ Capabilities (``Formulation.capabilities``), what the solve driver (``layers.sol
                 chain as Fleming et al.'s Algorithm 1 chains layers: each from where the last ended
     warm_up     calls compiled kernels (numba caches, HiGHS) that ``auto.warm_up`` loads before
                 the first group, outside any group's limit
+    one_chain   its answer must not depend on the number of workers: every group is chained in
+                the main process, from the previous group's end; a second worker only makes link
+                matrices (``matrix_helper``). Greedy: ``--formulation greedy`` and the exact
+                run's greedy pass are one answer with one process or two
     any_size    takes groups of any size (``dp``, exact up to ``dp.fits``, raises above: library
                 only, not a CLI choice)
 """
@@ -23,7 +27,7 @@ from .problem import OrderingOptionsError
 
 FORMULATIONS: dict[str, Formulation] = {
     "greedy": Formulation("greedy", "gatesopt.ordering.greedy",
-                          capabilities=frozenset({"any_size"}),
+                          capabilities=frozenset({"any_size", "one_chain"}),
                           description="nearest neighbour, 2-opt, Or-opt, orientation DP"),
     "tsp": Formulation("tsp", "gatesopt.ordering.tsp", backends=("ortools",),
                        capabilities=frozenset({"any_size"}),

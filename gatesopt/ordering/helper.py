@@ -160,6 +160,11 @@ class Helper:
         got = self.results.pop(g, None)
         return None if got is None else (got[0], got[2])
 
+    def wait(self) -> None:
+        """Until the helper has ended (every answer it makes received): for tests."""
+        while not self.dead:
+            self._drain(block=True)
+
     def stop(self) -> None:
         # every answer the main process needed has been taken: a group the helper is still on
         # is nobody's (the main process solved it), so the helper is not waited for

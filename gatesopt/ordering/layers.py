@@ -12,7 +12,6 @@ same end: if a heuristic's path costs more, the original order is kept.
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -22,6 +21,7 @@ from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
 from .chain import end_of, look_ahead, path_options, pick_paths, rescored
 from .helper import Helper
+from .matrix_helper import MatrixHelper, with_arc
 from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
                       OrderingSolution, path_travel_mm)
 from .runner import GroupRunner, greedy_answer
@@ -40,33 +40,38 @@ class GreedyPass:
     solution: OrderingSolution
     answers: tuple
     matrices: tuple
+    #: groups whose matrix the helper process made (``matrix_helper``; empty with one worker)
+    handed: frozenset = frozenset()
 
     def with_matrix(self, g: int, grp):
         """Group g as the exact chain builds it (its own start and end), with greedy's link
         matrix where greedy made one: the matrix depends on the group's candidates only
         (``cost.TimePricer.dense``), not on where the group starts or ends."""
-        arc = self.matrices[g]
-        c = grp.costs
-        if arc is None or c is None or c.arc is not None or arc.shape != (grp.n_cands, grp.n_cands):
-            return grp
-        return dataclasses.replace(grp, costs=dataclasses.replace(c, arc=arc))
+        return with_arc(grp, self.matrices[g])
 
 
 def solve_greedy(problem: OrderingProblem, *, time_limit_s: float = 2.0,
-                 budget_s: float | None = None, progress=None) -> GreedyPass:
-    """``solve(problem, "greedy")`` in one process, keeping per group greedy's answer and the link
-    matrix it made (``GreedyPass``)."""
+                 budget_s: float | None = None, workers: int = 1,
+                 progress=None) -> GreedyPass:
+    """``solve(problem, "greedy", workers=workers)``, keeping per group greedy's answer, its bound
+    and the link matrix it made or the helper made for it (``GreedyPass``): with two workers the
+    second process makes matrices only (``matrix_helper``), so the answers are one worker's and
+    every group comes to the exact solve with its bound and matrix. A group greedy had no time for
+    keeps the matrix the helper made for it, if any."""
     built: list = []
-    sol = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=budget_s,
+    sol = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=budget_s, workers=workers,
                 progress=progress, built_groups=built)
-    answers, matrices = [], []
-    for g, grp in enumerate(built):
+    answers, matrices, handed = [], [], set()
+    for g, (grp, from_helper) in enumerate(built):
         gs = sol.groups[g]
         fixed = problem.group_fixed[g] or grp.n_curves == 0
         answers.append(None if fixed else greedy_answer(grp, gs))
         c = grp.costs
-        matrices.append(None if fixed or c is None or getattr(c, "euclidean", False) else c.arc)
-    return GreedyPass(sol, tuple(answers), tuple(matrices))
+        arc = None if fixed or c is None or getattr(c, "euclidean", False) else c.arc
+        matrices.append(arc)
+        if from_helper and arc is not None:
+            handed.add(g)
+    return GreedyPass(sol, tuple(answers), tuple(matrices), frozenset(handed))
 
 
 def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: float = 2.0,
@@ -78,11 +83,14 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     bound settle take next to nothing). ``workers = 2``: a second process solves the chain from the
     back (``helper.Helper``) until it meets the main process. ``progress``: called as
     ``progress(groups_done, n_groups, groups_proven)`` after each group (the CLI draws a bar).
+    A formulation whose answer must not depend on the workers (capability ``one_chain``:
+    greedy) chains every group in this process; its second process makes link matrices only
+    (``matrix_helper.MatrixHelper``), so two workers give one worker's paths, sooner.
     ``greedy``: a greedy pass of the same problem (``solve_greedy``): each group starts from its
     link matrix and greedy's path (the warm start), and a group the budget leaves no time for
     keeps greedy's path instead of the slicer's order (``runner.OUT_OF_TIME_GREEDY``), in the
-    helper process too. ``built_groups``: a list the Group of each group is appended to, as
-    solved (``solve_greedy``)."""
+    helper process too. ``built_groups``: a list (Group, matrix from the helper?) of each group
+    is appended to, as solved (``solve_greedy``)."""
     record = formulations.lookup(formulation)
     if workers not in (1, 2):
         raise OrderingOptionsError(f"workers must be 1 or 2, not {workers!r}")
@@ -101,15 +109,22 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     proven = 0      # re-orderable groups proven so far (for ``progress``)
     reorderable = problem.group_reorderable
     answers = greedy.answers if greedy is not None else None
+    one_chain = "one_chain" in record.capabilities
     helper = (Helper.start(problem, formulation, time_limit_s, budget_s, t0, kwargs, answers)
-              if workers == 2 else None)
+              if workers == 2 and not one_chain else None)
+    maker = MatrixHelper.start(problem) if workers == 2 and one_chain else None
     try:
+        # with the matrix helper the main process solves alone; the plan counts the helper's
+        # time as far as the pending groups' matrices go (``GroupRunner.other_makes_matrices``)
+        other_alive = ((lambda: not helper.dead) if helper else
+                       (lambda: not maker.dead) if maker else None)
         runner = GroupRunner(problem, fn, time_limit_s, budget_s, t0, kwargs,
                              shared=helper.shared if helper else None,
-                             other_alive=(lambda: not helper.dead) if helper else None,
+                             other_alive=other_alive,
                              warm_up=(formulations.warm_up if "warm_up" in record.capabilities
                                       else None),
-                             matrices_made=greedy is not None)
+                             matrices_made=greedy is not None,
+                             other_makes_matrices=maker is not None)
         for g in range(problem.n_groups):
             if stop_requested():        # Ctrl-C (``solvers.stop_scope``): no whole answer yet
                 raise Interrupted(f"curve ordering stopped at group {g} of {problem.n_groups}")
@@ -119,6 +134,12 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             grp = problem.group(g, pos, end)
             if greedy is not None:
                 grp = greedy.with_matrix(g, grp)
+            handed = False
+            if maker is not None and not problem.group_fixed[g] and grp.n_curves >= 2:
+                mine = with_arc(grp, maker.take(g))
+                handed, grp = mine is not grp, mine
+                for h in maker.received():      # made there: the plan no longer charges them
+                    runner.matrix_made(h)
             if problem.group_fixed[g] or grp.n_curves == 0:
                 order = np.arange(grp.n_cands)      # one candidate per curve, in the slicer's order
                 obj = grp.path_cost(order)
@@ -137,7 +158,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                         grp.check_order(gs.order)
             plans.append((grp, opts, pos, end))
             if built_groups is not None:
-                built_groups.append(grp)
+                built_groups.append((grp, handed))
             runner.passed(g)
             if progress is not None:
                 proven += bool(reorderable[g]) and opts[0].status == Status.OPTIMAL
@@ -146,6 +167,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     finally:
         if helper:
             helper.stop()
+        if maker:
+            maker.stop()
     if "look_ahead" in record.capabilities:      # the baselines chain as the paper does
         deadline = None if budget_s is None else t0 + budget_s - runner.rest_s(problem.n_groups - 1)
         look_ahead(problem, plans, fn, time_limit_s, deadline, kwargs)

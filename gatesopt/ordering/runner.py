@@ -104,7 +104,8 @@ class GroupRunner:
     kernels)."""
 
     def __init__(self, problem, fn, time_limit_s, budget_s, t0, kwargs, shared=None,
-                 other_alive=None, warm_up=None, matrices_made: bool = False):
+                 other_alive=None, warm_up=None, matrices_made: bool = False,
+                 other_makes_matrices: bool = False):
         self.problem, self.fn, self.time_limit_s, self.budget_s = problem, fn, time_limit_s, budget_s
         self.t0, self.kwargs = t0, kwargs
         self.cache = {}     # identical groups recur layer after layer (same infill, same start)
@@ -116,6 +117,9 @@ class GroupRunner:
                      else None)
         # with a helper both processes spend the time left at once, while both are running
         self.other_alive = other_alive if other_alive is not None else (lambda: shared is not None)
+        #: the other process makes link matrices only (``matrix_helper``): it adds at most the
+        #: pending groups' matrix time to what is left, not a whole second process's
+        self.other_makes_matrices = other_makes_matrices
         if warm_up is not None:
             # outside any group's limit: a group's first call of a kernel would otherwise load it
             # (~0.35 s in all) or, on a first run after an install, compile it (~20 s) inside
@@ -175,8 +179,11 @@ class GroupRunner:
                 return self._late(grp, greedy, backwards)
         share = None
         if self.plan is not None:
-            cpus = 2 if self.other_alive() else 1
-            left = max(0.0, cpus * wall_left - rate * self.plan.pending_curves())
+            other = 0.0
+            if self.other_alive():
+                other = (min(wall_left, self.plan.pending_matrix_s()) if self.other_makes_matrices
+                         else wall_left)
+            left = max(0.0, wall_left + other - rate * self.plan.pending_curves())
             share = self.plan.limit(g, left)
             if share is None:
                 # what is left goes to smaller groups (``BudgetPlan``: smallest first where it
@@ -222,6 +229,12 @@ class GroupRunner:
             self.plan.measured(g, limit, min(took, limit))
         self.cache[key] = gs
         return gs
+
+    def matrix_made(self, g: int) -> None:
+        """Group g's link matrix was made elsewhere (``matrix_helper``): the plan charges its
+        search without it."""
+        if self.plan is not None:
+            self.plan.matrix_made(g)
 
     def pass_rate(self) -> float:
         """Seconds per curve the caller spends between groups (``passed``), as measured so far

@@ -191,7 +191,8 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
         # the whole budget: greedy's answer in every group comes first (what a budget that
         # greedy uses up prints is then the greedy run's file, through one guard stage)
         t_g = time.perf_counter()
-        greedy = solve_greedy(problem, time_limit_s=time_limit_s, budget_s=solve_budget)
+        greedy = solve_greedy(problem, time_limit_s=time_limit_s, budget_s=solve_budget,
+                              workers=workers)
         if solve_budget is not None:
             # what greedy left, less the guard's second stage (the exact answer against greedy's
             # file) that an exact solve adds after it
