@@ -16,29 +16,18 @@ known by then, and the helper stops where they meet. The budget plan's "done" ma
 too, so both plan over the same groups, and both spend the time left at once
 (``runner.GroupRunner``).
 
-The helper is a fresh interpreter started with ``subprocess`` (``python -c``), not
-``multiprocessing``: "fork" after HiGHS has started its threads can deadlock, and "spawn"
-re-imports the caller's main module (a script without ``if __name__ == "__main__"`` would run
-again in the child, and its parent hung writing the problem to it). The problem goes over a
-temporary file, answers come back as pickled frames on the child's own stdout (its fd 1 points to
-stderr for anything else printed), read by a thread.
+The helper is a fresh interpreter (``child.Child``: started with ``subprocess``, its input over a
+temporary file, answers back as pickled frames on its own stdout, read by a thread).
 """
 from __future__ import annotations
 
-import os
 import pickle
-import queue
 import struct
-import subprocess
-import sys
-import tempfile
-import threading
 import time
-
-import numpy as np
 
 from . import formulations
 from .chain import end_of, path_options, solve_backwards
+from .child import Child, child_open, views
 from .problem import Anchor
 from .runner import GroupRunner
 
@@ -71,22 +60,18 @@ def _slicer_start(problem, g: int) -> Anchor:
     return Anchor(problem.curve_end_xy[c].copy(), c, False)
 
 
-def _views(buf, n_groups):
-    """(done mask per group, [main_at, helper_at]) over a shared buffer."""
-    done = np.ndarray((n_groups,), np.int8, buf, 16)
-    at = np.ndarray((2,), np.int64, buf, 0)
-    return done, at
+class Helper(Child):
+    """The main process's end of the chain helper (``start``; ``take`` per group in print
+    order, ``stop`` at the end)."""
 
-
-class Helper:
     def __init__(self, proc, shm, n_groups, path):
-        self.proc, self.shm, self.path = proc, shm, path
-        self.shared, self.at = _views(shm.buf, n_groups)
         self.results: dict[int, object] = {}
-        self.inbox: queue.Queue = queue.Queue()
-        self.dead = False
-        self.reader = threading.Thread(target=self._read, daemon=True)
-        self.reader.start()
+        super().__init__(proc, shm, n_groups, path)
+
+    @property
+    def shared(self):
+        """Per group, done by either process: the budget plan's marks (``runner.GroupRunner``)."""
+        return self.per_group
 
     @classmethod
     def start(cls, problem, formulation, time_limit_s, budget_s, t0, kwargs, greedy=None):
@@ -96,51 +81,27 @@ class Helper:
         todo = groups_to_solve(problem)
         if len(todo) < HELPER_MIN_GROUPS:
             return None
-        from multiprocessing import shared_memory
-        shm = shared_memory.SharedMemory(create=True, size=16 + problem.n_groups)
-        done, at = _views(shm.buf, problem.n_groups)
-        done[:] = 0
-        at[:] = (-1, problem.n_groups)
         # the budget's end as wall-clock time: the helper starts ~1.5 s later
         budget_end = None if budget_s is None else time.time() + budget_s - (time.perf_counter() - t0)
-        fd, path = tempfile.mkstemp(prefix="gatesopt-helper-", suffix=".pickle")
-        with os.fdopen(fd, "wb") as f:
-            pickle.dump((problem, formulation, time_limit_s, budget_end, kwargs, todo, shm.name,
-                         greedy), f)
-        proc = subprocess.Popen([sys.executable, "-c", "from gatesopt.ordering.helper import main; main()",
-                                 path], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE)
+        proc, shm, path = cls.spawn(
+            "helper", lambda name: (problem, formulation, time_limit_s, budget_end, kwargs, todo,
+                                    greedy, name), problem.n_groups, "helper")
         return cls(proc, shm, problem.n_groups, path)
 
-    def _read(self) -> None:
-        out = self.proc.stdout
-        try:
-            while True:
-                head = out.read(_HEAD.size)
-                if len(head) < _HEAD.size:
-                    break
-                (size,) = _HEAD.unpack(head)
-                body = out.read(size)
-                if len(body) < size:
-                    break
-                self.inbox.put(pickle.loads(body))
-        finally:
-            self.inbox.put(None)
+    def _frames(self, out):
+        while True:
+            head = out.read(_HEAD.size)
+            if len(head) < _HEAD.size:
+                return
+            (size,) = _HEAD.unpack(head)
+            body = out.read(size)
+            if len(body) < size:
+                return
+            yield pickle.loads(body)
 
-    def _drain(self, block: bool) -> None:
-        while not self.dead:
-            try:
-                item = self.inbox.get(block=block, timeout=0.5 if block else None)
-            except queue.Empty:
-                if block and self.proc.poll() is not None and self.inbox.empty():
-                    self.dead = True
-                return
-            if item is None:
-                self.dead = True
-                return
-            g, opts, entry, guess = item
-            self.results[g] = (opts, entry, guess)
-            if block:
-                return
+    def _keep(self, item) -> None:
+        g, opts, entry, guess = item
+        self.results[g] = (opts, entry, guess)
 
     def entry_of(self, g: int):
         """Where the helper's path for group g begins, if it has answered g (the main process
@@ -160,45 +121,12 @@ class Helper:
         got = self.results.pop(g, None)
         return None if got is None else (got[0], got[2])
 
-    def wait(self) -> None:
-        """Until the helper has ended (every answer it makes received): for tests."""
-        while not self.dead:
-            self._drain(block=True)
-
-    def stop(self) -> None:
-        # every answer the main process needed has been taken: a group the helper is still on
-        # is nobody's (the main process solved it), so the helper is not waited for
-        self.at[0] = 1 << 40
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self.proc.wait()
-        self.reader.join(timeout=1.0)
-        self.proc.stdout.close()
-        del self.shared, self.at
-        self.shm.close()
-        self.shm.unlink()
-        try:
-            os.unlink(self.path)
-        except OSError:
-            pass
-
 
 def main() -> None:
     """The helper process: solve the groups from the back until the main process reaches them."""
-    from multiprocessing import resource_tracker, shared_memory
-
-    import signal
-    # Ctrl-C reaches every process of the terminal's group: the main process stops the run (and
-    # this process, ``Helper.stop``); here it would only print a traceback
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    results = os.fdopen(os.dup(1), "wb")
-    os.dup2(2, 1)                               # stray prints (HiGHS, numba) go to stderr
-    with open(sys.argv[1], "rb") as f:
-        problem, formulation, time_limit_s, budget_end, kwargs, todo, name, greedy = pickle.load(f)
-    shm = shared_memory.SharedMemory(name=name)
-    # the parent owns the segment: without this the tracker would unlink it when we exit
-    resource_tracker.unregister(shm._name, "shared_memory")
-    done, at = _views(shm.buf, problem.n_groups)
+    results, payload, shm = child_open()
+    problem, formulation, time_limit_s, budget_end, kwargs, todo, greedy, _ = payload
+    done, at = views(shm.buf, problem.n_groups)
     t0 = time.perf_counter()
     entry = {}          # g -> where the path chosen for group g begins
     try:

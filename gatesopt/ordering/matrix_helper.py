@@ -12,9 +12,8 @@ makes them from the back of the chain, as the chain helper walks it, and stops w
 main process, which takes a matrix made there instead of making it (``take``) and makes the
 others itself: the matrices are the same numbers bit for bit, so the paths are too.
 
-The helper is a fresh interpreter (``python -c``, as ``helper.py`` starts its own, for the same
-reasons), reading the problem from a temporary file; each matrix comes back on its stdout as a
-frame (group, rows) followed by its float64 bytes, read by a thread straight into the array the
+The helper is a fresh interpreter (``child.Child``, as ``helper.py``'s), reading the problem from
+a temporary file; each matrix comes back on its stdout as a frame (group, rows) followed by its float64 bytes, read by a thread straight into the array the
 main process keeps (no pickle, one copy: the Cura bunny's matrices are ~190 MB in all). A shared
 byte per group says what the helper does with it (``FREE``, ``BUILDING``, ``SENT``): the main
 process waits for a group only while the helper is making or sending it.
@@ -22,18 +21,12 @@ process waits for a group only while the helper is making or sending it.
 from __future__ import annotations
 
 import dataclasses
-import os
-import pickle
-import queue
 import struct
-import subprocess
-import sys
-import tempfile
-import threading
 
 import numpy as np
 
 from .budget import MATRIX_S_PER_LINK
+from .child import Child, child_open, views
 from .problem import Anchor
 
 #: fewer groups than this with a matrix to make: no helper (a fresh interpreter's start, ~1.5 s
@@ -79,26 +72,19 @@ def with_arc(grp, arc):
     return dataclasses.replace(grp, costs=dataclasses.replace(c, arc=arc))
 
 
-def _views(buf, n_groups):
-    """(state per group, [main_at, helper_at]) over a shared buffer."""
-    state = np.ndarray((n_groups,), np.int8, buf, 16)
-    at = np.ndarray((2,), np.int64, buf, 0)
-    return state, at
-
-
-class MatrixHelper:
+class MatrixHelper(Child):
     """The main process's end of the helper (``start``; ``take`` per group in print order,
     ``stop`` at the end)."""
 
     def __init__(self, proc, shm, n_groups, path):
-        self.proc, self.shm, self.path = proc, shm, path
-        self.state, self.at = _views(shm.buf, n_groups)
         self.results: dict[int, np.ndarray] = {}
         self.fresh: list[int] = []          # groups received since ``received`` was last called
-        self.inbox: queue.Queue = queue.Queue()
-        self.dead = False
-        self.reader = threading.Thread(target=self._read, daemon=True)
-        self.reader.start()
+        super().__init__(proc, shm, n_groups, path)
+
+    @property
+    def state(self):
+        """Per group ``FREE``, ``BUILDING`` or ``SENT`` (the shared bytes)."""
+        return self.per_group
 
     @classmethod
     def start(cls, problem):
@@ -106,58 +92,32 @@ class MatrixHelper:
         todo = matrix_groups(problem)
         if len(todo) < MATRIX_HELPER_MIN_GROUPS or planned_matrix_s(problem, todo) < MATRIX_HELPER_MIN_S:
             return None
-        from multiprocessing import shared_memory
-        shm = shared_memory.SharedMemory(create=True, size=16 + problem.n_groups)
-        state, at = _views(shm.buf, problem.n_groups)
-        state[:] = FREE
-        at[:] = (-1, problem.n_groups)
-        del state, at
-        fd, path = tempfile.mkstemp(prefix="gatesopt-matrices-", suffix=".pickle")
-        with os.fdopen(fd, "wb") as f:
-            pickle.dump((problem, todo, shm.name), f, protocol=pickle.HIGHEST_PROTOCOL)
-        proc = subprocess.Popen([sys.executable, "-c",
-                                 "from gatesopt.ordering.matrix_helper import main; main()", path],
-                                stdin=subprocess.DEVNULL, stdout=subprocess.PIPE)
+        proc, shm, path = cls.spawn("matrix_helper", lambda name: (problem, todo, name),
+                                    problem.n_groups, "matrices")       # every group FREE (0)
         return cls(proc, shm, problem.n_groups, path)
 
-    def _read(self) -> None:
-        out = self.proc.stdout
-        try:
-            while True:
-                head = out.read(_HEAD.size)
-                if len(head) < _HEAD.size:
+    def _frames(self, out):
+        while True:
+            head = out.read(_HEAD.size)
+            if len(head) < _HEAD.size:
+                return
+            g, m = _HEAD.unpack(head)
+            arc = np.empty((m, m), np.float64)
+            view = memoryview(arc).cast("B")
+            got = 0
+            while got < len(view):
+                n = out.readinto(view[got:])
+                if not n:
                     break
-                g, m = _HEAD.unpack(head)
-                arc = np.empty((m, m), np.float64)
-                view = memoryview(arc).cast("B")
-                got = 0
-                while got < len(view):
-                    n = out.readinto(view[got:])
-                    if not n:
-                        break
-                    got += n
-                if got < len(view):
-                    break
-                self.inbox.put((g, arc))
-        finally:
-            self.inbox.put(None)
+                got += n
+            if got < len(view):
+                return
+            yield g, arc
 
-    def _drain(self, block: bool) -> None:
-        while not self.dead:
-            try:
-                item = self.inbox.get(block=block, timeout=0.5 if block else None)
-            except queue.Empty:
-                if block and self.proc.poll() is not None and self.inbox.empty():
-                    self.dead = True
-                return
-            if item is None:
-                self.dead = True
-                return
-            g, arc = item
-            self.results[g] = arc
-            self.fresh.append(g)
-            if block:
-                return
+    def _keep(self, item) -> None:
+        g, arc = item
+        self.results[g] = arc
+        self.fresh.append(g)
 
     def take(self, g: int) -> np.ndarray | None:
         """Group g's link matrix if the helper made it, or is making or sending it (then wait
@@ -176,43 +136,12 @@ class MatrixHelper:
         out, self.fresh = self.fresh, []
         return out
 
-    def wait(self) -> None:
-        """Until the helper has ended (every matrix it makes received): for tests, which then
-        compare each matrix with the main process's own."""
-        while not self.dead:
-            self._drain(block=True)
-
-    def stop(self) -> None:
-        # a matrix the helper is still making is nobody's (the main process made its own)
-        self.at[0] = 1 << 40
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self.proc.wait()
-        self.reader.join(timeout=1.0)
-        self.proc.stdout.close()
-        del self.state, self.at
-        self.shm.close()
-        self.shm.unlink()
-        try:
-            os.unlink(self.path)
-        except OSError:
-            pass
-
 
 def main() -> None:
     """The helper process: each group's matrix from the back until the main process reaches it."""
-    import signal
-    from multiprocessing import resource_tracker, shared_memory
-    # Ctrl-C reaches every process of the terminal's group: the main process stops the run
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    results = os.fdopen(os.dup(1), "wb")
-    os.dup2(2, 1)                               # stray prints go to stderr
-    with open(sys.argv[1], "rb") as f:
-        problem, todo, name = pickle.load(f)
-    shm = shared_memory.SharedMemory(name=name)
-    # the parent owns the segment: without this the tracker would unlink it when we exit
-    resource_tracker.unregister(shm._name, "shared_memory")
-    state, at = _views(shm.buf, problem.n_groups)
+    results, payload, shm = child_open()
+    problem, todo, _ = payload
+    state, at = views(shm.buf, problem.n_groups)
     origin = Anchor.of(problem.origin_xy)      # any start: the matrix does not depend on it
     try:
         for g in reversed(todo):
