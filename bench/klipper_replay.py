@@ -1393,18 +1393,21 @@ def replay_rows(a) -> tuple[list[dict], list[str]]:
                 # a dialect whose firmware times its own switches (klipper-gating) is solved for the
                 # printer it is replayed on (--printer-config: the shaper's window, the module's
                 # options); every other dialect once
-                key = (fw, v, label) if fw in SCHEDULED else (fw, v)
+                # (--stock-printer-config: every dialect so, as a user passing their printer.cfg)
+                per_printer = fw in SCHEDULED or a.stock_printer_config
+                key = (fw, v, label) if per_printer else (fw, v)
                 if key not in solved:
                     extra = shlex.split(v)
                     if fw in SCHEDULED:
                         # the replay's printer runs the module: its lines whatever the file says
                         extra += ["--force-firmware", fw]
+                    if per_printer:
                         cfg_path = work / f"printer.{re.sub(r'[^A-Za-z0-9]+', '_', label)}.cfg"
                         cfg_path.write_text(cfg)
                         extra += ["--printer-config", str(cfg_path)]
                     t0 = time.perf_counter()
                     try:
-                        solved[key] = (*solve(path, fw, extra, work, tag_extra=label if fw in SCHEDULED else ""),
+                        solved[key] = (*solve(path, fw, extra, work, tag_extra=label if per_printer else ""),
                                        time.perf_counter() - t0)
                     except ReplayError as exc:
                         solved[key] = exc
@@ -1506,6 +1509,9 @@ def main(argv=None) -> int:
     r.add_argument("--files", help="comma-separated names or globs in ../shared/instances "
                    f"(default: {', '.join(DEFAULT_FILES)})")
     r.add_argument("--firmware", default="klipper", help="comma-separated gatesopt dialects")
+    r.add_argument("--stock-printer-config", action="store_true",
+                   help="solve every dialect with --printer-config the replay's printer.cfg (by "
+                        "default only klipper-gating, whose module is on that printer)")
     r.add_argument("--solve-args", action="append", metavar="ARGS",
                    help="extra `gatesopt solve` options, one variant each (repeat; '' = default)")
     r.add_argument("--workdir", help="keep gatesopt's outputs here (default: a temporary folder)")
