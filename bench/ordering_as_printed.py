@@ -172,9 +172,9 @@ def changed_layers(r: dict) -> int:
 
 
 def _table(rows: dict, folder: str, files: list, mode: str) -> tuple[list[str], dict]:
-    lines = [f"| file | print s before | auto after | greedy after | travel auto | travel greedy | "
-             f"kept slower / re-orderable layers | greedy layers | optimal reverted | groups optimal | "
-             f"worst gap | islands moved (runs, layers) | free mode: print, travel | run s | verified |",
+    lines = ["| file | print s before | auto after | greedy after | travel auto | travel greedy | "
+             "kept slower / re-orderable layers | greedy layers | optimal reverted | groups optimal | "
+             "worst gap | islands moved (runs, layers) | free mode: print, travel | run s | verified |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     tally = {"files": 0, "not_faster_than_before": [], "slower_than_greedy": [], "kept": 0,
              "reorderable": 0, "reverted": 0, "optimal": 0, "groups": 0, "unverified": [],
@@ -308,8 +308,8 @@ def objects(args) -> None:
            "Commands (from the repository root, one process at nice 10, 2 cores shared with 6 "
            "other jobs; BEFORE: the same runs of the code before objects moved, where labels "
            "were barriers):", "", "```", cmd,
-           f"python bench/ordering_as_printed.py objects --before BEFORE.jsonl --after AFTER.jsonl "
-           f"--write docs/RESULTS.md", "```", "",
+           "python bench/ordering_as_printed.py objects --before BEFORE.jsonl --after AFTER.jsonl "
+           "--write docs/RESULTS.md", "```", "",
            "Files whose layers hold runs of >= 3 labelled objects (`; printing object`, M486, "
            "EXCLUDE_OBJECT, `;MESH:`), default budget 10 s, objective time. Print time: the "
            "planner model of the parsed, verified output, against the slicer's order (*slicer*). "

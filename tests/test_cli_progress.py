@@ -7,7 +7,6 @@ import ast
 import io
 import sys
 import time
-from pathlib import Path
 
 import numba
 
