@@ -396,8 +396,14 @@ def _schedule_keep(o: GatingOptions, t: _Timing, m: int, prev, nxt) -> np.ndarra
     after = np.minimum(prev + 1, n)
     gap = t.lb_cum_s[np.minimum(nxt, n)] - t.lb_cum_s[after]
     need = o.off_margin_s(m) + o.on_margin_s(m) + o.schedule.min_off_s + RULE_EPS_S
-    clear = t.barrier_cum[np.minimum(nxt, n), m] == t.barrier_cum[after, m]
-    return (prev >= 0) & (gap >= need) & clear
+    return (prev >= 0) & (gap >= need) & _clear_of_barriers(t, m, prev, nxt)
+
+
+def _clear_of_barriers(t: _Timing, m: int, prev, nxt) -> np.ndarray:
+    """Per interval (after step ``prev``, before step ``nxt``), whether no step between them is
+    one where the firmware switches motor ``m`` itself (``_barrier_cum``)."""
+    n = len(t.dur)
+    return t.barrier_cum[np.minimum(nxt, n), m] == t.barrier_cum[np.minimum(prev + 1, n), m]
 
 
 def _per_move_stalls(out: dict, t: _Timing, o: GatingOptions, per_event: int) -> None:
@@ -453,19 +459,17 @@ def _idle_table(o: GatingOptions, t: _Timing, group_rate_w: dict, steps_list, an
                 per_event, o.schedule is None, t.whole)))
             _per_move_stalls(out, t, o, per_event)
             prev, nxt = out["idle_prev_row"], out["idle_next_row"]
+            # an interval across a line where the firmware switches m itself is not one
+            # (``_barrier_cum``); a schedule's rules drop more (``_schedule_keep``)
+            keep = (_schedule_keep(o, t, m, prev, nxt) if o.schedule is not None
+                    else _clear_of_barriers(t, m, prev, nxt))
+            out = {nm: v[keep] for nm, v in out.items()}
+            prev, nxt = out["idle_prev_row"], out["idle_next_row"]
             if o.schedule is not None:
-                keep = _schedule_keep(o, t, m, prev, nxt)
-                out = {nm: v[keep] for nm, v in out.items()}
-                prev, nxt = out["idle_prev_row"], out["idle_next_row"]
                 out["idle_lb_off_s"] = t.lb_cum_s[np.minimum(prev + 1, n)]
                 out["idle_lb_on_s"] = t.lb_cum_s[np.minimum(nxt, n)]
             else:
-                # an interval across a line where the firmware switches m itself is not one
-                # (``_barrier_cum``); under a schedule ``_schedule_keep`` drops it
-                keep = (t.barrier_cum[np.minimum(nxt, n), m]
-                        == t.barrier_cum[np.minimum(prev + 1, n), m])
-                out = {nm: v[keep] for nm, v in out.items()}
-                out["idle_lb_off_s"] = out["idle_lb_on_s"] = np.zeros(int(keep.sum()))
+                out["idle_lb_off_s"] = out["idle_lb_on_s"] = np.zeros(len(prev))
             parts.append((k, m, out))
     res = {nm: np.concatenate([p[2][nm] for p in parts]) for nm in parts[0][2]}
     res["idle_angle"] = np.concatenate([np.full(len(p[2]["idle_start_s"]), p[0], np.int32) for p in parts])

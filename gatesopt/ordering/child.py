@@ -43,10 +43,10 @@ class Child:
         self.reader = threading.Thread(target=self._read, daemon=True)
         self.reader.start()
 
-    @staticmethod
-    def spawn(module: str, payload, n_groups: int, prefix: str):
-        """(process, shared memory, input path): the shared bytes zeroed with [main_at, helper_at]
-        = (-1, n_groups), ``payload(shm_name)`` pickled to a temporary file, and
+    @classmethod
+    def spawn(cls, module: str, payload, n_groups: int, prefix: str):
+        """The parent's end of a child started now: the shared bytes zeroed with [main_at,
+        helper_at] = (-1, n_groups), ``payload(shm_name)`` pickled to a temporary file, and
         ``gatesopt.ordering.<module>.main()`` started on it."""
         from multiprocessing import shared_memory
         shm = shared_memory.SharedMemory(create=True, size=16 + n_groups)
@@ -60,7 +60,7 @@ class Child:
         proc = subprocess.Popen([sys.executable, "-c",
                                  f"from gatesopt.ordering.{module} import main; main()", path],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.PIPE)
-        return proc, shm, path
+        return cls(proc, shm, n_groups, path)
 
     def _frames(self, out):
         """Yield each item the child wrote on ``out``; end at its end or a cut frame."""

@@ -83,10 +83,9 @@ class Helper(Child):
             return None
         # the budget's end as wall-clock time: the helper starts ~1.5 s later
         budget_end = None if budget_s is None else time.time() + budget_s - (time.perf_counter() - t0)
-        proc, shm, path = cls.spawn(
-            "helper", lambda name: (problem, formulation, time_limit_s, budget_end, kwargs, todo,
-                                    greedy, name), problem.n_groups, "helper")
-        return cls(proc, shm, problem.n_groups, path)
+        return cls.spawn("helper", lambda name: (problem, formulation, time_limit_s, budget_end,
+                                                 kwargs, todo, greedy, name),
+                         problem.n_groups, "helper")
 
     def _frames(self, out):
         while True:

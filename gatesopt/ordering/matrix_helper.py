@@ -92,9 +92,9 @@ class MatrixHelper(Child):
         todo = matrix_groups(problem)
         if len(todo) < MATRIX_HELPER_MIN_GROUPS or planned_matrix_s(problem, todo) < MATRIX_HELPER_MIN_S:
             return None
-        proc, shm, path = cls.spawn("matrix_helper", lambda name: (problem, todo, name),
-                                    problem.n_groups, "matrices")       # every group FREE (0)
-        return cls(proc, shm, problem.n_groups, path)
+        # (every group FREE: the shared bytes start at 0)
+        return cls.spawn("matrix_helper", lambda name: (problem, todo, name), problem.n_groups,
+                         "matrices")
 
     def _frames(self, out):
         while True:
