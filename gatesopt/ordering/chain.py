@@ -12,7 +12,7 @@ import numpy as np
 from ..solvers import Status, stop_requested
 from . import dp
 from .budget import exact_time_s
-from .problem import OPTIMAL_ABS_TOL, Anchor, GroupSolution, OrderingProblem
+from .problem import FILE_END, OPTIMAL_ABS_TOL, Anchor, GroupSolution, OrderingProblem
 
 #: look-ahead at a boundary (``look_ahead``): next groups of up to this many curves (the subset DP
 #: solves one from each of its possible entries in well under a millisecond)
@@ -80,10 +80,17 @@ def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwar
 
 def end_of(problem: OrderingProblem, g: int):
     """Where group g's path must travel on to: the next group's entry (an Anchor: its first
-    curve as the slicer printed it) if that group is fixed, else None."""
+    curve as the slicer printed it) if that group is fixed; for the file's last group, the
+    file's end where its first XY move starts from the last curve printed (``FILE_END``,
+    ``file_end.FileEnd``: a Cura file's ``G1 X0 Y210`` at the retraction feed,
+    KISSlicer's lift at 5 mm/s); else None."""
     if g + 1 < problem.n_groups and problem.group_fixed[g + 1]:
         c = int(problem.group_curve_start[g + 1])
         return Anchor(problem.curve_start_xy[c].copy(), c, False)
+    if g + 1 == problem.n_groups:
+        fe = getattr(problem.pricer, "file_end", None)
+        if fe is not None:
+            return Anchor(np.asarray(fe.xy, float).copy(), FILE_END, False)
     return None
 
 
@@ -158,7 +165,11 @@ def pick_paths(problem: OrderingProblem, plans) -> list[int]:
                 new_back.append(arg)
                 continue
             entry = problem.cand_anchor(g, grp, int(o[0]))
-            inner = grp.path_cost(o) - float(grp.start_cost()[o[0]]) - float(grp.end_cost()[o[-1]])
+            inner = grp.path_cost(o) - float(grp.start_cost()[o[0]])
+            end = plans[g][3]
+            if end is None or getattr(end, "curve", -1) != FILE_END:
+                # (the link into the next group is that group's; the file's end is no group's)
+                inner -= float(grp.end_cost()[o[-1]])
             links = [c + problem.link_cost(p, entry) for p, c in zip(pos, cost)]
             arg = int(np.argmin(links))
             new_cost.append(links[arg] + inner)

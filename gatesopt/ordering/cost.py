@@ -43,11 +43,12 @@ from .gap_plan import (JOINED_MAX_MOVES, MOVE_EPS_MM, W_COLS, W_F, W_J, W_JREADY
                        end_side, joined_s, junction, regime_rows,
                        reversed_gap_times_ms, same_z_s)
 from .curve_time import CurveEnds, gap_rows
+from .file_end import FileEnd
 from .gaps import REVERSE_EPS, GapFacts, ReversibleGaps
 from .layout import Layout
 from .move_times import MT_CODE, MoveTimes, trapezoid_one_s
 from .._planner_kernel import JERK, SCV
-from .problem import DENSE_MAX_CANDS, Anchor, Group, LinkCosts, OrderingProblem
+from .problem import DENSE_MAX_CANDS, FILE_END, Anchor, Group, LinkCosts, OrderingProblem
 from .travel import TravelRule, cross_one
 
 MS_PER_S = 1000.0
@@ -215,6 +216,7 @@ class TimePricer:
         #: planned: a reversed curve's ``node_ms`` is priced joined or not (ArcWelder arcs under
         #: classic jerk: up to 140 ms, real_prusa240); the links join them where ``joined``
         self.ends, self.joined = ends, bool(joined)
+        self.step_plan, self.limits = step_plan, lim     # (for ``repair.planner_priced``)
         self.node_ms = ends.node_ms
         #: the limits a rebuilt link's moves run under: those in force at the slicer's last
         #: travel in the gap its entry consumes (the emitter keeps that gap's state lines around
@@ -258,6 +260,7 @@ class TimePricer:
                 both_open = np.zeros(n, bool)
                 both_open[1:] = ~self.closed[1:] & ~self.closed[:-1] & ends.ok[1:] & ends.ok[:-1]
                 self.rev_ms = np.where(both_open & self.reversible.ok, self.copy_ms, self.rev_ms)
+        self.file_end = FileEnd.of(program, lay, move)     # the file's last group's end
         # the kernels' constant arguments, made once (per call costs: most of passing a group)
         r = self.reversible
         self._rev = (r.ok, r.plain, np.ascontiguousarray(r.start_xy), np.ascontiguousarray(r.end_xy))
@@ -336,13 +339,18 @@ class TimePricer:
         gc = np.asarray(curves, np.int64)[grp.cand_curve]
         changed = np.asarray(grp.cand_reversed, bool) | (np.asarray(grp.cand_seam) != 0)
         m = grp.n_cands
-        if end is None:
+        file_end = end is not None and end.curve == FILE_END
+        if end is None or file_end:
             sxy = np.asarray(start.xy, float).reshape(1, 2)
             s = self._links_flat(np.full(m, start.curve, np.int64), np.full(m, start.changed),
                                  np.repeat(sxy, m, axis=0), gc, changed,
                                  np.ascontiguousarray(grp.cand_entry_xy, float))
             e = np.zeros(m)
             direct = 0.0
+            if file_end and self.file_end is not None:
+                # the file's end after the last curve (``file_end.FileEnd``): no link, no group
+                e = self.file_end.ms(grp.cand_exit_xy)
+                direct = float(self.file_end.ms(sxy)[0])
         else:
             # start, direct (into a curve only) and end links in one call: the same numbers
             k = int(end.curve >= 0)

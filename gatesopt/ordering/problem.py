@@ -93,6 +93,12 @@ class OrderingOptions:
             raise OrderingOptionsError("seam_candidates must be >= 1")
 
 
+#: ``Anchor.curve`` of the file's end: the steps after the slicer's last curve, which the emitter
+#: copies verbatim, so their first XY move starts wherever the last curve printed leaves the head
+#: (``cost.TimePricer.file_end_ms``; ``chain.end_of`` gives it to the file's last group)
+FILE_END = -2
+
+
 @dataclass(frozen=True, eq=False)
 class Anchor:
     """Where a group's path comes from (its start) or must go on to (its end).

@@ -70,6 +70,9 @@ class Guarded:
     #: per step, the planner's durations (``step_times_s``) of the input and of ``output``, where
     #: the guard planned them (the report's print times reuse them: ``figures.figures``), else None
     planned_s: tuple = (None, None)
+    #: layers whose groups the repair pass solved again (``emit_guarded(repair=...)``): the
+    #: solver's order was put back there although a group in it was proven optimal
+    repaired: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
 
     def __iter__(self):     # (solution, text, output, kept), as the guard returned it before
         return iter((self.solution, self.text, self.output, self.kept))
@@ -316,6 +319,43 @@ def _stage(program: Program, problem: OrderingProblem, base: _Measured, solution
     return base, zero       # every state measured prints slower than the base: its order throughout
 
 
+def _repair_stage(program: Program, problem: OrderingProblem, base: _Measured,
+                  solution: OrderingSolution, changed: np.ndarray, emitted) -> _Measured:
+    """The repair pass's stage: ``solution`` (``base``'s order but in ``changed``) measured in at
+    most two emits, where ``_stage`` takes up to five. Its file is taken if no layer of it prints
+    slower than in ``base``'s (beyond ``GUARD_TOL_S``) and the whole no slower; else the file
+    with only the changed layers that printed no slower, with the layer after them no slower
+    either (the layer change belongs to both), taken on the same terms; else ``base``'s."""
+    L = program.n_layers
+    changed = np.concatenate((changed[:L], np.zeros(max(0, L - len(changed)), bool)))
+    if not changed.any():
+        return base
+    t0 = layer_times_s(base.output, base.durations_s)
+
+    def measured(states):
+        sol = mix_layers(problem, base.solution, solution, states, with_cost=False)
+        text, out = emitted(sol)
+        m = _Measured(sol, text, out, step_times_s(out))
+        if out.n_layers != L:
+            return m, None
+        return m, layer_times_s(out, m.durations_s)
+
+    def taken(m, t1):
+        return (t1 is not None and np.all(t1 <= t0 + GUARD_TOL_S)
+                and m.total_s <= base.total_s + GUARD_TOL_S)
+    first, t1 = measured(changed.astype(np.int64))
+    if taken(first, t1):
+        return first
+    if t1 is None:
+        return base
+    ok = changed & (t1 <= t0 + GUARD_TOL_S)
+    ok[:-1] &= t1[1:] <= t0[1:] + GUARD_TOL_S
+    if not ok.any() or np.array_equal(ok, changed):
+        return base
+    second, t2 = measured(ok.astype(np.int64))
+    return second if taken(second, t2) else base
+
+
 def greedy_taken(gs: GroupSolution) -> GroupSolution:
     """A greedy answer as printed by the guard: at best feasible (its proof, if the bound closed,
     was for the start its own chain gave the group; the layer before may now end elsewhere)."""
@@ -324,15 +364,34 @@ def greedy_taken(gs: GroupSolution) -> GroupSolution:
     return GroupSolution.make(gs.order, gs.objective, gs.bound, status, gs.solve_s, form)
 
 
+def proven_layers(problem: OrderingProblem, solution: OrderingSolution, n_layers: int) -> np.ndarray:
+    """(n_layers,) bool: layers holding a re-orderable group ``solution`` proved optimal."""
+    out = np.zeros(n_layers, bool)
+    ok = [g for g, gs in enumerate(solution.groups)
+          if problem.group_reorderable[g] and gs.status == Status.OPTIMAL]
+    lay = np.asarray(problem.group_layer, np.int64)[ok]
+    out[lay[lay < n_layers]] = True
+    return out
+
+
 def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingSolution,
                  time_guard: bool = True, greedy: OrderingSolution | None = None,
-                 greedy_layers=None) -> Guarded:
+                 greedy_layers=None, repair=None) -> Guarded:
     """Emit and re-parse ``solution``; with ``time_guard``, per layer the order the planner model
     says prints fastest (module docstring): the slicer's where the re-ordered layer does not pay
     for itself, and, with ``greedy`` (a greedy solution of the same problem), the greedy order in
     the layers of ``greedy_layers`` ((n_layers,) bool; None: every layer) where it prints faster.
     A group printed in the greedy order is reported with its greedy answer, at best "feasible"
-    (``GREEDY_TAKEN``)."""
+    (``GREEDY_TAKEN``).
+
+    ``repair`` (the repair pass, formulations/ordering.md "Time guard"): called as
+    ``repair(printed, layers)`` with the solution printed so far and the layers where the
+    solver's order was not printed although a group in it was proven optimal (the model and the
+    planner disagree there); it returns ``printed`` with those layers' groups solved again on
+    costs that agree with the planner (``ordering.repair.resolve_layers``), or None. One more
+    stage then measures that answer against the printed file (never slower than it), and in
+    those layers the solver's answer is the repaired one (its groups' status on those costs),
+    printed or not."""
     memo: dict = {}                     # layers that did not change are not emitted again
     L = program.n_layers
 
@@ -352,6 +411,30 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
                          emitted)
     best, _ = _stage(program, problem, base, solution,
                      differing_layers(problem, base.solution, solution, L), emitted)
+    repaired = np.zeros(0, np.int64)
+    if repair is not None:
+        lost = (differing_layers(problem, best.solution, solution, L)[:L]
+                & changed_layers(problem, solution)[:L] & proven_layers(problem, solution, L))
+        if lost.any():
+            printed = (best.solution if best.solution is not None else
+                       mix_layers(problem, None, solution, np.zeros(L, np.int64), with_cost=False))
+            cand = repair(printed, np.flatnonzero(lost))
+            if cand is not None:
+                # the layers solved again: those whose groups got new answers (a layer the
+                # repair had no time for keeps ``printed``'s, the same objects)
+                done = np.zeros(L, bool)
+                new = [g for g, (a, b) in enumerate(zip(printed.groups, cand.groups)) if a is not b]
+                lay = np.asarray(problem.group_layer, np.int64)[new]
+                done[lay[lay < L]] = True
+                done &= lost
+                best = _repair_stage(program, problem, best, cand,
+                                     differing_layers(problem, best.solution, cand, L) & done,
+                                     emitted)
+                # in those layers the solver's answer is the repaired one, printed or not
+                solution = dataclasses.replace(
+                    mix_layers(problem, solution, cand, done.astype(np.int64), with_cost=False),
+                    cost_after=solution.cost_after, travel_after_mm=solution.travel_after_mm)
+                repaired = np.flatnonzero(done)
     planned = (slicer.durations_s, best.durations_s)
     if best.solution is None:
         # the slicer's file throughout: emitted as the solution with every layer put back
@@ -373,7 +456,7 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     sol = dataclasses.replace(with_model_cost(problem, final), groups=groups,
                               formulation=solution.formulation, solve_s=solution.solve_s)
     kept = np.flatnonzero(changed_layers(problem, solution)[:L] & (source == FROM_SLICER))
-    return Guarded(sol, best.text, best.output, kept, source, planned)
+    return Guarded(sol, best.text, best.output, kept, source, planned, repaired)
 
 
 def _alternate(changed: np.ndarray, has: np.ndarray):

@@ -19,6 +19,7 @@ from ..ordering import formulations
 from ..ordering.groups import build
 from ..ordering.layers import solve, solve_greedy
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
+from ..ordering.repair import can_repair, planner_priced, repaired_status_counts, resolve_layers
 from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
 from ..ordering.runner import OUT_OF_TIME, OUT_OF_TIME_GREEDY
 from ..ordering.travel_stats import runs, travel_mask
@@ -150,6 +151,47 @@ class NoTimeToOrder(Exception):
 GUARD_STAGE_S_PER_LINE = 5e-6
 
 
+#: seconds per input line of what follows the time guard in ``order_program`` (the
+#: verification, the report's figures): the repair pass leaves that much of the budget.
+#: Measured on prusa25_bunny_triangles15_lh01 safe (259,028 lines), load ~4 on the 2 cores:
+#: 0.755 s wall (2.9 us a line), 0.51 s CPU
+AFTER_GUARD_S_PER_LINE = 3e-6
+#: seconds per input line of the repair pass, besides its groups' solves: the joined pricer
+#: (``repair.planner_priced``, the whole file: 0.05-0.12 s CPU on the bunnies, 0.19-0.56 us a
+#: line) and its stage's two emits at most (``guard._repair_stage``; with the guard's memo only
+#: the changed layers are written again: emit, parse and plan 0.145 s, 0.56 us a line, on
+#: prusa25_bunny_triangles15_lh01), plus what a group solve needs at least
+#: (``REPAIR_FIXED_S``). Where the repair can change costs (``repair.can_repair``: classic
+#: jerk), the exact solve's budget keeps it back
+REPAIR_S_PER_LINE = 2.5e-6
+REPAIR_FIXED_S = 0.05
+
+
+def repair_pass(program: Program, problem: OrderingProblem, formulation: str, *,
+                time_limit_s: float = 2.0, deadline_s: float | None = None, slow: float = 1.0):
+    """The time guard's repair pass (``guard.emit_guarded(repair=...)``; formulations/ordering.md,
+    "Time guard"): the layers the guard put back although a group in them was proven optimal
+    solved again with ``formulation`` on link costs that agree with the planner
+    (``repair.planner_priced``: joined to the curves' moves under classic jerk too). Within the
+    budget: ``deadline_s`` (a ``time.perf_counter()`` reading, None: none) less its pricer and
+    stage (``REPAIR_S_PER_LINE``, ``REPAIR_FIXED_S``) at ``slow`` times their quiet rates; with
+    less left, nothing is repaired."""
+    fn = formulations.group_solver(formulation)
+
+    def repair(printed: OrderingSolution, layers):
+        need_s = slow * (REPAIR_FIXED_S + REPAIR_S_PER_LINE * program.n_lines)
+        if deadline_s is not None and deadline_s - time.perf_counter() < need_s:
+            return None
+        joined = planner_priced(program, problem)
+        if joined is None:
+            return None
+        # the groups' solves get what is left but the stage (two emits at most)
+        stage_s = slow * 0.5 * REPAIR_S_PER_LINE * program.n_lines
+        return resolve_layers(joined, printed, layers, fn, time_limit_s=time_limit_s,
+                              deadline_s=None if deadline_s is None else deadline_s - stage_s)
+    return repair
+
+
 def reorder(program: Program, options: OrderingOptions | None = None, *,
             formulation: str = "auto", time_limit_s: float = 2.0,
             budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
@@ -197,6 +239,9 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
             # what greedy left, less the guard's second stage (the exact answer against greedy's
             # file) that an exact solve adds after it
             stage_s = finish_slow * GUARD_STAGE_S_PER_LINE * program.n_lines
+            if can_repair(problem):
+                # and the repair pass, where it can change the costs (``repair_pass``)
+                stage_s += finish_slow * (REPAIR_FIXED_S + REPAIR_S_PER_LINE * program.n_lines)
             exact_budget = max(0.0, solve_budget - (time.perf_counter() - t_g
                                                     - _jit.compile_s_since(t_g)) - stage_s)
     if greedy is not None and (stop_requested() or (exact_budget is not None
@@ -213,8 +258,16 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
                      workers=workers, progress=progress, greedy=greedy)
     if greedy is not None:
         solution = dataclasses.replace(solution, solve_s=solution.solve_s + greedy.solution.solve_s)
+    deadline = None
+    if budget_s is not None:
+        # what the budget leaves the repair pass: up to the end of the budget less the work
+        # after the guard (compiling kernels counts no time, as above)
+        deadline = (t0 + budget_s + _jit.compile_s_since(t0)
+                    - finish_slow * (FINISH_FIXED_S + AFTER_GUARD_S_PER_LINE * program.n_lines))
+    repair = (repair_pass(program, problem, formulation, time_limit_s=time_limit_s,
+                          deadline_s=deadline, slow=finish_slow) if time_guard else None)
     guarded = emit_guarded(program, problem, solution, time_guard,
-                           greedy=None if greedy is None else greedy.solution)
+                           greedy=None if greedy is None else greedy.solution, repair=repair)
     return problem, solve_budget, guarded
 
 
@@ -248,7 +301,7 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
                             formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
                             solve_budget_s=solve_budget, workers=workers,
                             wall_s=time.perf_counter() - t0, greedy_layers=guarded.greedy_layers,
-                            planned_s=guarded.planned_s)
+                            planned_s=guarded.planned_s, repaired=guarded.repaired)
     return OrderResult(program, problem, solution, text, out, findings, summary)
 
 
@@ -328,13 +381,14 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
                   findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
                   solve_budget_s: float | None, workers: int, wall_s: float,
                   with_figures: bool = True, greedy_layers: int = 0,
-                  planned_s: tuple = (None, None)) -> dict:
+                  planned_s: tuple = (None, None), repaired=()) -> dict:
     """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` has it under
     ``"ordering"``): the figures of the input and the output (``rewrite.figures``: travel,
     travels and retractions measured on the parsed files, print time under the planner model;
     ``with_figures`` False leaves them to the caller, whose own output they would describe), the
     solver's model travel, how each group and layer was solved. ``planned_s``: both files'
-    per-step planner durations where the time guard has them (``guard.Guarded.planned_s``)."""
+    per-step planner durations where the time guard has them (``guard.Guarded.planned_s``);
+    ``repaired``: the layers the guard's repair pass solved again (``guard.Guarded.repaired``)."""
     fig = figures(program, out, planned_s=planned_s) if with_figures else None
     layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
     sizes = np.diff(problem.group_curve_start)
@@ -388,6 +442,14 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         # and the greedy order printed faster (``guard.emit_guarded``; their groups: at best
         # feasible, formulation ``guard.GREEDY_TAKEN``)
         "layers_greedy": int(greedy_layers),
+        # the time guard's repair pass (``repair_pass``): layers the guard put back although a
+        # group in them was proven optimal, solved again on costs that agree with the planner;
+        # of them, those still put back; their groups and how many are proven on those costs
+        "layers_repaired": int(len(repaired)),
+        "layers_repaired_kept_slower": int(len(set(np.asarray(repaired).tolist())
+                                               & set(np.asarray(slower_layers).tolist()))),
+        "groups_repaired": repaired_status_counts(solution, problem)["groups"],
+        "groups_repaired_optimal": repaired_status_counts(solution, problem)["optimal"],
         "worst_gap": float(max((gs.gap for _, gs in decided), default=0.0)),
         "solve_s": solution.solve_s, "wall_s": wall_s,
         "verified": not findings, "findings": [str(f) for f in findings],
