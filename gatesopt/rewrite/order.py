@@ -216,7 +216,13 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     slicer's, the greedy or the exact order, whichever the planner model says is faster; its
     first stage is the greedy run's own guard. Where what greedy left would not pay for passing
     the groups again, the exact solve does not run: greedy's answer is printed, its groups at
-    best "feasible" (``guard.GREEDY_TAKEN``)."""
+    best "feasible" (``guard.GREEDY_TAKEN``).
+
+    The guard then runs its repair pass (``repair_pass``): the layers it put back although a
+    group in them was proven optimal are solved again on the joined link costs (classic jerk),
+    within what the budget leaves before the work after the guard (``AFTER_GUARD_S_PER_LINE``);
+    where that pass can change the costs, the exact solve keeps its cost back
+    (``REPAIR_S_PER_LINE``, ``REPAIR_FIXED_S``)."""
     t0 = time.perf_counter() if started_s is None else started_s
     problem = build(program, options or OrderingOptions())
     # compiling numba kernels (a first run) is not the run's to budget: it counts no time
