@@ -150,3 +150,30 @@ def test_the_file_end_is_the_last_groups_end_and_its_layer_is_not_put_back():
         last = int(prob.group_layer[-1])
         assert last not in g.kept.tolist()
         assert _proven_in(prob, g.solution, g.kept) == 0
+
+
+def _end_of(tail: str):
+    from gatesopt.limits import machine_limits
+    from gatesopt.ordering.file_end import FileEnd
+    from gatesopt.ordering.layout import layout
+    from gatesopt.ordering.move_times import MoveTimes
+    text = ("G90\nM82\nG92 E0\nG1 Z0.2 F600\nG1 X5 Y5 F3000\nG1 X10 Y5 E1 F1200\nG1 X10 Y10 E2\n"
+            "G1 X20 Y10 F3000\nG1 X20 Y20 E3 F1200\n" + tail)
+    prog = gatesopt.parse(text, source="end.gcode")
+    return FileEnd.of(prog, layout(prog), MoveTimes.from_limits(machine_limits(prog)))
+
+
+def test_the_file_end_move_is_the_first_xy_word_after_the_last_curve():
+    # Cura: retract, then park at the retraction's feed (no F on the park line)
+    end = _end_of("G1 E2.2 F2100\nM107\nG1 X0 Y210 ; park\nM84\n")
+    assert end is not None and np.allclose(end.xy, [0.0, 210.0]) and end.feed_mm_s == 35.0
+    # KISSlicer: back over the last point while lifting, at 5 mm/s (its own Z change kept)
+    end = _end_of("G1 E2.2 F1875\nG1 X20 Y20 Z5.2 E2.2 F300\n")
+    assert end is not None and np.allclose(end.xy, [20.0, 20.0]) and abs(end.dz_mm - 5.0) < 1e-9
+    ms = end.ms(np.array([[20.0, 20.0], [20.0, 30.0]]))
+    assert ms[1] - ms[0] > 800.0                  # 10 mm further: hypot(10, 5) vs 5 at 5 mm/s
+    # a home or a relative move first: the head's position does not carry over
+    assert _end_of("G1 E2.2 F2100\nG28 X\nG1 X0 Y210\n") is None
+    assert _end_of("G1 E2.2 F2100\nG91\nG1 X5 Y5\nG90\n") is None
+    # no XY move after the last curve (a Klipper END_PRINT macro): no end
+    assert _end_of("G1 E2.2 F2100\nG1 Z10 F600\nM84\n") is None
