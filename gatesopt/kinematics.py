@@ -13,6 +13,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from .firmware import FirmwareError
 from .slicers import printer_models
 
 #: printers whose X and Y motors are not one axis each (``model_kinematics``): on corexy both the
@@ -79,3 +80,19 @@ def printer_kinematics(data: bytes, printer=None) -> Kinematics | None:
     if printer is not None and printer.kinematics:
         return Kinematics(printer.kinematics, f"--printer-config {printer.source}")
     return model_kinematics(data)
+
+
+def check_gateable(data: bytes, motors, printer=None, source: str = "<text>") -> None:
+    """Raise ``FirmwareError`` (``source`` and what says it) if ``motors`` names a motor the
+    printer's kinematics (``printer_kinematics`` of ``data``, a file's bytes or its head and
+    tail, and ``printer``) couples to another axis: the firmware choice never picks one; this
+    guards a caller that builds its own ``GatingOptions`` (``rewrite.pipeline.run``,
+    ``stream.gate_stream``)."""
+    kin = printer_kinematics(data, printer)
+    coupled = coupled_motors(kin.name if kin else None)
+    bad = [m for m in motors if m.upper() in coupled]
+    if bad:
+        raise FirmwareError(
+            f"{source}: {kin.name} kinematics ({kin.source}): {coupled_words(coupled)}, so "
+            f"{','.join(bad)} cannot be gated while that axis rests (gatesopt models one motor "
+            f"per axis); gate {','.join(m for m in 'ZE' if m not in coupled)} instead")
