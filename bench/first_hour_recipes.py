@@ -14,8 +14,9 @@ there (plus `--json R` to read the figures), run with rotation on and off:
 - ``3dgates``: the same with `--firmware 3dgates` (the paper's S0/S1, patched firmware).
 
 The files (``RECIPE_FILES``) are named below: PrusaSlicer (Marlin), Cura (Marlin, no bed in the
-file) and Klipper-style files (OrcaSlicer, SuperSlicer, Cura for a Creality K1 Max; PrusaSlicer's
-Voron profile) from ../shared/instances (MANIFEST.tsv) and from ../fresh (manifest.tsv: slices the
+file), Cura files for an Ender 3 on Klipper (`--printer-config` bench/klipper/printer.cfg, a
+cartesian Klipper printer; stock recipe only) and files for corexy Klipper printers (OrcaSlicer,
+SuperSlicer, Cura for a Creality K1 Max; PrusaSlicer's Voron profile: no X/Y gating) from ../shared/instances (MANIFEST.tsv) and from ../fresh (manifest.tsv: slices the
 project never saw during development). One process at a time.
 
 ``--check``: every file of ../shared/instances and ../fresh, `gatesopt solve IN -o OUT` with no
@@ -38,7 +39,11 @@ from pathlib import Path
 from _markdown import replace_section  # bench/_markdown.py
 
 REPO = Path(__file__).resolve().parents[1]
-KLIPPER = "Klipper (Orca, SuperSlicer, Cura K1 Max, PrusaSlicer Voron)"
+KLIPPER = "Klipper corexy (Orca, SuperSlicer, Cura K1 Max, PrusaSlicer Voron)"
+#: Cura files for an Ender 3 run by Klipper: `--printer-config` of a cartesian Klipper printer
+#: (the replay bench's, bench/klipper/printer.cfg), the README's Klipper recipe
+KLIPPER_CARTESIAN = "Klipper cartesian (Cura Ender 3 files, --printer-config)"
+KLIPPER_CFG = REPO / "bench" / "klipper" / "printer.cfg"
 #: (file stem, kind, ``--bed`` for rotation on when the file names no bed: the printer definition
 #: it was sliced with, from MANIFEST.tsv / manifest.tsv)
 RECIPE_FILES = (
@@ -56,6 +61,10 @@ RECIPE_FILES = (
     ("real_orca230_arcs", KLIPPER, None),
     ("real_superslicer2356_arcwelder", KLIPPER, None),
     ("real_cura591", KLIPPER, "300x300"),                          # ;TARGET_MACHINE.NAME:Creality K1 Max
+    ("cura413_star_triangles20", KLIPPER_CARTESIAN, "235x235"),
+    ("cura413_cyl_grid20", KLIPPER_CARTESIAN, "235x235"),
+    ("cube__cura_ender3", KLIPPER_CARTESIAN, "235x235"),
+    ("pins__cura_ender3", KLIPPER_CARTESIAN, "235x235"),
     ("phonecase__prusa_klipper", KLIPPER, None),                   # PrusaSlicer's Voron profile
     ("pins__prusa_klipper", KLIPPER, None),
     ("plate__prusa_klipper", KLIPPER, None),
@@ -263,9 +272,13 @@ def main() -> int:
                     print(f"{stem}: not found, skipped", file=sys.stderr)
                     continue
                 for recipe, extra in RECIPES.items():
+                    if kind == KLIPPER_CARTESIAN and recipe != "stock":
+                        continue        # the paper's firmware is not Klipper
                     for rotate in ("on", "off"):
                         opts = extra + (["--rotate", "none"] if rotate == "off" else
                                         (["--bed", bed] if bed else []))
+                        if kind == KLIPPER_CARTESIAN:
+                            opts += ["--printer-config", str(KLIPPER_CFG)]
                         row = {"file": stem, "kind": kind, "set": "fresh" if path.parent == fresh else "corpus",
                                "recipe": recipe, "rotate": rotate, "bed": bed if rotate == "on" else None,
                                **solve(path, opts, Path(tmp))}

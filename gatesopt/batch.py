@@ -58,6 +58,7 @@ class BatchOptions:
     gating: bool = True
     profile: str = "paper"
     write_dir: str | None = None        # write each verified output here (never an unverified one)
+    printer_config: str | None = None   # the printer's Klipper config (``--printer-config``), a path
 
 
 def max_curves_per_layer(order_problem) -> int:
@@ -102,12 +103,17 @@ def process_file(path: str, options: BatchOptions, data: bytes | None = None) ->
         row.update(slicer=program.header.get("slicer", ""), flavor=program.header.get("flavor", ""),
                    infill_pattern=_infill_pattern(program), lines=program.n_lines, layers=program.n_layers)
         budget = options.max_added_time_pct
+        extra = {}
+        if options.printer_config:
+            # read in each worker (a path travels to worker processes; the config is small)
+            from .printer_config import read_printer_config
+            extra["printer"] = read_printer_config(options.printer_config)
         choice = choose(program, options.firmware, force=options.force_firmware,
                         max_added_time_pct=DEFAULT if budget == "default" else budget,
                         motors=None if options.motors is None else tuple(options.motors),
                         rotate=options.rotate, start_ahead_s=options.start_ahead_s,
                         end_late_s=options.end_late_s, max_added_lines_pct=options.max_added_lines_pct,
-                        profile=options.profile, bed_size_mm=options.bed_size_mm)
+                        profile=options.profile, bed_size_mm=options.bed_size_mm, **extra)
         # as `gatesopt solve` runs a file: the same whole-run budget, ordering mode and formulation
         # choice (the one the gating formulation names: milp, cpsat, greedy; auto for dp), so that
         # a row's figures are the ones `solve` gives for that file

@@ -383,13 +383,18 @@ def flavor_evidence(data: bytes) -> Evidence | None:
     return None
 
 
-def model_evidence(data: bytes) -> Evidence | None:
-    """The printer model the slicer names, where ``PRINTER_MODELS`` knows its firmware."""
+def printer_models(data: bytes):
+    """(line, text, value) of each printer model the slicer names (``PRINTER_MODEL_SETTINGS``,
+    in that order; an empty value skipped)."""
     for pattern in PRINTER_MODEL_SETTINGS:
         hit = _search(pattern, data)
-        if hit is None or not hit[2]:
-            continue
-        line, text, value = hit
+        if hit is not None and hit[2]:
+            yield hit
+
+
+def model_evidence(data: bytes) -> Evidence | None:
+    """The printer model the slicer names, where ``PRINTER_MODELS`` knows its firmware."""
+    for line, text, value in printer_models(data):
         for row in PRINTER_MODELS:
             if re.search(row.pattern, value, re.I):
                 return Evidence(row.family, "printer model", line, text, row.why, value)

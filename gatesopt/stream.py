@@ -21,9 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _scan
+from . import _scan, slicers
 from .energy import EnergyReport, load_profile, profile
 from .errors import GatesoptError, GcodeError
+from .kinematics import check_gateable
 from .parse import BGCODE_MAGIC, DEFAULT_FEED_MM_S, GZIP_MAGIC, parse
 
 DEFAULT_CHUNK_BYTES = 64 << 20
@@ -219,6 +220,22 @@ def _spaced_from_the_chunk_before(problem, sol, keep: np.ndarray) -> np.ndarray:
     return keep
 
 
+def _settings_bytes(p: Path) -> bytes:
+    """The head and tail of the file (``slicers.HEAD_BYTES`` each), where slicers write their
+    settings (the printer model), the lines between them as empty lines (counted, so that a line
+    number read there is the file's); a gzip file's head only (its tail costs a whole read)."""
+    with p.open("rb") as f:
+        head = f.read(slicers.HEAD_BYTES)
+        if head[:2] == GZIP_MAGIC:
+            with gzip.open(p, "rb") as g:
+                return g.read(slicers.HEAD_BYTES)
+        tail_at = max(len(head), p.stat().st_size - slicers.HEAD_BYTES)
+        skipped = 0
+        while f.tell() < tail_at:
+            skipped += f.read(min(1 << 24, tail_at - f.tell())).count(b"\n")
+        return head + b"\n" * skipped + f.read()
+
+
 def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dgates",
                 motors=("X", "Y"), chunk_bytes: int = DEFAULT_CHUNK_BYTES, verify_chunks: bool = True,
                 force: bool = False, progress=None, printer=None) -> StreamGatingResult:
@@ -240,6 +257,7 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
         raise GatesoptError(f"{out_path}: exists; pass --force to overwrite it")
     opts = GatingOptions.for_firmware(firmware, motors=tuple(motors), rotate="none", printer=printer)
     name = str(path)
+    check_gateable(_settings_bytes(Path(path)), opts.motors, printer, name)
     state_in = _scan.initial_state(25.0, DEFAULT_FEED_MM_S)
     state_out = state_in.copy()
     tmp = out_path.with_name(out_path.name + f".tmp-{os.getpid()}")

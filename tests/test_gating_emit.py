@@ -275,8 +275,24 @@ def _e2e(path, formulation, fw="3dgates", rotate="none"):
     return res
 
 
-E2E_FILES = ["real_slic3r131_stars.gcode", "real_prusa240_m486_arcwelder.gcode",
+E2E_FILES = ["real_slic3r131_stars.gcode", "real_prusa274_screw_arcs.gcode.gz",
              "slic3r13_torus_3dhoney20_acp.gcode"]
+
+
+def test_the_library_refuses_x_y_gating_on_a_corexy_file():
+    # real_prusa240 names a Voron (corexy): GatingOptions built by hand gating X, Y is refused
+    # up front (its X/Y motors each step for every X or Y move); the extruder is gated
+    from gatesopt.firmware import FirmwareError
+    from gatesopt.gating import GatingOptions
+    from gatesopt.rewrite import run
+    path = SHARED / "real_prusa240_m486_arcwelder.gcode"
+    if not path.exists():
+        pytest.skip(f"{path} absent (../shared/instances not beside the repo)")
+    p = gatesopt.parse(path)
+    with pytest.raises(FirmwareError, match=r"corexy kinematics .*X,Y cannot be gated"):
+        run(p, GatingOptions.for_firmware("3dgates"), order=False)
+    res = run(p, GatingOptions.for_firmware("3dgates", motors=("E",)), order=False)
+    assert res.report.ok and "S0 E" in res.text
 
 
 @pytest.mark.parametrize("name", E2E_FILES)
@@ -375,3 +391,18 @@ def test_kernel_equals_the_reference_on_real_files(name):
         fast = render_plain(p, fwm, arrays, 0.0, (0, 0))
         assert fast.splits > 100
         assert fast == render_plain(p, fwm, arrays, 0.0, (0, 0), split_in_kernel=False)
+
+
+def test_the_stream_refuses_x_y_gating_on_a_corexy_file(tmp_path):
+    # gate_stream reads the printer model from the file's head and tail (PrusaSlicer writes it at
+    # the end), with the file's own line number
+    from gatesopt.firmware import FirmwareError
+    from gatesopt.stream import gate_stream
+    path = SHARED / "real_prusa240_m486_arcwelder.gcode"
+    if not path.exists():
+        pytest.skip(f"{path} absent (../shared/instances not beside the repo)")
+    line = next(i for i, ln in enumerate(path.read_bytes().splitlines(), 1)
+                if ln.startswith(b"; printer_model ="))
+    with pytest.raises(FirmwareError, match=rf"corexy kinematics .*\(line {line}\)"):
+        gate_stream(path, tmp_path / "out.gcode")
+    assert not (tmp_path / "out.gcode").exists()

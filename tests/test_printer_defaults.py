@@ -7,11 +7,12 @@ from __future__ import annotations
 import csv
 import json
 import re
+from pathlib import Path
 
 import pytest
 
 import gatesopt
-from gatesopt import firmware, slicers
+from gatesopt import firmware, kinematics, slicers
 from gatesopt.cli import main
 from gatesopt.rewrite import printer
 
@@ -134,8 +135,13 @@ def test_every_fresh_file_gets_its_printer_s_dialect(row):
     job = next(j for j in FRESH_DIALECT if row["file"].endswith(f"__{j}.gcode") or f"__{j}_" in row["file"])
     choice = printer.choose(data)
     assert choice.firmware == FRESH_DIALECT[job]
-    assert choice.max_added_time_pct == printer.STOCK_BUDGET_PCT and choice.budget_is_default
     assert f"(line {facts.firmware.line})" in choice.line
+    if job == "prusa_klipper":
+        # PrusaSlicer's Voron 2.4 profile: corexy, so X and Y are not gated and nothing is
+        assert kinematics.model_kinematics(data).name == "corexy"
+        assert choice.options is None and choice.motors == () and "nothing is gated" in choice.line
+        return
+    assert choice.max_added_time_pct == printer.STOCK_BUDGET_PCT and choice.budget_is_default
 
 
 # -- the choice -----------------------------------------------------------------------------------
@@ -239,3 +245,102 @@ def test_batch_and_compare_read_each_file_s_firmware(tmp_path, capsys):
     capsys.readouterr()
     assert main(["compare", str(a), "--formulations", "dp"]) == 0
     assert "firmware marlin: read flavor setting" in capsys.readouterr().out
+
+
+# -- the printer's kinematics and its printer.cfg --------------------------------------------------
+BENCH_CFG = Path(__file__).resolve().parents[1] / "bench" / "klipper" / "printer.cfg"
+
+
+def _cfg(tmp_path, kinematics="cartesian", gating=False):
+    text = BENCH_CFG.read_text().replace("kinematics: cartesian", f"kinematics: {kinematics}")
+    assert f"kinematics: {kinematics}" in text
+    p = tmp_path / f"{kinematics}{'_g' if gating else ''}.cfg"
+    p.write_text(text + ("\n[gatesopt_gating]\n" if gating else ""))
+    from gatesopt.printer_config import read_printer_config
+    return read_printer_config(str(p))
+
+
+@pytest.mark.parametrize("model, expected", [("Voron_v2_250", "corexy"), ("CR-K1 Max", "corexy"),
+                                               ("Voron Switchwire", "corexz"), ("COREONE", "corexy"),
+                                               ("MK3S", None), ("ENDER3V2", None), ("Bambu Lab A1", None)])
+def test_printer_models_name_their_kinematics(model, expected):
+    k = kinematics.model_kinematics(f"; printer_model = {model}\n".encode())
+    assert (k.name if k else None) == expected
+
+
+def test_a_corexy_printer_gets_no_x_y_gating_and_says_why():
+    prog = gatesopt.parse(square("; printer_model = Voron_v2_250", start="PRINT_START"))
+    c = printer.choose(prog)
+    assert c.firmware == "klipper" and c.options is None and c.motors == ()
+    assert "corexy kinematics" in c.line and "X,Y are not gated" in c.line and "--motors E" in c.line
+    with pytest.raises(firmware.FirmwareError, match=r"corexy kinematics .* X cannot be gated"):
+        printer.choose(prog, motors=("X", "E"))
+    e = printer.choose(prog, motors=("E",))
+    assert e.options is not None and e.motors == ("E",)
+    # corexz (Voron Switchwire): X and Z are coupled, Y is one motor: Y is gated
+    sw = printer.choose(gatesopt.parse(square("; printer_model = Voron Switchwire", start="PRINT_START")))
+    assert sw.motors == ("Y",) and "X are not gated" in sw.line
+
+
+def test_solve_on_a_corexy_file_writes_no_motor_line(tmp_path, capsys):
+    src = tmp_path / "voron.gcode"
+    src.write_text(square("; printer_model = Voron_v2_250", start="PRINT_START"))
+    out = tmp_path / "out.gcode"
+    assert main(["solve", str(src), "-o", str(out), "--no-order"]) == 0
+    text = out.read_text()
+    assert "SET_STEPPER_ENABLE" not in text and "M18" not in text.replace("M84 X Y E", "")
+    assert "nothing is gated" in capsys.readouterr().out
+
+
+def test_a_printer_config_says_the_printer_runs_klipper(tmp_path):
+    # a plain Cura file (Marlin flavour, as Klipper's docs tell Cura users to set) for a Klipper
+    # printer: without the printer.cfg it gets Marlin's M18, which would stop a Klipper print
+    prog = gatesopt.parse(square(";FLAVOR:Marlin"))
+    assert printer.choose(prog).firmware == "marlin"
+    cfg = _cfg(tmp_path)
+    c = printer.choose(prog, printer=cfg)
+    assert c.firmware == "klipper" and c.motors == ("X", "Y")
+    assert c.line.startswith(f"klipper: read --printer-config {cfg.source}") and "the file says marlin" in c.line
+    with pytest.raises(firmware.FirmwareError, match=r"is a Klipper config.*stops the print"):
+        printer.choose(prog, "marlin", printer=cfg)
+    # the module's section in it: the module is installed, so its stall-free dialect
+    assert printer.choose(prog, printer=_cfg(tmp_path, gating=True)).firmware == "klipper-gating"
+    # a corexy printer.cfg wins over a model the file does not name, and a cartesian one over
+    # the corexy model the file names (the printer.cfg is the user's own machine)
+    assert printer.choose(prog, printer=_cfg(tmp_path, "corexy")).options is None
+    voron = gatesopt.parse(square("; printer_model = Voron_v2_250", start="PRINT_START"))
+    assert printer.choose(voron, printer=cfg).motors == ("X", "Y")
+    # with [gatesopt_gating] on a corexy printer: the stock dialect (klipper-gating refuses it),
+    # and X, Y not gated
+    g = printer.choose(prog, printer=_cfg(tmp_path, "corexy", gating=True))
+    assert g.firmware == "klipper" and g.options is None and "klipper-gating models cartesian" in g.line
+
+
+def test_batch_reads_the_printer_config(tmp_path):
+    src = tmp_path / "cura.gcode"
+    src.write_text(square(";FLAVOR:Marlin"))
+    cfg = tmp_path / "printer.cfg"
+    cfg.write_text(BENCH_CFG.read_text())
+    out = tmp_path / "rows.csv"
+    assert main(["batch", str(src), "--printer-config", str(cfg), "--out", str(out), "--no-order",
+                 "--quiet"]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert rows[0]["firmware"] == "klipper" and rows[0]["verified"] == "True"
+
+
+def test_the_verifier_reports_a_gated_motor_a_corexy_printer_couples(tmp_path):
+    # an output gating X on a Voron (made before gatesopt read the kinematics, or by another
+    # tool): the verifier says which line and why, from the printer model or the printer.cfg
+    from gatesopt.verify import verify
+    text = square("; printer_model = Voron_v2_250", start="PRINT_START")
+    lines = text.splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("G1 X120 Y80 "))
+    gated = lines[:k + 1] + ["SET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=0", lines[k + 1],
+                             "SET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=1"] + lines[k + 2:]
+    orig, out = gatesopt.parse(text), gatesopt.parse("\n".join(gated) + "\n")
+    rep = verify(orig, out, firmware="klipper")
+    hits = [f for f in rep.findings if "corexy printer" in f.message]
+    assert len(hits) == 1 and hits[0].line == k + 2 and "stepper_x" in hits[0].message
+    # the user's printer.cfg says cartesian: no such finding
+    rep = verify(orig, out, firmware="klipper", printer=_cfg(tmp_path))
+    assert not [f for f in rep.findings if "corexy" in f.message]

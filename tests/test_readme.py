@@ -74,7 +74,7 @@ def test_the_recipes_show_a_prusaslicer_a_cura_and_a_klipper_file():
 
 
 @pytest.mark.parametrize("index", range(len(_printer_blocks())))
-def test_solve_prints_what_the_readme_says(index, tmp_path, capsys):
+def test_solve_prints_what_the_readme_says(index, tmp_path, capsys, monkeypatch):
     """The first-hour walk: each README recipe run as written on the file it names prints the
     firmware, budget and rotation lines the README shows (a shown line ending in "..." is a
     prefix: what follows depends on the ordering's wall-clock budget)."""
@@ -86,6 +86,12 @@ def test_solve_prints_what_the_readme_says(index, tmp_path, capsys):
         pytest.skip(f"{name}: not in ../shared/instances or ../fresh")
     args = [w if w != name else str(path) for w in words[1:]]
     args[args.index("-o") + 1] = str(tmp_path / args[args.index("-o") + 1])
+    if "--printer-config" in args:
+        # "your printer.cfg": a cartesian Klipper printer's (the replay bench's), read from the
+        # folder the command runs in, as the README shows it
+        (tmp_path / "printer.cfg").write_text((ROOT / "bench" / "klipper" / "printer.cfg").read_text())
+        assert args[args.index("--printer-config") + 1] == "printer.cfg"
+        monkeypatch.chdir(tmp_path)
     assert main(args) == 0
     printed = {ln[:14].strip(): ln for ln in capsys.readouterr().out.splitlines()}
     assert shown

@@ -9,7 +9,7 @@ from ..errors import GatesoptError
 from .files import check_input, check_new_file, check_one_stdin, refuse_existing
 from .progress import default_workers, pause_status, resume_status, wants_progress
 from .options import (BUDGET_NOT_GIVEN, add_firmware_options, budget_pct, gating_formulations, motor_list,
-                      positive_s)
+                      positive_s, printer_config)
 
 NAME = "batch"
 HELP = "solve + verify many files, one result row each (CSV or JSON)"
@@ -95,6 +95,7 @@ def run(args) -> int:
         except ValueError:
             raise GatesoptError(f"--bed must look like 220x220, not {args.bed!r}") from None
     budget = args.max_added_time_pct
+    printer_config(args)        # a printer.cfg that cannot be read: one error now, not one per file
     opts = BatchOptions(formulation=forms[0], firmware=args.force_firmware or args.firmware,
                         force_firmware=args.force_firmware is not None, bed_size_mm=bed,
                         motors=None if args.motors is None else motor_list(args.motors), rotate=args.rotate,
@@ -102,7 +103,7 @@ def run(args) -> int:
                         max_added_lines_pct=args.max_added_lines_pct,
                         time_limit_s=args.time_limit, order=not args.no_order, gating=not args.no_gating,
                         profile=args.profile, write_dir=args.write_dir, order_mode=args.order_mode,
-                        budget_s=args.budget,
+                        budget_s=args.budget, printer_config=args.printer_config,
                         # one file at a time: its ordering may use both cores, as `solve` does
                         order_workers=default_workers() if args.jobs <= 1 and not args.dask else 1)
     stdin_data = sys.stdin.buffer.read() if STDIN_FILE in files else None

@@ -53,7 +53,7 @@ from .budget import after_order_s, no_time_note, ordering_budget_s, slowdown_fac
 from .figures import figures, print_time_s
 from .order import (NoTimeToOrder, kept_slower_note, order_summary, out_of_time_groups,
                     out_of_time_note, reorder, stage_floor_s)
-from .printer import FirmwareChoice, choose
+from .printer import FirmwareChoice, check_motors_fit, choose
 
 #: the keys of the ordering's report that ``gatesopt solve --json`` carries at its top level (the
 #: travel figures are the run's own, ``figures``: measured on the input and the final output);
@@ -601,6 +601,8 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         options = choice.options
         gating = gating and options is not None
     o = options or GatingOptions()
+    if gating:
+        check_motors_fit(program, o.motors, o.printer)     # corexy: X, Y are not one motor each
     notes = []
     times = Stages()
     times.add("read_s", time.perf_counter() - t0)

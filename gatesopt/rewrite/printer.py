@@ -26,7 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .. import firmware as fwmod
-from .. import slicers
+from .. import kinematics, slicers
 from ..gating.options import GatingOptions
 
 #: the dialect written for each firmware family a file names (``slicers.FAMILIES``)
@@ -40,6 +40,13 @@ _M18_WORDS = ("M18", "M84")
 #: families whose firmware stops the print on an ``M18`` line
 _M18_STOPS = {"klipper": "Klipper's M18 turns every motor off and clears homing, which stops the print",
               "reprapfirmware": "RepRapFirmware's M18 unhomes the axis and refuses its next move"}
+
+
+def check_motors_fit(program, motors, printer=None) -> None:
+    """``kinematics.check_gateable`` for ``program`` (a ``Program`` or a file's bytes)."""
+    data = program if isinstance(program, (bytes, bytearray)) else program.data
+    source = "<text>" if isinstance(program, (bytes, bytearray)) else program.source
+    kinematics.check_gateable(bytes(data), motors, printer, source)
 
 
 class _Default:
@@ -85,8 +92,35 @@ def _dialect_words(name: str) -> str:
     return f"{fw.off_word}{on} lines"
 
 
-def _auto(facts: slicers.PrinterFacts) -> tuple[str | None, str]:
-    """(dialect, what was read) for ``--firmware auto``."""
+def _from_printer_config(facts: slicers.PrinterFacts, printer) -> tuple[str, str]:
+    """(dialect, what was read) for ``--firmware auto`` with ``--printer-config``: a printer.cfg
+    is Klipper's own config, so the printer runs Klipper whatever the slicer wrote (Klipper's
+    docs/Slicers.md tells Cura and PrusaSlicer users to slice with the Marlin flavour, so a plain
+    Cura file for a Klipper printer says "Marlin"; Marlin's ``M18`` would stop that print). With
+    the module's ``[gatesopt_gating]`` section in it (the module is installed) and a printer
+    klipper-gating models (cartesian): ``klipper-gating``, whose switches add no time; else stock
+    ``klipper``."""
+    from ..firmware.klipper_gating import kinematics_refusal
+    name, how = "klipper", "a Klipper config"
+    if printer.gating is not None:
+        kin = printer.kinematics or "cartesian"
+        if kin == "cartesian":
+            name, how = "klipper-gating", "a Klipper config with gatesopt's [gatesopt_gating] module"
+        else:
+            how = (f"a Klipper config with [gatesopt_gating], but {kinematics_refusal(printer.source, kin)}"
+                   "; stock SET_STEPPER_ENABLE lines instead")
+    said = f"{name}: read --printer-config {printer.source}, {how} (the printer runs Klipper)"
+    ev = facts.firmware
+    if ev is not None and ev.family and ev.family != "klipper":
+        said += f"; the file says {ev.family} ({ev.kind} {ev.where()}), as Klipper's docs have slicers write"
+    return name, said
+
+
+def _auto(facts: slicers.PrinterFacts, printer=None) -> tuple[str | None, str]:
+    """(dialect, what was read) for ``--firmware auto``; ``printer``: the ``--printer-config``
+    given, which decides (``_from_printer_config``)."""
+    if printer is not None:
+        return _from_printer_config(facts, printer)
     ev = facts.firmware
     if ev is None:
         names = "|".join(n for n in fwmod.PRESETS)
@@ -113,12 +147,18 @@ def choose(program, requested: str = "auto", *, force: bool = False, max_added_t
     source = "<text>" if isinstance(program, (bytes, bytearray)) else program.source
     facts = slicers.read_printer(bytes(data))
     ev = facts.firmware
+    printer_cfg = gating.get("printer")
     if requested == "auto":
-        name, said = _auto(facts)
+        name, said = _auto(facts, printer_cfg)
     else:
         name = fwmod.get(requested).name
         said = f"{name} (--{'force-' if force else ''}firmware {name})"
         fw = fwmod.get(name)
+        if printer_cfg is not None and fw.off_word in _M18_WORDS and not force:
+            # the printer runs Klipper (its printer.cfg was given): Klipper would run the M18
+            raise fwmod.FirmwareError(
+                f"--printer-config {printer_cfg.source} is a Klipper config, so the printer runs "
+                f"Klipper; {_M18_STOPS['klipper']}: use --firmware auto, klipper or klipper-gating")
         if ev is not None and ev.family in _M18_STOPS and fw.off_word in _M18_WORDS and not force:
             raise fwmod.FirmwareError(
                 f"{source}:{ev.line}: the file is for {ev.family} ({ev.text!r}); {_M18_STOPS[ev.family]}: "
@@ -131,11 +171,27 @@ def choose(program, requested: str = "auto", *, force: bool = False, max_added_t
     if name is None:
         return FirmwareChoice(None, requested, None, False, (), facts, said)
     fw = fwmod.get(name)
+    kin = kinematics.printer_kinematics(bytes(data), printer_cfg)
+    coupled = kinematics.coupled_motors(kin.name if kin else None)
     if motors is None:
         motors = tuple(m for m in ("X", "Y") if m in fw.allowed_motors) or tuple(
             m for m in ("X", "Y", "Z", "E") if m in fw.allowed_motors)
-        if motors != ("X", "Y"):
+        if any(m in coupled for m in motors):
+            # gating models one motor per axis; on these printers it would switch off a motor the
+            # other axis's next move steps (with an input shaper Klipper's automatic re-enable
+            # comes after the first steps: a layer shift), and its saving would be counted wrong
+            kept = tuple(m for m in motors if m not in coupled)
+            said += (f"; {kin.name} kinematics ({kin.source}): {kinematics.coupled_words(coupled)}, so "
+                     f"{','.join(m for m in motors if m in coupled)} are not gated")
+            motors = kept
+            if not motors:
+                said += ("; nothing is gated (--motors E, or Z where the Z axis holds unpowered, "
+                         "to gate those)")
+                return FirmwareChoice(name, requested, None, False, (), facts, said)
+        elif motors != ("X", "Y"):
             said += f"; gates {','.join(motors)} only ({fw.refused_note or 'the firmware allows no other'})"
+    else:
+        check_motors_fit(program, motors, printer_cfg)
     default_budget = max_added_time_pct is DEFAULT
     if default_budget:
         max_added_time_pct = STOCK_BUDGET_PCT if _stalls(name) else None

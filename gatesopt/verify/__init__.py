@@ -181,7 +181,7 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
         findings += check_bounds(original, output, deg, (cx, cy))
         checks.append("bounds")
     # the firmware's own dialect first: timing read with the wrong firmware's rules means little
-    findings += check_firmware(output, firmware=fw, original=original)
+    findings += check_firmware(output, firmware=fw, original=original, printer=printer)
     checks.append("firmware")
     scheduled = dur_out = dur_orig = None
     if fw.schedule(printer, start_ahead_s=start_ahead_s, end_late_s=end_late_s) is not None:

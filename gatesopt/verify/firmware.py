@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import firmware as fwmod
+from .. import kinematics as kinmod
 from ..program import AXES, Program
 from .finding import Finding
 from .motor_lines import added_motor_lines
@@ -57,14 +58,32 @@ def firmware_problem(text: str, firmware="3dgates") -> str | None:
     return None
 
 
+def coupled_problem(text: str, kinematics) -> str | None:
+    """Why the disable line ``text`` switches off a motor the printer's ``kinematics``
+    (``slicers.Kinematics``) moves for another axis too (corexy: X and Y), or None."""
+    coupled = kinmod.coupled_motors(kinematics.name if kinematics else None)
+    parsed = fwmod.parse_motor_line(text) if coupled else None
+    if parsed is None or parsed[0]:
+        return None
+    bad = [m for m in parsed[1] if m in coupled]
+    if not bad:
+        return None
+    return (f"{text.split(';', 1)[0].strip()} switches {','.join(bad)} off on a {kinematics.name} "
+            f"printer ({kinematics.source}): {kinmod.coupled_words(coupled)}, so the next move of "
+            f"the other axis steps a motor that is off")
+
+
 def check_firmware(output: Program, *, firmware="3dgates", original: Program | None = None,
-                   max_findings: int = 10) -> list[Finding]:
+                   max_findings: int = 10, printer=None) -> list[Finding]:
     """Every motor enable/disable line the rewrite added (``added_motor_lines``; the original's own
     lines are not checked) is one ``firmware`` carries out as gating means it
-    (``firmware_problem``): its own dialect, a motor it may gate, the axis kept homed."""
+    (``firmware_problem``): its own dialect, a motor it may gate, the axis kept homed; and none
+    switches off a motor the printer's kinematics couples to another axis (``coupled_problem``:
+    the kinematics of ``printer``, a printer.cfg, else of the printer model the file names)."""
     fw = fwmod.get(firmware)
     rows, inverse, texts = added_motor_lines(original, output)
-    problem = [firmware_problem(t, fw) for t in texts]
+    kin = kinmod.printer_kinematics(bytes((original or output).data), printer)
+    problem = [firmware_problem(t, fw) or coupled_problem(t, kin) for t in texts]
     bad = np.array([p is not None for p in problem], bool)
     if not len(rows) or not bad.any():
         return []
