@@ -29,7 +29,7 @@ from scipy.optimize import nnls
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import gatesopt  # noqa: E402
-from gatesopt.ordering import dp, greedy, greedy_pass, ils, symmetric_graph  # noqa: E402
+from gatesopt.ordering import dp, greedy, greedy_pass, ils  # noqa: E402
 from gatesopt.ordering.chain import end_of  # noqa: E402
 from gatesopt.ordering.groups import build  # noqa: E402
 from gatesopt.ordering.problem import Anchor, OrderingOptions  # noqa: E402
@@ -62,12 +62,9 @@ def measure(path: str, mode: str, rows: dict) -> None:
         gs, t_g = cpu(lambda: greedy.solve(grp))
         rows["greedy"].append((n, m, t_g))
         if gs.status.value != "optimal" and greedy_pass.matching_applies(grp):
-            def match():
-                order, _ = symmetric_graph.matching_path(grp)
-                if order is not None:
-                    greedy.improve(grp, order)
-            _, t_x = cpu(match)
+            got, t_x = cpu(lambda: greedy_pass.matching_path(grp, gs))
             rows["matching"].append((n, m, t_x))
+            rows["matching_sizes"].append((mode, n, t_x, got.status.value == "optimal"))
         if g % 10 == 0 and 4 <= n <= 200:
             # a fixed number of ILS kicks (safe mode's block orders: ``blocks.BLOCK_KICKS_PER_BLOCK``)
             kicks = ils.KICKS_PER_CURVE * n
@@ -111,18 +108,34 @@ def fit(step: str, rows) -> None:
           f"p10 {q[0]:.2f} p50 {q[1]:.2f} p90 {q[2]:.2f}")
 
 
+def matching_sizes(rows) -> None:
+    """The matching step by group size: groups, CPU seconds, groups it proved."""
+    for mode in sorted({r[0] for r in rows}):
+        for lo, hi in ((13, 20), (21, 40), (41, 80), (81, 200)):
+            r = [x for x in rows if x[0] == mode and lo <= x[1] <= hi]
+            print(f"matching {mode} {lo}-{hi} curves: {len(r)} groups, {sum(x[2] for x in r):.2f} s "
+                  f"CPU, {sum(x[3] for x in r)} proven")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("files", nargs="+")
     ap.add_argument("--modes", default="safe,free")
+    ap.add_argument("--matching-max-curves", type=int, default=None,
+                    help="measure the matching step up to this many curves (default: "
+                         "greedy_pass.MATCHING_MAX_CURVES)")
     args = ap.parse_args()
+    if args.matching_max_curves is not None:
+        greedy_pass.MATCHING_MAX_CURVES = args.matching_max_curves
     rows = {k: [] for k in FEATURES}
+    rows["matching_sizes"] = []
     for path in args.files:
         for mode in args.modes.split(","):
             measure(path, mode, rows)
     for step, r in rows.items():
-        if r:
+        if r and step in FEATURES:
             fit(step, r)
+    matching_sizes(rows["matching_sizes"])
     return 0
 
 
