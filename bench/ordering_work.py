@@ -117,6 +117,35 @@ def matching_sizes(rows) -> None:
                   f"CPU, {sum(x[3] for x in r)} proven")
 
 
+def block_ils(path: str) -> None:
+    """Safe mode's block orders (``blocks._solve``): every ILS call the build makes, its
+    blocks, kicks and CPU seconds, and the fitted seconds per kick and block."""
+    from gatesopt.ordering import blocks
+    real = ils.improve_ils
+    rec = []
+
+    def timed(grp, order, **kw):
+        t = time.thread_time()
+        out = real(grp, order, **kw)
+        rec.append((grp.n_curves, kw.get("kicks"), time.thread_time() - t))
+        return out
+
+    ils.improve_ils = timed
+    try:
+        build(gatesopt.parse(path), OrderingOptions(mode="safe"))
+    finally:
+        ils.improve_ils = real
+    if not rec:
+        print(f"{Path(path).name}: no block ILS (kicks per block {blocks.BLOCK_KICKS_PER_BLOCK})")
+        return
+    warm = rec[1:] or rec           # the first call loads (or compiles) the kernel
+    units = sum(n * k for n, k, _ in warm)
+    cpu_s = sum(t for _, _, t in warm)
+    print(f"{Path(path).name}: {len(rec)} block ILS calls, {rec[0][0]} blocks, {rec[0][1]} kicks "
+          f"first; after the first ({rec[0][2]:.2f} s) {cpu_s:.2f} s CPU: {cpu_s / units:.3g} s per "
+          "kick and block")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("files", nargs="+")
@@ -124,7 +153,13 @@ def main() -> int:
     ap.add_argument("--matching-max-curves", type=int, default=None,
                     help="measure the matching step up to this many curves (default: "
                          "greedy_pass.MATCHING_MAX_CURVES)")
+    ap.add_argument("--blocks", action="store_true",
+                    help="only measure safe mode's block ILS on the files (block_ils)")
     args = ap.parse_args()
+    if args.blocks:
+        for path in args.files:
+            block_ils(path)
+        return 0
     if args.matching_max_curves is not None:
         greedy_pass.MATCHING_MAX_CURVES = args.matching_max_curves
     rows = {k: [] for k in FEATURES}

@@ -45,8 +45,10 @@ from .problem import Anchor, Group, LinkCosts, OrderingProblem, group_starts
 #: machine's load): the subset DP, the matching step, ILS. Beyond it the greedy path and local
 #: search only; islands repeat layer after layer (a cache takes those)
 BLOCKS_WORK_S = 1.0
-#: ILS kicks per block of a segment the DP does not take (a fixed number: no deadline)
-BLOCK_KICKS_PER_BLOCK = 15
+#: ILS kicks per block of a segment the DP does not take (a fixed number: no deadline); 5, not
+#: ILS's 15 per curve: a pin plate's 35-block segment then costs ~0.07 s of work (0.06 s CPU
+#: measured), so ``BLOCKS_WORK_S`` pays for ~15 of them (``budget.WORK_ILS_S_PER_KICK_CURVE``)
+BLOCK_KICKS_PER_BLOCK = 5
 #: loops smaller than this (mm^2) outline no island
 MIN_ISLAND_AREA_MM2 = 1e-3
 #: why a labelled object's run of a layer keeps its place (``object_runs``)

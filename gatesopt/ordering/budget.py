@@ -228,11 +228,14 @@ WORK_DP_S_PER_GROUP = 4.3e-5
 WORK_MATCHING_S_PER_CURVE3 = 0.0
 WORK_MATCHING_S_PER_LINK = 2e-7
 WORK_MATCHING_S_PER_GROUP = 2e-4
-#: ILS with a fixed number of kicks (safe mode's block orders, ``blocks._solve``): per kick and
-#: curve, and per group (its link matrix and neighbour lists): fitted on 180 groups, p10 0.78,
-#: p50 1.10, p90 1.58
-WORK_ILS_S_PER_KICK_CURVE = 1.2e-6
-WORK_ILS_S_PER_GROUP = 1.5e-2
+#: ILS with a fixed number of kicks on safe mode's block orders (``blocks._solve``), per kick and
+#: block, and per group: measured on pins__prusa_mk3s_acp and pins__cura_mk3 (11 calls each
+#: after the first, 35 blocks, 175 kicks: 0.71 / 0.68 s CPU, 1.06e-5 / 1.01e-5 s per kick and
+#: block, the per-group part included; one kick 0.6 ms; ``bench/ordering_work.py --blocks``). (On
+#: the curves of real groups ILS costs ~1.2e-6 s per kick and curve plus 1.5e-2 s per group:
+#: fitted on 180 groups of the four files above; a block group's kicks cost ~10x that)
+WORK_ILS_S_PER_KICK_CURVE = 1.1e-5
+WORK_ILS_S_PER_GROUP = 1e-3
 #: the safety net: a pass still running this many times its budget (plus WORK_NET_MIN_S) of
 #: wall-clock seconds after it began (a machine several times slower than the calibration one)
 #: leaves the groups after it unsearched, and the run says the net fired
