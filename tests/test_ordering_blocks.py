@@ -120,7 +120,7 @@ def test_a_segments_block_order_prices_the_layer_change_after_it(seed):
         if after >= problem.n_curves or problem.curve_layer[after] == problem.curve_layer[seg[0]]:
             continue                # the test is about the segment before a layer change
         bl = island_blocks(problem, seg, wall_like)
-        order, _, _ = blk._solve(problem, bl, seg, 1.0, {})
+        order, _, _, _ = blk._solve(problem, bl, seg, 1.0, {})
 
         def cost(o):
             curves = np.concatenate([bl[i] for i in o] + [[after]])

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from ..solvers import Status
-from . import dp, greedy, ils, matching, milp, symmetric, symmetric_graph
+from . import dp, greedy, greedy_pass, ils, matching, milp, symmetric, symmetric_graph
 from .budget import exact_time_s
 from .problem import OPTIMAL_ABS_TOL, Group, GroupSolution
 
@@ -74,21 +74,6 @@ def warm_up() -> None:
     symmetric.load_kernels()        # what these groups may not have reached
 
 
-def _matching_path(group: Group, heur: GroupSolution) -> GroupSolution:
-    """The better of ``heur`` and the matching's path (``symmetric_graph.matching_path``,
-    polished by the greedy local search), with the better of the two bounds."""
-    order, bound = symmetric_graph.matching_path(group)
-    bound = max(bound, heur.bound)
-    best, obj, formulation = heur.order, heur.objective, heur.formulation
-    if order is not None:
-        order = greedy.improve(group, order)
-        o = group.path_cost(order)
-        if o < obj - 1e-9:
-            best, obj, formulation = order, o, "matching"
-    status = Status.OPTIMAL if obj - bound <= OPTIMAL_ABS_TOL else Status.FEASIBLE
-    return GroupSolution.make(best, obj, bound, status, heur.solve_s, formulation)
-
-
 def _ils_from(group: Group, start: GroupSolution, bound: float, deadline: float,
               formulation: str, **kwargs) -> GroupSolution:
     """``start``, or the ILS path from it (``ils.improve_ils`` until ``deadline``, stopped once
@@ -125,7 +110,7 @@ def solve(group: Group, *, time_limit_s: float = 2.0, hint=None,
         # the cheapest perfect matching of the end points: a bound within ~2 % of the optimum
         # on real groups (the cheap bound: ~20 %), and, patched into one path, a path that is
         # often the optimum (formulations/ordering.md, "Bounds")
-        heur = _matching_path(group, heur)
+        heur = greedy_pass.matching_path(group, heur)
         if heur.status == Status.OPTIMAL:
             return GroupSolution.make(heur.order, heur.objective, heur.bound, Status.OPTIMAL,
                                       time.perf_counter() - t0, "auto:matching")

@@ -40,10 +40,15 @@ from ..solvers import Status
 from .layout import LINE_BARRIER, LINE_FATAL, LINE_LABEL
 from .problem import Anchor, Group, LinkCosts, OrderingProblem, group_starts
 
-#: the time limit of one segment's block order, and of all of a file's together (beyond it the
-#: greedy path and local search only): islands repeat layer after layer (a cache takes those)
-BLOCK_TIME_LIMIT_S = 0.2
-BLOCKS_BUDGET_S = 1.0
+#: what a file's block orders may spend beyond greedy's path, in work (deterministic seconds,
+#: ``budget.WorkPlan``'s units: issue 36, the same block orders on every run, whatever the
+#: machine's load): the subset DP, the matching step, ILS. Beyond it the greedy path and local
+#: search only; islands repeat layer after layer (a cache takes those)
+BLOCKS_WORK_S = 1.0
+#: ILS kicks per block of a segment the DP does not take (a fixed number: no deadline); 5, not
+#: ILS's 15 per curve: a pin plate's 35-block segment then costs ~0.07 s of work (0.06 s CPU
+#: measured), so ``BLOCKS_WORK_S`` pays for ~15 of them (``budget.WORK_ILS_S_PER_KICK_CURVE``)
+BLOCK_KICKS_PER_BLOCK = 5
 #: loops smaller than this (mm^2) outline no island
 MIN_ISLAND_AREA_MM2 = 1e-3
 #: why a labelled object's run of a layer keeps its place (``object_runs``)
@@ -82,14 +87,14 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
               "objects_proven": 0, "objects_kept": {}}
     moved_layers = set()
     cache: dict = {}
-    t_end = time.perf_counter() + BLOCKS_BUDGET_S
+    work = [BLOCKS_WORK_S]     # deterministic seconds left (``_solve`` charges each segment)
     for seg in segments(problem):
         blocks = island_blocks(problem, seg, cg.wall_like)
         if len(blocks) < 3:
             continue
         report["segments"] += 1
         report["blocks"] += len(blocks)
-        moved, proven = _order_run(problem, blocks, seg, t_end, cache, perm, moved_layers, report)
+        moved, proven = _order_run(problem, blocks, seg, work, cache, perm, moved_layers, report)
         report["proven"] += proven
         report["segments_moved"] += moved
     runs, kept = object_runs(problem)
@@ -101,7 +106,7 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
         seg = np.arange(objs[0][0], objs[-1][1] + 1)
         report["object_runs"] += 1
         report["objects"] += len(blocks)
-        moved, proven = _order_run(problem, blocks, seg, t_end, cache, perm, moved_layers, report)
+        moved, proven = _order_run(problem, blocks, seg, work, cache, perm, moved_layers, report)
         report["objects_proven"] += proven
         report["object_runs_moved"] += moved
     report["layers_moved"] = len(moved_layers)
@@ -111,13 +116,15 @@ def order_blocks(program: Program, problem: OrderingProblem, cg: CurveGroups) ->
     return permuted(problem, perm, cg, report)
 
 
-def _order_run(problem, blocks, seg, t_end, cache, perm, moved_layers, report) -> tuple[int, int]:
-    """Order one run of blocks (islands or objects) within what is left until ``t_end``; a new
-    order is written into ``perm`` and its layer into ``moved_layers``. Returns (moved 0/1,
-    proven 0/1); the solve time goes to ``report["solve_s"]``."""
-    limit = max(0.0, min(BLOCK_TIME_LIMIT_S, t_end - time.perf_counter()))
-    order, proven, took = _solve(problem, blocks, seg, limit, cache)
+def _order_run(problem, blocks, seg, work, cache, perm, moved_layers, report) -> tuple[int, int]:
+    """Order one run of blocks (islands or objects) within the work left (``work[0]``,
+    deterministic seconds, charged here); a new order is written into ``perm`` and its layer into
+    ``moved_layers``. Returns (moved 0/1, proven 0/1); the solve time goes to
+    ``report["solve_s"]``, its work to ``report["work_s"]``."""
+    order, proven, took, spent = _solve(problem, blocks, seg, work[0], cache)
+    work[0] -= spent
     report["solve_s"] += took
+    report["work_s"] = report.get("work_s", 0.0) + spent
     if np.array_equal(order, np.arange(len(blocks))):
         return 0, int(proven)
     moved_layers.add(int(problem.curve_layer[seg[0]]))
@@ -270,11 +277,17 @@ def island_blocks(problem: OrderingProblem, seg: np.ndarray, wall_like: np.ndarr
     return [seg[island == isl] for isl in order]
 
 
-def _solve(problem: OrderingProblem, blocks: list, seg: np.ndarray, limit: float, cache: dict):
-    """(block order, proven optimal?, seconds) for one segment: the first block stays first, the
-    others are one candidate each of a group solved by ``auto``; kept as the slicer had them
-    unless the solved order costs less."""
-    from . import auto
+def _solve(problem: OrderingProblem, blocks: list, seg: np.ndarray, work_left_s: float,
+           cache: dict):
+    """(block order, proven optimal?, seconds, work) for one segment: the first block stays
+    first, the others are one candidate each of a group solved by the greedy formulation
+    (``greedy_pass.solve``: the subset DP up to ``budget.DP_CURVES`` blocks, greedy's path and
+    bound, the matching step where it applies and ``work_left_s`` pays for it), then, unproven,
+    the subset DP where it fits (``dp.fits``) or ILS with ``BLOCK_KICKS_PER_BLOCK`` kicks per
+    block, where ``work_left_s`` pays for it; kept as the slicer had them unless the solved order
+    costs less. Every step runs to its end (no clock is read): the same order on every run. The
+    work (deterministic seconds, ``budget``'s constants) is counted from the segment's size."""
+    from . import budget, dp, greedy_pass, ils
     t0 = time.perf_counter()
     first = [int(b[0]) for b in blocks]
     last = [int(b[-1]) for b in blocks]
@@ -295,12 +308,27 @@ def _solve(problem: OrderingProblem, blocks: list, seg: np.ndarray, limit: float
     grp = dataclasses.replace(grp, costs=_block_costs(problem, first[1:], last[1:], start, end))
     key = grp.key()
     got = cache.get(key)
+    spent = 0.0
     if got is None:
-        if limit > 0:
-            gs = auto.solve(grp, time_limit_s=limit)
-        else:
-            from .greedy import solve as greedy_solve
-            gs = greedy_solve(grp)
+        small = greedy_pass.dp_first(grp)
+        spent = float(budget.greedy_work_s(k, k, problem.pricer is not None, small))
+        extra = budget.matching_work_s(k, k)
+        gs = greedy_pass.solve(grp, with_matching=spent + extra <= work_left_s)
+        if gs.formulation == greedy_pass.MATCHING_FORMULATION:
+            spent += extra
+        if gs.status != Status.OPTIMAL and k >= 4:
+            dp_s = budget.WORK_DP_S_PER_GROUP + budget.WORK_DP_S_PER_STATE * dp.work(grp)
+            kicks = BLOCK_KICKS_PER_BLOCK * k
+            ils_s = budget.WORK_ILS_S_PER_GROUP + budget.WORK_ILS_S_PER_KICK_CURVE * kicks * k
+            if dp.fits(grp) and spent + dp_s <= work_left_s:
+                spent += dp_s
+                gs = dp.solve(grp)
+            elif spent + ils_s <= work_left_s:
+                spent += ils_s
+                order = ils.improve_ils(grp, gs.order, kicks=kicks, local_optimum=True)
+                if grp.path_cost(order) < gs.objective - 1e-9:
+                    gs = dataclasses.replace(gs, order=np.asarray(order, np.int64),
+                                             objective=grp.path_cost(order))
         ident = np.arange(k)
         if grp.path_cost(gs.order) < grp.path_cost(ident) - 1e-9:
             got = (gs.order, gs.status == Status.OPTIMAL)
@@ -309,7 +337,8 @@ def _solve(problem: OrderingProblem, blocks: list, seg: np.ndarray, limit: float
                    grp.path_cost(ident) <= gs.objective + 1e-9)
         cache[key] = got
     order, proven = got
-    return np.concatenate(([0], np.asarray(order) + 1)), bool(proven), time.perf_counter() - t0
+    return (np.concatenate(([0], np.asarray(order) + 1)), bool(proven), time.perf_counter() - t0,
+            spent)
 
 
 def _block_costs(problem: OrderingProblem, first, last, start: Anchor, end) -> LinkCosts:

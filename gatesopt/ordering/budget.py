@@ -21,7 +21,7 @@ DP_CURVES = 12
 MIN_SYMMETRIC_S = 0.01
 MIN_SYMMETRIC_S_PER_CURVE = 0.002
 #: what a group costs in the plan without an exact step, per curve: the greedy path and the
-#: matching's bound and path (``auto._matching_path``), measured (docs/BENCHMARKS.md)
+#: matching's bound and path (``greedy_pass.matching_path``), measured (docs/BENCHMARKS.md)
 HEURISTIC_S_PER_CURVE = 8e-5
 #: making a group's time-objective link matrix (``cost._dense``, on first use: inside the group's
 #: search since ``problem.LinkCosts.make_arc``), per link (m^2 for m candidates): measured 0.22 us
@@ -148,11 +148,6 @@ class BudgetPlan:
     def pending_curves(self) -> float:
         return float(self.curves[self.pending].sum())
 
-    def pending_matrix_s(self) -> float:
-        """What making the pending groups' link matrices is planned to take (0 where they are
-        made already): all a matrix-making helper process can take off the main process."""
-        return float(self.matrix_s[self.pending].sum())
-
     def limit(self, g: int, left_s: float) -> float | None:
         """Time for group ``g`` out of ``left_s`` seconds left for it and the groups after it;
         None: none (what is left is spent on smaller groups: the class docstring)."""
@@ -190,13 +185,143 @@ class BudgetPlan:
             self.exact_used_s += used_s
             self.exact_planned_s += float(self.shape_s[self.rank[g]])
 
-    def matrix_made(self, g: int) -> None:
-        """Group ``g``'s link matrix was made by another process (``matrix_helper``): its
-        heuristic time no longer counts it."""
-        if self.claims[g]:
-            i = self.rank[g]
-            self.heuristic_s[i] -= self.matrix_s[i]
-            self.matrix_s[i] = 0.0
-
     def done(self, g: int) -> None:
         self.done_mask[g] = 1
+
+
+# ---- the greedy chain's budget in work, not wall-clock (issue 36)
+#
+# The greedy pass (``--formulation greedy``, and an exact run's first pass) decides which groups
+# it orders from counts, never from a clock, as OR-Tools CP-SAT's ``max_deterministic_time`` or
+# Gurobi's ``WorkLimit`` do: each group's work is priced from its size in *deterministic seconds*
+# (the CPU seconds the step takes on the calibration machine, fitted by bench/ordering_work.py:
+# docs/BENCHMARKS.md, "Greedy pass work units"), and the budget's seconds are spent in those.
+# Two runs of one file with one budget order the same groups the same way, whatever the
+# machine's load and whichever process makes the link matrices (``matrix_helper``: its matrices
+# are charged to the plan as if the main process had made them). A machine slower than the
+# calibration one runs past the budget; the wall-clock safety net (``WORK_NET_FACTOR``) ends the
+# pass there, and the run says so (then it is not reproducible).
+
+#: The constants are fitted by bench/ordering_work.py on this machine (thread CPU seconds, 2,692
+#: groups of the Cura bunny, real_cura591, prusa25_xend_honey25_acp and real_prusa261_benchy,
+#: safe and free; docs/BENCHMARKS.md, "Greedy pass work units"), each scaled so that the modelled
+#: total is the measured one.
+#: per curve of the file, building its group and passing it (every group, fixed too: measured
+#: 5.8e-6), and the chain's end (``chain.pick_paths``, travel totals)
+WORK_PASS_S_PER_CURVE = 6e-6
+WORK_TAIL_S_PER_CURVE = 4e-6
+#: making a group's time-objective link matrix, per link (m^2 for m candidates): measured 3.33e-7
+#: (measured / modelled over the groups above 1 ms: p10 0.90, p50 0.96, p90 1.24)
+WORK_MATRIX_S_PER_LINK = 3.3e-7
+#: greedy's nearest neighbour, local search, orientation DP and cheap bound: per link (m^2), per
+#: curve and per group (fitted 4.3e-8 per link and 1.4e-4 per group, x 1.4 to the measured total;
+#: p10 0.84, p50 1.11, p90 1.55: the local search's passes vary)
+WORK_GREEDY_S_PER_LINK = 6.1e-8
+WORK_GREEDY_S_PER_CURVE = 0.0
+WORK_GREEDY_S_PER_GROUP = 1.9e-4
+#: the subset DP (``dp.work``: 2^n m^2 states x moves) and per group (p10 0.90, p90 1.13)
+WORK_DP_S_PER_STATE = 1.3e-9
+WORK_DP_S_PER_GROUP = 4.3e-5
+#: the matching step (``greedy_pass.matching_path``) on groups of at most
+#: ``greedy_pass.MATCHING_MAX_CURVES``: per group and per link (the Cura bunny, safe: 369 groups
+#: of 13-40 curves, 0.26 s CPU in all)
+WORK_MATCHING_S_PER_CURVE3 = 0.0
+WORK_MATCHING_S_PER_LINK = 2e-7
+WORK_MATCHING_S_PER_GROUP = 2e-4
+#: ILS with a fixed number of kicks on safe mode's block orders (``blocks._solve``), per kick and
+#: block, and per group: measured on pins__prusa_mk3s_acp and pins__cura_mk3 (11 calls each
+#: after the first, 35 blocks, 175 kicks: 0.71 / 0.68 s CPU, 1.06e-5 / 1.01e-5 s per kick and
+#: block, the per-group part included; one kick 0.6 ms; ``bench/ordering_work.py --blocks``). (On
+#: the curves of real groups ILS costs ~1.2e-6 s per kick and curve plus 1.5e-2 s per group:
+#: fitted on 180 groups of the four files above; a block group's kicks cost ~10x that)
+WORK_ILS_S_PER_KICK_CURVE = 1.1e-5
+WORK_ILS_S_PER_GROUP = 1e-3
+#: the safety net: a pass still running this many times its budget (plus WORK_NET_MIN_S) of
+#: wall-clock seconds after it began (a machine several times slower than the calibration one)
+#: leaves the groups after it unsearched, and the run says the net fired
+WORK_NET_FACTOR = 3.0
+WORK_NET_MIN_S = 5.0
+
+
+def group_cands(problem: OrderingProblem) -> tuple[np.ndarray, np.ndarray]:
+    """Per group (curves, candidates): one candidate per loop (its seam), two per open curve
+    (either direction); with ``move_seams`` a loop's extra seams are not counted (a lower
+    estimate, the same on every run)."""
+    start = np.asarray(problem.group_curve_start, np.int64)
+    n = np.diff(start)
+    open_cum = np.concatenate([[0], np.cumsum(~np.asarray(problem.curve_closed, bool))])
+    return n, n + (open_cum[start[1:]] - open_cum[start[:-1]])
+
+
+def greedy_work_s(n, m, time_objective: bool, dp_first) -> np.ndarray:
+    """Deterministic seconds of the greedy pass's solve of groups of ``n`` curves and ``m``
+    candidates (numpy arrays): its link matrix (time objective) and the subset DP (``dp_first``)
+    or greedy's path."""
+    n, m = np.asarray(n, float), np.asarray(m, float)
+    links = m * m
+    states = np.where(dp_first, 2.0 ** np.minimum(n, 60.0) * links, 0.0)
+    solve = np.where(dp_first, WORK_DP_S_PER_GROUP + WORK_DP_S_PER_STATE * states,
+                     WORK_GREEDY_S_PER_GROUP + WORK_GREEDY_S_PER_CURVE * n
+                     + WORK_GREEDY_S_PER_LINK * links)
+    return solve + (WORK_MATRIX_S_PER_LINK * links if time_objective else 0.0)
+
+
+def matching_work_s(n: int, m: int) -> float:
+    """Deterministic seconds of the matching step on a group of ``n`` curves, ``m`` candidates."""
+    return (WORK_MATCHING_S_PER_GROUP + WORK_MATCHING_S_PER_CURVE3 * float(n) ** 3
+            + WORK_MATCHING_S_PER_LINK * float(m) ** 2)
+
+
+class WorkPlan:
+    """The greedy chain's budget in deterministic seconds (the section's comment above). The pass
+    of every group and the chain's end are set aside first; of the rest, each re-orderable group
+    is charged its solve's work (``greedy_work_s``, counted from its size; the matching step's
+    where it ran). Where what is left does not pay for every group still to come, the smallest
+    are paid for first and the largest keep the slicer's order (as ``BudgetPlan`` funds them):
+    ``funds`` answers per group, in print order, from counts alone."""
+
+    def __init__(self, problem: OrderingProblem, budget_s: float):
+        from .dp import MAX_WORK
+        n, m = group_cands(problem)
+        decided = np.asarray(problem.group_reorderable, bool)
+        dp_first = decided & (n <= DP_CURVES) & ((2.0 ** np.minimum(n, 60)) * m * m <= MAX_WORK)
+        self.est_s = np.where(decided, greedy_work_s(n, m, problem.pricer is not None, dp_first),
+                              0.0)
+        self.time_objective = problem.pricer is not None
+        self.budget_s = float(budget_s)
+        self.left_s = (self.budget_s - (WORK_PASS_S_PER_CURVE + WORK_TAIL_S_PER_CURVE)
+                       * float(problem.n_curves))
+        self.spent_s = self.budget_s - self.left_s
+        self.order = np.flatnonzero(decided)[np.argsort(self.est_s[decided], kind="stable")]
+        self.rank = np.full(problem.n_groups, -1, np.int64)
+        self.rank[self.order] = np.arange(len(self.order))
+        self.pending = np.ones(len(self.order), bool)       # by rank
+
+    def funds(self, g: int) -> bool:
+        """Whether group g (re-orderable, the next in print order) is searched: every group still
+        to come is paid for, or g is among the smallest that what is left pays for."""
+        r = int(self.rank[g])
+        if r < 0:
+            return True
+        est = self.est_s[self.order[self.pending]]
+        if est.sum() <= self.left_s:
+            return True
+        k = int(np.searchsorted(np.cumsum(est), self.left_s, side="right"))
+        return int(np.count_nonzero(self.pending[:r])) < k
+
+    def affords(self, g: int, extra_s: float) -> bool:
+        """Whether ``extra_s`` more on group g (the matching step) still leaves every group after
+        it paid for (then it takes nothing from them)."""
+        r = int(self.rank[g])
+        after = self.pending.copy()
+        if r >= 0:
+            after[r] = False
+        return (self.est_s[self.order[after]].sum() + self.est_s[g] + extra_s) <= self.left_s
+
+    def charge(self, g: int, work_s: float) -> None:
+        """Group g is done, its solve charged ``work_s`` (0: it kept the slicer's order)."""
+        r = int(self.rank[g])
+        if r >= 0:
+            self.pending[r] = False
+        self.left_s -= work_s
+        self.spent_s += work_s

@@ -26,9 +26,10 @@ from ..solvers import Formulation
 from .problem import OrderingOptionsError
 
 FORMULATIONS: dict[str, Formulation] = {
-    "greedy": Formulation("greedy", "gatesopt.ordering.greedy",
+    "greedy": Formulation("greedy", "gatesopt.ordering.greedy_pass",
                           capabilities=frozenset({"any_size", "one_chain"}),
-                          description="nearest neighbour, 2-opt, Or-opt, orientation DP"),
+                          description="nearest neighbour, 2-opt, Or-opt, orientation DP; subset DP on small "
+                                      "groups, matching where cheap"),
     "tsp": Formulation("tsp", "gatesopt.ordering.tsp", backends=("ortools",),
                        capabilities=frozenset({"any_size"}),
                        description="Fleming et al. Algorithm 1: a shortest closed tour, cut open"),

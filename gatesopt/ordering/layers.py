@@ -24,7 +24,7 @@ from .helper import Helper
 from .matrix_helper import MatrixHelper, with_arc
 from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
                       OrderingSolution, path_travel_mm)
-from .runner import GroupRunner, greedy_answer
+from .runner import GroupRunner, WorkRunner, greedy_answer
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,17 +114,19 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
               if workers == 2 and not one_chain else None)
     maker = MatrixHelper.start(problem) if workers == 2 and one_chain else None
     try:
-        # with the matrix helper the main process solves alone; the plan counts the helper's
-        # time as far as the pending groups' matrices go (``GroupRunner.other_makes_matrices``)
-        other_alive = ((lambda: not helper.dead) if helper else
-                       (lambda: not maker.dead) if maker else None)
-        runner = GroupRunner(problem, fn, time_limit_s, budget_s, t0, kwargs,
-                             shared=helper.shared if helper else None,
-                             other_alive=other_alive,
-                             warm_up=(formulations.warm_up if "warm_up" in record.capabilities
-                                      else None),
-                             matrices_made=greedy is not None,
-                             other_makes_matrices=maker is not None)
+        if one_chain:
+            # the greedy chain: its budget in work, not wall-clock (``runner.WorkRunner``): the
+            # same groups searched the same way on every run, with one worker or two (the
+            # matrix helper's matrices are charged as if made here)
+            runner = WorkRunner(problem, fn, time_limit_s, budget_s, t0, kwargs)
+        else:
+            other_alive = (lambda: not helper.dead) if helper else None
+            runner = GroupRunner(problem, fn, time_limit_s, budget_s, t0, kwargs,
+                                 shared=helper.shared if helper else None,
+                                 other_alive=other_alive,
+                                 warm_up=(formulations.warm_up if "warm_up" in record.capabilities
+                                          else None),
+                                 matrices_made=greedy is not None)
         for g in range(problem.n_groups):
             if stop_requested():        # Ctrl-C (``solvers.stop_scope``): no whole answer yet
                 raise Interrupted(f"curve ordering stopped at group {g} of {problem.n_groups}")
@@ -138,8 +140,6 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             if maker is not None and not problem.group_fixed[g] and grp.n_curves >= 2:
                 mine = with_arc(grp, maker.take(g))
                 handed, grp = mine is not grp, mine
-                for h in maker.received():      # made there: the plan no longer charges them
-                    runner.matrix_made(h)
             if problem.group_fixed[g] or grp.n_curves == 0:
                 order = np.arange(grp.n_cands)      # one candidate per curve, in the slicer's order
                 obj = grp.path_cost(order)
@@ -147,7 +147,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
             else:
                 answer = helper.take(g) if helper else None
                 if answer is None:
-                    gs = runner.run(g, grp, answers[g] if answers is not None else None)
+                    gs = (runner.run(g, grp) if one_chain else
+                          runner.run(g, grp, answers[g] if answers is not None else None))
                     grp.check_order(gs.order)
                     opts = path_options(grp, gs)
                 else:
@@ -197,7 +198,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                             time.perf_counter() - t0, formulation,
                             cost_before=base.order_cost(ident, no, np.zeros(n, np.int64)),
                             cost_after=base.order_cost(order_out, reversed_, seam),
-                            cost_unit=problem.cost_unit)
+                            cost_unit=problem.cost_unit,
+                            work_net_fired=one_chain and runner.net_fired)
 
 
 def model_travel_mm(problem: OrderingProblem, order, reversed_, seam) -> float:

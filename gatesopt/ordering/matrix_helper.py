@@ -130,8 +130,7 @@ class MatrixHelper(Child):
         return self.results.pop(g, None)
 
     def received(self) -> list[int]:
-        """Groups whose matrix arrived since the last call (the budget plan stops charging
-        their matrix: ``budget.BudgetPlan.matrix_made``)."""
+        """Groups whose matrix arrived since the last call."""
         self._drain(block=False)
         out, self.fresh = self.fresh, []
         return out

@@ -644,6 +644,9 @@ class OrderingSolution:
     cost_before: float = float("nan")
     cost_after: float = float("nan")
     cost_unit: str = "mm"
+    #: the greedy chain's wall-clock safety net fired (``runner.WorkRunner``): the groups after it
+    #: kept the slicer's order for want of wall-clock time, so the run is not reproducible
+    work_net_fired: bool = False
 
     def layer_summary(self, problem: OrderingProblem) -> list[dict]:
         """Per layer: curves, largest group, worst status and gap, solve time."""

@@ -11,7 +11,9 @@ import numpy as np
 from .. import _jit
 from ..solvers import Status
 from .budget import (OVERHEAD_S_PER_CURVE, OVERRUN_PRIOR_CURVES, OVERRUN_S_PER_CURVE,
-                     STOP_HELPER_S, TAIL_S_PER_CURVE, BudgetPlan, exact_time_s)
+                     STOP_HELPER_S, TAIL_S_PER_CURVE, WORK_NET_FACTOR, WORK_NET_MIN_S,
+                     BudgetPlan, WorkPlan, exact_time_s, greedy_work_s, matching_work_s)
+from .greedy_pass import DP_FORMULATION, MATCHING_FORMULATION
 from .problem import OPTIMAL_ABS_TOL, GroupSolution, kept_solution
 
 #: a group whose solve spent more than this compiling numba kernels (a first run after an
@@ -104,8 +106,7 @@ class GroupRunner:
     kernels)."""
 
     def __init__(self, problem, fn, time_limit_s, budget_s, t0, kwargs, shared=None,
-                 other_alive=None, warm_up=None, matrices_made: bool = False,
-                 other_makes_matrices: bool = False):
+                 other_alive=None, warm_up=None, matrices_made: bool = False):
         self.problem, self.fn, self.time_limit_s, self.budget_s = problem, fn, time_limit_s, budget_s
         self.t0, self.kwargs = t0, kwargs
         self.cache = {}     # identical groups recur layer after layer (same infill, same start)
@@ -117,9 +118,6 @@ class GroupRunner:
                      else None)
         # with a helper both processes spend the time left at once, while both are running
         self.other_alive = other_alive if other_alive is not None else (lambda: shared is not None)
-        #: the other process makes link matrices only (``matrix_helper``): it adds at most the
-        #: pending groups' matrix time to what is left, not a whole second process's
-        self.other_makes_matrices = other_makes_matrices
         if warm_up is not None:
             # outside any group's limit: a group's first call of a kernel would otherwise load it
             # (~0.35 s in all) or, on a first run after an install, compile it (~20 s) inside
@@ -179,10 +177,7 @@ class GroupRunner:
                 return self._late(grp, greedy, backwards)
         share = None
         if self.plan is not None:
-            other = 0.0
-            if self.other_alive():
-                other = (min(wall_left, self.plan.pending_matrix_s()) if self.other_makes_matrices
-                         else wall_left)
+            other = wall_left if self.other_alive() else 0.0
             left = max(0.0, wall_left + other - rate * self.plan.pending_curves())
             share = self.plan.limit(g, left)
             if share is None:
@@ -230,12 +225,6 @@ class GroupRunner:
         self.cache[key] = gs
         return gs
 
-    def matrix_made(self, g: int) -> None:
-        """Group g's link matrix was made elsewhere (``matrix_helper``): the plan charges its
-        search without it."""
-        if self.plan is not None:
-            self.plan.matrix_made(g)
-
     def pass_rate(self) -> float:
         """Seconds per curve the caller spends between groups (``passed``), as measured so far
         on this run (so on this machine as loaded), from the prior ``OVERHEAD_S_PER_CURVE``."""
@@ -260,3 +249,52 @@ class GroupRunner:
         self.mark, self.in_run_s = now, 0.0
         if self.plan is not None:
             self.plan.done(g)
+
+
+class WorkRunner:
+    """The greedy chain's groups (``layers.solve`` of a ``one_chain`` formulation) under a budget
+    in work (``budget.WorkPlan``, deterministic seconds), not wall-clock: which groups are
+    searched, and whether the matching step runs on them, follows from counts alone, so two runs
+    (one worker or two, a quiet machine or a loaded one) give the same answer. The wall-clock
+    safety net: once ``WORK_NET_FACTOR`` times the budget plus ``WORK_NET_MIN_S`` has passed
+    since ``t0`` (numba compiling not counted), every group after keeps the slicer's order
+    (``OUT_OF_TIME``) and ``net_fired`` says so. ``budget_s`` None: every group searched."""
+
+    def __init__(self, problem, fn, time_limit_s, budget_s, t0, kwargs):
+        self.fn, self.time_limit_s, self.t0, self.kwargs = fn, time_limit_s, t0, kwargs
+        self.plan = None if budget_s is None else WorkPlan(problem, budget_s)
+        self.net_s = None if budget_s is None else WORK_NET_FACTOR * budget_s + WORK_NET_MIN_S
+        self.time_objective = problem.pricer is not None
+        self.net_fired = False
+        self.out_of_time = 0
+
+    def run(self, g: int, grp) -> GroupSolution:
+        """Group g's answer: searched if the plan pays for it, else the slicer's order."""
+        if self.plan is None:
+            return self.fn(grp, time_limit_s=self.time_limit_s, **self.kwargs)
+        if not self.net_fired:
+            elapsed = time.perf_counter() - self.t0 - _jit.compile_s_since(self.t0)
+            self.net_fired = elapsed > self.net_s
+        if self.net_fired or not self.plan.funds(g):
+            self.plan.charge(g, 0.0)
+            self.out_of_time += 1
+            return kept_solution(grp, time.perf_counter(), OUT_OF_TIME)
+        n, m = grp.n_curves, grp.n_cands
+        extra_s = matching_work_s(n, m)
+        gs = self.fn(grp, time_limit_s=self.time_limit_s,
+                     with_matching=self.plan.affords(g, extra_s),
+                     **self.kwargs)
+        work_s = float(greedy_work_s(n, m, self.time_objective, gs.formulation == DP_FORMULATION))
+        if gs.formulation == MATCHING_FORMULATION:
+            work_s += extra_s
+        self.plan.charge(g, work_s)
+        return gs
+
+    @property
+    def work_s(self) -> float:
+        """Deterministic seconds spent so far (the pass set aside, what the groups were charged)."""
+        return 0.0 if self.plan is None else self.plan.spent_s
+
+    def passed(self, g: int) -> None:
+        """Group g is done (``GroupRunner.passed``'s place in the loop): the pass's work was set
+        aside when the plan was made."""

@@ -24,7 +24,7 @@ from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
 from ..ordering.runner import OUT_OF_TIME, OUT_OF_TIME_GREEDY
 from ..ordering.travel_stats import runs, travel_mask
 from ..program import Program
-from ..solvers import stop_requested
+from ..solvers import Status, stop_requested
 from ..verify.ordering import check
 from .figures import figures
 from .guard import (FROM_GREEDY, FROM_SOLVER, GUARD_TOL_S, emit_guarded,  # noqa: F401 (re-exported)
@@ -77,6 +77,12 @@ def out_of_time_note(n_groups: int, n_decided: int, solve_budget_s) -> str:
             f"keep the slicer's order unsearched (status fallback; a larger --budget searches them)")
 
 
+#: the report's line where the greedy chain's wall-clock safety net fired
+WORK_NET_NOTE = ("curve ordering: this machine ran the greedy pass far slower than its work budget "
+                 "plans (the wall-clock safety net fired): groups after that point keep the "
+                 "slicer's order, and another run may order a different number of them")
+
+
 def kept_slower_note(n_layers: int) -> str:
     """The report's line for layers the time guard put back (``emit_guarded``)."""
     return (f"{n_layers} layers keep the slicer's order: re-ordered they took longer under the "
@@ -103,6 +109,21 @@ FINISH_FIXED_S = 0.15
 #: building the ordering problem (``ordering.groups.build``), per input line: ``reorder`` measures
 #: it, ``stage_floor_s`` estimates it before (the Cura bunny: 1.28 s for 204,404 lines, quiet)
 BUILD_S_PER_LINE = 7e-6
+#: reading the file (``parse``), per input line, as the greedy chain's work budget counts it
+#: (``greedy_work_budget_s``): the Cura bunny (gzip, 204,404 lines) 0.45 s CPU
+READ_S_PER_LINE = 2.5e-6
+
+
+def greedy_work_budget_s(budget_s: float | None, n_lines: int, read: bool = False) -> float | None:
+    """The greedy chain's budget in work (deterministic seconds, ``ordering.runner.WorkRunner``):
+    ``solve_budget_s`` with the build (and, ``read``, the file's reading) counted at their quiet
+    rates per line instead of as measured, and the work after the solve at its quiet rate: from the
+    budget and the file's size alone, so the greedy pass orders the same groups the same way on
+    every run (issue 36). None (no budget) stays None."""
+    if budget_s is None:
+        return None
+    spent = (BUILD_S_PER_LINE + (READ_S_PER_LINE if read else 0.0)) * n_lines
+    return solve_budget_s(budget_s, n_lines, spent, 1.0)
 
 
 def solve_budget_s(budget_s: float | None, n_lines: int, spent_s: float,
@@ -192,11 +213,21 @@ def repair_pass(program: Program, problem: OrderingProblem, formulation: str, *,
     return repair
 
 
+def same_start_layers(source: np.ndarray) -> np.ndarray:
+    """Per layer, whether it prints the greedy chain's answer (``FROM_SOLVER`` where greedy's
+    solution is the one emitted) from where greedy's chain began it: the layer before prints it
+    too. A group proven there (the subset DP, a closing bound) keeps its proof (its start and end
+    are the ones it was proven for); elsewhere ``greedy_taken`` (at best feasible)."""
+    src = np.asarray(source) == FROM_SOLVER
+    prev = np.concatenate(([True], src[:-1]))
+    return src & prev
+
+
 def reorder(program: Program, options: OrderingOptions | None = None, *,
             formulation: str = "auto", time_limit_s: float = 2.0,
             budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
             progress=None, started_s: float | None = None, slow: float | None = None,
-            finish_slow: float = 1.0):
+            finish_slow: float = 1.0, work_budget_s: float | None = None):
     """build -> [greedy] -> solve with what ``budget_s`` leaves (``solve_budget_s``, counted from
     ``started_s``, default now) -> ``emit_guarded``, without verifying (``order_program`` does;
     ``rewrite.pipeline.run`` verifies its own output). Returns (problem, the solve's budget,
@@ -205,7 +236,10 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     ``NoTimeToOrder`` after the build where the solve's budget would not pay for passing the
     groups at ``slow`` times the runner's priors (every group would keep the slicer's order, late).
     ``finish_slow``: the work after the solve (emit, re-parse, verify) is estimated at that many
-    times its quiet rates (``order_program`` measures it).
+    times its quiet rates (``order_program`` measures it). ``work_budget_s``: the greedy chain's
+    budget in work (``greedy_work_budget_s``; default: from ``budget_s`` and the file's lines, the
+    reading not counted): the greedy formulation, and an exact run's greedy pass, spend that, not
+    wall-clock seconds.
 
     With an exact formulation and the time guard (issue 36: never slower than greedy), greedy
     orders every group first (``layers.solve_greedy``: the answer ``--formulation greedy`` gives,
@@ -233,13 +267,17 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     if slow is not None and solve_budget is not None:
         if solve_budget < pass_s:
             raise NoTimeToOrder(solve_budget, pass_s, problem.n_groups)
+    if work_budget_s is None:
+        work_budget_s = greedy_work_budget_s(budget_s, program.n_lines)
     greedy = None
     exact_budget = solve_budget
+    if "one_chain" in formulations.lookup(formulation).capabilities:
+        exact_budget = work_budget_s            # greedy: its budget is work (module docstring)
     if time_guard and "exact" in formulations.lookup(formulation).capabilities:
         # the whole budget: greedy's answer in every group comes first (what a budget that
         # greedy uses up prints is then the greedy run's file, through one guard stage)
         t_g = time.perf_counter()
-        greedy = solve_greedy(problem, time_limit_s=time_limit_s, budget_s=solve_budget,
+        greedy = solve_greedy(problem, time_limit_s=time_limit_s, budget_s=work_budget_s,
                               workers=workers)
         if solve_budget is not None:
             # what greedy left, less the guard's second stage (the exact answer against greedy's
@@ -255,15 +293,18 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
         # no time left to pass the groups again (or a Ctrl-C): greedy's answer is the solve's
         guarded = emit_guarded(program, problem, greedy.solution, time_guard)
         decided = problem.group_reorderable
-        groups = tuple(greedy_taken(gs) if d else gs
-                       for gs, d in zip(guarded.solution.groups, decided))
-        sol = dataclasses.replace(guarded.solution, groups=groups, formulation=formulation)
+        same = same_start_layers(guarded.source)[np.asarray(problem.group_layer, np.int64)]
+        groups = tuple(greedy_taken(gs) if d and not (s and gs.status == Status.OPTIMAL) else gs
+                       for gs, d, s in zip(guarded.solution.groups, decided, same))
+        sol = dataclasses.replace(guarded.solution, groups=groups, formulation=formulation,
+                                  work_net_fired=greedy.solution.work_net_fired)
         source = np.where(guarded.source == FROM_SOLVER, FROM_GREEDY, guarded.source)
         return problem, solve_budget, dataclasses.replace(guarded, solution=sol, source=source)
     solution = solve(problem, formulation, time_limit_s=time_limit_s, budget_s=exact_budget,
                      workers=workers, progress=progress, greedy=greedy)
     if greedy is not None:
-        solution = dataclasses.replace(solution, solve_s=solution.solve_s + greedy.solution.solve_s)
+        solution = dataclasses.replace(solution, solve_s=solution.solve_s + greedy.solution.solve_s,
+                                       work_net_fired=greedy.solution.work_net_fired)
     deadline = None
     if budget_s is not None:
         # what the budget leaves the repair pass: up to the end of the budget less the work
@@ -295,12 +336,15 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
     short for searching keeps every group's order unsearched (``runner.OUT_OF_TIME``): passing
     them costs ~9 us per curve (the Cura bunny's 67,356: 0.61 s CPU)."""
     program.check_rewritable()
+    # the greedy chain's budget in work: with ``started_s`` the budget counts the file's reading
+    # too (at its quiet rate per line: never as measured, the same on every run)
+    work_budget = greedy_work_budget_s(budget_s, program.n_lines, read=started_s is not None)
     t0 = time.perf_counter() if started_s is None else started_s
     options = options or OrderingOptions()
     problem, solve_budget, guarded = reorder(
         program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
         workers=workers, time_guard=time_guard, progress=progress, started_s=t0,
-        finish_slow=slow)
+        finish_slow=slow, work_budget_s=work_budget)
     solution, text, out, slower_layers = guarded
     findings = tuple(check(program, out, problem.program_problem.layout))
     summary = order_summary(program, out, problem, solution, options, slower_layers, findings,
@@ -405,6 +449,8 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
     late_greedy = greedy_out_of_time_groups(problem, solution)
     if late_greedy:
         slower.append(greedy_out_of_time_note(late_greedy, len(decided)))
+    if solution.work_net_fired:
+        slower.append(WORK_NET_NOTE)
     time_obj = problem.cost_unit == "ms"
     return {
         "objective": options.objective,
@@ -429,6 +475,9 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         # of the fallback groups, those the budget left no time to search exactly that keep the
         # greedy pass's path (``runner.OUT_OF_TIME_GREEDY``)
         "groups_out_of_time_greedy": late_greedy,
+        # the greedy chain's wall-clock safety net fired (``ordering.runner.WorkRunner``): groups
+        # kept the slicer's order for want of wall-clock time, not of work: not reproducible
+        "work_net_fired": bool(solution.work_net_fired),
         # safe mode's blocks (ordering/blocks.py): segments of >= 3 islands, how many moved, how
         # many block orders were proven optimal (the slicer's order kept counts if it was proven)
         "block_segments": int(problem.block_report.get("segments", 0)),

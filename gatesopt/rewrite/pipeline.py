@@ -51,8 +51,8 @@ from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested
 from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
 from .budget import after_order_s, no_time_note, ordering_budget_s, slowdown_factor
 from .figures import figures, print_time_s
-from .order import (NoTimeToOrder, kept_slower_note, order_summary, out_of_time_groups,
-                    out_of_time_note, reorder, stage_floor_s)
+from .order import (READ_S_PER_LINE, NoTimeToOrder, greedy_work_budget_s, kept_slower_note,
+                    order_summary, out_of_time_groups, out_of_time_note, reorder, stage_floor_s)
 from .printer import FirmwareChoice, check_motors_fit, choose
 
 #: the keys of the ordering's report that ``gatesopt solve --json`` carries at its top level (the
@@ -170,7 +170,7 @@ class Stages:
 def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
                   budget_s: float | None = None, progress=None, options=None,
                   formulation: str = "auto", started_s: float | None = None,
-                  slow: float | None = None):
+                  slow: float | None = None, work_budget_s: float | None = None):
     """Re-order curves (``rewrite.order.reorder``): (program, ordered?, note, problem,
     ``summarize(findings)``: the ordering's report, given the findings of its checks, solve
     seconds). A stop request (Ctrl-C) keeps the slicer's order (a valid answer) with a note, as
@@ -182,7 +182,7 @@ def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
         problem, solve_budget, guarded = reorder(
             program, options, formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
             workers=workers, progress=progress, started_s=t0 if started_s is None else started_s,
-            slow=slow)
+            slow=slow, work_budget_s=work_budget_s)
     except NoTimeToOrder as exc:
         return (program, False, f"curve ordering skipped after its build: {exc}: the slicer's order "
                 "kept (a larger --budget re-orders)", None, None, 0.0)
@@ -610,16 +610,24 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     with stop_scope():
         base, ordered, order_problem, summarize = program, False, None, None
         ob = order_budget_s
+        order_work_s = None
         if order and budget_s is not None:
             slow = slowdown_factor(t0, cpu_started_s)
             # compiling numba kernels (a first run) is not charged to the budget (cli.progress)
             spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
             ob = ordering_budget_s(budget_s, program, o, formulation, gating, spent_s, time_limit_s, slow)
+            # the greedy chain's budget in work (issue 36: the same greedy pass on every run):
+            # the same estimate with the reading counted at its quiet rate, not as measured
+            work_ob = ordering_budget_s(budget_s, program, o, formulation, gating,
+                                        READ_S_PER_LINE * program.n_lines, time_limit_s, 1.0)
             if gating and _exact(formulation):
                 # an exact gating formulation's search is part of the budget too (issue 37): the
                 # ordering leaves it a share of what it would get, at most --time-limit
                 ob -= min(math.inf if time_limit_s is None else float(time_limit_s),
                           EXACT_GATING_SHARE * max(ob, 0.0))
+                work_ob -= min(math.inf if time_limit_s is None else float(time_limit_s),
+                               EXACT_GATING_SHARE * max(work_ob, 0.0))
+            order_work_s = greedy_work_budget_s(work_ob, program.n_lines)
             floor = stage_floor_s(program, slow)
             if ob <= floor:
                 # what the rest leaves the ordering would not pay for its build, a pass over
@@ -632,7 +640,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
                 base, ordered, note, order_problem, summarize, order_solve_s = _order_curves(
                     program, order_time_limit_s, order_workers, ob, order_progress,
                     order_options, order_formulation,
-                    slow=slow if budget_s is not None else None)
+                    slow=slow if budget_s is not None else None, work_budget_s=order_work_s)
             times.add("ordering_solve_s", order_solve_s)
             if note:
                 notes.append(note)
