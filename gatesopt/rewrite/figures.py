@@ -24,6 +24,7 @@ import numpy as np
 
 from .. import firmware as fwmod
 from ..ordering.travel_stats import travel_stats
+from ..limits import machine_limits
 from ..planner import durations
 from ..program import Kind, Program
 from ..verify.energy import stall_s
@@ -48,13 +49,25 @@ def _no_enable_stop(program: Program, rows):
 
 
 def print_time_s(program: Program, firmware: str = "3dgates",
-                 planned_s: np.ndarray | None = None) -> float:
+                 planned_s: np.ndarray | None = None, printer=None) -> float:
     """The print time of ``program`` under the planner model, firmware dwells included (module
     docstring): every step of the file, heat-up waits and homing at their profile durations.
     ``planned_s``: ``planner.plan(program).duration_s``, where the caller has it (the time
-    guard planned the file already)."""
-    planned = durations(program, "planner") if planned_s is None else planned_s
-    stall = fwmod.stall_durations(program, firmware, planner=_no_stall, enable_price=_no_enable_stop)
+    guard planned the file already). ``printer``: the printer's Klipper config
+    (``--printer-config``): its limits plan the moves (``limits.machine_limits``, the firmware's
+    planner rules) and its input shaper's step window prices each flush's restart
+    (``Firmware.enable_fixed_s``: 28.6 ms at mzv 30 Hz where 2 ms without), as the gating problem
+    prices them; without it the file's limits and the dialect's defaults, as before."""
+    if planned_s is not None:
+        planned = planned_s
+    elif printer is None:
+        planned = durations(program, "planner")
+    else:
+        fw = fwmod.get(firmware)
+        family = fw.planner.family if fw.planner is not None else None
+        planned = durations(program, "planner", machine_limits(program, family=family, printer=printer))
+    stall = fwmod.stall_durations(program, firmware, planner=_no_stall, enable_price=_no_enable_stop,
+                                  printer=printer)
     return float(planned.sum() + stall.sum())
 
 
@@ -101,16 +114,17 @@ def file_firmware(program: Program) -> str:
 
 
 def figures(before: Program, after: Program, firmware: str | None = None,
-            before_s: float | None = None, planned_s: tuple = (None, None)) -> dict:
+            before_s: float | None = None, planned_s: tuple = (None, None), printer=None) -> dict:
     """The report keys of both files: ``print_time_before_s`` / ``_after_s`` / ``_change_pct``
     with ``print_time_model``, and ``travel_before_mm`` / ``_after_mm`` / ``_change_pct``,
     ``travels_*``, ``retractions_*``. ``firmware``: the dialect the output's motor lines are in
     (None: the file's own, ``file_firmware``); ``before_s``: ``before``'s print time in that
     firmware where the caller has it already; ``planned_s``: both files' per-step planner
-    durations where the caller has them (``print_time_s``; None: planned here)."""
+    durations where the caller has them (``print_time_s``; None: planned here); ``printer``: the
+    printer's Klipper config both are timed on (``print_time_s``)."""
     firmware = firmware or file_firmware(before)
-    tb = print_time_s(before, firmware, planned_s[0]) if before_s is None else float(before_s)
-    ta = print_time_s(after, firmware, planned_s[1])
+    tb = print_time_s(before, firmware, planned_s[0], printer) if before_s is None else float(before_s)
+    ta = print_time_s(after, firmware, planned_s[1], printer)
     mb, ma = travel(before), travel(after)
     return {
         "print_time_before_s": tb, "print_time_after_s": ta, "print_time_change_pct": pct(ta, tb),
