@@ -131,9 +131,9 @@ def test_an_output_over_the_limit_is_solved_again_with_less(monkeypatch):
     program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
     real = pipeline.print_time_s
 
-    def dear(p, firmware="3dgates"):
+    def dear(p, firmware="3dgates", printer=None, family=None):
         m18 = sum(1 for i in range(p.n_lines) if p.line_text(i).startswith("M18"))
-        return real(p, firmware) + 0.5 * m18
+        return real(p, firmware, printer=printer, family=family) + 0.5 * m18
 
     monkeypatch.setattr(pipeline, "print_time_s", dear)
     o = GatingOptions.for_firmware("marlin", max_added_time_pct=1.0, rotate="none")

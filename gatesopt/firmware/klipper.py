@@ -26,22 +26,32 @@ at 150 mm/s and 3000 mm/s^2), between two moves from their junction speed, which
 retraction (an extrude-only move starts and ends at rest, ``Move.calc_junction``). So an enable
 line is priced per move (``enable_is_stop``): ``planner.stop_restart_s`` -- v / (2 a) to stop
 from the speed v the head passes the line at and as much to get back to it, 0 next to an
-extrude-only move -- plus the restart ``2 * SDS_CHECK_TIME``, in the gating problem and in the
-verifier alike (where no planner prices it, ``KLIPPER_ENABLE_STALL_S``: a stop at 50 mm/s). A
-disable line likewise (``disable_is_stop``): its flush's stop, the two 0.1 s dwells and the
-restart (``KLIPPER_STALL_S``, 0.22 s, where no planner prices it; 203-241 ms measured). No line of this dialect splits an extrude-only move (``split_moves``
+extrude-only move -- plus the restart ``2 * kin_flush_delay`` (below), in the gating problem, the
+verifier and the report's print time alike (where no planner prices it, ``KLIPPER_ENABLE_STALL_S``:
+a stop at 50 mm/s). A disable line likewise (``disable_is_stop``): its flush's stop, the two
+0.1 s dwells and the restart (``KLIPPER_STALL_S``, 0.22 s, where no planner prices it; 203-241 ms
+measured without a shaper). No line of this dialect splits an extrude-only move (``split_moves``
 "kinematic": Klipper plans each half from rest to rest); splitting no move at all ("none") was
 tried and gated next to nothing: most idle intervals worth a 0.22 s stall lie inside one long
 single-axis move.
 
 With an input shaper the restart is longer: ``2 * kin_flush_delay``, the largest step window of
 any stepper (``restart_s``: 28.6 ms at mzv 30 Hz instead of 2 ms), priced from ``--printer-config``
-(``Klipper.enable_fixed_s``); without one the restart is priced without a shaper.
+(``Klipper.enable_fixed_s``); without one the restart is priced without a shaper
+(``KLIPPER_RESTART_S``), and with a shaper each line costs ``2 * (window - 1 ms)`` more than
+priced (+26.6 ms at mzv 30 Hz): the ``note`` says so.
+
+Measured in Klipper's host in batch mode (``klippy -o``) a line can cost 0.25 s more than this:
+the batch flush timer (klippy/extras/motion_queuing.py ``_flush_handler_debug``) moves the last
+step time ``BGFLUSH_EXTRA_TIME`` past the flushed moves when it runs between a flush and the next
+moves, which depends on where klippy's 4096-byte reads of the file end. A printer's
+``_flush_handler`` flushes no further than the MCU's clock + 0.4 s, behind the ~1 s of moves the
+host keeps queued, and ``_calc_print_time``'s ``est_print_time + BUFFER_TIME_START`` lies behind
+the flushed moves too: no such delay while the host keeps ahead, so it is not priced
+(bench/klipper/gatesopt_replay_clock.py measures it in a replay).
 
 What it cannot honour (``note``): an end-late below Klipper's 0.1 s dwell (the pin goes off 0.1 s
-after the moves before the line end, whatever end-late asked), and with an input shaper but no
-printer config each flush costs ``2 * (shaper window - 1 ms)`` more than priced (+26.6 ms per line
-at mzv 30 Hz).
+after the moves before the line end, whatever end-late asked).
 
 Klipper has no ``M17``: ``klippy/gcode.py`` ``cmd_default`` answers 'Unknown command:"M17"' and
 goes on (no dwell, nothing switched). ``SET_STEPPER_ENABLE`` takes one ``STEPPER=`` per command (a
@@ -79,12 +89,21 @@ SDS_CHECK_TIME_S = 0.001
 #: a full stop and restart at a print speed of 50 mm/s with Klipper's 3000 mm/s^2: v / a
 #: (decelerating from v and accelerating back cost v/(2a) each over moving at v)
 KLIPPER_STOP_S = 50.0 / 3000.0
-#: an ``ENABLE=1`` line: the look-ahead flush (a full stop) and the clock's restart
-#: ``2 * kin_flush_delay`` later (toolhead ``_calc_print_time``); 17-19 ms measured, no shaper
-KLIPPER_ENABLE_STALL_S = round(KLIPPER_STOP_S + 2 * SDS_CHECK_TIME_S, 4)
 #: counted on top of the start-ahead: the longest pre-active time of Klipper's input shapers
 #: (klippy/extras/shaper_defs.py) at 20 Hz, 3hump_ei's 58.3 ms, rounded up
 SHAPER_LEAD_S = 0.060
+#: the clock's restart after a flush (``restart_s``: 2 x kin_flush_delay) where no printer config
+#: says which input shaper the printer runs: that of a printer without one (2 x SDS_CHECK_TIME).
+#: With a shaper each line then costs 2 x (its window - 1 ms) more than priced (26.6 ms at mzv
+#: 30 Hz, measured in Klipper: docs/RESULTS.md); ``--printer-config`` prices the printer's own.
+#: Pricing the longest window of Klipper's shapers at 20 Hz instead (2 x ``SHAPER_LEAD_S``, 120 ms
+#: a line, the start lead's assumption) was tried: the budget then holds on any printer, but
+#: ``--firmware klipper`` gated nothing on two of the three corpus files it was tried on and 4
+#: lines on the third (each gate 0.24 s dearer than its saving), so it is not the default.
+KLIPPER_RESTART_S = 2 * SDS_CHECK_TIME_S
+#: an ``ENABLE=1`` line: the look-ahead flush (a full stop) and the clock's restart
+#: ``2 * kin_flush_delay`` later (toolhead ``_calc_print_time``); 17-19 ms measured, no shaper
+KLIPPER_ENABLE_STALL_S = round(KLIPPER_STOP_S + KLIPPER_RESTART_S, 4)
 #: on top of a printer's own pre-active time (``Klipper.start_lead``): stepcompress may send a step
 #: 25 us early (klippy/chelper/stepcompress.c, MAX_STEPCOMPRESS_ERROR), and MCU clock rounding
 SHAPER_LEAD_SLACK_S = 25e-6 + 1e-6
@@ -199,7 +218,8 @@ class Klipper(Firmware):
 
     def enable_fixed_s(self, printer=None) -> float:
         """The clock's restart after an ``ENABLE=1`` line's flush: ``2 * kin_flush_delay``
-        (``restart_s``); ``enable_restart_s`` (no shaper) without a printer config."""
+        (``restart_s``); ``enable_restart_s`` without a printer config (``KLIPPER_RESTART_S``:
+        no shaper)."""
         return self.enable_restart_s if printer is None else restart_s(printer)
 
     def disable_fixed_s_at(self, printer=None) -> float:
@@ -227,13 +247,14 @@ DIALECT = Klipper(
     executes=frozenset({"SET_STEPPER_ENABLE", "M18", "M84"}),
     description="Klipper: SET_STEPPER_ENABLE per stepper, ~0.22 s stall off, ~0.02 s on",
     start_lead_s=SHAPER_LEAD_S, split_moves="kinematic",
-    enable_is_stop=True, enable_restart_s=2 * SDS_CHECK_TIME_S,
-    disable_is_stop=True, disable_fixed_s=KLIPPER_ENABLE_DWELL_S + 2 * SDS_CHECK_TIME_S,
+    enable_is_stop=True, enable_restart_s=KLIPPER_RESTART_S,
+    disable_is_stop=True, disable_fixed_s=KLIPPER_ENABLE_DWELL_S + KLIPPER_RESTART_S,
     note=(f"klipper: each motor switched on {SHAPER_LEAD_S * 1e3:g} ms more than the start-ahead "
           "before its next move (an input shaper's steps start before the move; with "
           "--printer-config: that printer's shaper pre-active time); each "
           "SET_STEPPER_ENABLE stops the print head (ENABLE=0 also dwells 2 x 0.1 s, so a motor "
           "goes off >= 0.1 s after its last step whatever the end-late); with an input shaper "
-          "every such line restarts 2 x its step window later (priced from --printer-config)"),
+          "every such line restarts 2 x its step window later: priced from --printer-config, "
+          "without one as without a shaper (with mzv at 30 Hz 26.6 ms a line more than priced)"),
     rank=2, detect_words=("SET_STEPPER_ENABLE",), detect_rank=10,
     motor_commands=(SET_STEPPER_ENABLE,), planner=PLANNER)

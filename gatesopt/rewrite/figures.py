@@ -5,8 +5,10 @@ print time (``print_time_s``)
     The planner model (``gatesopt.planner``: trapezoidal velocity profiles, junction speeds, the
     machine limits the file sets; a line that drains the firmware's queue, Marlin's ``M18``,
     Klipper's ``SET_STEPPER_ENABLE``, brings the head to rest) plus the firmware's dwells
-    (``firmware.stall_durations``: Klipper's 2 x 0.1 s; Marlin's full stop is the planner's
-    already). Measured against the slicers' own estimates it is within a few per cent
+    (``firmware.stall_durations``: Klipper's 2 x 0.1 s and restarts; Marlin's full stop is the
+    planner's already). A gated output and its original are timed by the dialect's planner rules
+    and, given, the printer's config (``--printer-config``: its limits, its shaper's restarts), as
+    the gating problem prices the lines. Measured against the slicers' own estimates it is within a few per cent
     (PrusaSlicer files +3..+9 %, Cura's -15..+7 %, docs/RESULTS.md "Time model"), where the
     paper's T = L / F is 20-27 % under PrusaSlicer's. It is the one print time a report shows.
     The paper's T = L / F (3DGates Eq. 2) stays what the *energy* model integrates over (the
@@ -24,6 +26,7 @@ import numpy as np
 
 from .. import firmware as fwmod
 from ..ordering.travel_stats import travel_stats
+from ..limits import machine_limits
 from ..planner import durations
 from ..program import Kind, Program
 from ..verify.energy import stall_s
@@ -48,13 +51,29 @@ def _no_enable_stop(program: Program, rows):
 
 
 def print_time_s(program: Program, firmware: str = "3dgates",
-                 planned_s: np.ndarray | None = None) -> float:
+                 planned_s: np.ndarray | None = None, printer=None, family: str | None = None) -> float:
     """The print time of ``program`` under the planner model, firmware dwells included (module
     docstring): every step of the file, heat-up waits and homing at their profile durations.
     ``planned_s``: ``planner.plan(program).duration_s``, where the caller has it (the time
-    guard planned the file already)."""
-    planned = durations(program, "planner") if planned_s is None else planned_s
-    stall = fwmod.stall_durations(program, firmware, planner=_no_stall, enable_price=_no_enable_stop)
+    guard planned the file already). ``printer``: the printer's Klipper config
+    (``--printer-config``): its limits plan the moves (``limits.machine_limits``, the firmware's
+    planner rules) and its input shaper's step window prices each flush's restart
+    (``Firmware.enable_fixed_s``: 28.6 ms at mzv 30 Hz where 2 ms without), as the gating problem
+    prices them; without it the file's limits and the dialect's defaults. ``family``: the planner
+    rules to plan by (``GatingOptions.planner_family``, as the gating problem and the verifier
+    plan a dialect's output; None: the file's flavor's, or Klipper's with a printer config)."""
+    if planned_s is not None:
+        planned = planned_s
+    elif printer is None and family is None:
+        planned = durations(program, "planner")
+    else:
+        # the dialect's own planner rules, as the gating problem and the verifier plan it: a
+        # stock klipper output of a PrusaSlicer file is planned by Klipper's rules, not by the
+        # Marlin rules its flavor names (which made real_prusa233_multi's output 2.4 s shorter
+        # than its original, its 63 gates priced 10.44 s where Klipper took 14.06 s)
+        planned = durations(program, "planner", machine_limits(program, family=family, printer=printer))
+    stall = fwmod.stall_durations(program, firmware, planner=_no_stall, enable_price=_no_enable_stop,
+                                  printer=printer)
     return float(planned.sum() + stall.sum())
 
 
@@ -101,16 +120,19 @@ def file_firmware(program: Program) -> str:
 
 
 def figures(before: Program, after: Program, firmware: str | None = None,
-            before_s: float | None = None, planned_s: tuple = (None, None)) -> dict:
+            before_s: float | None = None, planned_s: tuple = (None, None), printer=None,
+            family: str | None = None) -> dict:
     """The report keys of both files: ``print_time_before_s`` / ``_after_s`` / ``_change_pct``
     with ``print_time_model``, and ``travel_before_mm`` / ``_after_mm`` / ``_change_pct``,
     ``travels_*``, ``retractions_*``. ``firmware``: the dialect the output's motor lines are in
     (None: the file's own, ``file_firmware``); ``before_s``: ``before``'s print time in that
     firmware where the caller has it already; ``planned_s``: both files' per-step planner
-    durations where the caller has them (``print_time_s``; None: planned here)."""
+    durations where the caller has them (``print_time_s``; None: planned here); ``printer``,
+    ``family``: the printer's Klipper config and the planner rules both are timed on
+    (``print_time_s``)."""
     firmware = firmware or file_firmware(before)
-    tb = print_time_s(before, firmware, planned_s[0]) if before_s is None else float(before_s)
-    ta = print_time_s(after, firmware, planned_s[1])
+    tb = print_time_s(before, firmware, planned_s[0], printer, family) if before_s is None else float(before_s)
+    ta = print_time_s(after, firmware, planned_s[1], printer, family)
     mb, ma = travel(before), travel(after)
     return {
         "print_time_before_s": tb, "print_time_after_s": ta, "print_time_change_pct": pct(ta, tb),

@@ -259,7 +259,7 @@ def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes
     gating rewrote, solution, emitted, rotation report, the output parsed)."""
     with times.stage("gating_build_s"):
         problem = build(base, o)
-        base_planned = planned if planned is not None else _Planned(base, o.firmware)
+        base_planned = planned if planned is not None else _Planned(base, o.firmware, o.printer, o.planner_family)
         problem = _budget_on_print(problem, base_planned, limit_s)
     notes += list(problem.notes)
     t = time.perf_counter()
@@ -285,7 +285,7 @@ def _gate(base: Program, o: GatingOptions, formulation: str, time_limit_s, notes
             rproblem = build(rbase, ro)
             # the rotated text can take a little longer itself (0.15 s of 1175 s on a PrusaSlicer
             # file): the budget is on the print as sliced, so the stalls get what is left of it
-            rbase_planned = _Planned(rbase, o.firmware)
+            rbase_planned = _Planned(rbase, o.firmware, o.printer, o.planner_family)
             if limit_s is not None:
                 rproblem = _budget_on_print(rproblem, rbase_planned, limit_s)
             elif o.max_added_time_pct is not None and rproblem.time_before_s > problem.time_before_s > 0:
@@ -329,13 +329,13 @@ class _Planned:
     """A program's print time under the planner model in a dialect (``figures.print_time_s``),
     computed once and only when asked for."""
 
-    def __init__(self, program: Program, firmware: str):
-        self.program, self.firmware, self._s = program, firmware, None
+    def __init__(self, program: Program, firmware: str, printer=None, family: str | None = None):
+        self.program, self.firmware, self.printer, self.family, self._s = program, firmware, printer, family, None
 
     @property
     def s(self) -> float:
         if self._s is None:
-            self._s = print_time_s(self.program, self.firmware)
+            self._s = print_time_s(self.program, self.firmware, printer=self.printer, family=self.family)
         return self._s
 
 
@@ -347,7 +347,7 @@ def budget_limit_s(program: Program, o: GatingOptions, planned: _Planned | None 
     user will see: re-ordering, rotation and the firmware's stalls together."""
     if o.max_added_time_pct is None:
         return None
-    planned = planned if planned is not None else _Planned(program, o.firmware)
+    planned = planned if planned is not None else _Planned(program, o.firmware, o.printer, o.planner_family)
     return (1.0 + o.max_added_time_pct / 100.0) * planned.s
 
 
@@ -379,7 +379,7 @@ def _within_limit(base: Program, planned: _Planned, sol: GatingSolution, em: Emi
         return sol, em, out
     problem = sol.problem
     for k in range(LIMIT_ROUNDS + 1):
-        after_s = print_time_s(out, o.firmware)
+        after_s = print_time_s(out, o.firmware, printer=o.printer, family=o.planner_family)
         if after_s <= limit_s * (1.0 + 1e-9):
             return sol, em, out
         planner_added = after_s - planned.s
@@ -649,7 +649,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             # the re-ordered copy has other line numbers: the rotation line cites the user's file
             o = o.replace(bed=slicers.read_bed(program.data))
         sol = em = rotation = out = None
-        planned0 = _Planned(program, o.firmware)
+        planned0 = _Planned(program, o.firmware, o.printer, o.planner_family)
         if gating:
             if budget_s is not None and _exact(formulation):
                 time_limit_s = _gating_limit_in_budget(program, o, budget_s, t0, time_limit_s, slow, notes)
@@ -668,7 +668,9 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         rep, extra = _verify_run(program, ordered_base, out, o, sol, ordered)
     with times.stage("report_s"):
         figs = figures(program, out, o.firmware if sol is not None else None,
-                       before_s=planned0._s if sol is not None else None)
+                       before_s=planned0._s if sol is not None else None,
+                       printer=o.printer if sol is not None else None,
+                       family=o.planner_family if sol is not None else None)
         order_report = None
         if summarize is not None:
             # without gating ``verify`` above ran the ordering checks itself: its findings are theirs
