@@ -344,3 +344,13 @@ def test_the_verifier_reports_a_gated_motor_a_corexy_printer_couples(tmp_path):
     # the user's printer.cfg says cartesian: no such finding
     rep = verify(orig, out, firmware="klipper", printer=_cfg(tmp_path))
     assert not [f for f in rep.findings if "corexy" in f.message]
+
+
+def test_a_marlin_flavour_alone_says_how_a_klipper_printer_gets_safe_lines(tmp_path):
+    # nothing in a Marlin-flavoured Cura file tells a Klipper printer from a Marlin one: the
+    # firmware line says what to do if it is Klipper; not where something says which it is
+    hint = "if the printer runs Klipper, pass its printer.cfg (--printer-config)"
+    assert hint in printer.choose(gatesopt.parse(square(";FLAVOR:Marlin"))).line
+    assert hint in printer.choose(gatesopt.parse(square())).line            # nothing read: assumed
+    assert hint not in printer.choose(gatesopt.parse(square(";FLAVOR:Marlin")), "marlin").line
+    assert hint not in printer.choose(gatesopt.parse(square(";FLAVOR:Marlin")), printer=_cfg(tmp_path)).line

@@ -78,7 +78,6 @@ class MatrixHelper(Child):
 
     def __init__(self, proc, shm, n_groups, path):
         self.results: dict[int, np.ndarray] = {}
-        self.fresh: list[int] = []          # groups received since ``received`` was last called
         super().__init__(proc, shm, n_groups, path)
 
     @property
@@ -117,7 +116,6 @@ class MatrixHelper(Child):
     def _keep(self, item) -> None:
         g, arc = item
         self.results[g] = arc
-        self.fresh.append(g)
 
     def take(self, g: int) -> np.ndarray | None:
         """Group g's link matrix if the helper made it, or is making or sending it (then wait
@@ -128,12 +126,6 @@ class MatrixHelper(Child):
         while g not in self.results and not self.dead and self.state[g] != FREE:
             self._drain(block=True)
         return self.results.pop(g, None)
-
-    def received(self) -> list[int]:
-        """Groups whose matrix arrived since the last call."""
-        self._drain(block=False)
-        out, self.fresh = self.fresh, []
-        return out
 
 
 def main() -> None:

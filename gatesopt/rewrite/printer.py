@@ -203,6 +203,12 @@ def choose(program, requested: str = "auto", *, force: bool = False, max_added_t
     said += f"; {_dialect_words(name)}, {budget_words}"
     if fw.note:
         said += f"; {fw.note}"
+    if (requested == "auto" and name == "marlin" and printer_cfg is None
+            and (ev is None or ev.kind == "flavor setting")):
+        # a Marlin flavour is what Klipper's docs tell Cura and PrusaSlicer users to set: nothing
+        # in such a file tells a Klipper printer from a Marlin one, and M18 stops a Klipper print
+        said += ("; if the printer runs Klipper, pass its printer.cfg (--printer-config): "
+                 "Klipper's M18 turns every motor off and the print stops")
     if name == "klipper" and "klipper-gating" in fwmod.PRESETS:
         said += ("; with gatesopt's Klipper module installed (integrations/klipper), --firmware "
                  "klipper-gating switches motors without stalls")
