@@ -1,4 +1,4 @@
-"""Calibrate the greedy pass's work units (``budget.work_s``: deterministic seconds, issue 36):
+"""Calibrate the greedy pass's work units (``budget.greedy_work_s``: deterministic seconds, issue 36):
 per group the CPU seconds of each step of the greedy chain against the counts the work model
 charges, and the least-squares constants that turn counts into seconds on this machine.
 

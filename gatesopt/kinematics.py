@@ -88,7 +88,11 @@ def check_gateable(data: bytes, motors, printer=None, source: str = "<text>") ->
     tail, and ``printer``) couples to another axis: the firmware choice never picks one; this
     guards a caller that builds its own ``GatingOptions`` (``rewrite.pipeline.run``,
     ``stream.gate_stream``)."""
-    kin = printer_kinematics(data, printer)
+    refuse_coupled(printer_kinematics(data, printer), motors, source)
+
+
+def refuse_coupled(kin: Kinematics | None, motors, source: str = "<text>") -> None:
+    """``check_gateable`` for kinematics ``kin`` read already (None: unknown, one motor per axis)."""
     coupled = coupled_motors(kin.name if kin else None)
     bad = [m for m in motors if m.upper() in coupled]
     if bad:

@@ -24,6 +24,7 @@ import numpy as np
 from . import _scan, slicers
 from .energy import EnergyReport, load_profile, profile
 from .errors import GatesoptError, GcodeError
+from .firmware import FirmwareError
 from .kinematics import check_gateable
 from .parse import BGCODE_MAGIC, DEFAULT_FEED_MM_S, GZIP_MAGIC, parse
 
@@ -220,19 +221,23 @@ def _spaced_from_the_chunk_before(problem, sol, keep: np.ndarray) -> np.ndarray:
     return keep
 
 
-def _settings_bytes(p: Path) -> bytes:
+def _settings_bytes(p: Path, file_lines: bool = False) -> bytes:
     """The head and tail of the file (``slicers.HEAD_BYTES`` each), where slicers write their
-    settings (the printer model), the lines between them as empty lines (counted, so that a line
-    number read there is the file's); a gzip file's head only (its tail costs a whole read)."""
+    settings (the printer model); a gzip file's head only (its tail costs a whole read).
+    ``file_lines``: the lines between them as empty lines (counted: a read of the whole file), so
+    that a line number read in the tail is the file's."""
     with p.open("rb") as f:
         head = f.read(slicers.HEAD_BYTES)
         if head[:2] == GZIP_MAGIC:
             with gzip.open(p, "rb") as g:
                 return g.read(slicers.HEAD_BYTES)
         tail_at = max(len(head), p.stat().st_size - slicers.HEAD_BYTES)
-        skipped = 0
-        while f.tell() < tail_at:
-            skipped += f.read(min(1 << 24, tail_at - f.tell())).count(b"\n")
+        skipped = 0 if tail_at == len(head) else 1     # the whole file: nothing between
+        if file_lines:
+            skipped = 0
+            while f.tell() < tail_at:
+                skipped += f.read(min(1 << 24, tail_at - f.tell())).count(b"\n")
+        f.seek(tail_at)
         return head + b"\n" * skipped + f.read()
 
 
@@ -257,7 +262,13 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
         raise GatesoptError(f"{out_path}: exists; pass --force to overwrite it")
     opts = GatingOptions.for_firmware(firmware, motors=tuple(motors), rotate="none", printer=printer)
     name = str(path)
-    check_gateable(_settings_bytes(Path(path)), opts.motors, printer, name)
+    try:
+        check_gateable(_settings_bytes(Path(path)), opts.motors, printer, name)
+    except FirmwareError:
+        # refused: once more with the file's own line numbers for the message (a whole read,
+        # paid only here)
+        check_gateable(_settings_bytes(Path(path), file_lines=True), opts.motors, printer, name)
+        raise
     state_in = _scan.initial_state(25.0, DEFAULT_FEED_MM_S)
     state_out = state_in.copy()
     tmp = out_path.with_name(out_path.name + f".tmp-{os.getpid()}")

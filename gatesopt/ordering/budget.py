@@ -291,7 +291,6 @@ class WorkPlan:
         self.budget_s = float(budget_s)
         self.left_s = (self.budget_s - (WORK_PASS_S_PER_CURVE + WORK_TAIL_S_PER_CURVE)
                        * float(problem.n_curves))
-        self.spent_s = self.budget_s - self.left_s
         self.order = np.flatnonzero(decided)[np.argsort(self.est_s[decided], kind="stable")]
         self.rank = np.full(problem.n_groups, -1, np.int64)
         self.rank[self.order] = np.arange(len(self.order))
@@ -324,4 +323,3 @@ class WorkPlan:
         if r >= 0:
             self.pending[r] = False
         self.left_s -= work_s
-        self.spent_s += work_s

@@ -264,9 +264,7 @@ class WorkRunner:
         self.fn, self.time_limit_s, self.t0, self.kwargs = fn, time_limit_s, t0, kwargs
         self.plan = None if budget_s is None else WorkPlan(problem, budget_s)
         self.net_s = None if budget_s is None else WORK_NET_FACTOR * budget_s + WORK_NET_MIN_S
-        self.time_objective = problem.pricer is not None
         self.net_fired = False
-        self.out_of_time = 0
 
     def run(self, g: int, grp) -> GroupSolution:
         """Group g's answer: searched if the plan pays for it, else the slicer's order."""
@@ -277,23 +275,17 @@ class WorkRunner:
             self.net_fired = elapsed > self.net_s
         if self.net_fired or not self.plan.funds(g):
             self.plan.charge(g, 0.0)
-            self.out_of_time += 1
             return kept_solution(grp, time.perf_counter(), OUT_OF_TIME)
         n, m = grp.n_curves, grp.n_cands
         extra_s = matching_work_s(n, m)
         gs = self.fn(grp, time_limit_s=self.time_limit_s,
                      with_matching=self.plan.affords(g, extra_s),
                      **self.kwargs)
-        work_s = float(greedy_work_s(n, m, self.time_objective, gs.formulation == DP_FORMULATION))
+        work_s = float(greedy_work_s(n, m, self.plan.time_objective, gs.formulation == DP_FORMULATION))
         if gs.formulation == MATCHING_FORMULATION:
             work_s += extra_s
         self.plan.charge(g, work_s)
         return gs
-
-    @property
-    def work_s(self) -> float:
-        """Deterministic seconds spent so far (the pass set aside, what the groups were charged)."""
-        return 0.0 if self.plan is None else self.plan.spent_s
 
     def passed(self, g: int) -> None:
         """Group g is done (``GroupRunner.passed``'s place in the loop): the pass's work was set

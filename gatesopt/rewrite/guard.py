@@ -364,14 +364,19 @@ def greedy_taken(gs: GroupSolution) -> GroupSolution:
     return GroupSolution.make(gs.order, gs.objective, gs.bound, status, gs.solve_s, form)
 
 
-def proven_layers(problem: OrderingProblem, solution: OrderingSolution, n_layers: int) -> np.ndarray:
-    """(n_layers,) bool: layers holding a re-orderable group ``solution`` proved optimal."""
+def layers_of_groups(problem: OrderingProblem, groups, n_layers: int) -> np.ndarray:
+    """(n_layers,) bool: layers holding one of ``groups`` (group indices)."""
     out = np.zeros(n_layers, bool)
-    ok = [g for g, gs in enumerate(solution.groups)
-          if problem.group_reorderable[g] and gs.status == Status.OPTIMAL]
-    lay = np.asarray(problem.group_layer, np.int64)[ok]
+    lay = np.asarray(problem.group_layer, np.int64)[np.asarray(groups, np.int64)]
     out[lay[lay < n_layers]] = True
     return out
+
+
+def proven_layers(problem: OrderingProblem, solution: OrderingSolution, n_layers: int) -> np.ndarray:
+    """(n_layers,) bool: layers holding a re-orderable group ``solution`` proved optimal."""
+    return layers_of_groups(problem, [g for g, gs in enumerate(solution.groups)
+                                      if problem.group_reorderable[g] and gs.status == Status.OPTIMAL],
+                            n_layers)
 
 
 def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingSolution,
@@ -422,11 +427,8 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
             if cand is not None:
                 # the layers solved again: those whose groups got new answers (a layer the
                 # repair had no time for keeps ``printed``'s, the same objects)
-                done = np.zeros(L, bool)
                 new = [g for g, (a, b) in enumerate(zip(printed.groups, cand.groups)) if a is not b]
-                lay = np.asarray(problem.group_layer, np.int64)[new]
-                done[lay[lay < L]] = True
-                done &= lost
+                done = layers_of_groups(problem, new, L) & lost
                 best = _repair_stage(program, problem, best, cand,
                                      differing_layers(problem, best.solution, cand, L) & done,
                                      emitted)

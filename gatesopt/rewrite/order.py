@@ -452,6 +452,7 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
     if solution.work_net_fired:
         slower.append(WORK_NET_NOTE)
     time_obj = problem.cost_unit == "ms"
+    repaired_groups = repaired_status_counts(solution, problem)
     return {
         "objective": options.objective,
         # the objective the solver optimised: the travels' time as emitted (time) or their length
@@ -503,8 +504,8 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         "layers_repaired": int(len(repaired)),
         "layers_repaired_kept_slower": int(len(set(np.asarray(repaired).tolist())
                                                & set(np.asarray(slower_layers).tolist()))),
-        "groups_repaired": repaired_status_counts(solution, problem)["groups"],
-        "groups_repaired_optimal": repaired_status_counts(solution, problem)["optimal"],
+        "groups_repaired": repaired_groups["groups"],
+        "groups_repaired_optimal": repaired_groups["optimal"],
         "worst_gap": float(max((gs.gap for _, gs in decided), default=0.0)),
         "solve_s": solution.solve_s, "wall_s": wall_s,
         "verified": not findings, "findings": [str(f) for f in findings],

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import _jit, slicers
+from ..kinematics import check_gateable
 from ..gating.emit import EmitResult, emit_result, render
 from ..gating.options import GatingOptions
 from ..gating.problem import build
@@ -53,7 +54,7 @@ from .budget import after_order_s, no_time_note, ordering_budget_s, slowdown_fac
 from .figures import figures, print_time_s
 from .order import (READ_S_PER_LINE, NoTimeToOrder, greedy_work_budget_s, kept_slower_note,
                     order_summary, out_of_time_groups, out_of_time_note, reorder, stage_floor_s)
-from .printer import FirmwareChoice, check_motors_fit, choose
+from .printer import FirmwareChoice, choose
 
 #: the keys of the ordering's report that ``gatesopt solve --json`` carries at its top level (the
 #: travel figures are the run's own, ``figures``: measured on the input and the final output);
@@ -602,7 +603,8 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         gating = gating and options is not None
     o = options or GatingOptions()
     if gating:
-        check_motors_fit(program, o.motors, o.printer)     # corexy: X, Y are not one motor each
+        # corexy: X, Y are not one motor each (``choose`` never picks them; options made by hand may)
+        check_gateable(program.data, o.motors, o.printer, program.source)
     notes = []
     times = Stages()
     times.add("read_s", time.perf_counter() - t0)
@@ -615,19 +617,19 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             slow = slowdown_factor(t0, cpu_started_s)
             # compiling numba kernels (a first run) is not charged to the budget (cli.progress)
             spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
-            ob = ordering_budget_s(budget_s, program, o, formulation, gating, spent_s, time_limit_s, slow)
+            def ordering_share(spent, rate):
+                b = ordering_budget_s(budget_s, program, o, formulation, gating, spent, time_limit_s, rate)
+                if gating and _exact(formulation):
+                    # an exact gating formulation's search is part of the budget too (issue 37):
+                    # the ordering leaves it a share of what it would get, at most --time-limit
+                    b -= min(math.inf if time_limit_s is None else float(time_limit_s),
+                             EXACT_GATING_SHARE * max(b, 0.0))
+                return b
+            ob = ordering_share(spent_s, slow)
             # the greedy chain's budget in work (issue 36: the same greedy pass on every run):
             # the same estimate with the reading counted at its quiet rate, not as measured
-            work_ob = ordering_budget_s(budget_s, program, o, formulation, gating,
-                                        READ_S_PER_LINE * program.n_lines, time_limit_s, 1.0)
-            if gating and _exact(formulation):
-                # an exact gating formulation's search is part of the budget too (issue 37): the
-                # ordering leaves it a share of what it would get, at most --time-limit
-                ob -= min(math.inf if time_limit_s is None else float(time_limit_s),
-                          EXACT_GATING_SHARE * max(ob, 0.0))
-                work_ob -= min(math.inf if time_limit_s is None else float(time_limit_s),
-                               EXACT_GATING_SHARE * max(work_ob, 0.0))
-            order_work_s = greedy_work_budget_s(work_ob, program.n_lines)
+            order_work_s = greedy_work_budget_s(ordering_share(READ_S_PER_LINE * program.n_lines, 1.0),
+                                                program.n_lines)
             floor = stage_floor_s(program, slow)
             if ob <= floor:
                 # what the rest leaves the ordering would not pay for its build, a pass over

@@ -42,13 +42,6 @@ _M18_STOPS = {"klipper": "Klipper's M18 turns every motor off and clears homing,
               "reprapfirmware": "RepRapFirmware's M18 unhomes the axis and refuses its next move"}
 
 
-def check_motors_fit(program, motors, printer=None) -> None:
-    """``kinematics.check_gateable`` for ``program`` (a ``Program`` or a file's bytes)."""
-    data = program if isinstance(program, (bytes, bytearray)) else program.data
-    source = "<text>" if isinstance(program, (bytes, bytearray)) else program.source
-    kinematics.check_gateable(bytes(data), motors, printer, source)
-
-
 class _Default:
     """The ``max_added_time_pct`` a caller did not give (None is "no budget", given)."""
 
@@ -191,7 +184,7 @@ def choose(program, requested: str = "auto", *, force: bool = False, max_added_t
         elif motors != ("X", "Y"):
             said += f"; gates {','.join(motors)} only ({fw.refused_note or 'the firmware allows no other'})"
     else:
-        check_motors_fit(program, motors, printer_cfg)
+        kinematics.refuse_coupled(kin, motors, source)
     default_budget = max_added_time_pct is DEFAULT
     if default_budget:
         max_added_time_pct = STOCK_BUDGET_PCT if _stalls(name) else None
