@@ -67,3 +67,19 @@ def shared_params():
     if not files:
         return [pytest.param(None, marks=pytest.mark.skip(reason=f"no corpus at {SHARED_INSTANCES}"))]
     return [pytest.param(p, id=p.name) for p in files]
+
+
+def matrix_helper_first(monkeypatch) -> None:
+    """The ordering's matrix helper makes every link matrix before the chain's first group (a
+    small file's chain would otherwise end before the fresh interpreter starts): the main process
+    takes them all (tests/test_greedy_workers.py, tests/test_greedy_work.py)."""
+    from gatesopt.ordering import matrix_helper
+    start = matrix_helper.MatrixHelper.start.__func__
+
+    def start_and_wait(cls, problem):
+        maker = start(cls, problem)
+        if maker is not None:
+            maker.wait()
+        return maker
+
+    monkeypatch.setattr(matrix_helper.MatrixHelper, "start", classmethod(start_and_wait))

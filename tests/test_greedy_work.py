@@ -19,7 +19,7 @@ from gatesopt.rewrite.guard import FROM_SLICER, FROM_SOLVER
 from gatesopt.rewrite.order import order_program, same_start_layers
 from gatesopt.solvers import Status
 
-from conftest import PROJECT_INSTANCES
+from conftest import PROJECT_INSTANCES, matrix_helper_first
 
 
 def _same_answer(a, b) -> None:
@@ -92,15 +92,7 @@ def test_the_greedy_pass_is_the_same_with_two_workers_under_a_budget(monkeypatch
     prob = _problem()
     b = _half_budget(prob)
     one = layers.solve_greedy(prob, budget_s=b, workers=1)
-    start = matrix_helper.MatrixHelper.start.__func__
-
-    def start_and_wait(cls, problem):
-        maker = start(cls, problem)
-        if maker is not None:
-            maker.wait()
-        return maker
-
-    monkeypatch.setattr(matrix_helper.MatrixHelper, "start", classmethod(start_and_wait))
+    matrix_helper_first(monkeypatch)
     two = layers.solve_greedy(prob, budget_s=b, workers=2)
     assert two.handed                       # the helper made matrices
     assert 0 < _late(one.solution)

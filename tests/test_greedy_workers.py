@@ -15,7 +15,8 @@ from gatesopt.ordering.groups import build
 from gatesopt.ordering.polylines import from_polylines
 from gatesopt.ordering.problem import OrderingOptions
 
-from conftest import PROJECT_INSTANCES, SHARED_INSTANCES, needs_shared, random_line_layers
+from conftest import (PROJECT_INSTANCES, SHARED_INSTANCES, matrix_helper_first, needs_shared,
+                      random_line_layers)
 
 
 def _same_answer(a, b) -> None:
@@ -67,26 +68,12 @@ def small_helper(monkeypatch):
     monkeypatch.setattr(matrix_helper, "MATRIX_HELPER_MIN_S", 0.0)
 
 
-def _helper_first(monkeypatch) -> None:
-    """The helper makes every matrix before the chain's first group (a small file's chain would
-    otherwise end before the fresh interpreter starts): the main process takes them all."""
-    start = matrix_helper.MatrixHelper.start.__func__
-
-    def start_and_wait(cls, problem):
-        maker = start(cls, problem)
-        if maker is not None:
-            maker.wait()
-        return maker
-
-    monkeypatch.setattr(matrix_helper.MatrixHelper, "start", classmethod(start_and_wait))
-
-
 def _check_greedy_pass(prob, one, monkeypatch) -> None:
     """Two workers, as timing goes and with every matrix handed over: one worker's answer; the
     exact run's greedy pass (``solve_greedy``) is the greedy run's, with every group's bound,
     and a matrix for every group (the helper's, where it made one, equal to one worker's)."""
     _same_answer(one.solution, layers.solve(prob, "greedy", workers=2))
-    _helper_first(monkeypatch)
+    matrix_helper_first(monkeypatch)
     two = layers.solve(prob, "greedy", workers=2)
     _same_answer(one.solution, two)
     gp = layers.solve_greedy(prob, workers=2)
