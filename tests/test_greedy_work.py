@@ -15,8 +15,8 @@ from gatesopt.ordering import budget, greedy_pass, layers, matrix_helper, runner
 from gatesopt.ordering.groups import build
 from gatesopt.ordering.problem import OrderingOptions
 from gatesopt.ordering.runner import OUT_OF_TIME
-from gatesopt.rewrite.guard import FROM_SLICER, FROM_SOLVER
-from gatesopt.rewrite.order import order_program, same_start_layers
+from gatesopt.rewrite.guard import same_entry_groups
+from gatesopt.rewrite.order import order_program
 from gatesopt.solvers import Status
 
 from conftest import PROJECT_INSTANCES, matrix_helper_first
@@ -119,9 +119,31 @@ def test_small_groups_are_proven_by_the_dp_in_the_greedy_pass():
         assert exact.groups[g].status == Status.OPTIMAL
 
 
-def test_a_proof_holds_where_the_layer_and_the_one_before_print_greedys_chain():
-    src = np.array([FROM_SOLVER, FROM_SOLVER, FROM_SLICER, FROM_SOLVER, FROM_SOLVER])
-    assert same_start_layers(src).tolist() == [True, True, False, False, True]
+def test_a_group_is_entered_alike_where_the_curve_before_it_is_printed_alike():
+    """Turning the last curve of layer k around changes how the group after it (the first of
+    layer k + 1) is entered, and nothing else; printing layer k backwards (it then ends on
+    another curve) too, and the groups whose own order changed but whose entry did not are
+    still entered alike."""
+    import dataclasses
+    prob = _problem()
+    sol = layers.solve(prob, "greedy")
+    assert same_entry_groups(prob, sol, sol).all()
+    order = np.asarray(sol.curve_order)
+    lay = np.asarray(prob.curve_layer)[order]
+    glay = np.asarray(prob.group_layer)
+    k = next(k for k in range(1, int(lay.max())) if np.count_nonzero(lay == k) >= 2)
+    after = int(np.flatnonzero(glay == k + 1)[0])       # the first group of layer k + 1
+    last = int(order[np.flatnonzero(lay == k)[-1]])
+    rev = sol.curve_reversed.copy()
+    rev[last] = ~rev[last]
+    turned = dataclasses.replace(sol, curve_reversed=rev)
+    assert np.flatnonzero(~same_entry_groups(prob, sol, turned)).tolist() == [after]
+    at = np.flatnonzero(lay == k)
+    backwards = order.copy()
+    backwards[at] = order[at][::-1]
+    other = dataclasses.replace(sol, curve_order=backwards)
+    differ = np.flatnonzero(~same_entry_groups(prob, sol, other)).tolist()
+    assert after in differ and all(glay[g] == k or g == after for g in differ)
 
 
 @pytest.mark.parametrize("mode", ["safe", "free"])

@@ -356,12 +356,53 @@ def _repair_stage(program: Program, problem: OrderingProblem, base: _Measured,
     return second if taken(second, t2) else base
 
 
-def greedy_taken(gs: GroupSolution) -> GroupSolution:
-    """A greedy answer as printed by the guard: at best feasible (its proof, if the bound closed,
-    was for the start its own chain gave the group; the layer before may now end elsewhere)."""
+def greedy_taken(gs: GroupSolution, entered_alike: bool = False) -> GroupSolution:
+    """A greedy answer as printed by the guard. ``entered_alike``: the group is entered as in
+    greedy's chain (``same_entry_groups``): the group starts and ends as greedy solved it, so a
+    proof greedy made for it (the subset DP, a closing bound) stands and the answer is greedy's
+    as it was. Elsewhere at best feasible (its proof was for the start greedy's own chain gave
+    the group; the layer before now ends elsewhere)."""
+    if entered_alike:
+        return gs
     status = Status.FEASIBLE if gs.status == Status.OPTIMAL else gs.status
     form = gs.formulation if gs.formulation.startswith("kept") else GREEDY_TAKEN
     return GroupSolution.make(gs.order, gs.objective, gs.bound, status, gs.solve_s, form)
+
+
+def same_entry_groups(problem: OrderingProblem, a: OrderingSolution,
+                      b: OrderingSolution) -> np.ndarray:
+    """(n_groups,) bool: groups that ``a`` and ``b`` enter alike -- the curve printed before the
+    group's first one is the same curve, printed in the same direction from the same seam (or
+    none: the file's first curve). Such a group starts where it starts in the other: where it
+    prints ``b``'s path and ``b``'s solver proved that path for this start (and for the end it
+    had: the next fixed group's entry, the file's end, or free -- the same in every solution for
+    a chain solved forward), the proof stands. Inside a layer printed whole from one solution
+    only a layer's first group can be entered otherwise (``mix_layers``)."""
+    pp = problem.program_problem
+    n = pp.n_curves
+    G = problem.n_groups
+    out = np.ones(G, bool)
+    if n == 0:
+        return out
+    owner = np.repeat(np.arange(G), np.diff(np.asarray(problem.group_curve_start, np.int64)))
+    if problem.curve_source is not None:
+        own = np.empty(n, np.int64)
+        own[np.asarray(problem.curve_source, np.int64)] = owner
+        owner = own
+
+    def entry(s):
+        order = np.asarray(s.curve_order, np.int64)
+        first = np.full(G, n, np.int64)
+        np.minimum.at(first, owner[order], np.arange(n))
+        has = first < n
+        p = np.where(has, first - 1, -1)
+        c = np.where(p >= 0, order[np.maximum(p, 0)], -1)
+        cc = np.maximum(c, 0)
+        rev = np.where(c >= 0, np.asarray(s.curve_reversed, bool)[cc], False)
+        seam = np.where(c >= 0, np.asarray(s.curve_seam, np.int64)[cc], 0)
+        return c, rev, seam
+    (ca, ra, sa), (cb, rb, sb) = entry(a), entry(b)
+    return (ca == cb) & (ra == rb) & (sa == sb)
 
 
 def layers_of_groups(problem: OrderingProblem, groups, n_layers: int) -> np.ndarray:
@@ -386,8 +427,9 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     says prints fastest (module docstring): the slicer's where the re-ordered layer does not pay
     for itself, and, with ``greedy`` (a greedy solution of the same problem), the greedy order in
     the layers of ``greedy_layers`` ((n_layers,) bool; None: every layer) where it prints faster.
-    A group printed in the greedy order is reported with its greedy answer, at best "feasible"
-    (``GREEDY_TAKEN``).
+    A group printed in the greedy order is reported with its greedy answer: proven where greedy
+    proved it and it is entered as in greedy's chain (``same_entry_groups``), else at best
+    "feasible" (``GREEDY_TAKEN``).
 
     ``repair`` (the repair pass, formulations/ordering.md "Time guard"): called as
     ``repair(printed, layers)`` with the solution printed so far and the layers where the
@@ -451,10 +493,14 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     groups = solution.groups
     if greedy is not None:
         source[~same & ~differing_layers(problem, final, greedy, L)[:L]] = FROM_GREEDY
-        at = source[np.asarray(problem.group_layer, np.int64)] == FROM_GREEDY
+        glay = np.asarray(problem.group_layer, np.int64)
+        at = source[glay] == FROM_GREEDY
+        # greedy's proofs stand in the groups entered as in greedy's chain
+        alike = same_entry_groups(problem, final, greedy)
         decided = problem.group_reorderable
-        groups = tuple((greedy_taken(gg) if d else gg) if t else gs
-                       for gs, gg, t, d in zip(solution.groups, greedy.groups, at, decided))
+        groups = tuple((greedy_taken(gg, a) if d else gg) if t else gs
+                       for gs, gg, t, d, a in zip(solution.groups, greedy.groups, at, decided,
+                                                  alike))
     sol = dataclasses.replace(with_model_cost(problem, final), groups=groups,
                               formulation=solution.formulation, solve_s=solution.solve_s)
     kept = np.flatnonzero(changed_layers(problem, solution)[:L] & (source == FROM_SLICER))

@@ -24,11 +24,12 @@ from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
 from ..ordering.runner import OUT_OF_TIME, OUT_OF_TIME_GREEDY
 from ..ordering.travel_stats import runs, travel_mask
 from ..program import Program
-from ..solvers import Status, stop_requested
+from ..solvers import stop_requested
 from ..verify.ordering import check
 from .figures import figures
 from .guard import (FROM_GREEDY, FROM_SOLVER, GUARD_TOL_S, emit_guarded,  # noqa: F401 (re-exported)
-                    greedy_taken, keep_layers, layer_times_s, step_times_s)
+                    greedy_taken, keep_layers, layer_times_s, same_entry_groups,
+                    step_times_s)
 
 
 @dataclass(frozen=True, eq=False)
@@ -213,16 +214,6 @@ def repair_pass(program: Program, problem: OrderingProblem, formulation: str, *,
     return repair
 
 
-def same_start_layers(source: np.ndarray) -> np.ndarray:
-    """Per layer, whether it prints the greedy chain's answer (``FROM_SOLVER`` where greedy's
-    solution is the one emitted) from where greedy's chain began it: the layer before prints it
-    too. A group proven there (the subset DP, a closing bound) keeps its proof (its start and end
-    are the ones it was proven for); elsewhere ``greedy_taken`` (at best feasible)."""
-    src = np.asarray(source) == FROM_SOLVER
-    prev = np.concatenate(([True], src[:-1]))
-    return src & prev
-
-
 def reorder(program: Program, options: OrderingOptions | None = None, *,
             formulation: str = "auto", time_limit_s: float = 2.0,
             budget_s: float | None = None, workers: int = 1, time_guard: bool = True,
@@ -293,8 +284,11 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
         # no time left to pass the groups again (or a Ctrl-C): greedy's answer is the solve's
         guarded = emit_guarded(program, problem, greedy.solution, time_guard)
         decided = problem.group_reorderable
-        same = same_start_layers(guarded.source)[np.asarray(problem.group_layer, np.int64)]
-        groups = tuple(greedy_taken(gs) if d and not (s and gs.status == Status.OPTIMAL) else gs
+        # greedy's proofs stand in the groups that print greedy's order entered as its chain
+        # entered them (``guard.same_entry_groups``); elsewhere its answers are at best feasible
+        same = ((guarded.source == FROM_SOLVER)[np.asarray(problem.group_layer, np.int64)]
+                & same_entry_groups(problem, guarded.solution, greedy.solution))
+        groups = tuple(greedy_taken(gs, s) if d else gs
                        for gs, d, s in zip(guarded.solution.groups, decided, same))
         sol = dataclasses.replace(guarded.solution, groups=groups, formulation=formulation,
                                   work_net_fired=greedy.solution.work_net_fired)
