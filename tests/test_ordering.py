@@ -456,7 +456,9 @@ def test_progress_is_called_after_every_group_with_the_proofs_so_far():
     assert all(c[1] == n for c in calls)
     proven = [c[2] for c in calls]
     assert proven == sorted(proven)
-    assert proven[-1] == res.summary["groups_optimal"] > 0
+    # (the proofs as the groups were solved; the report's count can only be lower: a group the
+    # chain or the time guard enters from another start than it was proven from is not proven)
+    assert 0 < res.summary["groups_optimal"] <= proven[-1]
 
 
 def test_cli_progress_bar_shows_groups_and_proofs():

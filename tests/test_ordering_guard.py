@@ -201,9 +201,13 @@ def test_with_a_greedy_solution_each_layer_prints_the_fastest_of_the_three_order
     assert res.greedy_layers == sum(v == guard.FROM_GREEDY for v in want.values())
     decided = prob.group_reorderable
     alike = guard.same_entry_groups(prob, res.solution, other)
+    entered = guard.same_entry_groups(prob, res.solution, sol)
     for g, gs in enumerate(res.solution.groups):
         L = prob.group_layer[g]
-        if res.source[L] != guard.FROM_GREEDY:
+        if res.source[L] == guard.FROM_SOLVER and not entered[g]:
+            # the solver's layer entered from another curve than its chain's: not proven there
+            assert gs.status != "optimal" and np.array_equal(gs.order, sol.groups[g].order)
+        elif res.source[L] != guard.FROM_GREEDY:
             assert gs is sol.groups[g]
         elif decided[g] and alike[g]:
             # entered as in greedy's chain: greedy's answer as it was, its proof included
@@ -234,7 +238,8 @@ def test_a_greedy_proof_is_reported_only_where_the_group_is_entered_as_greedy_en
     # make it faster there) and the solver's, each layer printed backwards, in the rest: a greedy
     # layer after a solver layer is entered from another curve, one after a greedy or unchanged
     # layer from the same. A group reported proven in a greedy layer must be optimal from where
-    # the printed file enters it (checked by the DP); those entered otherwise are not reported so
+    # the printed file enters it (checked by the DP); those entered otherwise are not reported so,
+    # nor are the solver's groups its chain did not enter as printed
     from gatesopt.ordering import dp, layers
     from gatesopt.solvers import Status
     prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
@@ -257,9 +262,22 @@ def test_a_greedy_proof_is_reported_only_where_the_group_is_entered_as_greedy_en
     res = guard.emit_guarded(orig, prob, sol, greedy=gp.solution)
     assert sorted(np.flatnonzero(res.source == guard.FROM_GREEDY).tolist()) == sorted(to_greedy)
     alike = guard.same_entry_groups(prob, res.solution, gp.solution)
-    kept = demoted = checked = 0
+    entered = guard.same_entry_groups(prob, res.solution, sol)
+    kept = demoted = checked = solver_demoted = 0
     for g, grp, order in _printed_starts(prob, res.solution):
-        if res.source[prob.group_layer[g]] != guard.FROM_GREEDY or not prob.group_reorderable[g]:
+        if not prob.group_reorderable[g]:
+            continue
+        if res.source[prob.group_layer[g]] == guard.FROM_SOLVER:
+            # the same rule for the solver's answers (here greedy's paths backwards, greedy's
+            # statuses): proven only where entered as the solver's chain entered them
+            gs = res.solution.groups[g]
+            if entered[g]:
+                assert gs is sol.groups[g]
+            elif sol.groups[g].status == Status.OPTIMAL:
+                solver_demoted += 1
+                assert gs.status == Status.FEASIBLE
+            continue
+        if res.source[prob.group_layer[g]] != guard.FROM_GREEDY:
             continue
         gs, was = res.solution.groups[g], gp.solution.groups[g]
         if was.status != Status.OPTIMAL:
@@ -273,7 +291,7 @@ def test_a_greedy_proof_is_reported_only_where_the_group_is_entered_as_greedy_en
         if gs.status == Status.OPTIMAL and dp.fits(grp):
             checked += 1
             assert grp.path_cost(order) <= dp.solve(grp).objective + 1e-6
-    assert kept and demoted and checked
+    assert kept and demoted and checked and solver_demoted
 
 
 def test_the_guard_with_a_greedy_solution_is_never_slower_than_greedys_own_guard(monkeypatch, star):

@@ -24,6 +24,9 @@ LOOKAHEAD_TRIES = 2
 #: solved again (a fallback would take its limit). A fixed end can make the proof several times
 #: slower (docs/BENCHMARKS.md, "Curve-ordering constants")
 LOOKAHEAD_TIME_FACTOR = 20.0
+#: the formulation suffix of a path solved backwards (``solve_backwards``: its start free, the
+#: travel into it the group before's)
+BACKWARDS = "+back"
 
 
 def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwargs) -> None:
@@ -104,7 +107,11 @@ def path_options(grp, gs: GroupSolution, backwards: bool = False) -> list:
     opts = [gs]
     if len(ident) == grp.n_curves and not np.array_equal(ident, gs.order):
         ident_obj = grp.path_cost(ident)
-        opts.append(GroupSolution.make(ident, ident_obj, gs.bound, gs.status, gs.solve_s,
+        # proven only where it is an optimum too (the chain DP may take it for the chain's sake)
+        status = gs.status
+        if status == Status.OPTIMAL and ident_obj - gs.bound > OPTIMAL_ABS_TOL:
+            status = Status.FEASIBLE
+        opts.append(GroupSolution.make(ident, ident_obj, gs.bound, status, gs.solve_s,
                                        gs.formulation + "+kept"))
         if ident_obj < gs.objective - 1e-9:
             opts = opts[::-1]
@@ -122,7 +129,7 @@ def solve_backwards(runner, problem: OrderingProblem, g: int, end, greedy=None) 
     gs = runner.run(g, back, greedy, backwards=True)
     back.check_order(gs.order)
     opts = [GroupSolution.make(o.order[::-1].copy(), o.objective, o.bound, o.status, o.solve_s,
-                               o.formulation + "+back")
+                               o.formulation + BACKWARDS)
             for o in path_options(back, gs, backwards=True)]
     return fwd, opts
 

@@ -19,11 +19,11 @@ import numpy as np
 
 from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
-from .chain import end_of, look_ahead, path_options, pick_paths, rescored
+from .chain import BACKWARDS, end_of, look_ahead, path_options, pick_paths, rescored
 from .helper import Helper
 from .matrix_helper import MatrixHelper, with_arc
 from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
-                      OrderingSolution, path_travel_mm)
+                      OrderingSolution, path_travel_mm, same_anchor)
 from .runner import GroupRunner, WorkRunner, greedy_answer
 
 
@@ -174,8 +174,18 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
         deadline = None if budget_s is None else t0 + budget_s - runner.rest_s(problem.n_groups - 1)
         look_ahead(problem, plans, fn, time_limit_s, deadline, kwargs)
     choice = pick_paths(problem, plans)
-    for g, (grp, opts, _, _) in enumerate(plans):
+    entry = Anchor.of(problem.origin_xy)       # where the chain picked enters each group
+    for g, (grp, opts, start, _) in enumerate(plans):
         gs = opts[choice[g]]
+        if (gs.status == Status.OPTIMAL and reorderable[g] and BACKWARDS not in gs.formulation
+                and not same_anchor(entry, start)):
+            # proven from ``start`` (the chain as solved: each group from the solver's path of
+            # the one before), entered from elsewhere (the chain DP took another path before
+            # it): the proof is for another problem
+            gs = GroupSolution.make(gs.order, gs.objective, gs.bound, Status.FEASIBLE,
+                                    gs.solve_s, gs.formulation)
+        if grp.n_curves:
+            entry = problem.exit_anchor(g, grp, gs.order)
         curves = problem.group_curves(g)
         for k in gs.order:
             c = int(curves[grp.cand_curve[k]])

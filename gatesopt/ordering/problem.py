@@ -121,6 +121,13 @@ class Anchor:
         return Anchor(np.asarray(value, float)[:2].copy())
 
 
+def same_anchor(a: Anchor, b: Anchor) -> bool:
+    """Whether two anchors are one: the same curve, printed alike, at the same point (a group
+    started from either has the same start costs)."""
+    return (a.curve == b.curve and bool(a.changed) == bool(b.changed)
+            and np.array_equal(np.asarray(a.xy, float)[:2], np.asarray(b.xy, float)[:2]))
+
+
 @dataclass(frozen=True, eq=False)
 class LinkCosts:
     """A group's link costs in the objective's unit (``OrderingProblem.cost_unit``).

@@ -36,9 +36,11 @@ import dataclasses
 
 import numpy as np
 
+from ..ordering.chain import BACKWARDS
 from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
 from ..ordering.problem import GroupSolution, OrderingProblem, OrderingSolution
+from ..ordering.repair import REPAIRED
 from ..parse import parse
 from ..planner import planned_durations_s
 from ..program import Program
@@ -490,17 +492,26 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     final = best.solution
     same = ~differing_layers(problem, final, solution, L)[:L]
     source = np.where(same, FROM_SOLVER, FROM_SLICER)
-    groups = solution.groups
+    glay = np.asarray(problem.group_layer, np.int64)
+    # the solver's proofs stand in the groups it prints entered as its chain entered them (a
+    # layer after one put back or printed in greedy's order may start from another curve); not
+    # checked: a path solved backwards (its start free) and a repaired one (solved from
+    # ``printed``'s entry). A layer put back keeps the solver's answers as they were (what it
+    # proved, not printed: "proven groups reverted")
+    entered = same_entry_groups(problem, final, solution) | (source[glay] != FROM_SOLVER)
+    groups = tuple(gs if a or gs.status != Status.OPTIMAL
+                   or gs.formulation.endswith((BACKWARDS, REPAIRED))
+                   else GroupSolution.make(gs.order, gs.objective, gs.bound, Status.FEASIBLE,
+                                           gs.solve_s, gs.formulation)
+                   for gs, a in zip(solution.groups, entered))
     if greedy is not None:
         source[~same & ~differing_layers(problem, final, greedy, L)[:L]] = FROM_GREEDY
-        glay = np.asarray(problem.group_layer, np.int64)
         at = source[glay] == FROM_GREEDY
         # greedy's proofs stand in the groups entered as in greedy's chain
         alike = same_entry_groups(problem, final, greedy)
         decided = problem.group_reorderable
         groups = tuple((greedy_taken(gg, a) if d else gg) if t else gs
-                       for gs, gg, t, d, a in zip(solution.groups, greedy.groups, at, decided,
-                                                  alike))
+                       for gs, gg, t, d, a in zip(groups, greedy.groups, at, decided, alike))
     sol = dataclasses.replace(with_model_cost(problem, final), groups=groups,
                               formulation=solution.formulation, solve_s=solution.solve_s)
     kept = np.flatnonzero(changed_layers(problem, solution)[:L] & (source == FROM_SLICER))
