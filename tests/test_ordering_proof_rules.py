@@ -162,3 +162,32 @@ def test_every_group_reported_proven_prints_its_optimum_from_where_the_file_ente
         if grp.n_curves:
             pos = prob.exit_anchor(g, grp, gs.order)
     assert checked >= 500
+
+
+def test_a_proof_holds_only_for_the_start_and_the_end_it_was_made_for():
+    # ``layers.proof_holds``: group 0 solved (as by the main process) to end where the helper's
+    # path of group 1 begins; the chain picked must start it where it was solved from and enter
+    # group 1 at that entry. A path solved backwards (start free) holds from any start
+    from gatesopt.ordering.layers import proof_holds
+    from gatesopt.ordering.problem import Anchor, GroupSolution
+    strokes = [np.array([[0.0, y], [10.0, y]]) for y in (0, 40, 10, 30, 20)]
+    prob = from_polylines([strokes, strokes])
+    start = Anchor.of(prob.origin_xy)
+    nxt = prob.group(1, start)
+    end = prob.cand_anchor(1, nxt, 0)
+    grp = prob.group(0, start, end)
+    gs = dp.solve(grp)
+    one = dp.solve(nxt)
+    other = next(k for k in range(nxt.n_cands)
+                 if not np.array_equal(nxt.cand_entry_xy[k], nxt.cand_entry_xy[0]))
+
+    def picked_next(first):         # (only where group 1's path begins matters here)
+        return GroupSolution.make(np.array([first]), 0.0, 0.0, Status.FEASIBLE, 0.0, "test")
+    plans = [(grp, [gs], start, end), (nxt, [one], start, None)]
+    assert proof_holds(prob, plans, [gs, picked_next(0)], 0, start)
+    # the next group entered elsewhere: g's end link was to another point
+    assert not proof_holds(prob, plans, [gs, picked_next(other)], 0, start)
+    # entered from elsewhere
+    assert not proof_holds(prob, plans, [gs, picked_next(0)], 0, Anchor.of((99.0, 99.0)))
+    back = dataclasses.replace(gs, formulation=gs.formulation + "+back")
+    assert proof_holds(prob, plans, [back, picked_next(other)], 0, Anchor.of((99.0, 99.0)))

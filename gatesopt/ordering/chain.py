@@ -27,6 +27,9 @@ LOOKAHEAD_TIME_FACTOR = 20.0
 #: the formulation suffix of a path solved backwards (``solve_backwards``: its start free, the
 #: travel into it the group before's)
 BACKWARDS = "+back"
+#: the formulation suffix of a look-ahead path (``look_ahead``: proven for the next group's entry
+#: it was solved to)
+LOOKAHEAD = "+ahead"
 
 
 def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwargs) -> None:
@@ -76,9 +79,10 @@ def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwar
                 gg.check_order(gs.order)
             if gs.objective + ns.objective < pair - OPTIMAL_ABS_TOL:
                 opts.append(GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status,
-                                               gs.solve_s, gs.formulation + "+ahead"))
+                                               gs.solve_s, gs.formulation + LOOKAHEAD))
                 nxt_opts.append(GroupSolution.make(ns.order, ns.objective, ns.bound,
-                                                   ns.status, ns.solve_s, ns.formulation + "+ahead"))
+                                                   ns.status, ns.solve_s,
+                                                   ns.formulation + LOOKAHEAD))
 
 
 def end_of(problem: OrderingProblem, g: int):

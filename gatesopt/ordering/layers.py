@@ -19,7 +19,7 @@ import numpy as np
 
 from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
-from .chain import BACKWARDS, end_of, look_ahead, path_options, pick_paths, rescored
+from .chain import BACKWARDS, LOOKAHEAD, end_of, look_ahead, path_options, pick_paths, rescored
 from .helper import Helper
 from .matrix_helper import MatrixHelper, with_arc
 from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
@@ -174,14 +174,12 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
         deadline = None if budget_s is None else t0 + budget_s - runner.rest_s(problem.n_groups - 1)
         look_ahead(problem, plans, fn, time_limit_s, deadline, kwargs)
     choice = pick_paths(problem, plans)
+    picked = [opts[choice[g]] for g, (_, opts, _, _) in enumerate(plans)]
     entry = Anchor.of(problem.origin_xy)       # where the chain picked enters each group
-    for g, (grp, opts, start, _) in enumerate(plans):
-        gs = opts[choice[g]]
-        if (gs.status == Status.OPTIMAL and reorderable[g] and BACKWARDS not in gs.formulation
-                and not same_anchor(entry, start)):
-            # proven from ``start`` (the chain as solved: each group from the solver's path of
-            # the one before), entered from elsewhere (the chain DP took another path before
-            # it): the proof is for another problem
+    for g, (grp, opts, start, end) in enumerate(plans):
+        gs = picked[g]
+        if gs.status == Status.OPTIMAL and reorderable[g] and not proof_holds(
+                problem, plans, picked, g, entry):
             gs = GroupSolution.make(gs.order, gs.objective, gs.bound, Status.FEASIBLE,
                                     gs.solve_s, gs.formulation)
         if grp.n_curves:
@@ -210,6 +208,29 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                             cost_after=base.order_cost(order_out, reversed_, seam),
                             cost_unit=problem.cost_unit,
                             work_net_fired=one_chain and runner.net_fired)
+
+
+def proof_holds(problem: OrderingProblem, plans, picked, g: int, entry: Anchor) -> bool:
+    """Whether group g's picked answer (proven for the problem it was solved as) is proven in the
+    chain picked: a forward solve was proven from the start in ``plans`` (each group from the
+    solver's path of the one before) -- the chain DP may enter it from elsewhere (``entry``:
+    another option taken for the group before); one solved to the next group's path as the
+    helper process found it (its end not the file's nor a fixed group's) was proven for that
+    entry -- the chain may take another path there. Not checked: a path solved backwards (its
+    start free, the travel into it the group before's) and a look-ahead path (proven for the
+    entry it was solved to: ``chain.look_ahead`` adds it with that entry's path)."""
+    grp, _, start, end = plans[g]
+    form = picked[g].formulation
+    if BACKWARDS in form:
+        return True
+    if not same_anchor(entry, start):
+        return False
+    if LOOKAHEAD in form or end is None or end_of(problem, g) is not None:
+        return True
+    if g + 1 >= len(plans) or not len(picked[g + 1].order):
+        return False
+    nxt = plans[g + 1][0]
+    return same_anchor(problem.cand_anchor(g + 1, nxt, int(picked[g + 1].order[0])), end)
 
 
 def model_travel_mm(problem: OrderingProblem, order, reversed_, seam) -> float:
