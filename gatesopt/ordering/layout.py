@@ -102,6 +102,16 @@ def state_key_of(program: Program, i: int):
         return ("fan",)
     if head in (b"M204", b"M201", b"M203", b"M205"):
         return (head.decode(),) + tuple(sorted({w[:1].decode() for w in words[1:]}))
+    if head in STATE_EXT:
+        # Klipper's extended commands set only the parameters they name: Creality Print / Orca
+        # restate SQUARE_CORNER_VELOCITY on some SET_VELOCITY_LIMIT lines and not on others
+        # (bridges: "ACCEL=2500 ACCEL_TO_DECEL=1250"), so one key per command left a curve moved
+        # past another feature's line under that feature's corner velocity
+        # (real_crealityprint514 free, layer 17: a bridge of 899 moves at 7 mm/s instead of 12,
+        # 2.95 s slower). One key per set of parameter names, as for M204's letters; the writer
+        # keeps their order (``writer.Writer.reissue``)
+        return (head.decode(),) + tuple(sorted({w.split(b"=")[0].decode("ascii", "replace")
+                                                for w in words[1:]}))
     return (head.decode(),)
 
 

@@ -117,7 +117,7 @@ class Writer:
             # a state line (the first of its key is a barrier, and still sets state)
             key = self.lay.state_key.get(i)
             if key is not None:
-                self.state[key] = text.rstrip("\r\n")
+                self._set_state(key, text.rstrip("\r\n"))
             elif cls == LINE_NEUTRAL and not code:
                 name = feature_of_comment(text, self.lay.feature_prefix)
                 if name is not None:
@@ -149,19 +149,45 @@ class Writer:
     def write(self, text: str) -> None:
         self.out.append(text + self.nl)
 
+    def _set_state(self, key, text: str) -> None:
+        # ``state`` keeps its keys in the order their lines were last written: where two keys
+        # of one command set the same parameter (M204 S and M204 P T, SET_VELOCITY_LIMIT with
+        # and without SQUARE_CORNER_VELOCITY), the later line's value is in force
+        self.state.pop(key, None)
+        self.state[key] = text
+
     def reissue(self, states: list, k: int) -> None:
-        """Write each state line ``states`` (``states_at``) holds at its k-th place that is not
-        what the output has in force."""
-        for key, texts in states:
-            text = texts[k]
-            if text is not None and self.state.get(key) != text:
+        """Make the state lines in force what ``states`` (``states_at``) holds at its k-th place:
+        per command (a key's first word), its keys' texts in the original's order. Where the
+        output's differ from the first differing key on, those lines are written again in that
+        order (a line sets only the parameters it names, so the value of each is the last line's
+        that names it, as in the original)."""
+        for head in states:
+            want = [(key, texts[k], lines[k]) for key, texts, lines in head if texts[k] is not None]
+            if not want:
+                continue
+            if len(head) == 1:
+                key, text, _ = want[0]
+                if self.state.get(key) != text:
+                    self.write(text)
+                    self._set_state(key, text)
+                continue
+            want.sort(key=lambda x: x[2])
+            name = want[0][0][0]
+            have = [(key, text) for key, text in self.state.items() if key[0] == name]
+            j = 0
+            while j < len(want) and j < len(have) and have[j] == want[j][:2]:
+                j += 1
+            if j == len(want) and j == len(have):
+                continue
+            for key, text, _ in want[j:]:
                 self.write(text)
-                self.state[key] = text
+                self._set_state(key, text)
 
     # -- the per-layer memo of ``emitter.emit`` -------------------------------------------------------
     def entry_key(self) -> tuple:
         """What a layer's text depends on besides its own curves (E apart: ``emitter.same_entry``)."""
-        return (tuple(self.xyz.tolist()), self.feed, tuple(sorted(self.state.items())),
+        return (tuple(self.xyz.tolist()), self.feed, tuple(self.state.items()),
                 self.feature, self.n_commands, self.e - self.e_off, self.e, self.e_off)
 
     def snapshot(self) -> tuple:
@@ -270,10 +296,12 @@ def required_state(program: Program, lay: Layout):
 
 
 def states_at(req, lines) -> list:
-    """Per state key (in ``req``'s order), the text in force at each of ``lines``: the key's last
-    line before it, None before its first."""
-    out = []
+    """Per command (a state key's first word), per key of it (in ``req``'s order), the text in
+    force at each of ``lines`` and the line it is on: the key's last line before it (None, -1
+    before its first)."""
+    heads: dict = {}
     for key, (arr, texts) in req.items():
-        opts = [None] + texts
-        out.append((key, [opts[j] for j in np.searchsorted(arr, lines, side="left").tolist()]))
-    return out
+        opts, at = [None] + texts, [-1] + arr.tolist()
+        j = np.searchsorted(arr, lines, side="left").tolist()
+        heads.setdefault(key[0], []).append((key, [opts[i] for i in j], [at[i] for i in j]))
+    return list(heads.values())
