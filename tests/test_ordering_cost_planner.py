@@ -113,6 +113,51 @@ def test_a_rebuilt_travel_costs_what_the_planner_plans_under_other_junction_rule
     assert np.abs(rows[:, 0] - rows[:, 1]).max() <= TOL_MS
 
 
+def orca_layers() -> str:
+    """Two layers the way OrcaSlicer writes them for Klipper: the wall's acceleration stated
+    before the wall (``SET_VELOCITY_LIMIT ACCEL=500``), the travel acceleration after it, in the
+    gap after the wall (``ACCEL=5000``), the infill lines after it at that acceleration, stated
+    nowhere else."""
+    lines = [";FLAVOR:Klipper", "G21", "G90", "M83", "G28",
+             "SET_VELOCITY_LIMIT ACCEL=5000 ACCEL_TO_DECEL=5000", "G1 Z0.2 F720"]
+    infill = [((60, 30), (90, 30)), ((120, 90), (150, 90)), ((93, 31), (93, 60))]
+    for layer in range(2):
+        z = 0.2 * (layer + 1)
+        lines += [";LAYER_CHANGE", f"G1 Z{z:.1f} F720", "G1 X10 Y10 F12000", "G1 E0.8 F2100",
+                  "SET_VELOCITY_LIMIT ACCEL=500 ACCEL_TO_DECEL=500", ";TYPE:Outer wall",
+                  "G1 X40 Y10 E1.5 F2700",
+                  "SET_VELOCITY_LIMIT ACCEL=5000 ACCEL_TO_DECEL=5000", "G1 E-0.8 F2100"]
+        for a, b in infill:
+            lines += [f"G1 Z{z + 0.4:.1f} F720", f"G1 X{a[0]} Y{a[1]} F12000", f"G1 Z{z:.1f} F720",
+                      "G1 E0.8 F2100", ";TYPE:Internal infill",
+                      f"G1 X{b[0]} Y{b[1]} E1.5 F2700", "G1 E-0.8 F2100"]
+    return "\n".join(lines) + "\nM104 S0\n"
+
+
+def test_a_rebuilt_travel_runs_under_the_limits_it_was_priced_at():
+    # the link from the wall into the second infill line consumes the gap before that line,
+    # which holds no limits line: the travel acceleration in force at the slicer's travel there
+    # was stated in the gap after the wall, which this link does not consume. Priced at it
+    # (``curve_time.gap_rows``), the travel was written under the wall's 500 mm/s^2: 897.7 ms
+    # priced, 1256.8 ms planned (real_orca230_arcs layer 168: 23.7 ms a link, the layer put back)
+    from gatesopt.verify.ordering import check
+    prog = gatesopt.parse(orca_layers())
+    prob = build(prog, OrderingOptions(mode="free"))
+    assert prob.pricer.move.junction_code == 2             # Klipper's rule, its limits read
+    assert len(machine_limits(prog).changes) > 0
+    sol = solve(prob, "auto")
+    n = prob.n_curves
+    assert n == 8
+    order = np.array([0, 2, 1, 3, 4, 6, 5, 7])             # per layer: the wall, then line 2
+    sol = dataclasses.replace(sol, curve_order=order, curve_reversed=np.zeros(n, bool),
+                              curve_seam=np.zeros(n, np.int64))
+    rows = _rebuilt_links(prog, prob, sol)
+    assert len(rows) >= 4
+    assert rows[:, 1].max() > 800.0                          # the wall's link is among them
+    assert np.abs(rows[:, 0] - rows[:, 1]).max() <= TOL_MS
+    assert check(prog, gatesopt.parse(emit(prog, prob, sol))) == []
+
+
 def test_a_re_ordered_file_is_planned_with_the_limits_of_the_file_it_came_from():
     # a CuraEngine file starts with ";FLAVOR:" (its printer profile is read from that); the
     # re-ordered file starts with gatesopt's header line: it must get the same limits and

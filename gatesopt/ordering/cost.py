@@ -219,9 +219,10 @@ class TimePricer:
         self.step_plan, self.limits = step_plan, lim     # (for ``repair.planner_priced``)
         self.node_ms = ends.node_ms
         #: the limits a rebuilt link's moves run under: those in force at the slicer's last
-        #: travel in the gap its entry consumes (the emitter keeps that gap's state lines around
-        #: its travel: PrusaSlicer's ``M204 S`` for travels, Orca's per-feature
-        #: ``SET_VELOCITY_LIMIT``), row ``gap_row[c]`` of ``row_table``, joined or not; with
+        #: travel in the gap before the curve it enters (``layout.link_travel_steps``; the
+        #: emitter re-issues them before the travel, wherever they were stated: PrusaSlicer's
+        #: ``M204 S`` for travels, Orca's per-feature ``SET_VELOCITY_LIMIT``, written after a
+        #: wall in the gap after it), row ``gap_row[c]`` of ``row_table``, joined or not; with
         #: the copied gaps priced move by move, the file's first (``MoveTimes.limits_row``)
         self.row_table = np.asarray(move.limits_row, float).reshape(1, -1)
         self.gap_row = np.zeros(n, np.int64)

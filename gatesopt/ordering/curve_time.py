@@ -25,7 +25,8 @@ from .. import _planner_kernel as pk
 from . import gap_plan as gp
 from ..limits import MachineLimits
 from ..planner import arc_tangents, move_geometry
-from ..program import MOTION_KINDS, Kind, Program
+from ..program import MOTION_KINDS, Program
+from .layout import link_travel_steps
 
 
 #: a curve's change of time printed backwards below this (ms) is not priced (``CurveEnds.of``)
@@ -235,19 +236,9 @@ def gap_rows(program: Program, lay, lim: MachineLimits) -> tuple[np.ndarray, np.
     """(table, row): the limits regimes of ``lim`` (``MachineLimits.regimes``) and per curve c
     of ``lay`` the regime in force at the slicer's last travel in the gap before c (its last
     motion step without one, c's first step in a gap without motion): what a link into c runs
-    under, its gap's state lines copied around it (``gaps.rebuilt_gap``)."""
+    under (``layout.link_travel_steps``: the emitter re-issues those limits before its travel)."""
     change_line, table = lim.regimes()
-    n = len(lay.curve_s0)
-    s0 = np.asarray(lay.curve_s0, np.int64)
-    a = np.concatenate(([0], np.asarray(lay.curve_s1, np.int64)[:-1])) if n else s0
-    step = s0.copy()
-    for kinds in ((Kind.TRAVEL,), MOTION_KINDS):
-        at = np.flatnonzero(np.isin(program.kind, np.asarray(kinds, program.kind.dtype)))
-        j = np.searchsorted(at, s0) - 1
-        ok = (j >= 0) & (step == s0)
-        found = np.where(ok, at[np.maximum(j, 0)], -1) if len(at) else np.full(n, -1)
-        ok &= found >= a
-        step = np.where(ok, found, step)
+    step = link_travel_steps(program, lay)
     regime = np.searchsorted(change_line, program.line[step], side="right").astype(np.int64)
     return np.ascontiguousarray(table, float), regime
 

@@ -42,7 +42,7 @@ import numpy as np
 from ..headers import ORDER_HEADER
 from ..program import Program
 from .gaps import rebuilt_gap, reversed_gap
-from .layout import LINE_LABEL, Layout, layout
+from .layout import LIMIT_STATE_HEADS, LINE_LABEL, Layout, layout, link_travel_steps
 from ..slicers import LABEL_CLOSE
 from .problem import OrderingProblem, OrderingSolution
 from .travel import TravelRule
@@ -161,7 +161,7 @@ class _Plan:
         self.changed = (rev | (seam != 0)).tolist()
         (self.group_first, self.layer, self.l0, self.l1, self.feature, self.req,
          self.curve_state, self.block, self.run, self.closes, self.close_set, self.s0,
-         self.feed0, self.has_f) = per_curve
+         self.feed0, self.has_f, self.travel_state) = per_curve
 
     @staticmethod
     def per_curve(p: Program, problem: OrderingProblem, lay: Layout) -> tuple:
@@ -180,11 +180,21 @@ class _Plan:
         block = [(b0, b1) if ok else None for ok, b0, b1 in
                  zip(whole, p.line_start[l0].tolist(), p.line_start[l1 + 1].tolist())]
         run, closes, close_set = _runs(p, lay)
+        # per curve, the motion limits in force at the slicer's travel into it: a rebuilt (or
+        # reversed) travel runs under them, as ``cost.TimePricer`` prices it. Left alone, it ran
+        # under the limits of the curve the output leaves: Orca states a wall's acceleration
+        # before the wall and its travel acceleration (SET_VELOCITY_LIMIT ACCEL=10000) after
+        # it, in the gap after the wall, which a link from the wall into another curve does not
+        # consume: real_orca230_arcs layer 168, links from a wall into gap infill planned at the
+        # wall's 5,000 mm/s^2, 23.7 ms over the price each
+        limit_req = {k: v for k, v in req.items() if k[0] in LIMIT_STATE_HEADS}
+        travel_state = states_at(limit_req, p.line[link_travel_steps(p, lay)])
         return (problem.group_curve_start[gidx].tolist(), problem.curve_layer.tolist(),
                 l0.tolist(), l1.tolist(), p.feature[lay.curve_s0].tolist(), req, curve_state,
                 block, run, closes, close_set, lay.curve_s0.tolist(),
                 p.feed_mm_s[lay.curve_s0].tolist(),
-                {})     # per curve asked: whether its first line sets F itself (``_curve``)
+                {},     # per curve asked: whether its first line sets F itself (``_curve``)
+                travel_state)
 
     def gap_lines(self, c: int) -> range:
         """The original lines between curve c - 1 and curve c."""
@@ -249,9 +259,12 @@ def _emit_curve(plan: _Plan, w: Writer, k: int, prev: int) -> int:
             lines = _closing(plan, w, prev, c, lines)
             entry = _entry_mm(p, lay, c, plan.rev[c], plan.seam[c])
             if plan.rgaps is not None and plan.rgaps.applies(plan.group_first, prev, c, w.xyz, entry):
+                # the gap before c + 1 backwards, under the limits of its own travel
+                w.reissue(plan.travel_state, c + 1)
                 reversed_gap(w, p, lay, plan.rule, lines, c)
             else:
-                rebuilt_gap(w, p, lay, plan.rule, lines, c, entry, plan.layer[c])
+                rebuilt_gap(w, p, lay, plan.rule, lines, c, entry, plan.layer[c],
+                            limits=(plan.travel_state, c))
     w.reissue(plan.curve_state, c)      # state the curve saw in the original
     fi = plan.feature[c]
     if fi >= 0 and w.feature != p.feature_names[fi]:

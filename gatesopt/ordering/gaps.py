@@ -208,7 +208,7 @@ def _sort_lines(w: Writer, p: Program, line_sets) -> _GapLines:
 
 
 def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets, c: int,
-                target, layer: int = -1) -> None:
+                target, layer: int = -1, limits=None) -> None:
     """One rebuilt travel into curve c, with the non-motion lines of the given original gaps.
 
     Each gap's lines split where the slicer retracted, travelled and unretracted: lines before
@@ -218,7 +218,9 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
     slicer's own for this gap (else the file's median), and the net E of the consumed gaps is
     unchanged, so E per layer (and across a layer change) stays what it was. Whether it
     retracts is ``rule``'s (``travel.TravelRule``), which ``cost.TimePricer`` prices: the
-    retraction length is the boundary gap's, else the file's median.
+    retraction length is the boundary gap's, else the file's median. ``limits``: (states, k) of
+    ``writer.states_at`` -- the motion limits the travel runs under, re-issued (``Writer.reissue``)
+    after the lines that come before it (``emitter``: those in force at the slicer's travel).
     """
     style = rule.style
     g = _sort_lines(w, p, line_sets)
@@ -259,6 +261,8 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
 
     for i in pre:
         copy(i)
+    if limits is not None:
+        w.reissue(*limits)
     (tx, ty, tz), (x0, y0, z0) = target.tolist(), w.xyz.tolist()
     dist = math.hypot(tx - x0, ty - y0)
     moving = dist > 1e-9 or abs(tz - z0) > 1e-9

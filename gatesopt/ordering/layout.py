@@ -115,6 +115,31 @@ def state_key_of(program: Program, i: int):
     return (head.decode(),)
 
 
+#: state commands that set the planner's motion limits (``limits.py`` reads them): a rebuilt
+#: travel runs under those in force at the slicer's travel it replaces (``link_travel_steps``)
+LIMIT_STATE_HEADS = ("M201", "M203", "M204", "M205", "SET_VELOCITY_LIMIT")
+
+
+def link_travel_steps(program: Program, lay: "Layout") -> np.ndarray:
+    """Per curve c of ``lay``, the step of the slicer's last travel in the gap before c (its last
+    motion step without one, c's first step in a gap without motion): the motion limits in force
+    there are those a link into c runs under -- priced so (``curve_time.gap_rows``) and written so
+    (``emitter``: the limit state lines in force at that step are re-issued before a rebuilt
+    travel, wherever the output stands when it leaves the curve before)."""
+    n = len(lay.curve_s0)
+    s0 = np.asarray(lay.curve_s0, np.int64)
+    a = np.concatenate(([0], np.asarray(lay.curve_s1, np.int64)[:-1])) if n else s0
+    step = s0.copy()
+    for kinds in ((Kind.TRAVEL,), MOTION_KINDS):
+        at = np.flatnonzero(np.isin(program.kind, np.asarray(kinds, program.kind.dtype)))
+        j = np.searchsorted(at, s0) - 1
+        ok = (j >= 0) & (step == s0)
+        found = np.where(ok, at[np.maximum(j, 0)], -1) if len(at) else np.full(n, -1)
+        ok &= found >= a
+        step = np.where(ok, found, step)
+    return step
+
+
 def firmware_retraction(program: Program) -> tuple[np.ndarray, np.ndarray]:
     """Lines of firmware retractions and unretractions: a bare ``G10`` / ``G11`` (Marlin, Klipper,
     RepRapFirmware; the slicer's "use firmware retraction"). With words ``G10`` is something else:
