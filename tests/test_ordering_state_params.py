@@ -109,3 +109,43 @@ def test_crealityprint_layer_17_reordered_under_the_sliced_limits():
     assert res.ok
     for layer in (17, 18):
         assert _limits_by_move(res.output, layer) == _limits_by_move(prog, layer)
+
+
+def _features_gcode(order) -> str:
+    """Layer 1's three features (wall at corner velocity 12, bridge, wall at 7) printed in
+    ``order``, each after its own SET_VELOCITY_LIMIT line as it stands (relative E: a feature's
+    moves extrude the same wherever they are printed); nothing re-issued."""
+    out = ["; FLAVOR: Klipper", "G21", "G90", "M83", "G92 E0", ";LAYER_CHANGE", ";Z:0.2",
+           "G1 X10 Y10 Z0.2 F12000", WALL_12, BRIDGE, "G1 F3000", "G1 X25 Y10 E0.8",
+           ";LAYER_CHANGE", ";Z:0.4", "G1 Z0.4 F12000"]
+    feats = ((WALL_12, 30), (BRIDGE, 60), (WALL_7, 90))
+    for k in order:
+        setting, y0 = feats[k]
+        out += [f"G1 X10 Y{y0} F12000", setting, "G1 F4500"]
+        out += [f"G1 X{10 + 15 * ((i + 1) % 2)} Y{y0 + 0.5 * i} E0.8" for i in range(4)]
+    out += ["G1 X0 Y150 F12000", "M84"]
+    return "\n".join(out) + "\n"
+
+
+def test_the_verifier_finds_a_move_printed_under_other_limits():
+    # the emitter's fault above, made by hand: the bridge moved after the wall at corner
+    # velocity 7 with nothing re-issued prints at 7, not 12: ``verify.ordering.check_limits``
+    # says so (the line, the limit, both values); the features in their own order, or re-ordered
+    # by the emitter, pass
+    from gatesopt.verify.ordering import check, check_limits
+    prog = gatesopt.parse(_features_gcode((0, 1, 2)))
+    naive = gatesopt.parse(_features_gcode((0, 2, 1)))
+    found = check_limits(prog, naive)
+    assert len(found) == 1 and found[0].check == "limits"
+    assert "square_corner_velocity = 7, 12 in the original" in found[0].message
+    assert any(f.check == "limits" for f in check(prog, naive))
+    assert check_limits(prog, prog) == []
+    prob = build(prog, OrderingOptions(mode="free"))
+    layer1 = np.flatnonzero(prob.curve_layer == 1)
+    order = np.arange(prob.n_curves)
+    order[layer1] = layer1[[0, 2, 1]]
+    n = prob.n_curves
+    sol = OrderingSolution(order, np.zeros(n, bool), np.zeros(n, np.int64), (), 0.0, 0.0, 0.0,
+                           "test")
+    out = gatesopt.parse(emit(prog, prob, sol))
+    assert check_limits(prog, out) == [] and check(prog, out) == []

@@ -6,7 +6,8 @@ order-dependent: a reversed piece next to a forward one would not merge as in th
 A move is its two end points (ordered), arc centre and turning sense, and its E. Then the shared checks
 (``verify.extrusion``, ``verify.commands``): E per layer equal, heater/tool commands (and fans other
 than the part-cooling fan) in the same order; ``fan``: every extruded move sees the part-cooling fan
-duty it saw in the original (emit re-issues M106 / M107); and
+duty it saw in the original (emit re-issues M106 / M107); ``limits``: every extruded move runs
+under the machine limits it ran under in the original (emit re-issues the limit lines); and
 ``barriers``: between two consecutive barrier lines (heaters, G92, tool changes, see
 ``gatesopt.ordering.layout``) each layer extrudes the same filament over the same path length in
 both files — so no extrusion moved across a barrier. ``objects``: object labels
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..limits import KEYS, machine_limits
 from ..ordering.layout import LINE_BARRIER, LINE_FATAL, Layout, layout
 from ..program import Kind, Program
 from ..slicers import LABEL_OPEN
@@ -307,6 +309,61 @@ def check_fan(original: Program, output: Program, *, max_findings: int = 3,
     return out
 
 
+#: the machine limits that bear on an extruded move (``limits.KEYS``): all but the travel's and
+#: the retraction's own, which a re-ordering may change with the travels it rebuilds
+_EXTRUDING_LIMITS = tuple(i for i, k in enumerate(KEYS)
+                          if k not in ("accel_travel", "accel_retract", "min_travel_feed"))
+
+
+def limits_at(program: Program, rows: np.ndarray) -> np.ndarray:
+    """(len(rows), n) int64: the machine limits in force at steps ``rows`` that bear on an
+    extruded move (``_EXTRUDING_LIMITS``: the file's M201-M205 / SET_VELOCITY_LIMIT lines over
+    its defaults, ``limits.machine_limits``), in thousandths (inf as -1), as compared."""
+    table = machine_limits(program).per_step(program)[np.asarray(rows, np.int64)]
+    table = table[:, _EXTRUDING_LIMITS]
+    finite = np.isfinite(table)
+    return np.where(finite, np.round(np.where(finite, table, 0.0) * 1000.0), -1.0).astype(np.int64)
+
+
+def check_limits(original: Program, output: Program, *, max_findings: int = 3,
+                 keys=None) -> list[Finding]:
+    """Every extruded move runs under the machine limits it ran under in the original
+    (acceleration, jerk / junction deviation / square corner velocity, velocity caps): the emitter
+    re-issues the slicer's limit lines where a re-ordered curve would meet another feature's
+    (``writer.Writer.reissue``; a bridge moved after a wall printed at the wall's corner velocity
+    before it did so per parameter: real_crealityprint514 free, 2.95 s slower). Compared as
+    ``check_fan`` compares the fan: layers whose moves differ are the geometry check's.
+    ``keys``: as for ``check_geometry``."""
+    (ra, qa, _), (rb, qb, _) = keys or (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
+    lim_a, lim_b = limits_at(original, ra), limits_at(output, rb)
+    la, lb = original.layer[ra], output.layer[rb]
+    names = [KEYS[i] for i in _EXTRUDING_LIMITS]
+    out = []
+    for L in _layers_differing(la, np.column_stack([qa, lim_a]), lb,
+                               np.column_stack([qb, lim_b])).tolist():
+        ia, ib = np.flatnonzero(la == L), np.flatnonzero(lb == L)
+        if not np.array_equal(_sorted_rows(qa[ia]), _sorted_rows(qb[ib])):     # shape too
+            continue                    # its moves differ: the geometry check's finding
+        want: dict = {}
+        for i in ia.tolist():
+            want.setdefault(qa[i].tobytes(), []).append(lim_a[i])
+        for j in ib.tolist():
+            seen = want[qb[j].tobytes()]
+            hit = next((t for t, v in enumerate(seen) if np.array_equal(v, lim_b[j])), None)
+            if hit is not None:
+                seen.pop(hit)
+                continue
+            was = seen[0] if seen else lim_b[j]
+            k = int(np.flatnonzero(was != lim_b[j])[0]) if seen else 0
+            out.append(Finding("limits", int(output.line[rb[j]]) + 1,
+                               f"layer {L}: extruded move with {names[k]} = {lim_b[j][k] / 1000:g}, "
+                               f"{was[k] / 1000:g} in the original"))
+            break
+        if len(out) >= max_findings:
+            break
+    return out
+
+
 #: the checks ``check`` shares with ``gatesopt.verify.verify``, which runs them on every output
 SHARED_CHECKS = ("extrusion", "commands")
 
@@ -317,6 +374,7 @@ def check_moves(original: Program, output: Program) -> list[Finding]:
     keys = (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
     lays = (layout(original), layout(output))
     return (check_geometry(original, output, keys=keys) + check_fan(original, output, keys=keys)
+            + check_limits(original, output, keys=keys)
             + check_barriers(original, output, lays=lays) + check_objects(original, output, lays=lays))
 
 
@@ -329,5 +387,5 @@ def check(original: Program, output: Program, original_layout: Layout | None = N
             # the fan move by move (check_fan) implies the per-layer filament by fan duty that
             # check_commands would check too: one finding per fault, the stricter one
             + check_commands(original, output, reordered=True, fan_duty=False)
-            + check_fan(original, output, keys=keys) + check_barriers(original, output, lays=lays)
-            + check_objects(original, output, lays=lays))
+            + check_fan(original, output, keys=keys) + check_limits(original, output, keys=keys)
+            + check_barriers(original, output, lays=lays) + check_objects(original, output, lays=lays))
