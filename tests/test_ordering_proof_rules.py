@@ -191,3 +191,11 @@ def test_a_proof_holds_only_for_the_start_and_the_end_it_was_made_for():
     assert not proof_holds(prob, plans, [gs, picked_next(0)], 0, Anchor.of((99.0, 99.0)))
     back = dataclasses.replace(gs, formulation=gs.formulation + "+back")
     assert proof_holds(prob, plans, [back, picked_next(other)], 0, Anchor.of((99.0, 99.0)))
+    # a look-ahead pair holds where both halves are taken
+    from gatesopt.ordering.chain import LOOKAHEAD_FROM, LOOKAHEAD_TO
+    to = dataclasses.replace(gs, formulation=gs.formulation + LOOKAHEAD_TO)
+    frm = dataclasses.replace(picked_next(other), formulation="dp" + LOOKAHEAD_FROM)
+    assert proof_holds(prob, plans, [to, frm], 0, start)
+    assert proof_holds(prob, plans, [to, frm], 1, start)
+    assert not proof_holds(prob, plans, [to, picked_next(other)], 0, start)
+    assert not proof_holds(prob, plans, [gs, frm], 1, start)

@@ -27,9 +27,12 @@ LOOKAHEAD_TIME_FACTOR = 20.0
 #: the formulation suffix of a path solved backwards (``solve_backwards``: its start free, the
 #: travel into it the group before's)
 BACKWARDS = "+back"
-#: the formulation suffix of a look-ahead path (``look_ahead``: proven for the next group's entry
-#: it was solved to)
+#: the formulation suffixes of a look-ahead pair (``look_ahead``): group g's path solved to end at
+#: an entry of group g + 1 (``LOOKAHEAD_TO``) and g + 1's path solved from that entry
+#: (``LOOKAHEAD_FROM``): a split proof, each of its part, taken together by the chain DP
 LOOKAHEAD = "+ahead"
+LOOKAHEAD_TO = LOOKAHEAD + ":to"
+LOOKAHEAD_FROM = LOOKAHEAD + ":from"
 
 
 def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwargs) -> None:
@@ -79,10 +82,10 @@ def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwar
                 gg.check_order(gs.order)
             if gs.objective + ns.objective < pair - OPTIMAL_ABS_TOL:
                 opts.append(GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status,
-                                               gs.solve_s, gs.formulation + LOOKAHEAD))
+                                               gs.solve_s, gs.formulation + LOOKAHEAD_TO))
                 nxt_opts.append(GroupSolution.make(ns.order, ns.objective, ns.bound,
                                                    ns.status, ns.solve_s,
-                                                   ns.formulation + LOOKAHEAD))
+                                                   ns.formulation + LOOKAHEAD_FROM))
 
 
 def end_of(problem: OrderingProblem, g: int):

@@ -19,7 +19,8 @@ import numpy as np
 
 from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
-from .chain import BACKWARDS, LOOKAHEAD, end_of, look_ahead, path_options, pick_paths, rescored
+from .chain import (BACKWARDS, LOOKAHEAD_FROM, LOOKAHEAD_TO, end_of, look_ahead, path_options,
+                    pick_paths, rescored)
 from .helper import Helper
 from .matrix_helper import MatrixHelper, with_arc
 from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
@@ -216,16 +217,22 @@ def proof_holds(problem: OrderingProblem, plans, picked, g: int, entry: Anchor) 
     solver's path of the one before) -- the chain DP may enter it from elsewhere (``entry``:
     another option taken for the group before); one solved to the next group's path as the
     helper process found it (its end not the file's nor a fixed group's) was proven for that
-    entry -- the chain may take another path there. Not checked: a path solved backwards (its
-    start free, the travel into it the group before's) and a look-ahead path (proven for the
-    entry it was solved to: ``chain.look_ahead`` adds it with that entry's path)."""
+    entry -- the chain may take another path there. Split proofs hold where their other half is
+    taken: a path solved backwards (its start free, the travel into it the group before's: the
+    group before was solved to it) and a look-ahead pair (``chain.look_ahead``: g's path to an
+    entry of g + 1, g + 1's from it), taken together (of two tries the chain could pair halves
+    of different ones: not told apart here)."""
     grp, _, start, end = plans[g]
     form = picked[g].formulation
     if BACKWARDS in form:
         return True
+    if LOOKAHEAD_FROM in form:
+        return g > 0 and LOOKAHEAD_TO in picked[g - 1].formulation
     if not same_anchor(entry, start):
         return False
-    if LOOKAHEAD in form or end is None or end_of(problem, g) is not None:
+    if LOOKAHEAD_TO in form:
+        return g + 1 < len(plans) and LOOKAHEAD_FROM in picked[g + 1].formulation
+    if end is None or end_of(problem, g) is not None:
         return True
     if g + 1 >= len(plans) or not len(picked[g + 1].order):
         return False
