@@ -277,7 +277,9 @@ def report(args) -> None:
            "(auto), print time against the slicer's, travel change. *greedy layers*: layers the "
            "time guard printed in the greedy order (auto's run: the exact solve left them "
            "unproven, or a proven order printed slower than greedy's under the planner model; "
-           "their groups count as not proven). *run s*: parse to verified output.", ""]
+           "their groups count as proven only where greedy proved them for the start they print "
+           "from, `guard.same_entry_groups`; a solver's group printed from another start than it "
+           "was proven from counts as not proven either). *run s*: parse to verified output.", ""]
     crit = []
     for folder in sorted(folders):
         files = sorted(folders[folder])
