@@ -88,6 +88,60 @@ def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwar
                                                    ns.formulation + LOOKAHEAD_FROM))
 
 
+#: a proof made for another start is made again for the start printed where the subset DP takes
+#: at most this long on the group (``reprove``; a DP of <= 12 curves takes about a millisecond)
+REPROVE_MAX_S = 0.01
+
+
+def reprove(problem: OrderingProblem, g: int, start: Anchor, end, gs: GroupSolution) -> GroupSolution:
+    """Group g's answer ``gs`` (proven for another start or end than those it is printed with:
+    another path taken before it, or after it where it was solved to the next group's entry)
+    from ``start`` to ``end`` (None: free): priced there, and proven again where the subset DP
+    takes the group in at most ``REPROVE_MAX_S`` -- optimal if its path costs the DP's optimum,
+    else feasible with that optimum as its bound; elsewhere at best feasible, unpriced again."""
+    grp = problem.group(g, start, end)
+    if len(gs.order) == grp.n_curves and dp.fits(grp) and dp.time_s(grp) <= REPROVE_MAX_S:
+        best = dp.solve(grp).objective
+        cost = grp.path_cost(gs.order)
+        status = Status.OPTIMAL if cost - best <= OPTIMAL_ABS_TOL else Status.FEASIBLE
+        return GroupSolution.make(gs.order, cost, min(best, cost), status, gs.solve_s,
+                                  gs.formulation)
+    status = Status.FEASIBLE if gs.status == Status.OPTIMAL else gs.status
+    return GroupSolution.make(gs.order, gs.objective, gs.bound, status, gs.solve_s, gs.formulation)
+
+
+def entry_positions(problem: OrderingProblem, solution) -> np.ndarray:
+    """Per group, the position in ``solution``'s print order (an ``OrderingSolution``, program
+    curve numbering) of the group's first curve printed; the number of curves for an empty
+    group."""
+    pp = problem.program_problem
+    n, G = pp.n_curves, problem.n_groups
+    owner = np.repeat(np.arange(G), np.diff(np.asarray(problem.group_curve_start, np.int64)))
+    if problem.curve_source is not None:
+        own = np.empty(n, np.int64)
+        own[np.asarray(problem.curve_source, np.int64)] = owner
+        owner = own
+    first = np.full(G, n, np.int64)
+    if n:
+        np.minimum.at(first, owner[np.asarray(solution.curve_order, np.int64)], np.arange(n))
+    return first
+
+
+def anchor_before(problem: OrderingProblem, solution, pos: int) -> Anchor:
+    """Where ``solution`` stands before printing its curve at position ``pos``: the exit of the
+    curve before it, as printed (the origin before the first)."""
+    if pos <= 0:
+        return Anchor.of(problem.origin_xy)
+    c = int(np.asarray(solution.curve_order, np.int64)[pos - 1])
+    _, b = problem.program_problem.entry_exit_xy(np.array([c]), solution.curve_reversed,
+                                                 solution.curve_seam)
+    changed = bool(solution.curve_reversed[c]) or int(solution.curve_seam[c]) != 0
+    pc = c
+    if problem.curve_source is not None:
+        pc = int(np.flatnonzero(np.asarray(problem.curve_source) == c)[0])
+    return Anchor(np.asarray(b[0], float).copy(), pc, changed)
+
+
 def end_of(problem: OrderingProblem, g: int):
     """Where group g's path must travel on to: the next group's entry (an Anchor: its first
     curve as the slicer printed it) if that group is fixed; for the file's last group, the

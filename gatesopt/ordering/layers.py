@@ -20,7 +20,7 @@ import numpy as np
 from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
 from .chain import (BACKWARDS, LOOKAHEAD_FROM, LOOKAHEAD_TO, end_of, look_ahead, path_options,
-                    pick_paths, rescored)
+                    pick_paths, reprove, rescored)
 from .helper import Helper
 from .matrix_helper import MatrixHelper, with_arc
 from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
@@ -181,8 +181,9 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
         gs = picked[g]
         if gs.status == Status.OPTIMAL and reorderable[g] and not proof_holds(
                 problem, plans, picked, g, entry):
-            gs = GroupSolution.make(gs.order, gs.objective, gs.bound, Status.FEASIBLE,
-                                    gs.solve_s, gs.formulation)
+            # proven for another start or end than the chain picked gives it: proven again
+            # there where the subset DP is quick, else at best feasible
+            gs = reprove(problem, g, entry, printed_end(problem, plans, picked, g), gs)
         if grp.n_curves:
             entry = problem.exit_anchor(g, grp, gs.order)
         curves = problem.group_curves(g)
@@ -209,6 +210,18 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                             cost_after=base.order_cost(order_out, reversed_, seam),
                             cost_unit=problem.cost_unit,
                             work_net_fired=one_chain and runner.net_fired)
+
+
+def printed_end(problem: OrderingProblem, plans, picked, g: int):
+    """Where group g's path travels on to in the chain picked, as far as its cost counts it: the
+    end it was solved with if that came from the problem (a fixed group's entry, the file's end),
+    the entry of the next group's picked path if it was solved to the helper's path, else none."""
+    end = plans[g][3]
+    if end is None or end_of(problem, g) is not None:
+        return end
+    if g + 1 < len(plans) and len(picked[g + 1].order):
+        return problem.cand_anchor(g + 1, plans[g + 1][0], int(picked[g + 1].order[0]))
+    return None
 
 
 def proof_holds(problem: OrderingProblem, plans, picked, g: int, entry: Anchor) -> bool:

@@ -36,7 +36,7 @@ import dataclasses
 
 import numpy as np
 
-from ..ordering.chain import BACKWARDS
+from ..ordering.chain import BACKWARDS, anchor_before, end_of, entry_positions, reprove
 from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
 from ..ordering.problem import GroupSolution, OrderingProblem, OrderingSolution
@@ -358,17 +358,25 @@ def _repair_stage(program: Program, problem: OrderingProblem, base: _Measured,
     return second if taken(second, t2) else base
 
 
-def greedy_taken(gs: GroupSolution, entered_alike: bool = False) -> GroupSolution:
-    """A greedy answer as printed by the guard. ``entered_alike``: the group is entered as in
-    greedy's chain (``same_entry_groups``): the group starts and ends as greedy solved it, so a
-    proof greedy made for it (the subset DP, a closing bound) stands and the answer is greedy's
-    as it was. Elsewhere at best feasible (its proof was for the start greedy's own chain gave
-    the group; the layer before now ends elsewhere)."""
-    if entered_alike:
-        return gs
-    status = Status.FEASIBLE if gs.status == Status.OPTIMAL else gs.status
+def greedy_taken(gs: GroupSolution) -> GroupSolution:
+    """A greedy answer printed by the guard in a group entered otherwise than greedy's chain
+    entered it, its status as ``printed_answer`` made it: formulation ``GREEDY_TAKEN``."""
     form = gs.formulation if gs.formulation.startswith("kept") else GREEDY_TAKEN
-    return GroupSolution.make(gs.order, gs.objective, gs.bound, status, gs.solve_s, form)
+    return GroupSolution.make(gs.order, gs.objective, gs.bound, gs.status, gs.solve_s, form)
+
+
+def printed_answer(problem: OrderingProblem, final: OrderingSolution, g: int, gs: GroupSolution,
+                   entered_alike: bool, first: np.ndarray) -> GroupSolution:
+    """Group g's answer ``gs`` as ``final`` prints it: as it was where the group is entered as the
+    chain that proved it entered it (``same_entry_groups``), or where it is not proven, or where
+    its proof is split with its neighbour (``+back``) or made on the printed file's entry
+    (``+joined``); else proven again from where ``final`` enters it (``chain.reprove``: the
+    subset DP where it is quick, else at best feasible). ``first``: ``chain.entry_positions``
+    of ``final``."""
+    if (entered_alike or gs.status != Status.OPTIMAL
+            or gs.formulation.endswith((BACKWARDS, REPAIRED))):
+        return gs
+    return reprove(problem, g, anchor_before(problem, final, int(first[g])), end_of(problem, g), gs)
 
 
 def same_entry_groups(problem: OrderingProblem, a: OrderingSolution,
@@ -380,28 +388,16 @@ def same_entry_groups(problem: OrderingProblem, a: OrderingSolution,
     had: the next fixed group's entry, the file's end, or free -- the same in every solution for
     a chain solved forward), the proof stands. Inside a layer printed whole from one solution
     only a layer's first group can be entered otherwise (``mix_layers``)."""
-    pp = problem.program_problem
-    n = pp.n_curves
-    G = problem.n_groups
-    out = np.ones(G, bool)
-    if n == 0:
-        return out
-    owner = np.repeat(np.arange(G), np.diff(np.asarray(problem.group_curve_start, np.int64)))
-    if problem.curve_source is not None:
-        own = np.empty(n, np.int64)
-        own[np.asarray(problem.curve_source, np.int64)] = owner
-        owner = own
+    n = problem.program_problem.n_curves
 
     def entry(s):
         order = np.asarray(s.curve_order, np.int64)
-        first = np.full(G, n, np.int64)
-        np.minimum.at(first, owner[order], np.arange(n))
-        has = first < n
-        p = np.where(has, first - 1, -1)
-        c = np.where(p >= 0, order[np.maximum(p, 0)], -1)
+        p = entry_positions(problem, s) - 1
+        p = np.where(p < n - 1, p, -1)          # (an empty group: no entry)
+        c = np.where(p >= 0, order[np.maximum(p, 0)], -1) if n else np.full(len(p), -1)
         cc = np.maximum(c, 0)
-        rev = np.where(c >= 0, np.asarray(s.curve_reversed, bool)[cc], False)
-        seam = np.where(c >= 0, np.asarray(s.curve_seam, np.int64)[cc], 0)
+        rev = np.where(c >= 0, np.asarray(s.curve_reversed, bool)[cc], False) if n else c >= 0
+        seam = np.where(c >= 0, np.asarray(s.curve_seam, np.int64)[cc], 0) if n else c * 0
         return c, rev, seam
     (ca, ra, sa), (cb, rb, sb) = entry(a), entry(b)
     return (ca == cb) & (ra == rb) & (sa == sb)
@@ -499,19 +495,19 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     # ``printed``'s entry). A layer put back keeps the solver's answers as they were (what it
     # proved, not printed: "proven groups reverted")
     entered = same_entry_groups(problem, final, solution) | (source[glay] != FROM_SOLVER)
-    groups = tuple(gs if a or gs.status != Status.OPTIMAL
-                   or gs.formulation.endswith((BACKWARDS, REPAIRED))
-                   else GroupSolution.make(gs.order, gs.objective, gs.bound, Status.FEASIBLE,
-                                           gs.solve_s, gs.formulation)
-                   for gs, a in zip(solution.groups, entered))
+    first = entry_positions(problem, final)
+    groups = tuple(printed_answer(problem, final, g, gs, a, first)
+                   for g, (gs, a) in enumerate(zip(solution.groups, entered)))
     if greedy is not None:
         source[~same & ~differing_layers(problem, final, greedy, L)[:L]] = FROM_GREEDY
         at = source[glay] == FROM_GREEDY
         # greedy's proofs stand in the groups entered as in greedy's chain
         alike = same_entry_groups(problem, final, greedy)
         decided = problem.group_reorderable
-        groups = tuple((greedy_taken(gg, a) if d else gg) if t else gs
-                       for gs, gg, t, d, a in zip(groups, greedy.groups, at, decided, alike))
+        groups = tuple(((gg if a else greedy_taken(printed_answer(problem, final, g, gg, a, first)))
+                        if d else gg) if t else gs
+                       for g, (gs, gg, t, d, a) in enumerate(zip(groups, greedy.groups, at,
+                                                                 decided, alike)))
     sol = dataclasses.replace(with_model_cost(problem, final), groups=groups,
                               formulation=solution.formulation, solve_s=solution.solve_s)
     kept = np.flatnonzero(changed_layers(problem, solution)[:L] & (source == FROM_SLICER))

@@ -284,11 +284,12 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
         # no time left to pass the groups again (or a Ctrl-C): greedy's answer is the solve's
         guarded = emit_guarded(program, problem, greedy.solution, time_guard)
         decided = problem.group_reorderable
-        # greedy's proofs stand in the groups that print greedy's order entered as its chain
-        # entered them (``guard.same_entry_groups``); elsewhere its answers are at best feasible
+        # greedy's answers as printed (``emit_guarded``: its proofs stand in the groups entered
+        # as its chain entered them, elsewhere made again from where the file enters them,
+        # ``guard.printed_answer``), labelled as taken by the guard where entered otherwise
         same = ((guarded.source == FROM_SOLVER)[np.asarray(problem.group_layer, np.int64)]
                 & same_entry_groups(problem, guarded.solution, greedy.solution))
-        groups = tuple(greedy_taken(gs, s) if d else gs
+        groups = tuple(greedy_taken(gs) if d and not s else gs
                        for gs, d, s in zip(guarded.solution.groups, decided, same))
         sol = dataclasses.replace(guarded.solution, groups=groups, formulation=formulation,
                                   work_net_fired=greedy.solution.work_net_fired)
