@@ -33,6 +33,8 @@ BACKWARDS = "+back"
 LOOKAHEAD = "+ahead"
 LOOKAHEAD_TO = LOOKAHEAD + ":to"
 LOOKAHEAD_FROM = LOOKAHEAD + ":from"
+#: the formulation suffix of the slicer's order offered beside the solver's path (``path_options``)
+KEPT = "+kept"
 
 
 def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwargs) -> None:
@@ -93,7 +95,8 @@ def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwar
 REPROVE_MAX_S = 0.01
 
 
-def reprove(problem: OrderingProblem, g: int, start: Anchor, end, gs: GroupSolution) -> GroupSolution:
+def reprove(problem: OrderingProblem, g: int, start: Anchor, end,
+            gs: GroupSolution) -> GroupSolution:
     """Group g's answer ``gs`` (proven for another start or end than those it is printed with:
     another path taken before it, or after it where it was solved to the next group's entry)
     from ``start`` to ``end`` (None: free): priced there, and proven again where the subset DP
@@ -173,7 +176,7 @@ def path_options(grp, gs: GroupSolution, backwards: bool = False) -> list:
         if status == Status.OPTIMAL and ident_obj - gs.bound > OPTIMAL_ABS_TOL:
             status = Status.FEASIBLE
         opts.append(GroupSolution.make(ident, ident_obj, gs.bound, status, gs.solve_s,
-                                       gs.formulation + "+kept"))
+                                       gs.formulation + KEPT))
         if ident_obj < gs.objective - 1e-9:
             opts = opts[::-1]
     return opts

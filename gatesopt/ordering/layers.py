@@ -19,7 +19,7 @@ import numpy as np
 
 from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
-from .chain import (BACKWARDS, LOOKAHEAD_FROM, LOOKAHEAD_TO, end_of, look_ahead, path_options,
+from .chain import (BACKWARDS, KEPT, LOOKAHEAD_FROM, LOOKAHEAD_TO, end_of, look_ahead, path_options,
                     pick_paths, reprove, rescored)
 from .helper import Helper
 from .matrix_helper import MatrixHelper, with_arc
@@ -179,8 +179,10 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     entry = Anchor.of(problem.origin_xy)       # where the chain picked enters each group
     for g, (grp, opts, start, end) in enumerate(plans):
         gs = picked[g]
-        if gs.status == Status.OPTIMAL and reorderable[g] and not proof_holds(
-                problem, plans, picked, g, entry):
+        if reorderable[g] and ((gs.status == Status.OPTIMAL and not proof_holds(
+                problem, plans, picked, g, entry)) or gs.formulation.endswith(KEPT)):
+            # (the slicer's order, taken by the chain DP for the chain's sake: proven, if it is,
+            # for the entry of the group after it the chain takes)
             # proven for another start or end than the chain picked gives it: proven again
             # there where the subset DP is quick, else at best feasible
             gs = reprove(problem, g, entry, printed_end(problem, plans, picked, g), gs)
@@ -215,9 +217,14 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
 def printed_end(problem: OrderingProblem, plans, picked, g: int):
     """Where group g's path travels on to in the chain picked, as far as its cost counts it: the
     end it was solved with if that came from the problem (a fixed group's entry, the file's end),
-    the entry of the next group's picked path if it was solved to the helper's path, else none."""
+    the entry of the next group's picked path if it was solved to the helper's path or to an
+    entry of the next group (a look-ahead path: proven again for the entry the chain takes),
+    else none."""
     end = plans[g][3]
-    if end is None or end_of(problem, g) is not None:
+    form = picked[g].formulation
+    to_next = LOOKAHEAD_TO in form or form.endswith(KEPT) or (
+        end is not None and end_of(problem, g) is None)
+    if not to_next:
         return end
     if g + 1 < len(plans) and len(picked[g + 1].order):
         return problem.cand_anchor(g + 1, plans[g + 1][0], int(picked[g + 1].order[0]))
