@@ -277,36 +277,53 @@ def check_geometry(original: Program, output: Program, *, tol_mm: float = 1e-3,
     return out
 
 
-def check_fan(original: Program, output: Program, *, max_findings: int = 3,
-               keys=None) -> list[Finding]:
-    """Every extruded move sees the part-cooling fan duty it saw in the original (the parser's
-    modal ``fan``; emit re-issues M106 / M107 where a re-ordered curve would see another value).
-    Layers whose moves differ are the geometry check's; the others are compared move by move.
-    ``keys``: as for ``check_geometry``."""
-    (ra, qa, _), (rb, qb, _) = keys or (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
-    duty_a, duty_b = fan_duty_s(original, ra), fan_duty_s(output, rb)
+def _moves_keep(original: Program, output: Program, val_a: np.ndarray, val_b: np.ndarray, keys,
+                max_findings: int, finding) -> list[Finding]:
+    """Every extruded move of ``output`` carries the value row (``val_b``, per extruded move) its
+    move carried in ``original`` (``val_a``): per layer whose moves are the same (the others
+    are the geometry check's), matched move by move. ``finding(L, j, got, want)`` makes the
+    finding for output move j (``want``: an unmatched original value of that move, or None)."""
+    (ra, qa, _), (rb, qb, _) = keys
     la, lb = original.layer[ra], output.layer[rb]
     out = []
-    for L in _layers_differing(la, np.column_stack([qa, duty_a]), lb, np.column_stack([qb, duty_b])).tolist():
+    for L in _layers_differing(la, np.column_stack([qa, val_a]), lb,
+                               np.column_stack([qb, val_b])).tolist():
         ia, ib = np.flatnonzero(la == L), np.flatnonzero(lb == L)
         if not np.array_equal(_sorted_rows(qa[ia]), _sorted_rows(qb[ib])):     # shape too
             continue                    # its moves differ: the geometry check's finding
         want: dict = {}
         for i in ia.tolist():
-            want.setdefault(qa[i].tobytes(), []).append(int(duty_a[i]))
+            want.setdefault(qa[i].tobytes(), []).append(val_a[i].tobytes())
         for j in ib.tolist():
             seen = want[qb[j].tobytes()]
-            d = int(duty_b[j])
-            if d in seen:
-                seen.remove(d)
+            got = val_b[j].tobytes()
+            if got in seen:
+                seen.remove(got)
                 continue
-            out.append(Finding("fan", int(output.line[rb[j]]) + 1,
-                               f"layer {L}: extruded move with the part fan at S{d}, "
-                               f"at S{seen[0] if seen else '?'} in the original"))
+            was = np.frombuffer(seen[0], np.int64) if seen else None
+            out.append(finding(L, j, val_b[j], was))
             break
         if len(out) >= max_findings:
             break
     return out
+
+
+def check_fan(original: Program, output: Program, *, max_findings: int = 3,
+              keys=None) -> list[Finding]:
+    """Every extruded move sees the part-cooling fan duty it saw in the original (the parser's
+    modal ``fan``; emit re-issues M106 / M107 where a re-ordered curve would see another value).
+    Layers whose moves differ are the geometry check's; the others are compared move by move.
+    ``keys``: as for ``check_geometry``."""
+    keys = keys or (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
+    (ra, _, _), (rb, _, _) = keys
+    duty_a = fan_duty_s(original, ra).reshape(-1, 1)
+    duty_b = fan_duty_s(output, rb).reshape(-1, 1)
+
+    def finding(L, j, got, was):
+        return Finding("fan", int(output.line[rb[j]]) + 1,
+                       f"layer {L}: extruded move with the part fan at S{int(got[0])}, "
+                       f"at S{int(was[0]) if was is not None else '?'} in the original")
+    return _moves_keep(original, output, duty_a, duty_b, keys, max_findings, finding)
 
 
 #: the machine limits that bear on an extruded move (``limits.KEYS``): all but the travel's and
@@ -332,36 +349,19 @@ def check_limits(original: Program, output: Program, *, max_findings: int = 3,
     re-issues the slicer's limit lines where a re-ordered curve would meet another feature's
     (``writer.Writer.reissue``; a bridge moved after a wall printed at the wall's corner velocity
     before it did so per parameter: real_crealityprint514 free, 2.95 s slower). Compared as
-    ``check_fan`` compares the fan: layers whose moves differ are the geometry check's.
-    ``keys``: as for ``check_geometry``."""
-    (ra, qa, _), (rb, qb, _) = keys or (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
-    lim_a, lim_b = limits_at(original, ra), limits_at(output, rb)
-    la, lb = original.layer[ra], output.layer[rb]
+    ``check_fan`` compares the fan. ``keys``: as for ``check_geometry``."""
+    keys = keys or (_move_keys(original, 1e-4), _move_keys(output, 1e-4))
+    (ra, _, _), (rb, _, _) = keys
     names = [KEYS[i] for i in _EXTRUDING_LIMITS]
-    out = []
-    for L in _layers_differing(la, np.column_stack([qa, lim_a]), lb,
-                               np.column_stack([qb, lim_b])).tolist():
-        ia, ib = np.flatnonzero(la == L), np.flatnonzero(lb == L)
-        if not np.array_equal(_sorted_rows(qa[ia]), _sorted_rows(qb[ib])):     # shape too
-            continue                    # its moves differ: the geometry check's finding
-        want: dict = {}
-        for i in ia.tolist():
-            want.setdefault(qa[i].tobytes(), []).append(lim_a[i])
-        for j in ib.tolist():
-            seen = want[qb[j].tobytes()]
-            hit = next((t for t, v in enumerate(seen) if np.array_equal(v, lim_b[j])), None)
-            if hit is not None:
-                seen.pop(hit)
-                continue
-            was = seen[0] if seen else lim_b[j]
-            k = int(np.flatnonzero(was != lim_b[j])[0]) if seen else 0
-            out.append(Finding("limits", int(output.line[rb[j]]) + 1,
-                               f"layer {L}: extruded move with {names[k]} = {lim_b[j][k] / 1000:g}, "
-                               f"{was[k] / 1000:g} in the original"))
-            break
-        if len(out) >= max_findings:
-            break
-    return out
+
+    def finding(L, j, got, was):
+        k = int(np.flatnonzero(was != got)[0]) if was is not None else 0
+        orig = f"{was[k] / 1000:g}" if was is not None else "?"
+        return Finding("limits", int(output.line[rb[j]]) + 1,
+                       f"layer {L}: extruded move with {names[k]} = {got[k] / 1000:g}, "
+                       f"{orig} in the original")
+    return _moves_keep(original, output, limits_at(original, ra), limits_at(output, rb), keys,
+                       max_findings, finding)
 
 
 #: the checks ``check`` shares with ``gatesopt.verify.verify``, which runs them on every output
