@@ -176,7 +176,10 @@ def _from_vector(v, firmware, junction, source, changes, profile) -> MachineLimi
 # ------------------------------------------------------------------------------------------------
 # reading the file
 _CONFIG_RE = re.compile(rb"^; *(machine_[a-z_]+|gcode_flavor|xy_accel_mm_per_s_per_s) *= *([^\r\n]*)", re.M)
-_CMD_RE = re.compile(rb"^[ \t]*(?:N\d+[ \t]*)?(M201|M203|M204|M205|M566|SET_VELOCITY_LIMIT)"
+#: the commands that set the planner's limits (the emitter re-issues those in force at a rebuilt
+#: travel: ``ordering.layout.link_travel_steps``)
+LIMIT_COMMANDS = ("M201", "M203", "M204", "M205", "M566", "SET_VELOCITY_LIMIT")
+_CMD_RE = re.compile(rb"^[ \t]*(?:N\d+[ \t]*)?(" + "|".join(LIMIT_COMMANDS).encode() + rb")"
                      rb"(?![0-9A-Za-z_.])([^;\r\n]*)", re.M | re.I)
 _WORD_RE = re.compile(rb"([A-Za-z])[ \t]*([-+]?(?:\d+\.?\d*|\.\d+))")
 _KLIPPER_PARAM_RE = re.compile(rb"([A-Za-z_]+)[ \t]*=[ \t]*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")

@@ -181,10 +181,10 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
         gs = picked[g]
         if reorderable[g] and ((gs.status == Status.OPTIMAL and not proof_holds(
                 problem, plans, picked, g, entry)) or gs.formulation.endswith(KEPT)):
-            # (the slicer's order, taken by the chain DP for the chain's sake: proven, if it is,
-            # for the entry of the group after it the chain takes)
-            # proven for another start or end than the chain picked gives it: proven again
-            # there where the subset DP is quick, else at best feasible
+            # proven for another start or end than the chain picked gives it, or the slicer's
+            # order taken by the chain DP for the chain's sake: proven again there (for the
+            # next group's entry as picked, ``printed_end``) where the subset DP is quick, else
+            # at best feasible
             gs = reprove(problem, g, entry, printed_end(problem, plans, picked, g), gs)
         if grp.n_curves:
             entry = problem.exit_anchor(g, grp, gs.order)
@@ -224,8 +224,12 @@ def printed_end(problem: OrderingProblem, plans, picked, g: int):
     form = picked[g].formulation
     to_next = LOOKAHEAD_TO in form or form.endswith(KEPT) or (
         end is not None and end_of(problem, g) is None)
-    if not to_next:
-        return end
+    return next_entry(problem, plans, picked, g) if to_next else end
+
+
+def next_entry(problem: OrderingProblem, plans, picked, g: int) -> Anchor | None:
+    """Where the chain picked enters the group after g: its picked path's first candidate
+    (None: g is the last group, or the next path is empty)."""
     if g + 1 < len(plans) and len(picked[g + 1].order):
         return problem.cand_anchor(g + 1, plans[g + 1][0], int(picked[g + 1].order[0]))
     return None
@@ -254,10 +258,8 @@ def proof_holds(problem: OrderingProblem, plans, picked, g: int, entry: Anchor) 
         return g + 1 < len(plans) and LOOKAHEAD_FROM in picked[g + 1].formulation
     if end is None or end_of(problem, g) is not None:
         return True
-    if g + 1 >= len(plans) or not len(picked[g + 1].order):
-        return False
-    nxt = plans[g + 1][0]
-    return same_anchor(problem.cand_anchor(g + 1, nxt, int(picked[g + 1].order[0])), end)
+    nxt = next_entry(problem, plans, picked, g)
+    return nxt is not None and same_anchor(nxt, end)
 
 
 def model_travel_mm(problem: OrderingProblem, order, reversed_, seam) -> float:

@@ -40,6 +40,7 @@ import numpy as np
 
 from .._text import code_words
 from ..firmware import xy_disable_rows
+from ..limits import LIMIT_COMMANDS
 from ..program import Kind, Program
 from ..slicers import LABEL_OTHER, OBJECT_LABEL_WORDS, object_label
 
@@ -115,9 +116,10 @@ def state_key_of(program: Program, i: int):
     return (head.decode(),)
 
 
-#: state commands that set the planner's motion limits (``limits.py`` reads them): a rebuilt
-#: travel runs under those in force at the slicer's travel it replaces (``link_travel_steps``)
-LIMIT_STATE_HEADS = ("M201", "M203", "M204", "M205", "SET_VELOCITY_LIMIT")
+#: state commands that set the planner's motion limits (those ``limits.py`` reads; M566 is not a
+#: state line): a rebuilt travel runs under those in force at the slicer's travel it replaces
+#: (``link_travel_steps``)
+LIMIT_STATE_HEADS = LIMIT_COMMANDS
 
 
 def link_travel_steps(program: Program, lay: "Layout") -> np.ndarray:

@@ -23,9 +23,9 @@ import numpy as np
 
 from ..program import Program
 from ..solvers import Status
-from .chain import end_of, path_options
+from .chain import anchor_before, end_of, path_options
 from .cost import TimePricer
-from .problem import Anchor, GroupSolution, OrderingProblem, OrderingSolution
+from .problem import GroupSolution, OrderingProblem, OrderingSolution
 
 #: the formulation suffix of a group solved again by the repair pass (its status is its status on
 #: the joined costs)
@@ -74,19 +74,6 @@ def _layer_positions(problem: OrderingProblem, order: np.ndarray, layer: int) ->
     return np.flatnonzero(problem.program_problem.curve_layer[order] == layer)
 
 
-def _printed_exit(problem: OrderingProblem, printed: OrderingSolution, pos: int) -> Anchor:
-    """Where the printed file's curve at position ``pos`` is left, as an Anchor in ``problem``'s
-    curve numbering."""
-    base = problem.program_problem
-    c = int(printed.curve_order[pos])
-    _, b = base.entry_exit_xy(np.array([c]), printed.curve_reversed, printed.curve_seam)
-    changed = bool(printed.curve_reversed[c]) or int(printed.curve_seam[c]) != 0
-    pc = c
-    if problem.curve_source is not None:
-        pc = int(np.flatnonzero(problem.curve_source == c)[0])
-    return Anchor(b[0].copy(), pc, changed)
-
-
 def resolve_layers(problem: OrderingProblem, printed: OrderingSolution, layers, fn, *,
                    time_limit_s: float = 2.0, deadline_s: float | None = None,
                    kwargs: dict | None = None) -> OrderingSolution:
@@ -111,8 +98,7 @@ def resolve_layers(problem: OrderingProblem, printed: OrderingSolution, layers, 
         if not len(posn):
             continue
         first = int(posn[0])
-        pos = (_printed_exit(problem, printed, first - 1) if first > 0
-               else Anchor.of(problem.origin_xy))
+        pos = anchor_before(problem, printed, first)
         new_order, layer_groups = [], {}
         g_all = np.flatnonzero(np.asarray(problem.group_layer) == lay_i)
         for g in g_all.tolist():
