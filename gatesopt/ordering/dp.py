@@ -80,18 +80,28 @@ def _held_karp(n, cand_curve, arc, start_c, end_c):
     return order, best
 
 
-def solve(group: Group, *, time_limit_s: float = 10.0, hint=None) -> GroupSolution:
+def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
+          first: int | None = None) -> GroupSolution:
     """Exact for groups that ``fits``; larger ones raise OrderingOptionsError (a ValueError: use
-    cpsat or milp)."""
+    cpsat or milp). ``first``: the path must begin with that candidate (the cheapest such path:
+    "feasible", bound 0: optimal for the group only where it costs the unconstrained optimum;
+    ``chain.settle``)."""
     t0 = time.perf_counter()
     if group.n_curves == 0:
         return GroupSolution.make([], 0.0, 0.0, Status.OPTIMAL, 0.0, "dp")
     if not fits(group):
         raise OrderingOptionsError(f"dp: group of {group.n_curves} curves / {group.n_cands} "
                                    "candidates is too large")
+    start_c = np.array(group.start_cost(), float)
+    if first is not None:
+        keep = start_c[first]
+        start_c[:] = np.inf
+        start_c[first] = keep
     order, best = _held_karp(group.n_curves, np.asarray(group.cand_curve, np.int64),
-                             np.ascontiguousarray(group.arc_cost(), float),
-                             np.ascontiguousarray(group.start_cost(), float),
+                             np.ascontiguousarray(group.arc_cost(), float), start_c,
                              np.ascontiguousarray(group.end_cost(), float))
     obj = group.path_cost(order)
+    if first is not None:       # the cheapest of some paths: no bound on the group's optimum
+        return GroupSolution.make(order, obj, 0.0, Status.FEASIBLE, time.perf_counter() - t0,
+                                  "dp:first")
     return GroupSolution.make(order, obj, obj, Status.OPTIMAL, time.perf_counter() - t0, "dp")

@@ -19,13 +19,13 @@ import numpy as np
 
 from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
-from .chain import (BACKWARDS, KEPT, LOOKAHEAD_FROM, LOOKAHEAD_TO, end_of, look_ahead, path_options,
-                    pick_paths, reprove, rescored)
+from .chain import end_of, look_ahead, path_options, pick_paths, rescored
 from .helper import Helper
 from .matrix_helper import MatrixHelper, with_arc
 from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
-                      OrderingSolution, path_travel_mm, same_anchor)
+                      OrderingSolution, path_travel_mm)
 from .runner import GroupRunner, WorkRunner, greedy_answer
+from .settle import settle_chain
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,18 +176,10 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
         look_ahead(problem, plans, fn, time_limit_s, deadline, kwargs)
     choice = pick_paths(problem, plans)
     picked = [opts[choice[g]] for g, (_, opts, _, _) in enumerate(plans)]
-    entry = Anchor.of(problem.origin_xy)       # where the chain picked enters each group
-    for g, (grp, opts, start, end) in enumerate(plans):
+    # each group made right where the chain prints it (proven for its printed start and end)
+    picked = settle_chain(problem, plans, picked)
+    for g, (grp, _, _, _) in enumerate(plans):
         gs = picked[g]
-        if reorderable[g] and ((gs.status == Status.OPTIMAL and not proof_holds(
-                problem, plans, picked, g, entry)) or gs.formulation.endswith(KEPT)):
-            # proven for another start or end than the chain picked gives it, or the slicer's
-            # order taken by the chain DP for the chain's sake: proven again there (for the
-            # next group's entry as picked, ``printed_end``) where the subset DP is quick, else
-            # at best feasible
-            gs = reprove(problem, g, entry, printed_end(problem, plans, picked, g), gs)
-        if grp.n_curves:
-            entry = problem.exit_anchor(g, grp, gs.order)
         curves = problem.group_curves(g)
         for k in gs.order:
             c = int(curves[grp.cand_curve[k]])
@@ -212,54 +204,6 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                             cost_after=base.order_cost(order_out, reversed_, seam),
                             cost_unit=problem.cost_unit,
                             work_net_fired=one_chain and runner.net_fired)
-
-
-def printed_end(problem: OrderingProblem, plans, picked, g: int):
-    """Where group g's path travels on to in the chain picked, as far as its cost counts it: the
-    end it was solved with if that came from the problem (a fixed group's entry, the file's end),
-    the entry of the next group's picked path if it was solved to the helper's path or to an
-    entry of the next group (a look-ahead path: proven again for the entry the chain takes),
-    else none."""
-    end = plans[g][3]
-    form = picked[g].formulation
-    to_next = LOOKAHEAD_TO in form or form.endswith(KEPT) or (
-        end is not None and end_of(problem, g) is None)
-    return next_entry(problem, plans, picked, g) if to_next else end
-
-
-def next_entry(problem: OrderingProblem, plans, picked, g: int) -> Anchor | None:
-    """Where the chain picked enters the group after g: its picked path's first candidate
-    (None: g is the last group, or the next path is empty)."""
-    if g + 1 < len(plans) and len(picked[g + 1].order):
-        return problem.cand_anchor(g + 1, plans[g + 1][0], int(picked[g + 1].order[0]))
-    return None
-
-
-def proof_holds(problem: OrderingProblem, plans, picked, g: int, entry: Anchor) -> bool:
-    """Whether group g's picked answer (proven for the problem it was solved as) is proven in the
-    chain picked: a forward solve was proven from the start in ``plans`` (each group from the
-    solver's path of the one before) -- the chain DP may enter it from elsewhere (``entry``:
-    another option taken for the group before); one solved to the next group's path as the
-    helper process found it (its end not the file's nor a fixed group's) was proven for that
-    entry -- the chain may take another path there. Split proofs hold where their other half is
-    taken: a path solved backwards (its start free, the travel into it the group before's: the
-    group before was solved to it) and a look-ahead pair (``chain.look_ahead``: g's path to an
-    entry of g + 1, g + 1's from it), taken together (of two tries the chain could pair halves
-    of different ones: not told apart here)."""
-    grp, _, start, end = plans[g]
-    form = picked[g].formulation
-    if BACKWARDS in form:
-        return True
-    if LOOKAHEAD_FROM in form:
-        return g > 0 and LOOKAHEAD_TO in picked[g - 1].formulation
-    if not same_anchor(entry, start):
-        return False
-    if LOOKAHEAD_TO in form:
-        return g + 1 < len(plans) and LOOKAHEAD_FROM in picked[g + 1].formulation
-    if end is None or end_of(problem, g) is not None:
-        return True
-    nxt = next_entry(problem, plans, picked, g)
-    return nxt is not None and same_anchor(nxt, end)
 
 
 def model_travel_mm(problem: OrderingProblem, order, reversed_, seam) -> float:
