@@ -4,6 +4,7 @@ DP; the chain never gets dearer, and every group reported optimal prints the DP'
 start it prints from to where it travels on."""
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -115,3 +116,52 @@ def test_settling_proves_more_and_prints_cheaper_than_proving_again_alone(monkey
     assert proven[0] > proven[1]
     assert sum(_chain_cost(p, s) for p, s in zip(probs, sols)) < sum(
         _chain_cost(p, o) for p, o in zip(probs, olds)) - 1e-6
+
+
+def _claims_hold(prob, final, groups) -> tuple[int, int]:
+    """(groups checked, groups reported optimal that are not): each re-orderable group reported
+    optimal must print the DP's optimum from where ``final`` enters it, to its own end (free, the
+    problem's) or to the next group's entry as ``final`` prints it."""
+    from gatesopt.ordering.chain import anchor_at, anchor_before, entry_positions
+    first = entry_positions(prob, final)
+    n = len(final.curve_order)
+    checked = bad = 0
+    for g, gs in enumerate(groups):
+        if not (prob.group_reorderable[g] and gs.status == Status.OPTIMAL) or first[g] >= n:
+            continue
+        if LOOKAHEAD_FROM in gs.formulation or BACKWARDS in gs.formulation:
+            continue
+        start = anchor_before(prob, final, int(first[g]))
+        ends = [end_of(prob, g)]
+        if ends[0] is None and g + 1 < prob.n_groups and first[g + 1] < n:
+            ends.append(anchor_at(prob, final, int(first[g + 1])))
+        checked += 1
+        bad += not any(prob.group(g, start, e).path_cost(gs.order)
+                       <= dp.solve(prob.group(g, start, e)).objective + OPTIMAL_ABS_TOL
+                       for e in ends)
+    return checked, bad
+
+
+def test_a_proof_for_the_next_groups_entry_holds_only_where_the_file_enters_that_group_so():
+    # the time guard may print the layer after a group in another order (the slicer's here):
+    # a group proven for the next group's entry as its end (``settle``) is then proven again
+    # where the file prints it (``guard.printed_answer`` with ``same_next_entries``); every group
+    # the guard's answer reports optimal holds for the file's own start and next entry
+    from gatesopt.rewrite.guard import (entry_positions, keep_layers, printed_answer,
+                                        same_entry_groups, same_next_entries)
+    exits_moved = 0
+    for seed in range(6):
+        prob = strokes_problem(seed, 10)
+        sol = layers.solve(prob, "auto")
+        for lay in range(1, prob.n_groups):
+            final = keep_layers(prob, sol, [lay])
+            entered = same_entry_groups(prob, final, sol)
+            exited = same_next_entries(prob, final, sol)
+            exits_moved += int(np.count_nonzero(~exited))
+            first = entry_positions(prob, final)
+            groups = [printed_answer(prob, final, g, gs, a, first, x) if g != lay else
+                      dataclasses.replace(gs, status=Status.FEASIBLE)
+                      for g, (gs, a, x) in enumerate(zip(sol.groups, entered, exited))]
+            checked, bad = _claims_hold(prob, final, groups)
+            assert checked > 0 and bad == 0, (seed, lay)
+    assert exits_moved > 0

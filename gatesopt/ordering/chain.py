@@ -135,14 +135,26 @@ def anchor_before(problem: OrderingProblem, solution, pos: int) -> Anchor:
     curve before it, as printed (the origin before the first)."""
     if pos <= 0:
         return Anchor.of(problem.origin_xy)
-    c = int(np.asarray(solution.curve_order, np.int64)[pos - 1])
-    _, b = problem.program_problem.entry_exit_xy(np.array([c]), solution.curve_reversed,
+    return _printed_anchor(problem, solution, pos - 1, 1)
+
+
+def anchor_at(problem: OrderingProblem, solution, pos: int) -> Anchor:
+    """Where ``solution`` enters its curve at position ``pos``: the curve's entry point as
+    printed (the end a group's path travels on to where the next group begins there)."""
+    return _printed_anchor(problem, solution, pos, 0)
+
+
+def _printed_anchor(problem: OrderingProblem, solution, pos: int, side: int) -> Anchor:
+    """The entry (``side`` 0) or exit (1) of ``solution``'s curve at position ``pos`` as an
+    Anchor in the problem's numbering."""
+    c = int(np.asarray(solution.curve_order, np.int64)[pos])
+    ends = problem.program_problem.entry_exit_xy(np.array([c]), solution.curve_reversed,
                                                  solution.curve_seam)
     changed = bool(solution.curve_reversed[c]) or int(solution.curve_seam[c]) != 0
     pc = c
     if problem.curve_source is not None:
         pc = int(np.flatnonzero(np.asarray(problem.curve_source) == c)[0])
-    return Anchor(np.asarray(b[0], float).copy(), pc, changed)
+    return Anchor(np.asarray(ends[side][0], float).copy(), pc, changed)
 
 
 def end_of(problem: OrderingProblem, g: int):

@@ -47,10 +47,9 @@ def settle_chain(problem: OrderingProblem, plans, picked: list) -> list:
         to = printed_end(problem, plans, picked, g)
         # (a fallback -- a group the budget left no time for -- stays as it is: no search
         # after the budget; nor is an unproven group the DP cannot take quickly priced again)
-        if reorderable[g] and (
-                (gs.status == Status.FEASIBLE and _quick(grp))
-                or (gs.status == Status.OPTIMAL and (gs.formulation.endswith(KEPT) or not
-                                                     proof_holds(problem, plans, picked, g, entry)))):
+        unproven = gs.status == Status.FEASIBLE and _quick(grp)
+        if reorderable[g] and (unproven or (gs.status == Status.OPTIMAL and (
+                gs.formulation.endswith(KEPT) or not proof_holds(problem, plans, picked, g, entry)))):
             nxt = next_entry(problem, plans, picked, g) if fixed is None else None
             gs, tied = settle(problem, g, entry, gs, first, fixed, nxt, to)
             picked[g] = gs

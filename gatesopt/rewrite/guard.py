@@ -36,7 +36,9 @@ import dataclasses
 
 import numpy as np
 
-from ..ordering.chain import BACKWARDS, anchor_before, end_of, entry_positions, reprove
+from ..ordering import dp
+from ..ordering.chain import (BACKWARDS, KEPT, LOOKAHEAD_TO, REPROVE_MAX_S, anchor_at,
+                              anchor_before, end_of, entry_positions, reprove)
 from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
 from ..ordering.problem import GroupSolution, OrderingProblem, OrderingSolution
@@ -366,17 +368,58 @@ def greedy_taken(gs: GroupSolution) -> GroupSolution:
 
 
 def printed_answer(problem: OrderingProblem, final: OrderingSolution, g: int, gs: GroupSolution,
-                   entered_alike: bool, first: np.ndarray) -> GroupSolution:
+                   entered_alike: bool, first: np.ndarray,
+                   exited_alike: bool = True) -> GroupSolution:
     """Group g's answer ``gs`` as ``final`` prints it: as it was where the group is entered as the
-    chain that proved it entered it (``same_entry_groups``), or where it is not proven, or where
-    its proof is split with its neighbour (``+back``) or made on the printed file's entry
-    (``+joined``); else proven again from where ``final`` enters it (``chain.reprove``: the
-    subset DP where it is quick, else at best feasible). ``first``: ``chain.entry_positions``
-    of ``final``."""
-    if (entered_alike or gs.status != Status.OPTIMAL
-            or gs.formulation.endswith((BACKWARDS, REPAIRED))):
+    chain that proved it entered it (``same_entry_groups``) and the next group is entered there
+    as in that chain (``same_next_entries``: a path proven for the next group's entry as its end
+    -- ``ordering.settle`` -- holds only there), or where it is not proven, or where its proof
+    is split with its neighbour (``+back``) or made on the printed file's entry (``+joined``);
+    else proven again from where ``final`` enters it (``chain.reprove``: the subset DP where it
+    is quick, else at best feasible), for its own end (free, a fixed group's entry, the file's
+    end) or, failing that, for the next group's entry as printed. A group entered alike whose
+    next group is entered otherwise keeps a proof the subset DP cannot check quickly unless it
+    was made for the next group's entry (the slicer's order taken for it, a look-ahead path).
+    ``first``: ``chain.entry_positions`` of ``final``."""
+    if (gs.status != Status.OPTIMAL or gs.formulation.endswith((BACKWARDS, REPAIRED))
+            or (entered_alike and exited_alike)):
         return gs
-    return reprove(problem, g, anchor_before(problem, final, int(first[g])), end_of(problem, g), gs)
+    start = anchor_before(problem, final, int(first[g]))
+    end = end_of(problem, g)
+    grp = problem.group(g, start, end)
+    quick = dp.fits(grp) and dp.time_s(grp) <= REPROVE_MAX_S
+    if entered_alike and not quick and not any(s in gs.formulation for s in (KEPT, LOOKAHEAD_TO)):
+        return gs           # (proven for its own end: the next group's entry does not matter)
+    got = reprove(problem, g, start, end, gs)
+    n = len(final.curve_order)
+    if (got.status != Status.OPTIMAL and end is None and g + 1 < problem.n_groups
+            and first[g + 1] < n):
+        to_next = reprove(problem, g, start, anchor_at(problem, final, int(first[g + 1])), gs)
+        if to_next.status == Status.OPTIMAL:
+            return to_next
+    return got
+
+
+def same_next_entries(problem: OrderingProblem, a: OrderingSolution,
+                      b: OrderingSolution) -> np.ndarray:
+    """(n_groups,) bool: groups after which ``a`` and ``b`` enter the next group alike -- its
+    first curve printed is the same curve, in the same direction, from the same seam (True for
+    the last group, and where the next group prints nothing in either)."""
+    (ca, ra, sa), (cb, rb, sb) = _first_curves(problem, a), _first_curves(problem, b)
+    same = (ca == cb) & (ra == rb) & (sa == sb)
+    return np.append(same[1:], True) if len(same) else same
+
+
+def _first_curves(problem: OrderingProblem, s: OrderingSolution):
+    """Per group the curve ``s`` prints first (-1: none), whether reversed, its seam."""
+    n = problem.program_problem.n_curves
+    order = np.asarray(s.curve_order, np.int64)
+    p = entry_positions(problem, s)
+    c = np.where(p < n, order[np.minimum(p, max(n - 1, 0))], -1) if n else np.full(len(p), -1)
+    cc = np.maximum(c, 0)
+    rev = np.where(c >= 0, np.asarray(s.curve_reversed, bool)[cc], False) if n else c >= 0
+    seam = np.where(c >= 0, np.asarray(s.curve_seam, np.int64)[cc], 0) if n else c * 0
+    return c, rev, seam
 
 
 def same_entry_groups(problem: OrderingProblem, a: OrderingSolution,
@@ -490,24 +533,34 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     source = np.where(same, FROM_SOLVER, FROM_SLICER)
     glay = np.asarray(problem.group_layer, np.int64)
     # the solver's proofs stand in the groups it prints entered as its chain entered them (a
-    # layer after one put back or printed in greedy's order may start from another curve); not
+    # layer after one put back or printed in greedy's order may start from another curve), and
+    # left for the next group's entry as its chain left them (a proof made for that entry); not
     # checked: a path solved backwards (its start free) and a repaired one (solved from
     # ``printed``'s entry). A layer put back keeps the solver's answers as they were (what it
     # proved, not printed: "proven groups reverted")
-    entered = same_entry_groups(problem, final, solution) | (source[glay] != FROM_SOLVER)
+    put_back = source[glay] != FROM_SOLVER
+    entered = same_entry_groups(problem, final, solution) | put_back
+    exited = same_next_entries(problem, final, solution) | put_back
     first = entry_positions(problem, final)
-    groups = tuple(printed_answer(problem, final, g, gs, a, first)
-                   for g, (gs, a) in enumerate(zip(solution.groups, entered)))
+    groups = tuple(printed_answer(problem, final, g, gs, a, first, x)
+                   for g, (gs, a, x) in enumerate(zip(solution.groups, entered, exited)))
     if greedy is not None:
         source[~same & ~differing_layers(problem, final, greedy, L)[:L]] = FROM_GREEDY
         at = source[glay] == FROM_GREEDY
         # greedy's proofs stand in the groups entered as in greedy's chain
         alike = same_entry_groups(problem, final, greedy)
+        left_alike = same_next_entries(problem, final, greedy)
         decided = problem.group_reorderable
-        groups = tuple(((gg if a else greedy_taken(printed_answer(problem, final, g, gg, a, first)))
-                        if d else gg) if t else gs
-                       for g, (gs, gg, t, d, a) in enumerate(zip(groups, greedy.groups, at,
-                                                                 decided, alike)))
+        # (entered alike but the next group otherwise: greedy's answer, proven again where a
+        # proof for the next group's entry could no longer hold, under greedy's own name)
+        def greedys(g, gg, a, x):
+            if a and x:
+                return gg
+            got = printed_answer(problem, final, g, gg, a, first, x)
+            return got if a else greedy_taken(got)
+        groups = tuple((greedys(g, gg, a, x) if d else gg) if t else gs
+                       for g, (gs, gg, t, d, a, x) in enumerate(zip(groups, greedy.groups, at,
+                                                                    decided, alike, left_alike)))
     sol = dataclasses.replace(with_model_cost(problem, final), groups=groups,
                               formulation=solution.formulation, solve_s=solution.solve_s)
     kept = np.flatnonzero(changed_layers(problem, solution)[:L] & (source == FROM_SLICER))

@@ -28,7 +28,7 @@ from ..solvers import stop_requested
 from ..verify.ordering import check
 from .figures import figures
 from .guard import (FROM_GREEDY, FROM_SOLVER, GUARD_TOL_S, emit_guarded,  # noqa: F401 (re-exported)
-                    greedy_taken, keep_layers, layer_times_s, same_entry_groups,
+                    greedy_taken, keep_layers, layer_times_s, same_entry_groups, same_next_entries,
                     step_times_s)
 
 
@@ -288,7 +288,8 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
         # as its chain entered them, elsewhere made again from where the file enters them,
         # ``guard.printed_answer``), labelled as taken by the guard where entered otherwise
         same = ((guarded.source == FROM_SOLVER)[np.asarray(problem.group_layer, np.int64)]
-                & same_entry_groups(problem, guarded.solution, greedy.solution))
+                & same_entry_groups(problem, guarded.solution, greedy.solution)
+                & same_next_entries(problem, guarded.solution, greedy.solution))
         groups = tuple(greedy_taken(gs) if d and not s else gs
                        for gs, d, s in zip(guarded.solution.groups, decided, same))
         sol = dataclasses.replace(guarded.solution, groups=groups, formulation=formulation,
