@@ -418,32 +418,110 @@ def test_emit_memo_reuses_unchanged_layers_and_writes_what_a_fresh_emit_writes(n
     assert emit(prog, prob, sol, memo) == emit(prog, prob, sol)
 
 
-@pytest.mark.parametrize("name", ["star_lines_m82.gcode", "cyl_lines_zhop.gcode"])
-def test_emit_copies_unchanged_curves_in_one_piece_as_line_by_line(name, monkeypatch):
-    # an unchanged curve whose lines are all extruding steps is copied as one slice of the file
-    # (Writer.copy_steps) unless an E word must be re-numbered: the text must be the one the
-    # line-by-line copy writes, for a re-ordered solution and for the slicer's own order
-    from gatesopt.ordering import writer
+#: a feed set on a line the emit does not track ('N10 G1 F600': numbered), between two curves that
+#: follow each other: the curve-by-curve emit sets F again before the second (it lacks F itself)
+UNTRACKED_FEED = ("M82\nG92 E0\n;LAYER:0\nG1 Z0.2 F3000\n;TYPE:WALL-OUTER\nG0 X10 Y10 F6000\n"
+                  "G1 X20 Y10 E1.0 F1200\nG1 X20 Y20 E2.0\nG0 X30 Y20\nN10 G1 F600\n"
+                  "G1 X30 Y30 E4.0\nG0 X50 Y50 F6000\nG1 X60 Y50 E5.0 F1200\nG1 X60 Y60 E6.0\n"
+                  ";LAYER:1\nG1 Z0.4 F3000\nG0 X10 Y10 F6000\nG1 X20 Y10 E7.0 F1200\n")
+
+
+@pytest.mark.parametrize("name", ["star_lines_m82.gcode", "cyl_lines_zhop.gcode", "untracked feed"])
+def test_emit_copies_runs_of_unchanged_curves_as_curve_by_curve(name, monkeypatch):
+    # curves that follow each other as in the file are copied as one run of lines where nothing
+    # would be written between them (emitter._quiet, decided from the file alone): the text must
+    # be the one the curve-by-curve emit writes (every curve's state, feature and feed checked),
+    # for a re-ordered solution, the slicer's own order and the time guard's memo
+    from gatesopt.ordering import emitter
     from gatesopt.rewrite.order import keep_layers
-    prog = gatesopt.parse(str(PROJECT_INSTANCES / name))
+    prog = gatesopt.parse(UNTRACKED_FEED if name == "untracked feed" else str(PROJECT_INSTANCES / name))
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
     kept = keep_layers(prob, sol, list(range(prog.n_layers)))
-    used = []
-    copy_steps = writer.Writer.copy_steps
+    half = keep_layers(prob, sol, list(range(0, prog.n_layers, 2)))
+    quiet = emitter._quiet
+    quiet_curves = quiet(prog, prob.layout, emitter.Writer.per_line(prog, prob.layout),
+                         emitter.sets_feed(prog, prob.layout.curve_s0).tolist())
+    assert quiet_curves.sum() >= (1 if name == "untracked feed" else 10)
+    memo: dict = {}
+    runs = [emit(prog, prob, s, m) for s, m in ((sol, None), (kept, None), (sol, memo),
+                                                 (half, memo), (kept, memo))]
+    monkeypatch.setattr(emitter, "_quiet", lambda *a: np.zeros(len(prob.layout.curve_s0), bool))
+    memo = {}
+    assert runs == [emit(prog, prob, s, m) for s, m in ((sol, None), (kept, None), (sol, memo),
+                                                         (half, memo), (kept, memo))]
+    if name == "untracked feed":
+        assert not quiet_curves.all()
+        assert "N10 G1 F600\nG1 F600\nG1 X30 Y30 E4.0\n" in runs[1]
+    else:
+        assert runs[1] == prog.to_gcode()           # the slicer's order: the file itself
 
-    def counted(self, *a):
-        ok = copy_steps(self, *a)
-        used.append(ok)
-        return ok
-    monkeypatch.setattr(writer.Writer, "copy_steps", counted)
-    fast = [emit(prog, prob, s) for s in (sol, kept)]
-    assert sum(used) >= 10                          # the one-piece copy did happen
-    if name.endswith("_m82.gcode"):
-        assert not all(used)                        # and an absolute-E layer re-ordered declined it
-    monkeypatch.setattr(writer.Writer, "copy_steps", lambda self, *a: False)
-    assert fast == [emit(prog, prob, s) for s in (sol, kept)]
-    assert fast[1] == prog.to_gcode()               # the slicer's order: the file itself
+
+#: layer 1's last curve follows the first line of a second M204 key (P T) and an M204 S: printed
+#: first, it leaves the output with a key the curves after it did not see in the original
+EXTRA_STATE_KEY = ("M83\nG92 E0\n;LAYER:0\nG1 Z0.2 F3000\nM204 S1000\n;TYPE:WALL-OUTER\n"
+                   "G0 X10 Y10 F6000\nG1 X20 Y10 E1 F1200\nG0 X10 Y20\nG1 X20 Y20 E1\n"
+                   ";LAYER:1\nG1 Z0.4 F3000\nG0 X10 Y30 F6000\nG1 X20 Y30 E1 F1200\nG0 X30 Y30\n"
+                   "G1 X40 Y30 E1\nG0 X50 Y30\nG1 X60 Y30 E1\nM204 P800 T2000\nM204 S1100\n"
+                   "G0 X70 Y30\nG1 X80 Y30 E1\n;LAYER:2\nG1 Z0.6 F3000\nG0 X10 Y40 F6000\n"
+                   "G1 X20 Y40 E1 F1200\n")
+
+
+def test_emit_copies_runs_only_where_the_output_holds_the_original_state_keys(monkeypatch):
+    # a curve printed before the first line of a state key (not what a solver does: that line is
+    # a barrier; the emit takes it) leaves the output holding a key the next curves did not see.
+    # Writer.reissue then writes their M204 S again before each of them (the output's M204 keys
+    # are in another order than the original's), so those curves are no run of lines to copy
+    # although _quiet, from the file alone, says they follow as in it: the text must still be
+    # the curve-by-curve emit's
+    import dataclasses
+    from gatesopt.ordering import emitter
+    prog = gatesopt.parse(EXTRA_STATE_KEY)
+    prob = build(prog, OrderingOptions(mode="free"))
+    lay = prob.layout
+    assert prob.program_problem.curve_layer.tolist() == [0, 0, 1, 1, 1, 1, 2]
+    quiet = emitter._quiet(prog, lay, emitter.Writer.per_line(prog, lay),
+                           emitter.sets_feed(prog, lay.curve_s0).tolist())
+    assert quiet[3] and quiet[4]
+    n = len(lay.curve_s0)
+    hand = dataclasses.replace(solve(prob, "greedy"), curve_order=np.array([0, 1, 5, 2, 3, 4, 6]),
+                               curve_reversed=np.zeros(n, bool), curve_seam=np.zeros(n, np.int64))
+    fast = emit(prog, prob, hand)
+    monkeypatch.setattr(emitter, "_quiet", lambda *a: np.zeros(n, bool))
+    assert fast == emit(prog, prob, hand)
+    # the original's, then before the travel into curve 2 and before curves 2, 3 and 4
+    assert fast.count("M204 S1000\n") == 5
+
+
+@pytest.mark.parametrize("name", ["star_lines_m82.gcode", "cyl_lines_zhop.gcode"])
+@pytest.mark.parametrize("e_error_mm", [0.0, 3e-9, 5e-8, 5e-7, 2e-6, 1.5])
+def test_copy_lines_writes_what_copy_line_writes_line_by_line(name, e_error_mm):
+    # Writer.copy_lines copies runs of steps in one piece, E re-numbered where the output's
+    # running E is off (absolute E): the same text and state as copy_line line by line, for
+    # ranges starting anywhere, with the output's E off by nothing, float noise (under the
+    # 1e-8 mm whole-curve test, between it and copy_line's 1e-7 mm), just over 1e-7 mm or a
+    # re-ordering's offset
+    from gatesopt.ordering.layout import layout
+    from gatesopt.ordering.writer import Writer
+    prog = gatesopt.parse(str(PROJECT_INSTANCES / name))
+    lay = layout(prog)
+    lists = Writer.per_line(prog, lay)
+    rng = np.random.default_rng(3)
+    cuts = np.sort(rng.choice(np.arange(1, prog.n_lines), 12, replace=False)).tolist()
+    for a, b in zip([0] + cuts, cuts + [prog.n_lines]):
+        one, many = Writer(prog, lay, lists), Writer(prog, lay, lists)
+        before = np.flatnonzero(prog.line < a)          # the original's E where line a starts
+        for w in (one, many):
+            if len(before):
+                w.e = float(prog.end_mm[before[-1], 3]) + e_error_mm
+                w.e_off = float(prog.offset_mm[before[-1], 3])
+        for i in range(a, b):
+            one.copy_line(i)
+        many.copy_lines(a, b)
+        assert "".join(many.out) == "".join(one.out)
+        assert (many.e, many.e_off, many.feed, many.state, many.feature, many.n_commands) == (
+            one.e, one.e_off, one.feed, one.state, one.feature, one.n_commands)
+        assert list(map(float, many.xyz)) == list(map(float, one.xyz))
 
 
 def test_progress_is_called_after_every_group_with_the_proofs_so_far():
@@ -657,3 +735,23 @@ def test_emit_renumbers_e_on_moves_only():
     w.copy_line(7)
     assert w.out[6].startswith("G1 X30 Y10 E2.000001")      # a move: re-numbered
     assert w.out[7].rstrip("\n") == lines[7]                  # a motor line: as written
+
+
+@pytest.mark.parametrize("comments", [True, False])
+def test_sets_feed_finds_the_f_words_the_regex_finds(comments):
+    # emitter.sets_feed reads every F of the file at once with numpy: it must say what F_WORD
+    # says of each move's line before its ';' (a file without any ';' too)
+    from gatesopt.ordering.emitter import sets_feed
+    from gatesopt.ordering.writer import F_WORD
+    words = ["F1200", "f600", "F.5", "F+90", "F0900", ""]     # (the parser refuses bad F words)
+    lines = ["G90", "M83", "G1 Z0.2"]
+    for k, word in enumerate(words):
+        lines.append(f"G1 X{k + 1} Y1 E0.1 {word}")
+        if comments:
+            lines.append(f"G1 X{k + 1} Y2 E0.1 ; {word}")
+            lines.append(f"G1 X{k + 1} Y3 E0.1 {word};{word}")
+    prog = gatesopt.parse("\n".join(lines) + "\n")
+    text = prog.to_gcode().splitlines()
+    want = [bool(F_WORD.search(text[i].split(";")[0])) for i in prog.line.tolist()]
+    assert sets_feed(prog, np.arange(prog.n_steps)).tolist() == want
+    assert 3 <= sum(want) < len(want)

@@ -46,7 +46,8 @@ from .layout import LIMIT_STATE_HEADS, LINE_LABEL, Layout, layout, link_travel_s
 from ..slicers import LABEL_CLOSE
 from .problem import OrderingProblem, OrderingSolution
 from .travel import TravelRule
-from .writer import F_WORD, Writer, gcode_number, required_state, states_at
+from .writer import (F_WORD, CurveMoves, PerLine, Writer, gcode_number, required_state,
+                     states_at)
 
 
 def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
@@ -79,18 +80,17 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
         # the gaps a link may write reversed: the time objective's pricer says which (and prices
         # them so); the travel objective rebuilds every link that is not the slicer's own
         rgaps = problem.pricer.reversible if problem.pricer is not None else None
-        fixed = (rule, Writer.per_line(program, lay), _Plan.per_curve(p, problem, lay), rgaps)
+        lists = Writer.per_line(program, lay)
+        fixed = (rule, lists, _Plan.per_curve(p, problem, lay, lists), rgaps)
         if memo is not None:
             memo[_FIXED] = fixed
     rule, lists, per_curve, rgaps = fixed
     w = Writer(program, lay, lists)
     plan = _Plan(p, lay, rule, order, rev, seam, per_curve, rgaps)
-    changed, gap_lines = plan.changed, plan.gap_lines
 
     # prefix + first gap: verbatim (the first layer keeps its order, so curve 0 stays first)
     prev = -1
-    for i in gap_lines(order[0]) if order[0] == 0 else gap_lines(0):
-        w.copy_line(i)
+    w.copy_lines(0, plan.l0[0])
     # one block of the order per layer (a layer's curves are contiguous in any solution)
     lay_of = problem.curve_layer[order]
     cuts = np.flatnonzero(np.diff(lay_of)) + 1
@@ -99,7 +99,7 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
         key = None
         if memo is not None:
             blk = order[k0:k1]
-            key = (int(lay_of[k0]), prev, bool(changed[prev]) if prev >= 0 else False,
+            key = (int(lay_of[k0]), prev, bool(plan.changed[prev]) if prev >= 0 else False,
                    blk.tobytes(), rev[blk].tobytes(), seam[blk].tobytes(), w.entry_key())
             hit = memo.get(key[:-1])
             if hit is not None and same_entry(hit[0], key[-1]):
@@ -107,8 +107,12 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
                 prev = int(order[k1 - 1])
                 continue
             start = len(w.out)
-        for k in range(k0, k1):
-            prev = _emit_curve(plan, w, k, prev)
+        plan.layer_moves(k0, k1)
+        k = k0
+        while k < k1:
+            k = _emit_curves(plan, w, k, k1, prev)
+            prev = plan.order[k]
+            k += 1
         if key is not None:
             memo[key[:-1]] = (key[-1], w.out[start:], w.snapshot())
     # state the remainder of the file expects, then the remainder verbatim (the last run's
@@ -120,9 +124,11 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
         for i in plan.closes[plan.run[prev]]:
             w.copy_line(i)
         skip = plan.close_set
-    for i in range(last + 1, p.n_lines):
-        if i not in skip:
-            w.copy_line(i)
+    a = last + 1
+    for i in sorted(i for i in skip if i >= a):
+        w.copy_lines(a, i)
+        a = i + 1
+    w.copy_lines(a, p.n_lines)
     text = "".join(w.out)
     if p.n_lines and not p.data.endswith(b"\n") and text.endswith(w.nl):
         # the file ends without a line ending (FullControl's closing "M84 ; disable steppers"):
@@ -158,27 +164,39 @@ class _Plan:
                  per_curve: tuple, rgaps=None):
         self.p, self.lay, self.rule, self.rgaps = p, lay, rule, rgaps
         self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
-        self.changed = (rev | (seam != 0)).tolist()
+        self.order_arr = order
+        self.changed_arr = rev | (seam != 0)
+        self.changed = self.changed_arr.tolist()
         (self.group_first, self.layer, self.l0, self.l1, self.feature, self.req,
-         self.curve_state, self.block, self.run, self.closes, self.close_set, self.s0,
-         self.feed0, self.has_f, self.travel_state) = per_curve
+         self.curve_state, self.run, self.closes, self.close_set, self.s0,
+         self.feed0, self.has_f, quiet, self.travel_state, self.n_keys) = per_curve
+        # per position k of the order: curve order[k] follows order[k - 1] as in the file, both
+        # unchanged, and nothing is written between them but the original's lines (``quiet``):
+        # ``_emit_curves`` copies such a run of curves as one run of lines
+        nxt = np.zeros(len(order), bool)
+        if len(order) > 1:
+            a, b = order[:-1], order[1:]
+            nxt[1:] = (b == a + 1) & ~self.changed_arr[a] & ~self.changed_arr[b] & quiet[b]
+        self.follows = nxt.tolist()
+        self.rev_arr, self.seam_arr = rev, seam
+        self.moves = None       # the layer's curves written move by move (``layer_moves``)
+
+    def layer_moves(self, k0: int, k1: int) -> None:
+        """``moves``: the moves of the curves at positions k0..k1-1 written move by move (made
+        where a layer is written, not for the layers the memo gives)."""
+        blk = self.order_arr[k0:k1]
+        moved = blk[self.changed_arr[blk]]
+        self.moves = CurveMoves.of(self.p, self.lay, moved.tolist(), self.rev_arr[moved].tolist(),
+                                   self.seam_arr[moved].tolist())
 
     @staticmethod
-    def per_curve(p: Program, problem: OrderingProblem, lay: Layout) -> tuple:
+    def per_curve(p: Program, problem: OrderingProblem, lay: Layout, lines: PerLine) -> tuple:
         """What does not depend on the order: each curve's group's original first curve, layer,
         first and last line, feature, the state lines in force at any line and, per state key,
         the text in force at each curve's first line (``states_at``)."""
         gidx = np.repeat(np.arange(problem.n_groups), np.diff(problem.group_curve_start))
         req = required_state(p, lay)
         curve_state = states_at(req, lay.curve_l0)
-        # a curve whose lines are all extruding steps, not the file's last line, is copied in
-        # one piece when unchanged (``Writer.copy_steps``): (first byte, end byte), else None
-        steps_before = np.concatenate(([0], np.cumsum(lay.step_of_line >= 0)))
-        l0, l1 = lay.curve_l0, lay.curve_l1
-        whole = ((steps_before[l1 + 1] - steps_before[l0] == l1 - l0 + 1)
-                 & (l1 + 1 < p.n_lines)).tolist()
-        block = [(b0, b1) if ok else None for ok, b0, b1 in
-                 zip(whole, p.line_start[l0].tolist(), p.line_start[l1 + 1].tolist())]
         run, closes, close_set = _runs(p, lay)
         # per curve, the motion limits in force at the slicer's travel into it: a rebuilt (or
         # reversed) travel runs under them, as ``cost.TimePricer`` prices it. Left alone, it ran
@@ -189,12 +207,18 @@ class _Plan:
         # wall's 5,000 mm/s^2, 23.7 ms over the price each
         limit_req = {k: v for k, v in req.items() if k[0] in LIMIT_STATE_HEADS}
         travel_state = states_at(limit_req, p.line[link_travel_steps(p, lay)])
+        # per curve, how many state keys are in force at its first line (a key is, from its
+        # first line on): where the output has no others, ``Writer.reissue`` leaves each
+        # command's keys in the original's order, so a curve that follows as in the file needs
+        # no state line before it (``_emit_curves``)
+        firsts = np.sort(np.asarray([arr[0] for arr, _ in req.values()], np.int64))
+        n_keys = np.searchsorted(firsts, lay.curve_l0, side="left").tolist()
+        has_f = sets_feed(p, lay.curve_s0).tolist()
         return (problem.group_curve_start[gidx].tolist(), problem.curve_layer.tolist(),
-                l0.tolist(), l1.tolist(), p.feature[lay.curve_s0].tolist(), req, curve_state,
-                block, run, closes, close_set, lay.curve_s0.tolist(),
-                p.feed_mm_s[lay.curve_s0].tolist(),
-                {},     # per curve asked: whether its first line sets F itself (``_curve``)
-                travel_state)
+                lay.curve_l0.tolist(), lay.curve_l1.tolist(), p.feature[lay.curve_s0].tolist(),
+                req, curve_state, run, closes, close_set, lay.curve_s0.tolist(),
+                p.feed_mm_s[lay.curve_s0].tolist(), has_f, _quiet(p, lay, lines, has_f),
+                travel_state, n_keys)
 
     def gap_lines(self, c: int) -> range:
         """The original lines between curve c - 1 and curve c."""
@@ -239,14 +263,15 @@ def _closing(plan: _Plan, w: Writer, prev: int, c: int, lines: list) -> list:
     return [([i for i in rng if i not in close or i in mine], b) for rng, b in lines]
 
 
-def _emit_curve(plan: _Plan, w: Writer, k: int, prev: int) -> int:
-    """The k-th curve of the new order with the gap before it; returns that curve."""
+def _emit_curves(plan: _Plan, w: Writer, k: int, k_end: int, prev: int) -> int:
+    """The k-th curve of the new order with the gap before it, and the curves after it (before
+    position ``k_end``) that follow it as in the file (``_Plan.follows``); returns the position of
+    the last curve written."""
     p, lay = plan.p, plan.lay
     c = plan.order[k]
     if k > 0:
         if prev == c - 1 and not plan.changed[prev] and not plan.changed[c]:
-            for i in plan.gap_lines(c):
-                w.copy_line(i)
+            w.copy_lines(plan.l1[prev] + 1, plan.l0[c])
         else:
             lines = []
             first = plan.group_first[c]
@@ -276,26 +301,102 @@ def _emit_curve(plan: _Plan, w: Writer, k: int, prev: int) -> int:
         feed = plan.feed0[c]
         if w.feed is None or abs(w.feed - feed) > 1e-9:
             # the first move may rely on a modal F set before it: set it explicitly
-            has_f = plan.has_f.get(c)
-            if has_f is None:
-                has_f = plan.has_f[c] = bool(F_WORD.search(
-                    w.texts[int(p.line[plan.s0[c]])].split(";")[0]))
-            if not has_f:
+            if not plan.has_f[c]:
                 w.write(f"G1 F{gcode_number(feed * 60.0, 3)}")
                 w.feed = feed
-        l0, l1, block = plan.l0[c], plan.l1[c], plan.block[c]
-        if block is not None and w.copy_steps(l0, l1, *block):
-            return c
-        for i in range(l0, l1 + 1):
-            w.copy_line(i)
-        return c
-    _curve(w, p, lay, c, reverse, seam)
-    return c
+        # this curve and those that follow it as in the file: one run of the original's lines
+        # (where the output has only the state keys the original had at c: else ``reissue``
+        # may write a command's lines again before the next curve)
+        follows = plan.follows
+        last = k
+        if len(w.state) == plan.n_keys[c]:
+            while last + 1 < k_end and follows[last + 1]:
+                last += 1
+        w.copy_lines(plan.l0[c], plan.l1[plan.order[last]] + 1)
+        return last
+    _curve(plan, w, p, lay, c, reverse)
+    return k
 
 
-def _curve(w: Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> None:
+def sets_feed(p: Program, steps: np.ndarray) -> np.ndarray:
+    """Per step of ``steps``: whether its line sets F itself (an F word before any ';', as
+    ``F_WORD`` finds it), else the move relies on the modal F set before it."""
+    lines = p.line[steps]
+    if not p.data.isascii():
+        return np.asarray([bool(F_WORD.search(p.line_text(int(i)).split(";")[0]))
+                           for i in lines.tolist()], bool)
+    # F_WORD on every F of the file at once (the file's characters are its bytes): not after a
+    # letter or '_', then [-+]? and a digit or '.' and a digit; before its line's first ';'
+    data = np.frombuffer(p.data, np.uint8)
+    pad = np.concatenate((data, np.zeros(3, np.uint8)))
+    at = np.flatnonzero((data == ord("F")) | (data == ord("f")))
+    before = np.where(at > 0, pad[at - 1], ord("\n"))
+    lower = before | 0x20                                   # a letter's lower case
+    after = at + 1 + ((pad[at + 1] == ord("+")) | (pad[at + 1] == ord("-")))
+
+    def digit(i):
+        return (pad[i] >= ord("0")) & (pad[i] <= ord("9"))
+    word = (~((lower >= ord("a")) & (lower <= ord("z"))) & (before != ord("_"))
+            & (digit(after) | ((pad[after] == ord(".")) & digit(after + 1))))
+    line_start = p.line_start
+    line_of = np.searchsorted(line_start, at, side="right") - 1
+    semis = np.append(np.flatnonzero(data == ord(";")), len(data))     # (a file without any)
+    first_semi = semis[np.searchsorted(semis, line_start[line_of])]
+    has = np.zeros(p.n_lines, bool)
+    has[line_of[word & (at < first_semi)]] = True
+    return has[lines]
+
+
+def _quiet(p: Program, lay: Layout, lines: PerLine, has_f: list) -> np.ndarray:
+    """(n,) bool: curve c printed unchanged right after curve c - 1 (unchanged), with the
+    original's lines between them, needs nothing written before it (``_emit_curves`` copies such
+    runs of curves as runs of lines). Its state lines: what c - 1 saw (``Writer.reissue`` made it
+    so, each command's keys in the original's order where the output holds no other key, which
+    ``_emit_curves`` checks) with the lines between applied, which are c's by ``states_at``. Its feature label: the
+    last label between them, else c - 1's where it has one. Its feed: the last the lines between
+    set (``Writer.copy_line``: every step does) within 1e-9 of c's, or c's first move sets F."""
+    n = len(lay.curve_l0)
+    quiet = np.zeros(n, bool)
+    if n < 2:
+        return quiet
+    n_lines = p.n_lines
+    l0 = lay.curve_l0
+    a, b = l0[:-1], l0[1:]              # the lines between: [a, b), curve c - 1 and its gap
+    idx = np.arange(n_lines)
+    # feed: the last line before b that sets it (c - 1 has a step, so it lies in [a, b))
+    fset = np.full(n_lines, np.nan)
+    steps = lay.step_of_line >= 0
+    fset[steps] = p.feed_mm_s[lay.step_of_line[steps]]
+    for i, eff in lines.effects.items():
+        if eff.feed_mm_s is not None:
+            fset[i] = eff.feed_mm_s
+    last_f = np.maximum.accumulate(np.where(np.isnan(fset), -1, idx))
+    fed = fset[last_f[b - 1]]
+    feed_ok = np.abs(fed - p.feed_mm_s[lay.curve_s0[1:]]) <= 1e-9
+    # feature: the last label line in [a, b), else c - 1's own
+    # (names compared, as ``_emit_curves`` does: each as the first index of its name)
+    names: dict = {}
+    for j, name in enumerate(p.feature_names):
+        names.setdefault(name, j)
+    canon = np.asarray([names[name] for name in p.feature_names] + [-1], np.int64)
+    label = np.full(n_lines, -2, np.int64)  # -2: no label; a name not a feature's: -3
+    for i, eff in lines.effects.items():
+        if eff.feature is not None:
+            label[i] = names.get(eff.feature, -3)
+    last_l = np.maximum.accumulate(np.where(label != -2, idx, -1))
+    at = last_l[b - 1]
+    fi = p.feature[lay.curve_s0]
+    fi = np.where(fi >= 0, canon[fi], -1)
+    seen = np.where(at >= a, label[np.maximum(at, 0)], fi[:-1])
+    feature_ok = (fi[1:] < 0) | ((seen >= 0) & (seen == fi[1:]))
+    # where the feed differs, c's first move may set F itself
+    quiet[1:] = feature_ok & (feed_ok | np.asarray(has_f[1:], bool))
+    return quiet
+
+
+def _curve(plan: _Plan, w: Writer, p: Program, lay: Layout, c: int, reverse: bool) -> None:
     """Curve c printed backwards (``reverse``) or from vertex ``seam``, move by move (in its
-    own order and direction ``_emit_curve`` copies it)."""
+    own order and direction ``_emit_curves`` copies it)."""
     a, b = int(lay.curve_s0[c]), int(lay.curve_s1[c])
     # neutral commands inside the curve (progress M73, messages M117) are not moves: written
     # move by move the curve would lose them, so they go first, in their order
@@ -303,9 +404,8 @@ def _curve(w: Writer, p: Program, lay: Layout, c: int, reverse: bool, seam: int)
     for k in range(bisect.bisect_right(cmd, int(lay.curve_l0[c])),
                    bisect.bisect_left(cmd, int(lay.curve_l1[c]))):
         w.copy_line(cmd[k])
-    steps = range(b - 1, a - 1, -1) if reverse else list(range(a + seam, b)) + list(range(a, a + seam))
-    for s in steps:
-        w.step(s, reverse)
+    j0 = plan.moves.first[c]
+    w.steps(plan.moves, j0, j0 + b - a, reverse)
 
 
 def _entry_mm(p: Program, lay: Layout, c: int, reverse: bool, seam: int) -> np.ndarray:

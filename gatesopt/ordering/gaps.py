@@ -24,6 +24,8 @@ from .layout import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION
 from .travel import TravelRule
 from .writer import Writer
 
+#: a gap's E-only steps (plain ints: an enum lookup per step is slow)
+E_MOVE_KINDS = (int(Kind.RETRACT), int(Kind.UNRETRACT))
 #: the gap lines a curve moved elsewhere leaves behind: feature labels and wipe markers are
 #: re-derived where it lands
 TYPE_OR_WIPE = re.compile(r"^\s*;\s*(TYPE:|FEATURE:|feature |WIPE_START|WIPE_END)", re.I)
@@ -263,7 +265,7 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
         copy(i)
     if limits is not None:
         w.reissue(*limits)
-    (tx, ty, tz), (x0, y0, z0) = target.tolist(), w.xyz.tolist()
+    (tx, ty, tz), (x0, y0, z0) = target.tolist(), (float(v) for v in w.xyz)
     dist = math.hypot(tx - x0, ty - y0)
     moving = dist > 1e-9 or abs(tz - z0) > 1e-9
     # the boundary gap's own retraction length where it retracted (a layer change may retract
@@ -286,7 +288,7 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
     for i in mid:
         copy(i)
     if moving:
-        x_now, y_now, z_now = w.xyz.tolist()
+        x_now, y_now, z_now = (float(v) for v in w.xyz)
         z_to = tz
         if retract and style.hop_mm > 0:
             z_up = max(z_now, z_to) + style.hop_mm
@@ -323,15 +325,19 @@ def reversed_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets
     g = _sort_lines(w, p, line_sets)
     a, b = int(lay.curve_s1[c]), int(lay.curve_s0[c + 1])
     emitted = 0.0
-    for s in range(b - 1, a - 1, -1):
-        d_e = float(p.end_mm[s, 3] - p.start_mm[s, 3])
-        feed = float(p.feed_mm_s[s])
-        if p.kind[s] in (Kind.RETRACT, Kind.UNRETRACT):
-            w.move_e(-d_e, feed, bool(p.relative_e[s]))
+    # (the steps' rows as floats, read once: numpy scalars per step were most of this)
+    start, end = p.start_mm[a:b].tolist(), p.end_mm[a:b].tolist()
+    offset, kind = p.offset_mm[a:b].tolist(), p.kind[a:b].tolist()
+    g0 = (p.line_number[p.line[a:b]] == 0).tolist()
+    feeds, relative = w.lines.step_feed, w.lines.step_relative_e
+    for j in range(b - a - 1, -1, -1):
+        s = a + j
+        d_e = end[j][3] - start[j][3]
+        if kind[j] in E_MOVE_KINDS:
+            w.move_e(-d_e, feeds[s], relative[s])
             emitted -= d_e
         else:
-            cmd = "G0" if p.line_number[p.line[s]] == 0 else "G1"
-            w.move_xyz(p.start_mm[s, :3], feed, cmd, p.offset_mm[s])
+            w.move_xyz(start[j][:3], feeds[s], "G0" if g0[j] else "G1", offset[j])
     if abs(g.net - emitted) > REVERSE_EPS:
         w.move_e(g.net - emitted, rule.style.unretract_feed_mm_s,
                  bool(p.relative_e[int(lay.curve_s0[c])]))

@@ -104,6 +104,14 @@ def kept_slower_note(n_layers: int) -> str:
 #: time (budget 10, workers 1, same machine and hour, CPU us per line before -> after:
 #: cura413_xend_zigzag100 free, 7 emits, 25.5 -> 19.7; the bunny safe 7.8 -> 6.0, free 15.4 ->
 #: 9.6; prusa25_xend_honey25_acp free 12.5 -> 9.9; real_ideamaker420 free 39 -> 28), so 0.8 x 15
+#: = 12 us. Since the emit copies runs of unchanged curves as runs of lines and writes re-ordered
+#: curves' numbers per layer at once (``ordering.writer``, the same text byte for byte), the
+#: guard (its emits, parses, planner runs) takes 0.73-0.86 of its CPU time and the work after the
+#: solve 0.76-0.91 with the verifier's time taken as before (bench/after_solve.py, the bunny and
+#: cura413_xend_zigzag100, both modes, load ~2.5 on 2 cores): 11 us would follow. Kept at 12: the
+#: whole-run check at that load (bench/ordering_as_printed.py, the bunny, auto, 2 workers) ended
+#: 10.5-11.5 s with 12 us as with 11 us, the solve itself 0.3-1.9 s past its budget; lower it
+#: after a quiet-machine run of every corpus file ends within the budget
 FINISH_S_PER_LINE = 12e-6
 #: and per file, whatever its size (imports on first use, the report)
 FINISH_FIXED_S = 0.15
@@ -169,7 +177,8 @@ class NoTimeToOrder(Exception):
 #: stage's file: its emits and planner runs), which only a run with a greedy stage pays and the
 #: finish estimate (``FINISH_S_PER_LINE``, measured with one stage) does not hold: 5.1 us on
 #: real_cura591 (44,755 lines: 0.14 s one stage, 0.36 s two), quiet machine; then 6 us, lowered
-#: by the ratio ``FINISH_S_PER_LINE`` was (its emits, parses and planner runs are the same work)
+#: by the ratio ``FINISH_S_PER_LINE`` was (its emits, parses and planner runs are the same work;
+#: after the faster emit the guard's ratio is at most 0.86 -- 4.3 us -- kept at 5 as that is)
 GUARD_STAGE_S_PER_LINE = 5e-6
 
 
