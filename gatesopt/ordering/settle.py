@@ -65,7 +65,9 @@ def settle_chain(problem: OrderingProblem, plans, picked: list) -> list:
                     first = int(gs.order[0])        # where the group before now ends
                     tied = end is not None and fixed is None
         else:
-            tied = to is not None and fixed is None
+            # (a fixed group, or one not proven, holds no claim on the next group's entry)
+            tied = (to is not None and fixed is None and bool(reorderable[g])
+                    and gs.status == Status.OPTIMAL)
         before = (entry, first)
         if grp.n_curves:
             entry = problem.exit_anchor(g, grp, gs.order)
