@@ -166,6 +166,7 @@ def _sort_lines(w: Writer, p: Program, line_sets) -> _GapLines:
     r_boundary = r_internal = 0.0
     net = 0.0
     cls_of, de_of, travel_of = w.line_cls, w.line_de, w.line_travel
+    marked = w.marker_moves
     gap: list[int] = []
     for lines, boundary in line_sets:
         lines = list(lines)
@@ -191,6 +192,11 @@ def _sort_lines(w: Writer, p: Program, line_sets) -> _GapLines:
                         r_boundary -= d_e
                     else:
                         r_internal -= d_e
+                if i in marked:
+                    # the layer's marker after this move's G-code (Slic3r's ``G1 Z1 F7800 ; move
+                    # to next layer (4)``): our travel replaces the move, its marker stays where
+                    # it was (``Writer.copy_gap_line``); dropped, the layers after it merged
+                    (pre if j < split_r else mid if j < split_t else post if j < split_u else late).append(i)
                 continue
             if cls[j] == LINE_CURVE:
                 continue
@@ -259,7 +265,7 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
     def copy(i: int) -> None:
         if i in net_before and abs(net_before[i] - emitted) > 1e-9:
             move_e(net_before[i] - emitted)
-        w.copy_line(i)
+        w.copy_gap_line(i)
 
     for i in pre:
         copy(i)
@@ -342,4 +348,4 @@ def reversed_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets
         w.move_e(g.net - emitted, rule.style.unretract_feed_mm_s,
                  bool(p.relative_e[int(lay.curve_s0[c])]))
     for i in g.pre + g.mid + g.post + g.late:
-        w.copy_line(i)
+        w.copy_gap_line(i)

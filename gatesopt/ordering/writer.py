@@ -24,6 +24,22 @@ F_WORD = re.compile(r"(?<![A-Za-z_])[Ff]([-+]?\d*\.?\d+)")
 TRAVEL_KINDS = (int(Kind.TRAVEL), int(Kind.ARC))
 
 
+def marker_moves(program: Program, lay: Layout) -> frozenset:
+    """Moves in gaps that carry their layer's marker after the G-code (``slicers.TRAILING``:
+    Slic3r's verbose ``G1 Z1.000 F7800.000 ; move to next layer (4)``), where the file's layers
+    come from markers. A rebuilt travel replaces such a move and must keep its marker: the output
+    is read by the same markers (verify, slicer previews, layer-based post-processors), and
+    without them its layers merge (Slic3r 1.3 with gcode_comments and retract_lift: layer 4's
+    walls printed in "layer 3", refused by verify)."""
+    if not program.layer_method.startswith("marker:"):
+        return frozenset()
+    lines = np.asarray(sorted(set(program.layer_line.tolist())), np.int64)
+    lines = lines[(lines >= 0) & (lines < program.n_lines)]
+    moves = lines[(lay.step_of_line[lines] >= 0) & (lay.line_class[lines] == LINE_MOTION)]
+    return frozenset(i for i in moves.tolist() if b";" in program.data[
+        program.line_start[i]:program.line_start[i + 1]])
+
+
 def gcode_number(v: float, nd: int) -> str:
     """``v`` with at most ``nd`` decimals, as slicers write numbers (no trailing zeros, ".5")."""
     return _short(("%.*f" % (nd, v)).rstrip("0").rstrip("."))
@@ -74,6 +90,7 @@ class PerLine:
     block_end: list         # per line: l1 where an absolute-E curve l0..l1 of extruding steps
     #                         starts (``copy_lines``' one-piece test), else -1
     e_split: dict           # per line whose E word was re-numbered: its text around the number
+    marker_moves: frozenset = frozenset()   # ``marker_moves``: moves carrying a layer marker
 
 
 class LineEffect(NamedTuple):
@@ -205,6 +222,7 @@ class Writer:
         self.line_cls, self.line_de, self.line_travel = L.line_cls, L.line_de, L.line_travel
         self.layer_lines, self.arc_steps, self.texts = L.layer_lines, L.arc_steps, L.texts
         self.command_lines, self.command_set = L.command_lines, L.command_set
+        self.marker_moves = L.marker_moves
         # neutral commands written so far: the k-th one written is the original's k-th (below)
         self.n_commands = 0
 
@@ -253,7 +271,8 @@ class Writer:
             commands, frozenset(commands), moves.tolist(), texts, text,
             program.line_start.tolist(), effects, np.flatnonzero(special).tolist() + [n],
             np.concatenate(([0], np.cumsum(renumber))).tolist(),
-            np.where(has, logical_e[s], 0.0).tolist(), block_end.tolist(), {})
+            np.where(has, logical_e[s], 0.0).tolist(), block_end.tolist(), {},
+            marker_moves(program, lay))
 
     # -- copying original lines -------------------------------------------------------------
     def copy_line(self, i: int) -> None:
@@ -293,6 +312,16 @@ class Writer:
         if not text.endswith("\n"):
             text += self.nl
         self.out.append(text)
+
+    def copy_gap_line(self, i: int) -> None:
+        """A line of a gap whose travel is rebuilt (``gaps.rebuilt_gap``, ``gaps.reversed_gap``):
+        copied, except a move of ``marker_moves``, whose layer marker alone is written, as a
+        comment line (the rebuilt travel makes the move)."""
+        if i in self.marker_moves:
+            text = self.texts[i]
+            self.write(text[text.index(";"):].rstrip("\r\n"))
+        else:
+            self.copy_line(i)
 
     def _renumbered(self, i: int, text: str, want: float) -> str:
         """Line i (a move, ``text``) with its E word saying ``want``."""
