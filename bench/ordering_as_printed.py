@@ -83,6 +83,7 @@ def audit_proofs(problem, solution) -> tuple[int, int]:
     it, to its own end (free, a fixed group's entry, the file's end) or to the next group's
     entry as the output prints it. Independent of the solve's bookkeeping (which start each
     proof was made for): the claims are checked on the printed order itself."""
+    import numpy as np
     from gatesopt.ordering import dp
     from gatesopt.ordering.chain import anchor_at, anchor_before, end_of, entry_positions
     from gatesopt.ordering.problem import OPTIMAL_ABS_TOL
@@ -98,6 +99,14 @@ def audit_proofs(problem, solution) -> tuple[int, int]:
         grp = problem.group(g, start, ends[0])
         if len(gs.order) != grp.n_curves or not (dp.fits(grp)
                                                  and dp.time_s(grp) <= AUDIT_DP_MAX_S):
+            continue
+        # (a layer the time guard put back prints the slicer's order, not the answer reported:
+        # the "proven groups reverted")
+        curves = np.asarray(problem.group_curves(g))[np.asarray(grp.cand_curve)[gs.order]]
+        if problem.curve_source is not None:
+            curves = np.asarray(problem.curve_source)[curves]
+        printed = np.asarray(solution.curve_order)[int(first[g]):int(first[g]) + len(curves)]
+        if not np.array_equal(curves, printed):
             continue
         if ends[0] is None and g + 1 < problem.n_groups and first[g + 1] < n:
             ends.append(anchor_at(problem, solution, int(first[g + 1])))

@@ -500,6 +500,7 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     best, _ = _stage(program, problem, base, solution,
                      differing_layers(problem, base.solution, solution, L), emitted)
     repaired = np.zeros(0, np.int64)
+    proved = solution       # the chain the solver's proofs were made in (before any repair)
     if repair is not None:
         lost = (differing_layers(problem, best.solution, solution, L)[:L]
                 & changed_layers(problem, solution)[:L] & proven_layers(problem, solution, L))
@@ -539,8 +540,11 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     # ``printed``'s entry). A layer put back keeps the solver's answers as they were (what it
     # proved, not printed: "proven groups reverted")
     put_back = source[glay] != FROM_SOLVER
-    entered = same_entry_groups(problem, final, solution) | put_back
-    exited = same_next_entries(problem, final, solution) | put_back
+    # (entries compared with the chain the proofs were made in: a layer repaired before a group
+    # moves its start even where the file prints the repaired layer; the repaired groups
+    # themselves are proven on the printed entry, ``+joined``)
+    entered = same_entry_groups(problem, final, proved) | put_back
+    exited = same_next_entries(problem, final, proved) | put_back
     first = entry_positions(problem, final)
     groups = tuple(printed_answer(problem, final, g, gs, a, first, x)
                    for g, (gs, a, x) in enumerate(zip(solution.groups, entered, exited)))
