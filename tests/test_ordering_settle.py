@@ -14,6 +14,7 @@ from gatesopt.ordering import OrderingOptions, dp, from_polylines, layers, settl
 from gatesopt.ordering.chain import BACKWARDS, KEPT, LOOKAHEAD_FROM, end_of, reprove
 from gatesopt.ordering.problem import OPTIMAL_ABS_TOL, Anchor
 from gatesopt.solvers import Status
+from gatesopt.verify.proofs import audit_proofs
 
 
 def strokes_problem(seed: int, n_groups: int = 8):
@@ -118,30 +119,6 @@ def test_settling_proves_more_and_prints_cheaper_than_proving_again_alone(monkey
         _chain_cost(p, o) for p, o in zip(probs, olds)) - 1e-6
 
 
-def _claims_hold(prob, final, groups) -> tuple[int, int]:
-    """(groups checked, groups reported optimal that are not): each re-orderable group reported
-    optimal must print the DP's optimum from where ``final`` enters it, to its own end (free, the
-    problem's) or to the next group's entry as ``final`` prints it."""
-    from gatesopt.ordering.chain import anchor_at, anchor_before, entry_positions
-    first = entry_positions(prob, final)
-    n = len(final.curve_order)
-    checked = bad = 0
-    for g, gs in enumerate(groups):
-        if not (prob.group_reorderable[g] and gs.status == Status.OPTIMAL) or first[g] >= n:
-            continue
-        if LOOKAHEAD_FROM in gs.formulation or BACKWARDS in gs.formulation:
-            continue
-        start = anchor_before(prob, final, int(first[g]))
-        ends = [end_of(prob, g)]
-        if ends[0] is None and g + 1 < prob.n_groups and first[g + 1] < n:
-            ends.append(anchor_at(prob, final, int(first[g + 1])))
-        checked += 1
-        bad += not any(prob.group(g, start, e).path_cost(gs.order)
-                       <= dp.solve(prob.group(g, start, e)).objective + OPTIMAL_ABS_TOL
-                       for e in ends)
-    return checked, bad
-
-
 def test_a_proof_for_the_next_groups_entry_holds_only_where_the_file_enters_that_group_so():
     # the time guard may print the layer after a group in another order (the slicer's here):
     # a group proven for the next group's entry as its end (``settle``) is then proven again
@@ -162,6 +139,6 @@ def test_a_proof_for_the_next_groups_entry_holds_only_where_the_file_enters_that
             groups = [printed_answer(prob, final, g, gs, a, first, x) if g != lay else
                       dataclasses.replace(gs, status=Status.FEASIBLE)
                       for g, (gs, a, x) in enumerate(zip(sol.groups, entered, exited))]
-            checked, bad = _claims_hold(prob, final, groups)
+            checked, bad = audit_proofs(prob, dataclasses.replace(final, groups=tuple(groups)))
             assert checked > 0 and bad == 0, (seed, lay)
     assert exits_moved > 0
