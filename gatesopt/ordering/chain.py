@@ -95,6 +95,12 @@ def look_ahead(problem: OrderingProblem, plans, fn, time_limit_s, deadline, kwar
 REPROVE_MAX_S = 0.01
 
 
+def quick_dp(grp) -> bool:
+    """Whether the subset DP takes ``grp`` in at most ``REPROVE_MAX_S`` (proofs made again where
+    a group prints: ``reprove``, ``settle``, ``guard.printed_answer``)."""
+    return dp.fits(grp) and dp.time_s(grp) <= REPROVE_MAX_S
+
+
 def reprove(problem: OrderingProblem, g: int, start: Anchor, end,
             gs: GroupSolution) -> GroupSolution:
     """Group g's answer ``gs`` (proven for another start or end than those it is printed with:
@@ -103,7 +109,7 @@ def reprove(problem: OrderingProblem, g: int, start: Anchor, end,
     takes the group in at most ``REPROVE_MAX_S`` -- optimal if its path costs the DP's optimum,
     else feasible with that optimum as its bound; elsewhere at best feasible, unpriced again."""
     grp = problem.group(g, start, end)
-    if len(gs.order) == grp.n_curves and dp.fits(grp) and dp.time_s(grp) <= REPROVE_MAX_S:
+    if len(gs.order) == grp.n_curves and quick_dp(grp):
         best = dp.solve(grp).objective
         cost = grp.path_cost(gs.order)
         status = Status.OPTIMAL if cost - best <= OPTIMAL_ABS_TOL else Status.FEASIBLE

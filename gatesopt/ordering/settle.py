@@ -20,7 +20,7 @@ import numpy as np
 
 from ..solvers import Status
 from . import dp
-from .chain import (BACKWARDS, KEPT, LOOKAHEAD_FROM, LOOKAHEAD_TO, REPROVE_MAX_S, end_of,
+from .chain import (BACKWARDS, KEPT, LOOKAHEAD_FROM, LOOKAHEAD_TO, end_of, quick_dp,
                     reprove)
 from .problem import OPTIMAL_ABS_TOL, Anchor, GroupSolution, OrderingProblem, same_anchor
 
@@ -47,7 +47,7 @@ def settle_chain(problem: OrderingProblem, plans, picked: list) -> list:
         to = printed_end(problem, plans, picked, g)
         # (a fallback -- a group the budget left no time for -- stays as it is: no search
         # after the budget; nor is an unproven group the DP cannot take quickly priced again)
-        unproven = gs.status == Status.FEASIBLE and _quick(grp)
+        unproven = gs.status == Status.FEASIBLE and quick_dp(grp)
         if reorderable[g] and (unproven or (gs.status == Status.OPTIMAL and (
                 gs.formulation.endswith(KEPT) or not proof_holds(problem, plans, picked, g, entry)))):
             nxt = next_entry(problem, plans, picked, g) if fixed is None else None
@@ -74,10 +74,6 @@ def settle_chain(problem: OrderingProblem, plans, picked: list) -> list:
     return picked
 
 
-def _quick(grp) -> bool:
-    return dp.fits(grp) and dp.time_s(grp) <= REPROVE_MAX_S
-
-
 def settle(problem: OrderingProblem, g: int, start: Anchor, gs: GroupSolution, first, fixed,
            nxt, to) -> tuple:
     """Group g's answer ``gs`` where the chain prints it, entered from ``start`` (from
@@ -95,7 +91,7 @@ def settle(problem: OrderingProblem, g: int, start: Anchor, gs: GroupSolution, f
     the next group's entry (``+kept``), 76 of 324 groups unproven where a DP path to the same
     entry was cheaper."""
     grp = problem.group(g, start, fixed)
-    if not (len(gs.order) == grp.n_curves and _quick(grp)):
+    if not (len(gs.order) == grp.n_curves and quick_dp(grp)):
         gs = reprove(problem, g, start, to, gs)
         return gs, gs.status == Status.OPTIMAL and to is not None and fixed is None
     best = dp.solve(grp)
@@ -134,11 +130,11 @@ def settle_pair(problem: OrderingProblem, a: int, start_a: Anchor, first_a, gs_a
     q = gs_a.order
     for _ in range(PAIR_TURNS):
         grp_b = problem.group(b, problem.exit_anchor(a, free_a, q), end_b)
-        if not _quick(grp_b):
+        if not quick_dp(grp_b):
             return None
         p = dp.solve(grp_b)
         grp_a = problem.group(a, start_a, problem.cand_anchor(b, grp_b, int(p.order[0])))
-        if not _quick(grp_a):
+        if not quick_dp(grp_a):
             return None
         qa = dp.solve(grp_a) if first_a is None else dp.solve(grp_a, first=int(first_a))
         if np.array_equal(qa.order, q):

@@ -36,9 +36,8 @@ import dataclasses
 
 import numpy as np
 
-from ..ordering import dp
-from ..ordering.chain import (BACKWARDS, KEPT, LOOKAHEAD_TO, REPROVE_MAX_S, anchor_at,
-                              anchor_before, end_of, entry_positions, reprove)
+from ..ordering.chain import (BACKWARDS, KEPT, LOOKAHEAD_TO, anchor_at, anchor_before, end_of,
+                              entry_positions, quick_dp, reprove)
 from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
 from ..ordering.problem import GroupSolution, OrderingProblem, OrderingSolution
@@ -386,9 +385,7 @@ def printed_answer(problem: OrderingProblem, final: OrderingSolution, g: int, gs
         return gs
     start = anchor_before(problem, final, int(first[g]))
     end = end_of(problem, g)
-    grp = problem.group(g, start, end)
-    quick = dp.fits(grp) and dp.time_s(grp) <= REPROVE_MAX_S
-    if entered_alike and not quick and not any(s in gs.formulation for s in (KEPT, LOOKAHEAD_TO)):
+    if entered_alike and not quick_dp(problem.group(g, start, end)) and not any(s in gs.formulation for s in (KEPT, LOOKAHEAD_TO)):
         return gs           # (proven for its own end: the next group's entry does not matter)
     got = reprove(problem, g, start, end, gs)
     n = len(final.curve_order)
