@@ -40,7 +40,7 @@ def test_run_measures_the_slowdown_and_the_ordering_gets_the_smaller_budget(monk
         seen["budget_s"] = budget_s
         return real(program, time_limit_s, workers, budget_s, *a, **kw)
     monkeypatch.setattr(pipeline, "_order_curves", spy)
-    monkeypatch.setattr(pipeline, "slowdown_factor", lambda started_s, cpu_started_s: 2.5)
+    monkeypatch.setattr(budget, "slowdown_factor", lambda *clocks: 2.5)
     program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
     o = GatingOptions(rotate="none")
     res = pipeline.run(program, o, budget_s=10.0, cpu_started_s=0.0)
@@ -50,8 +50,37 @@ def test_run_measures_the_slowdown_and_the_ordering_gets_the_smaller_budget(monk
 
 
 def test_no_time_left_keeps_the_slicers_order_and_says_so(monkeypatch):
-    monkeypatch.setattr(pipeline, "slowdown_factor", lambda started_s, cpu_started_s: budget.MAX_SLOWDOWN)
+    monkeypatch.setattr(budget, "slowdown_factor", lambda *clocks: budget.MAX_SLOWDOWN)
     program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
     res = pipeline.run(program, GatingOptions(rotate="none"), budget_s=0.5, cpu_started_s=0.0)
     assert res.report.ok and not res.ordered and "ordering_s" not in res.times
     assert any("curve ordering skipped" in n and "1/4.0 of a core" in n for n in res.notes)
+
+
+def test_a_first_run_counts_its_reading_at_the_quiet_rate():
+    # a first run (kernels compiled before the ordering) that read for 100 s at 1/50 of a core:
+    # counted as a quiet machine's reading, slowdown 1 (``budget_clock``)
+    t, slow = budget.budget_clock(0.0, 0.0, 100_000, now_s=100.0, compiled_s=35.0, cpu_now_s=2.0)
+    assert slow == 1.0
+    assert t == pytest.approx(100.0 - budget.READ_FIXED_S - 100_000 * budget.READ_S_PER_LINE)
+    # a later run (nothing compiled): as measured
+    t, slow = budget.budget_clock(0.0, 0.0, 100_000, now_s=100.0, compiled_s=0.0, cpu_now_s=2.0)
+    assert (t, slow) == (0.0, budget.MAX_SLOWDOWN)
+
+
+def test_a_first_run_stalled_before_the_ordering_still_orders(monkeypatch):
+    # README's first command on a fresh clone: 106 s of reading (35 s compiling, the rest
+    # waiting) made the run skip its ordering; a first run orders as a later quiet one does
+    import time
+    program = gatesopt.parse(PROJECT_INSTANCES / "square_grid_m82.gcode")
+    o = GatingOptions(rotate="none")
+    started = time.perf_counter() - 106.0
+    cpu = time.process_time() - 38.0
+    real = budget._jit.compile_s_since
+    for compiled_s, ordered in ((35.0, True), (0.0, False)):
+        monkeypatch.setattr(budget._jit, "compile_s_since",
+                            lambda t, c=compiled_s: c if t == started else real(t))
+        res = pipeline.run(program, o, budget_s=10.0, started_s=started, cpu_started_s=cpu)
+        assert res.report.ok and res.ordered == ordered, compiled_s
+        # the first run: no load read from its reading; the later one: 106 / 38 s as measured
+        assert res.summary()["slowdown"] == pytest.approx(1.0 if ordered else 106.0 / 38.0, rel=0.05)

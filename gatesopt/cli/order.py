@@ -63,7 +63,7 @@ def run(args) -> int:
     # a --budget counts from the command's start (``cli.clock``): imports, parse, all of it
     started_s = getattr(args, "started_s", None) or time.perf_counter()
     from ..ordering import OrderingOptions
-    from ..rewrite.budget import slowdown_factor
+    from ..rewrite.budget import budget_clock
     from ..rewrite.order import order_program
     positive_s(args.time_limit, "--time-limit")
     if args.budget is not None:
@@ -83,10 +83,13 @@ def run(args) -> int:
                             f"{program.n_layers - 1}")
     options = OrderingOptions(mode=args.order_mode, move_seams=args.move_seams,
                                     objective=args.objective)
-    deadline_s = None if args.budget is None else started_s + args.budget
     # the rest of a budgeted run is estimated at the rate this machine gave it so far, as
-    # ``gatesopt solve`` estimates it (a loaded machine: emit and verify take that much longer)
-    slow = 1.0 if args.budget is None else slowdown_factor(started_s, getattr(args, "cpu_started_s", None))
+    # ``gatesopt solve`` estimates it (a loaded machine: emit and verify take that much longer);
+    # a first run counts its reading at the quiet rate (``budget_clock``)
+    slow = 1.0
+    if args.budget is not None:
+        started_s, slow = budget_clock(started_s, getattr(args, "cpu_started_s", None), program.n_lines)
+    deadline_s = None if args.budget is None else started_s + args.budget
     with group_progress(wants_progress(), deadline_s=deadline_s, after="verifying") as progress:
         result = order_program(program, options, formulation=args.formulation,
                                time_limit_s=args.time_limit, budget_s=args.budget,

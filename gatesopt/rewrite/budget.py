@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import time
 
+from .. import _jit
 from ..program import Program
-from .order import FINISH_FIXED_S, FINISH_S_PER_LINE
+from .order import FINISH_FIXED_S, FINISH_S_PER_LINE, READ_S_PER_LINE
 
 #: seconds per input line of the stages after the ordering, without a rotation: the gating
 #: problem's build and dp solve, the emit, parsing the output, the verifier and the report's
@@ -43,6 +44,12 @@ AFTER_ORDER_FIXED_S = 0.3
 #: ``rewrite.order.stage_floor_s``)
 SLOWDOWN_PROBE_S = 0.5
 MAX_SLOWDOWN = 4.0
+#: a run that spent at least this many seconds compiling numba kernels before its ordering is a
+#: first run after an install or an update (``budget_clock``)
+FIRST_RUN_COMPILE_S = 1.0
+#: a file's reading, per file: interpreter start-up and imports, counted from the process's start
+#: (``cli.clock``; ~0.7 s measured on this project's 2-core machine, quiet, warm disk)
+READ_FIXED_S = 1.0
 
 
 def after_order_s(n_lines: int, rotate: bool) -> float:
@@ -63,6 +70,31 @@ def slowdown_factor(started_s: float, cpu_started_s: float | None, wall_now_s: f
     if wall < SLOWDOWN_PROBE_S or cpu <= 0.0:
         return 1.0
     return min(max(wall / cpu, 1.0), MAX_SLOWDOWN)
+
+
+def budget_clock(started_s: float, cpu_started_s: float | None, n_lines: int,
+                 now_s: float | None = None, compiled_s: float | None = None,
+                 cpu_now_s: float | None = None) -> tuple[float, float]:
+    """(the moment a whole-run budget counts from, ``slowdown_factor``), read before the curve
+    ordering of a run that started at ``started_s`` / ``cpu_started_s`` (``slowdown_factor``).
+
+    A later run: ``started_s`` and the wall / CPU ratio as measured. A first run after an install
+    or an update (at least ``FIRST_RUN_COMPILE_S`` of numba compiling so far, ``_jit``): its
+    reading counted at the quiet rate (``READ_FIXED_S`` + ``READ_S_PER_LINE`` per line) and a
+    slowdown of 1, so that it solves as a later run on a quiet machine does, as the CLI's note
+    says. What such a run measures on itself is no measure of load: a fresh clone's first
+    ``gatesopt solve`` (README's first command) read for 106 s, 35 s of it compiling and the rest
+    waiting (wall / CPU 2.8: the first imports and the kernel cache's writes, on a machine booted
+    a minute before), and skipped its ordering; the same command on a warm disk read for 37 s and
+    re-ordered. Compiling after this moment stays uncounted as before (``compile_s_since``).
+    ``now_s``, ``cpu_now_s``, ``compiled_s``: the clocks' and ``_jit``'s readings now (default:
+    read them)."""
+    now = time.perf_counter() if now_s is None else now_s
+    if compiled_s is None:
+        compiled_s = _jit.compile_s_since(started_s)
+    if compiled_s < FIRST_RUN_COMPILE_S:
+        return started_s, slowdown_factor(started_s, cpu_started_s, now, cpu_now_s)
+    return now - (READ_FIXED_S + READ_S_PER_LINE * int(n_lines)), 1.0
 
 
 def ordering_budget_s(budget_s: float, program: Program, options, formulation: str, gating: bool,

@@ -50,7 +50,7 @@ from ..parse import parse
 from ..program import Kind, Program
 from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
 from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
-from .budget import after_order_s, no_time_note, ordering_budget_s, slowdown_factor
+from .budget import after_order_s, budget_clock, no_time_note, ordering_budget_s
 from .figures import figures, print_time_s
 from .order import (READ_S_PER_LINE, NoTimeToOrder, greedy_work_budget_s, kept_slower_note,
                     order_summary, out_of_time_groups, out_of_time_note, reorder, stage_floor_s)
@@ -609,14 +609,16 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     times = Stages()
     times.add("read_s", time.perf_counter() - t0)
     slow = 1.0
+    budget_t0 = t0       # what the budget counts from (a first run: ``budget.budget_clock``)
+    if budget_s is not None:
+        budget_t0, slow = budget_clock(t0, cpu_started_s, program.n_lines)
     with stop_scope():
         base, ordered, order_problem, summarize = program, False, None, None
         ob = order_budget_s
         order_work_s = None
         if order and budget_s is not None:
-            slow = slowdown_factor(t0, cpu_started_s)
             # compiling numba kernels (a first run) is not charged to the budget (cli.progress)
-            spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
+            spent_s = time.perf_counter() - budget_t0 - _jit.compile_s_since(budget_t0)
             def ordering_share(spent, rate):
                 b = ordering_budget_s(budget_s, program, o, formulation, gating, spent, time_limit_s, rate)
                 if gating and _exact(formulation):
@@ -654,7 +656,8 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         planned0 = _Planned(program, o.firmware, o.printer, o.planner_family)
         if gating:
             if budget_s is not None and _exact(formulation):
-                time_limit_s = _gating_limit_in_budget(program, o, budget_s, t0, time_limit_s, slow, notes)
+                time_limit_s = _gating_limit_in_budget(program, o, budget_s, budget_t0, time_limit_s,
+                                                             slow, notes)
             with times.stage("report_s"):   # the time budget's reference: the file as given
                 limit_s = budget_limit_s(program, o, planned0)
             base, sol, em, rotation, out = _gate(base, o, formulation, time_limit_s, notes,
