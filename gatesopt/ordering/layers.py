@@ -63,8 +63,13 @@ def solve_greedy(problem: OrderingProblem, *, time_limit_s: float = 2.0,
     sol = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=budget_s, workers=workers,
                 progress=progress, built_groups=built)
     answers, matrices, handed = [], [], set()
-    for g, (grp, from_helper) in enumerate(built):
-        gs = sol.groups[g]
+    for g, (grp, from_helper, gs) in enumerate(built):
+        # the answer greedy made for ``grp`` itself, not the one its chain printed: the chain
+        # may print a path taken or proven for another start or end (``chain.pick_paths``,
+        # ``settle``), and a bound is shifted from the costs it was proven with
+        # (``GreedyAnswer.for_group``). Seen: a group settled to the next group's entry, its
+        # bound (1,676 ms, with the travel on) shifted as if from the free end -> "optimal" at
+        # 939.28 ms where the DP's optimum was 936.20 (plate__cura_ender3 free, the proof audit)
         fixed = problem.group_fixed[g] or grp.n_curves == 0
         answers.append(None if fixed else greedy_answer(grp, gs))
         c = grp.costs
@@ -90,8 +95,8 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     ``greedy``: a greedy pass of the same problem (``solve_greedy``): each group starts from its
     link matrix and greedy's path (the warm start), and a group the budget leaves no time for
     keeps greedy's path instead of the slicer's order (``runner.OUT_OF_TIME_GREEDY``), in the
-    helper process too. ``built_groups``: a list (Group, matrix from the helper?) of each group
-    is appended to, as solved (``solve_greedy``)."""
+    helper process too. ``built_groups``: a list (Group, matrix from the helper?, the solver's
+    answer for that Group) of each group is appended to, as solved (``solve_greedy``)."""
     record = formulations.lookup(formulation)
     if workers not in (1, 2):
         raise OrderingOptionsError(f"workers must be 1 or 2, not {workers!r}")
@@ -160,7 +165,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                         grp.check_order(gs.order)
             plans.append((grp, opts, pos, end))
             if built_groups is not None:
-                built_groups.append((grp, handed))
+                built_groups.append((grp, handed, opts[0]))
             runner.passed(g)
             if progress is not None:
                 proven += bool(reorderable[g]) and opts[0].status == Status.OPTIMAL
