@@ -84,3 +84,29 @@ def test_a_first_run_stalled_before_the_ordering_still_orders(monkeypatch):
         assert res.report.ok and res.ordered == ordered, compiled_s
         # the first run: no load read from its reading; the later one: 106 / 38 s as measured
         assert res.summary()["slowdown"] == pytest.approx(1.0 if ordered else 106.0 / 38.0, rel=0.05)
+
+
+def test_an_ordering_that_costs_energy_is_not_applied(monkeypatch):
+    """A re-ordering priced in print time can lengthen the travel; where the re-ordered, gated
+    print uses more energy than the file as given (a RepRapFirmware file: E-only gating saves
+    next to nothing), the run is made again in the slicer's order and says so: never a negative
+    saving from a default run. The "re-ordering" here is the file with one long detour added."""
+    import re
+    text = (PROJECT_INSTANCES / "star_lines_m82.gcode").read_text().replace(
+        "; gcode_flavor = marlin2", "; gcode_flavor = reprapfirmware")
+    lines = text.splitlines()
+    k = next(i for i, ln in enumerate(lines) if i > len(lines) // 2
+             and re.match(r"G1 X[\d.]+ Y[\d.]+ E", ln))
+    x, y = re.match(r"G1 X([\d.]+) Y([\d.]+)", lines[k]).groups()
+    detour = lines[:k + 1] + ["G0 X0 Y0", f"G0 X{x} Y{y}"] + lines[k + 1:]
+    program = gatesopt.parse(text, source="star (rrf)")
+    longer = gatesopt.parse("\n".join(detour) + "\n", source="star (detour)")
+    monkeypatch.setattr(pipeline, "_order_curves",
+                        lambda program, *a, **kw: (longer, True, None, None, None, 0.0))
+    res = pipeline.run(program, order=True)
+    assert res.report.ok and not res.ordered
+    assert res.report.energy_j <= res.report.energy_before_j
+    assert any("curve ordering not applied" in n for n in res.notes)
+    # gating alone, as the run again made it: the same energy
+    plain = pipeline.run(program, order=False)
+    assert res.report.energy_j == pytest.approx(plain.report.energy_j)
