@@ -19,7 +19,8 @@ import numpy as np
 
 from ..solvers import Interrupted, Status, stop_requested
 from . import formulations
-from .chain import end_of, look_ahead, path_options, pick_paths, rescored
+from .chain import (BACKWARDS, LOOKAHEAD_FROM, LOOKAHEAD_TO, end_of, look_ahead, path_options,
+                    pick_paths, rescored)
 from .helper import Helper
 from .matrix_helper import MatrixHelper, with_arc
 from .problem import (Anchor, GroupSolution, OrderingOptionsError, OrderingProblem,
@@ -63,15 +64,15 @@ def solve_greedy(problem: OrderingProblem, *, time_limit_s: float = 2.0,
     sol = solve(problem, "greedy", time_limit_s=time_limit_s, budget_s=budget_s, workers=workers,
                 progress=progress, built_groups=built)
     answers, matrices, handed = [], [], set()
-    for g, (grp, from_helper, gs) in enumerate(built):
-        # the answer greedy made for ``grp`` itself, not the one its chain printed: the chain
-        # may print a path taken or proven for another start or end (``chain.pick_paths``,
-        # ``settle``), and a bound is shifted from the costs it was proven with
-        # (``GreedyAnswer.for_group``). Seen: a group settled to the next group's entry, its
-        # bound (1,676 ms, with the travel on) shifted as if from the free end -> "optimal" at
-        # 939.28 ms where the DP's optimum was 936.20 (plate__cura_ender3 free, the proof audit)
+    for g, (grp, from_helper, priced_on, gs) in enumerate(built):
+        # greedy's answer with the start and end costs of the group its bound is for
+        # (``GreedyAnswer.for_group`` shifts the bound from those): the chain may print a path
+        # settled for another start or end (``settle``). Seen: a group settled to the next
+        # group's entry, its bound (1,676 ms, the travel on included) shifted as if from the
+        # free end -> "optimal" at 939.28 ms where the DP's optimum was 936.20
+        # (plate__cura_ender3 free, the proof audit)
         fixed = problem.group_fixed[g] or grp.n_curves == 0
-        answers.append(None if fixed else greedy_answer(grp, gs))
+        answers.append(None if fixed else greedy_answer(priced_on, gs))
         c = grp.costs
         arc = None if fixed or c is None or getattr(c, "euclidean", False) else c.arc
         matrices.append(arc)
@@ -95,8 +96,9 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     ``greedy``: a greedy pass of the same problem (``solve_greedy``): each group starts from its
     link matrix and greedy's path (the warm start), and a group the budget leaves no time for
     keeps greedy's path instead of the slicer's order (``runner.OUT_OF_TIME_GREEDY``), in the
-    helper process too. ``built_groups``: a list (Group, matrix from the helper?, the solver's
-    answer for that Group) of each group is appended to, as solved (``solve_greedy``)."""
+    helper process too. ``built_groups``: a list each group's (Group as planned, matrix from the
+    helper?, the Group an answer's cost and bound are for, that answer) is appended to
+    (``solve_greedy``)."""
     record = formulations.lookup(formulation)
     if workers not in (1, 2):
         raise OrderingOptionsError(f"workers must be 1 or 2, not {workers!r}")
@@ -165,7 +167,7 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
                         grp.check_order(gs.order)
             plans.append((grp, opts, pos, end))
             if built_groups is not None:
-                built_groups.append((grp, handed, opts[0]))
+                built_groups.append((grp, handed, opts))
             runner.passed(g)
             if progress is not None:
                 proven += bool(reorderable[g]) and opts[0].status == Status.OPTIMAL
@@ -182,7 +184,20 @@ def solve(problem: OrderingProblem, formulation: str = "auto", *, time_limit_s: 
     choice = pick_paths(problem, plans)
     picked = [opts[choice[g]] for g, (_, opts, _, _) in enumerate(plans)]
     # each group made right where the chain prints it (proven for its printed start and end)
-    picked = settle_chain(problem, plans, picked)
+    priced = [None] * len(plans)
+    picked = settle_chain(problem, plans, picked, priced)
+    if built_groups is not None:
+        # per group the answer printed and the group its cost and bound are for: the group as
+        # planned for an option made on it, the start and end it was settled for, else the
+        # solver's own answer on the group as planned (``solve_greedy``)
+        for g, (grp, handed, opts) in enumerate(built_groups):
+            if any(picked[g] is o for o in opts) and not any(
+                    t in picked[g].formulation for t in (BACKWARDS, LOOKAHEAD_FROM, LOOKAHEAD_TO)):
+                built_groups[g] = (grp, handed, grp, picked[g])
+            elif priced[g] is not None:
+                built_groups[g] = (grp, handed, problem.group(g, *priced[g]), picked[g])
+            else:
+                built_groups[g] = (grp, handed, grp, opts[0])
     for g, (grp, _, _, _) in enumerate(plans):
         gs = picked[g]
         curves = problem.group_curves(g)

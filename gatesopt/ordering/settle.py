@@ -30,11 +30,13 @@ SETTLED = "+settled"
 PAIR_TURNS = 4
 
 
-def settle_chain(problem: OrderingProblem, plans, picked: list) -> list:
+def settle_chain(problem: OrderingProblem, plans, picked: list, priced: list | None = None) -> list:
     """``picked`` (per group the answer the chain DP took, ``plans`` as ``layers.solve`` keeps
     them) with each re-orderable group whose answer is not proven where it prints settled there
     (``settle``), in print order: each group's start is the exit of the group before as
-    settled."""
+    settled. ``priced``: a list of ``len(plans)`` Nones, where each answer settled gets the
+    (start, end) anchors its cost and bound are for, None where not known (``layers.solve_greedy``
+    hands them on with the answer: a bound holds for the costs it was proven with)."""
     picked = list(picked)
     reorderable = problem.group_reorderable
     entry = Anchor.of(problem.origin_xy)       # where the chain picked enters each group
@@ -51,15 +53,19 @@ def settle_chain(problem: OrderingProblem, plans, picked: list) -> list:
         if reorderable[g] and (unproven or (gs.status == Status.OPTIMAL and (
                 gs.formulation.endswith(KEPT) or not proof_holds(problem, plans, picked, g, entry)))):
             nxt = next_entry(problem, plans, picked, g) if fixed is None else None
-            gs, tied = settle(problem, g, entry, gs, first, fixed, nxt, to)
+            gs, tied, end_priced = settle(problem, g, entry, gs, first, fixed, nxt, to)
             picked[g] = gs
+            if priced is not None:
+                priced[g] = None if end_priced is False else (entry, end_priced)
             if (first is not None and gs.status != Status.OPTIMAL and before is not None
                     and reorderable[g - 1]):
                 end = fixed if fixed is not None else nxt
                 pair = settle_pair(problem, g - 1, before[0], before[1], picked[g - 1], g, end, gs)
                 if pair is not None:
-                    picked[g - 1], gs = pair
+                    picked[g - 1], gs, on_a, on_b = pair
                     picked[g] = gs
+                    if priced is not None:
+                        priced[g - 1], priced[g] = on_a, on_b
                     entry = problem.exit_anchor(g - 1, problem.group(g - 1, before[0]),
                                                 picked[g - 1].order)
                     first = int(gs.order[0])        # where the group before now ends
@@ -87,20 +93,24 @@ def settle(problem: OrderingProblem, g: int, start: Anchor, gs: GroupSolution, f
     start is the group before's exit, the end the group after's entry), so the chain only gets
     cheaper. With ``first``: the cheapest path from it, optimal where it costs the DP's optimum.
     Elsewhere ``chain.reprove`` for the end the path was taken for (``to``: ``printed_end``).
+    Returns (the answer, tied, the end its cost and bound are for from ``start``: an Anchor or
+    None (free); False where not known).
     Seen on fresh PrusaSlicer output in free mode: the slicer's order taken by the chain DP for
     the next group's entry (``+kept``), 76 of 324 groups unproven where a DP path to the same
     entry was cheaper."""
     grp = problem.group(g, start, fixed)
     if not (len(gs.order) == grp.n_curves and quick_dp(grp)):
         gs = reprove(problem, g, start, to, gs)
-        return gs, gs.status == Status.OPTIMAL and to is not None and fixed is None
+        return gs, gs.status == Status.OPTIMAL and to is not None and fixed is None, False
     best = dp.solve(grp)
     cost = grp.path_cost(gs.order)
     if cost - best.objective <= OPTIMAL_ABS_TOL:
         return GroupSolution.make(gs.order, cost, cost, Status.OPTIMAL, gs.solve_s,
-                                  gs.formulation), False
+                                  gs.formulation), False, fixed
     tied = fixed is None and nxt is not None
+    end = fixed
     if tied:
+        end = nxt
         grp = problem.group(g, start, nxt)
         best = dp.solve(grp)
         cost = grp.path_cost(gs.order)
@@ -110,7 +120,7 @@ def settle(problem: OrderingProblem, g: int, start: Anchor, gs: GroupSolution, f
         order, cost, form = cand.order, cand.objective, _settled(gs.formulation)
     status = Status.OPTIMAL if cost - best.objective <= OPTIMAL_ABS_TOL else Status.FEASIBLE
     return (GroupSolution.make(order, cost, min(best.objective, cost), status, gs.solve_s, form),
-            tied and status == Status.OPTIMAL)
+            tied and status == Status.OPTIMAL, end)
 
 
 def settle_pair(problem: OrderingProblem, a: int, start_a: Anchor, first_a, gs_a: GroupSolution,
@@ -120,8 +130,9 @@ def settle_pair(problem: OrderingProblem, a: int, start_a: Anchor, first_a, gs_a
     from that entry than its optimum: b's optimum from a's exit, then a's optimum to that
     optimum's entry, in turn, until a's path no longer changes (at most ``PAIR_TURNS``): then b
     is optimal from a's exit and a is to b's entry (at the optimum of paths from ``first_a``).
-    The two answers, or None where the turns do not settle, a group is not quick for the DP, or
-    the two cost more together than ``gs_a`` and ``gs_b``."""
+    The two answers and the (start, end) each is priced and bounded for, or None where the turns
+    do not settle, a group is not quick for the DP, or the two cost more together than ``gs_a``
+    and ``gs_b``."""
     free_a = problem.group(a, start_a)
     if len(gs_a.order) != free_a.n_curves or not len(gs_a.order):
         return None
@@ -150,7 +161,8 @@ def settle_pair(problem: OrderingProblem, a: int, start_a: Anchor, first_a, gs_a
                                _settled(gs_a.formulation))
     new_b = GroupSolution.make(p.order, p.objective, p.objective, Status.OPTIMAL, gs_b.solve_s,
                                _settled(gs_b.formulation))
-    return new_a, new_b
+    entry_b = problem.cand_anchor(b, grp_b, int(p.order[0]))
+    return new_a, new_b, (start_a, entry_b), (problem.exit_anchor(a, free_a, q), end_b)
 
 
 def _settled(formulation: str) -> str:
