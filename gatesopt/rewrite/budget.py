@@ -97,6 +97,33 @@ def budget_clock(started_s: float, cpu_started_s: float | None, n_lines: int,
     return now - (READ_FIXED_S + READ_S_PER_LINE * int(n_lines)), 1.0
 
 
+#: with ``budget_s`` and an exact gating formulation (milp, cpsat), the share of what the budget
+#: would leave the curve ordering that goes to the gating solves instead
+EXACT_GATING_SHARE = 0.5
+#: the least time limit the budget leaves an exact gating solve (it then answers with its warm
+#: start, dp's answer, and says it stopped on its time limit)
+MIN_EXACT_GATING_S = 0.5
+
+
+def gating_limit_s(program: Program, o, budget_s: float, t0: float, time_limit_s, slow: float,
+                   notes: list):
+    """The exact gating solves' time limit (``o``: the run's ``GatingOptions``) within the whole run's ``budget_s`` (counted from
+    ``t0``): what is left after the time spent and the estimate of building, rotating, emitting
+    and checking (``budget.after_order_s``, at the machine's ``slow`` rate), at most
+    ``time_limit_s``, at least ``MIN_EXACT_GATING_S``; a note where it is less than
+    ``time_limit_s``. So that the run's time, solves included, is the budget's (issue 37)."""
+    rotate = o.rotate != "none" and not (not isinstance(o.rotate, str) and float(o.rotate) % 360.0 == 0.0)
+    spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
+    left_s = budget_s - spent_s - slow * after_order_s(max(int(program.n_lines), int(program.n_steps)), rotate)
+    limit = max(left_s, MIN_EXACT_GATING_S)
+    if time_limit_s is not None and limit >= float(time_limit_s):
+        return time_limit_s
+    notes.append(f"gating: the {budget_s:g} s budget (--budget) leaves the solver {limit:.1f} s"
+                 + (f" of its {float(time_limit_s):g} s time limit" if time_limit_s is not None else "")
+                 + " (a larger --budget gives it more)")
+    return limit
+
+
 def ordering_budget_s(budget_s: float, program: Program, options, formulation: str, gating: bool,
                       spent_s: float, time_limit_s: float | None = None, slow: float = 1.0) -> float:
     """What a whole-run ``budget_s`` leaves the curve ordering (build, solve, emit), ``spent_s``

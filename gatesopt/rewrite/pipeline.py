@@ -13,7 +13,7 @@ together, warm starts and model building included; ``budget_s`` is the whole run
 ``started_s`` (the caller's clock reading before it read the file) to the verified output, every
 solve included: the ordering's solve gets what the rest is estimated to leave
 (``budget.ordering_budget_s``), less a share for an exact gating formulation's search, which gets
-what is left of the budget when it starts, at most ``time_limit_s`` (``_gating_limit_in_budget``).
+what is left of the budget when it starts, at most ``time_limit_s`` (``budget.gating_limit_s``).
 
 The time budget (``GatingOptions.max_added_time_pct``) is on the print time the user will see: the
 output's planner time (``figures.print_time_s``, the one print time every report gives) at most
@@ -50,7 +50,8 @@ from ..parse import parse
 from ..program import Kind, Program
 from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
 from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
-from .budget import after_order_s, budget_clock, no_time_note, ordering_budget_s
+from .budget import (EXACT_GATING_SHARE, budget_clock, gating_limit_s, no_time_note,
+                     ordering_budget_s)
 from .figures import figures, print_time_s
 from .order import (READ_S_PER_LINE, NoTimeToOrder, greedy_work_budget_s, kept_slower_note,
                     order_summary, out_of_time_groups, out_of_time_note, reorder, stage_floor_s)
@@ -533,38 +534,11 @@ def _verify_run(program: Program, ordered_base: Program, out: Program, o: Gating
     return rep, extra
 
 
-#: with ``budget_s`` and an exact gating formulation (milp, cpsat), the share of what the budget
-#: would leave the curve ordering that goes to the gating solves instead
-EXACT_GATING_SHARE = 0.5
-#: the least time limit the budget leaves an exact gating solve (it then answers with its warm
-#: start, dp's answer, and says it stopped on its time limit)
-MIN_EXACT_GATING_S = 0.5
-
-
 def _exact(formulation: str) -> bool:
     """True for a gating formulation whose search runs until its time limit (milp, cpsat)."""
     from ..gating.solve import FORMULATIONS
     f = FORMULATIONS.get(formulation)
     return f is not None and "exact" in f.capabilities
-
-
-def _gating_limit_in_budget(program: Program, o: GatingOptions, budget_s: float, t0: float,
-                            time_limit_s, slow: float, notes: list):
-    """The exact gating solves' time limit within the whole run's ``budget_s`` (counted from
-    ``t0``): what is left after the time spent and the estimate of building, rotating, emitting
-    and checking (``budget.after_order_s``, at the machine's ``slow`` rate), at most
-    ``time_limit_s``, at least ``MIN_EXACT_GATING_S``; a note where it is less than
-    ``time_limit_s``. So that the run's time, solves included, is the budget's (issue 37)."""
-    rotate = o.rotate != "none" and not (not isinstance(o.rotate, str) and float(o.rotate) % 360.0 == 0.0)
-    spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
-    left_s = budget_s - spent_s - slow * after_order_s(max(int(program.n_lines), int(program.n_steps)), rotate)
-    limit = max(left_s, MIN_EXACT_GATING_S)
-    if time_limit_s is not None and limit >= float(time_limit_s):
-        return time_limit_s
-    notes.append(f"gating: the {budget_s:g} s budget (--budget) leaves the solver {limit:.1f} s"
-                 + (f" of its {float(time_limit_s):g} s time limit" if time_limit_s is not None else "")
-                 + " (a larger --budget gives it more)")
-    return limit
 
 
 def order_formulation_of(gating_formulation: str) -> str:
@@ -659,7 +633,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         planned0 = _Planned(program, o.firmware, o.printer, o.planner_family)
         if gating:
             if budget_s is not None and _exact(formulation):
-                time_limit_s = _gating_limit_in_budget(program, o, budget_s, budget_t0, time_limit_s,
+                time_limit_s = gating_limit_s(program, o, budget_s, budget_t0, time_limit_s,
                                                              slow, notes)
             with times.stage("report_s"):   # the time budget's reference: the file as given
                 limit_s = budget_limit_s(program, o, planned0)
