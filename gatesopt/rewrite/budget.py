@@ -52,6 +52,13 @@ FIRST_RUN_COMPILE_S = 1.0
 READ_FIXED_S = 1.0
 
 
+def rotates(options) -> bool:
+    """Whether gating with ``options`` (``GatingOptions``) may turn the print: a rotation not
+    "none" nor a whole turn (the rotated text is rendered, parsed and solved again)."""
+    r = options.rotate
+    return r != "none" and not (not isinstance(r, str) and float(r) % 360.0 == 0.0)
+
+
 def after_order_s(n_lines: int, rotate: bool) -> float:
     """Estimated seconds of a run after its ordering (module docstring)."""
     return AFTER_ORDER_FIXED_S + n_lines * (AFTER_ORDER_S_PER_LINE + (ROTATE_S_PER_LINE if rotate else 0.0))
@@ -112,7 +119,7 @@ def gating_limit_s(program: Program, o, budget_s: float, t0: float, time_limit_s
     and checking (``budget.after_order_s``, at the machine's ``slow`` rate), at most
     ``time_limit_s``, at least ``MIN_EXACT_GATING_S``; a note where it is less than
     ``time_limit_s``. So that the run's time, solves included, is the budget's (issue 37)."""
-    rotate = o.rotate != "none" and not (not isinstance(o.rotate, str) and float(o.rotate) % 360.0 == 0.0)
+    rotate = rotates(o)
     spent_s = time.perf_counter() - t0 - _jit.compile_s_since(t0)
     left_s = budget_s - spent_s - slow * after_order_s(max(int(program.n_lines), int(program.n_steps)), rotate)
     limit = max(left_s, MIN_EXACT_GATING_S)
@@ -131,8 +138,7 @@ def ordering_budget_s(budget_s: float, program: Program, options, formulation: s
     rates (``slowdown_factor``). ``rewrite.order.solve_budget_s`` keeps at least a share of it for the
     solve however little is left."""
     n = max(int(program.n_lines), int(program.n_steps))
-    rotate = gating and options is not None and options.rotate != "none" and not (
-        not isinstance(options.rotate, str) and float(options.rotate) % 360.0 == 0.0)
+    rotate = gating and options is not None and rotates(options)
     rest = after_order_s(n, rotate) if gating else AFTER_ORDER_FIXED_S + n * AFTER_ORDER_S_PER_LINE / 2
     # the ordering's own emit (``rewrite.order.solve_budget_s`` estimates it at quiet rates)
     emit = FINISH_FIXED_S + FINISH_S_PER_LINE * int(program.n_lines)
