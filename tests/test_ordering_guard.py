@@ -204,6 +204,7 @@ def test_with_a_greedy_solution_each_layer_prints_the_fastest_of_the_three_order
              & guard.same_next_entries(prob, res.solution, other))
     entered = (guard.same_entry_groups(prob, res.solution, sol)
                & guard.same_next_entries(prob, res.solution, sol))
+    put_back = 0
     for g, grp, order in _printed_starts(prob, res.solution):
         gs, L = res.solution.groups[g], prob.group_layer[g]
         to_next = _to_next(prob, res.solution, g)
@@ -212,8 +213,18 @@ def test_with_a_greedy_solution_each_layer_prints_the_fastest_of_the_three_order
             # entered otherwise): its path, proven again from there (or not)
             assert np.array_equal(gs.order, sol.groups[g].order)
             _reproved_as_printed(grp, order, gs, sol.groups[g], to_next)
-        elif res.source[L] != guard.FROM_GREEDY:
+        elif res.source[L] == guard.FROM_SOLVER:
             assert gs is sol.groups[g]
+        elif res.source[L] == guard.FROM_SLICER:
+            was = sol.groups[g]
+            ident = np.flatnonzero(~np.asarray(grp.cand_reversed) & (np.asarray(grp.cand_seam) == 0))
+            if decided[g] and was.status == "optimal" and not np.array_equal(ident, was.order):
+                put_back += 1
+                # a proof in a layer put back: reported with the slicer's path it prints,
+                # proven only where the subset DP finds that path an optimum from there
+                _put_back_as_printed(grp, gs)
+            else:
+                assert gs is was
         elif decided[g] and alike[g]:
             # entered (and left) as in greedy's chain: greedy's answer as it was, its proof
             assert gs is other.groups[g]
@@ -221,6 +232,20 @@ def test_with_a_greedy_solution_each_layer_prints_the_fastest_of_the_three_order
             assert gs.formulation == guard.GREEDY_TAKEN
             assert np.array_equal(gs.order, other.groups[g].order)
             _reproved_as_printed(grp, order, gs, other.groups[g], to_next)
+    assert put_back == res.proofs_put_back
+
+
+def _put_back_as_printed(grp, gs):
+    """A proven group of a layer the guard put back (``guard.put_back_answer``): its answer is
+    the slicer's path, priced where printed; optimal only if the subset DP's optimum."""
+    from gatesopt.ordering import dp
+    from gatesopt.ordering.chain import KEPT
+    ident = np.flatnonzero(~np.asarray(grp.cand_reversed) & (np.asarray(grp.cand_seam) == 0))
+    assert gs.formulation.endswith(KEPT) and np.array_equal(gs.order, ident)
+    assert gs.objective == pytest.approx(grp.path_cost(ident))
+    best = dp.solve(grp).objective
+    assert (gs.status == "optimal") == (gs.objective <= best + 1e-6)
+    assert gs.bound <= gs.objective + 1e-9
 
 
 def _reproved_as_printed(grp, order, gs, was, to_next=None, entered_alike=False):

@@ -6,18 +6,22 @@ those costs; the repair never makes a layer slower than the file printed without
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 
 import gatesopt
 from gatesopt.ordering import OrderingOptions, build, solve
 from gatesopt.ordering.emitter import emit
+from gatesopt.ordering.chain import KEPT, anchor_before, end_of, entry_positions
 from gatesopt.ordering.formulations import group_solver
 from gatesopt.ordering.problem import GroupSolution
 from gatesopt.ordering.repair import REPAIRED, can_repair, planner_priced, resolve_layers
 from gatesopt.rewrite import guard
+from gatesopt.rewrite import order as order_mod
 from gatesopt.rewrite.order import repair_pass
 from gatesopt.solvers import Status
+from gatesopt.verify.proofs import audit_proofs
 
 from test_ordering_cost_planner import _corpus
 
@@ -48,11 +52,60 @@ def test_planner_priced_joins_classic_jerk_links_only_where_they_were_not():
     assert planner_priced(prog, joined) is None and not can_repair(joined)
 
 
+def test_a_put_back_layer_reports_the_path_it_prints_not_the_proof_it_reverted():
+    prog, prob, sol = _cubic()
+    old = guard.emit_guarded(prog, prob, sol)
+    # without the repair pass a layer with a proven group is put back ...
+    assert _proven_in(prob, sol, old.kept) >= 1
+    first = entry_positions(prob, old.solution)
+    demoted = 0
+    for g, gs in enumerate(old.solution.groups):
+        if not prob.group_reorderable[g] or int(prob.group_layer[g]) not in set(old.kept.tolist()):
+            continue
+        # ... and each of its groups reports the slicer's path it prints, priced where printed
+        grp = prob.group(g, anchor_before(prob, old.solution, int(first[g])), end_of(prob, g))
+        path = guard.printed_path(prob, old.solution, g, grp, first)
+        assert path is not None and np.array_equal(gs.order, path)
+        assert abs(gs.objective - grp.path_cost(path)) <= 1e-9 * max(1.0, gs.objective)
+        if sol.groups[g].status == Status.OPTIMAL and not np.array_equal(sol.groups[g].order, path):
+            # the model's proof the planner disagreed with: not reported as proven
+            assert gs.status == Status.FEASIBLE and gs.formulation.endswith(KEPT)
+            assert gs.bound <= gs.objective
+            demoted += 1
+    assert demoted >= 1 and _proven_in(prob, old.solution, old.kept) == 0
+    # every proof reported is the subset DP's optimum where printed
+    assert audit_proofs(prob, old.solution)[1] == 0
+
+
+def test_the_repair_pass_runs_past_the_budgets_end():
+    prog, prob, sol = _cubic()
+    old = guard.emit_guarded(prog, prob, sol)
+    late = repair_pass(prog, prob, "auto", deadline_s=time.perf_counter() - 100.0)
+    new = guard.emit_guarded(prog, prob, sol, repair=late)
+    assert len(old.kept) and set(old.kept.tolist()) <= set(new.repaired.tolist())
+    assert not set(old.kept.tolist()) & set(new.kept.tolist())
+
+
+def test_greedys_answer_taken_for_want_of_time_gets_the_repair_pass_too(monkeypatch):
+    prog = _corpus("real_cura410_cubic")
+    seen = []
+    real = order_mod.emit_guarded
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("repair"))
+        return real(*args, **kwargs)
+    # no time left after greedy: its answer is printed (``guard.GREEDY_TAKEN``), repaired alike
+    monkeypatch.setattr(order_mod, "solve_budget_s", lambda *a, **k: 1e-9)
+    monkeypatch.setattr(order_mod, "emit_guarded", spy)
+    _, _, got = order_mod.reorder(prog, OrderingOptions(mode="safe"), budget_s=10.0)
+    assert len(seen) == 1 and callable(seen[0])
+    assert np.all(got.source != guard.FROM_SOLVER)       # (greedy's answer, not an exact one)
+
+
 def test_a_reverted_proven_layer_is_solved_again_and_kept_reordered():
     prog, prob, sol = _cubic()
     old = guard.emit_guarded(prog, prob, sol)
-    # the old guard: a layer with a proven group put back (a "proven group reverted")
-    assert _proven_in(prob, old.solution, old.kept) >= 1
+    assert _proven_in(prob, sol, old.kept) >= 1
     new = guard.emit_guarded(prog, prob, sol, repair=repair_pass(prog, prob, "auto"))
     assert set(old.kept.tolist()) <= set(new.repaired.tolist())
     assert _proven_in(prob, new.solution, new.kept) == 0

@@ -36,11 +36,13 @@ import dataclasses
 
 import numpy as np
 
+from ..ordering import dp
+from ..ordering.bounds import lower_bound
 from ..ordering.chain import (BACKWARDS, KEPT, LOOKAHEAD_TO, anchor_at, anchor_before, end_of,
                               entry_positions, quick_dp, reprove)
 from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
-from ..ordering.problem import GroupSolution, OrderingProblem, OrderingSolution
+from ..ordering.problem import OPTIMAL_ABS_TOL, GroupSolution, OrderingProblem, OrderingSolution
 from ..ordering.repair import REPAIRED
 from ..parse import parse
 from ..planner import planned_durations_s
@@ -76,6 +78,10 @@ class Guarded:
     #: layers whose groups the repair pass solved again (``emit_guarded(repair=...)``): the
     #: solver's order was put back there although a group in it was proven optimal
     repaired: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
+    #: groups proven optimal on the model's costs whose layer prints the slicer's order (the
+    #: planner found it faster, after any repair): reported with the path printed
+    #: (``put_back_answer``), not as proven
+    proofs_put_back: int = 0
 
     def __iter__(self):     # (solution, text, output, kept), as the guard returned it before
         return iter((self.solution, self.text, self.output, self.kept))
@@ -397,6 +403,46 @@ def printed_answer(problem: OrderingProblem, final: OrderingSolution, g: int, gs
     return got
 
 
+def printed_path(problem: OrderingProblem, final: OrderingSolution, g: int, grp,
+                 first: np.ndarray) -> np.ndarray | None:
+    """Group g's path as ``final`` prints it, in ``grp``'s candidates (``problem.group(g, ...)``):
+    its curves from position ``first[g]`` on, each with the candidate of its direction and seam;
+    None where ``final`` does not print the group's curves there as one run."""
+    n = grp.n_curves
+    at = int(first[g])
+    curves = np.asarray(problem.group_curves(g), np.int64)[np.asarray(grp.cand_curve, np.int64)]
+    if problem.curve_source is not None:
+        curves = np.asarray(problem.curve_source, np.int64)[curves]
+    cand = {(int(c), bool(r), int(s)): k for k, (c, r, s) in
+            enumerate(zip(curves, np.asarray(grp.cand_reversed, bool), np.asarray(grp.cand_seam)))}
+    order = np.asarray(final.curve_order, np.int64)[at:at + n]
+    if len(order) != n:
+        return None
+    rev = np.asarray(final.curve_reversed, bool)[order]
+    seam = np.asarray(final.curve_seam, np.int64)[order]
+    path = [cand.get((int(c), bool(r), int(s))) for c, r, s in zip(order, rev, seam)]
+    return None if any(k is None for k in path) else np.asarray(path, np.int64)
+
+
+def put_back_answer(problem: OrderingProblem, final: OrderingSolution, g: int, gs: GroupSolution,
+                    first: np.ndarray) -> GroupSolution:
+    """Group g's answer where ``final`` prints its layer in the slicer's order although ``gs``
+    (a proven path) is another one: the printed path, priced from where ``final`` enters it to
+    its own end (``end_of``), optimal only where the subset DP finds it an optimum there
+    (``chain.quick_dp``), else feasible with the DP's optimum or the cheap bound
+    (``bounds.lower_bound``) as its bound; formulation ``gs``'s + ``KEPT``. ``gs`` itself where
+    ``final`` prints ``gs``'s path."""
+    grp = problem.group(g, anchor_before(problem, final, int(first[g])), end_of(problem, g))
+    path = printed_path(problem, final, g, grp, first)
+    if path is None or np.array_equal(path, gs.order):
+        return gs
+    cost = grp.path_cost(path)
+    bound = dp.solve(grp).objective if quick_dp(grp) else lower_bound(grp)
+    status = Status.OPTIMAL if cost - bound <= OPTIMAL_ABS_TOL else Status.FEASIBLE
+    form = gs.formulation if gs.formulation.endswith(KEPT) else gs.formulation + KEPT
+    return GroupSolution.make(path, cost, min(bound, cost), status, gs.solve_s, form)
+
+
 def same_next_entries(problem: OrderingProblem, a: OrderingSolution,
                       b: OrderingSolution) -> np.ndarray:
     """(n_groups,) bool: groups after which ``a`` and ``b`` enter the next group alike -- its
@@ -534,8 +580,7 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     # layer after one put back or printed in greedy's order may start from another curve), and
     # left for the next group's entry as its chain left them (a proof made for that entry); not
     # checked: a path solved backwards (its start free) and a repaired one (solved from
-    # ``printed``'s entry). A layer put back keeps the solver's answers as they were (what it
-    # proved, not printed: "proven groups reverted")
+    # ``printed``'s entry). A layer put back: its answers are what it prints (``put_back_answer``)
     put_back = source[glay] != FROM_SOLVER
     # (entries compared with the chain the proofs were made in: a layer repaired before a group
     # moves its start even where the file prints the repaired layer; the repaired groups
@@ -562,10 +607,19 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
         groups = tuple((greedys(g, gg, a, x) if d else gg) if t else gs
                        for g, (gs, gg, t, d, a, x) in enumerate(zip(groups, greedy.groups, at,
                                                                     decided, alike, left_alike)))
+    # a proof in a layer printed in the slicer's order (the planner found it faster, after the
+    # repair pass) is the model's, not the print's: the slicer's path stands in its place, proven
+    # only where it is an optimum itself (issue 36: no "proven optimal" group reverted)
+    slicers = source[glay] == FROM_SLICER
+    printed = tuple(put_back_answer(problem, final, g, gs, first)
+                    if s and problem.group_reorderable[g] and gs.status == Status.OPTIMAL else gs
+                    for g, (gs, s) in enumerate(zip(groups, slicers)))
+    n_put_back = sum(a is not b for a, b in zip(printed, groups))
+    groups = printed
     sol = dataclasses.replace(with_model_cost(problem, final), groups=groups,
                               formulation=solution.formulation, solve_s=solution.solve_s)
     kept = np.flatnonzero(changed_layers(problem, solution)[:L] & (source == FROM_SLICER))
-    return Guarded(sol, best.text, best.output, kept, source, planned, repaired)
+    return Guarded(sol, best.text, best.output, kept, source, planned, repaired, n_put_back)
 
 
 def _alternate(changed: np.ndarray, has: np.ndarray):

@@ -196,6 +196,20 @@ AFTER_GUARD_S_PER_LINE = 3e-6
 #: jerk), the exact solve's budget keeps it back
 REPAIR_S_PER_LINE = 2.5e-6
 REPAIR_FIXED_S = 0.05
+#: past the budget's end the repair pass's solves still get this much per group (s): the subset
+#: DP takes the groups it is made for in milliseconds (lh01's 39 in ~0.1 s)
+REPAIR_MIN_S_PER_GROUP = 0.05
+
+
+def _repair_deadline(t0: float, budget_s: float | None, program: Program,
+                     finish_slow: float) -> float | None:
+    """What the budget leaves the repair pass (a ``time.perf_counter()`` reading; None: no
+    budget): up to the end of the budget less the work after the guard (compiling kernels
+    counts no time, as in ``reorder``)."""
+    if budget_s is None:
+        return None
+    return (t0 + budget_s + _jit.compile_s_since(t0)
+            - finish_slow * (FINISH_FIXED_S + AFTER_GUARD_S_PER_LINE * program.n_lines))
 
 
 def repair_pass(program: Program, problem: OrderingProblem, formulation: str, *,
@@ -203,23 +217,28 @@ def repair_pass(program: Program, problem: OrderingProblem, formulation: str, *,
     """The time guard's repair pass (``guard.emit_guarded(repair=...)``; formulations/ordering.md,
     "Time guard"): the layers the guard put back although a group in them was proven optimal
     solved again with ``formulation`` on link costs that agree with the planner
-    (``repair.planner_priced``: joined to the curves' moves under classic jerk too). Within the
-    budget: ``deadline_s`` (a ``time.perf_counter()`` reading, None: none) less its pricer and
-    stage (``REPAIR_S_PER_LINE``, ``REPAIR_FIXED_S``) at ``slow`` times their quiet rates; with
-    less left, nothing is repaired."""
+    (``repair.planner_priced``: joined to the curves' moves under classic jerk too). The groups'
+    solves get what ``deadline_s`` (a ``time.perf_counter()`` reading, None: none) leaves less the
+    stage (two emits at most, ``REPAIR_S_PER_LINE`` at ``slow`` times its quiet rate), and at
+    least ``REPAIR_MIN_S_PER_GROUP`` each: the pass runs past the budget's end too (issue 36: a
+    proof the planner disagrees with is made again on the planner's costs, not printed as the
+    model's; a run that pays for it says so in its wall time). Its work is bounded by the layers
+    it concerns: the few the guard put back although a group in them was proven."""
     fn = formulations.group_solver(formulation)
 
     def repair(printed: OrderingSolution, layers):
-        need_s = slow * (REPAIR_FIXED_S + REPAIR_S_PER_LINE * program.n_lines)
-        if deadline_s is not None and deadline_s - time.perf_counter() < need_s:
-            return None
         joined = planner_priced(program, problem)
         if joined is None:
             return None
-        # the groups' solves get what is left but the stage (two emits at most)
-        stage_s = slow * 0.5 * REPAIR_S_PER_LINE * program.n_lines
+        deadline = None
+        if deadline_s is not None:
+            stage_s = slow * 0.5 * REPAIR_S_PER_LINE * program.n_lines
+            n_groups = int(np.count_nonzero(np.isin(problem.group_layer, np.asarray(layers))
+                                            & problem.group_reorderable))
+            deadline = max(deadline_s - stage_s,
+                           time.perf_counter() + REPAIR_MIN_S_PER_GROUP * n_groups)
         return resolve_layers(joined, printed, layers, fn, time_limit_s=time_limit_s,
-                              deadline_s=None if deadline_s is None else deadline_s - stage_s)
+                              deadline_s=deadline)
     return repair
 
 
@@ -290,8 +309,12 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
                                                     - _jit.compile_s_since(t_g)) - stage_s)
     if greedy is not None and (stop_requested() or (exact_budget is not None
                                                     and exact_budget < pass_s)):
-        # no time left to pass the groups again (or a Ctrl-C): greedy's answer is the solve's
-        guarded = emit_guarded(program, problem, greedy.solution, time_guard)
+        # no time left to pass the groups again (or a Ctrl-C): greedy's answer is the solve's,
+        # its proofs the planner disagrees with repaired as an exact solve's are
+        repair = None if stop_requested() else repair_pass(
+            program, problem, formulation, time_limit_s=time_limit_s,
+            deadline_s=_repair_deadline(t0, budget_s, program, finish_slow), slow=finish_slow)
+        guarded = emit_guarded(program, problem, greedy.solution, time_guard, repair=repair)
         decided = problem.group_reorderable
         # greedy's answers as printed (``emit_guarded``: its proofs stand in the groups entered
         # as its chain entered them, elsewhere made again from where the file enters them,
@@ -310,14 +333,9 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     if greedy is not None:
         solution = dataclasses.replace(solution, solve_s=solution.solve_s + greedy.solution.solve_s,
                                        work_net_fired=greedy.solution.work_net_fired)
-    deadline = None
-    if budget_s is not None:
-        # what the budget leaves the repair pass: up to the end of the budget less the work
-        # after the guard (compiling kernels counts no time, as above)
-        deadline = (t0 + budget_s + _jit.compile_s_since(t0)
-                    - finish_slow * (FINISH_FIXED_S + AFTER_GUARD_S_PER_LINE * program.n_lines))
     repair = (repair_pass(program, problem, formulation, time_limit_s=time_limit_s,
-                          deadline_s=deadline, slow=finish_slow) if time_guard else None)
+                          deadline_s=_repair_deadline(t0, budget_s, program, finish_slow),
+                          slow=finish_slow) if time_guard else None)
     guarded = emit_guarded(program, problem, solution, time_guard,
                            greedy=None if greedy is None else greedy.solution, repair=repair)
     return problem, solve_budget, guarded
@@ -356,7 +374,8 @@ def order_program(program: Program, options: OrderingOptions | None = None, *,
                             formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
                             solve_budget_s=solve_budget, workers=workers,
                             wall_s=time.perf_counter() - t0, greedy_layers=guarded.greedy_layers,
-                            planned_s=guarded.planned_s, repaired=guarded.repaired)
+                            planned_s=guarded.planned_s, repaired=guarded.repaired,
+                            proofs_put_back=guarded.proofs_put_back)
     return OrderResult(program, problem, solution, text, out, findings, summary)
 
 
@@ -419,6 +438,13 @@ def _solve_counts(problem: OrderingProblem, solution: OrderingSolution, slower_l
     return layers, counts, lay_counts, decided
 
 
+def put_back_note(n: int) -> str:
+    """The report's line on proofs the planner disagreed with (``guard.put_back_answer``)."""
+    return (f"{n:,} group{'s' if n != 1 else ''} proven optimal on the model's link costs "
+            f"print{'s' if n == 1 else ''} the slicer's order: the planner found it faster, even "
+            f"after the repair pass (reported with the path printed, not as proven)")
+
+
 def _slower_notes(fig: dict | None, slower_layers) -> list[str]:
     """The report's lines on a re-ordered print that is slower (or layers kept because they were)."""
     slower = []
@@ -436,14 +462,15 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
                   findings, *, formulation: str, time_limit_s: float, budget_s: float | None,
                   solve_budget_s: float | None, workers: int, wall_s: float,
                   with_figures: bool = True, greedy_layers: int = 0,
-                  planned_s: tuple = (None, None), repaired=()) -> dict:
+                  planned_s: tuple = (None, None), repaired=(), proofs_put_back: int = 0) -> dict:
     """The report of a re-ordering (``gatesopt order --json``; ``gatesopt solve`` has it under
     ``"ordering"``): the figures of the input and the output (``rewrite.figures``: travel,
     travels and retractions measured on the parsed files, print time under the planner model;
     ``with_figures`` False leaves them to the caller, whose own output they would describe), the
     solver's model travel, how each group and layer was solved. ``planned_s``: both files'
     per-step planner durations where the time guard has them (``guard.Guarded.planned_s``);
-    ``repaired``: the layers the guard's repair pass solved again (``guard.Guarded.repaired``)."""
+    ``repaired``: the layers the guard's repair pass solved again (``guard.Guarded.repaired``);
+    ``proofs_put_back``: ``guard.Guarded.proofs_put_back``."""
     fig = figures(program, out, planned_s=planned_s) if with_figures else None
     layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
     sizes = np.diff(problem.group_curve_start)
@@ -456,6 +483,8 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         slower.append(greedy_out_of_time_note(late_greedy, len(decided)))
     if solution.work_net_fired:
         slower.append(WORK_NET_NOTE)
+    if proofs_put_back:
+        slower.append(put_back_note(proofs_put_back))
     time_obj = problem.cost_unit == "ms"
     repaired_groups = repaired_status_counts(solution, problem)
     return {
@@ -511,6 +540,9 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
                                                & set(np.asarray(slower_layers).tolist()))),
         "groups_repaired": repaired_groups["groups"],
         "groups_repaired_optimal": repaired_groups["optimal"],
+        # groups proven on the model's costs printed in the slicer's order all the same (the
+        # planner found it faster, after the repair pass): reported with that path, not proven
+        "groups_proofs_put_back": int(proofs_put_back),
         "worst_gap": float(max((gs.gap for _, gs in decided), default=0.0)),
         "solve_s": solution.solve_s, "wall_s": wall_s,
         "verified": not findings, "findings": [str(f) for f in findings],

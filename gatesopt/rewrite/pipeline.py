@@ -213,7 +213,8 @@ def _order_curves(program: Program, time_limit_s: float, workers: int = 1,
         return order_summary(program, out, problem, solution, options, slower, findings,
                              formulation=formulation, time_limit_s=time_limit_s, budget_s=budget_s,
                              solve_budget_s=solve_budget, workers=workers, wall_s=wall_s,
-                             with_figures=False, greedy_layers=guarded.greedy_layers)
+                             with_figures=False, greedy_layers=guarded.greedy_layers,
+                             repaired=guarded.repaired, proofs_put_back=guarded.proofs_put_back)
     return out, True, note, problem, summarize, solution.solve_s
 
 
