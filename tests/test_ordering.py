@@ -72,6 +72,21 @@ def test_exact_formulations_match_brute_force(seed, n):
     assert lower_bound(grp) <= best + 1e-9
 
 
+@pytest.mark.parametrize("formulation", [cpsat, milp])
+def test_an_exact_solves_limit_does_not_count_numba_compiling(monkeypatch, formulation):
+    # a fresh install compiles its kernels on first use: time spent so is not the solve's (the
+    # ``.ci/run`` of a fresh clone under load answered a 4-curve group "fallback" at 10 s)
+    prob = random_problem(3, 9)
+    grp = prob.group(0, prob.origin_xy)
+    best = dp.solve(grp).objective
+    monkeypatch.setattr(formulation._jit, "compile_s_since", lambda t: 0.0)
+    late = formulation.solve(grp, time_limit_s=1e-6)
+    assert late.status != "optimal"           # (no time at all: the limit bites)
+    monkeypatch.setattr(formulation._jit, "compile_s_since", lambda t: 60.0)
+    got = formulation.solve(grp, time_limit_s=1e-6)
+    assert got.status == "optimal" and got.objective == pytest.approx(best, abs=1e-3)
+
+
 def test_six_curves_brute_force():
     prob = random_problem(42, 6, closed_share=0.0)
     grp = prob.group(0, prob.origin_xy, end=(25.0, 25.0))     # with an end point to reach

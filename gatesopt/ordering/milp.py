@@ -19,6 +19,7 @@ import time
 import highspy
 import numpy as np
 
+from .. import _jit
 from .._native import run_highs
 from ..solvers import Status
 from . import symmetric, symmetric_graph
@@ -154,17 +155,17 @@ class _Model:
         return (1.0, highspy.kHighsInf, cols, np.ones(len(cols)))
 
 
-def _lp_rounds(model, t0: float, time_limit_s: float, max_rounds: int = 60) -> float:
+def _lp_rounds(model, deadline: float, max_rounds: int = 60) -> float:
     """Cutting planes on the LP relaxation first (cheap): cut every connected component of the
     fractional solution's support that misses the depot. Returns the last LP bound (valid)."""
     h = model.h
-    model.deadline = t0 + time_limit_s
+    model.deadline = deadline
     n_int = model.n_int
     idx = np.arange(n_int, dtype=np.int32)
     h.changeColsIntegrality(n_int, idx, np.zeros(n_int, np.uint8))       # continuous
     bound = 0.0
     for _ in range(max_rounds):
-        if not run_highs(h, t0 + time_limit_s):
+        if not run_highs(h, deadline):
             break
         if h.getModelStatus() != _OPT:
             break
@@ -188,16 +189,19 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     if triv is not None:
         return triv
     hint = warm_start(group, hint, t0, time_limit_s)
+    # the limit runs from the call, numba's first compile of a kernel on the way not counted (a
+    # fresh install's first solve under load otherwise spends it compiling, and answers unproven)
+    deadline = t0 + time_limit_s + _jit.compile_s_since(t0)
     best = np.asarray(getattr(hint, "order", hint), np.int64)
     best_obj = group.path_cost(best)
     # auto passes the bound it has (the cheap one or the matching's: ~0.7 ms to recompute the
     # cheap one on a 100-curve group)
     bound = lower_bound(group) if known_bound is None else float(known_bound)
     if symmetric_graph.applies(group):
-        order, obj, lp_bound, proven = symmetric.solve(group, best, t0 + time_limit_s)
+        order, obj, lp_bound, proven = symmetric.solve(group, best, deadline)
         group.check_order(order)
         bound = max(bound, lp_bound)
-        if (proven or obj - bound <= OPTIMAL_ABS_TOL or time.perf_counter() >= t0 + time_limit_s
+        if (proven or obj - bound <= OPTIMAL_ABS_TOL or time.perf_counter() >= deadline
                 or group.n_cands > DIRECTED_AFTER_SYMMETRIC_MAX_CANDS):
             status = Status.OPTIMAL if proven or obj - bound <= OPTIMAL_ABS_TOL else Status.FEASIBLE
             return GroupSolution.make(order, obj, bound, status, time.perf_counter() - t0, "milp")
@@ -209,13 +213,13 @@ def solve(group: Group, *, time_limit_s: float = 10.0, hint=None,
     model = _Model(group)
     h = model.h
     status = Status.FALLBACK
-    bound = max(bound, _lp_rounds(model, t0, time_limit_s))
+    bound = max(bound, _lp_rounds(model, deadline))
     if best_obj - bound <= OPTIMAL_ABS_TOL:       # the LP bound alone proves the warm start
         return GroupSolution.make(best, best_obj, bound, Status.OPTIMAL, time.perf_counter() - t0, "milp")
     if give_up_gap is not None and best_obj > 0 and (best_obj - bound) / best_obj > give_up_gap:
         return GroupSolution.make(best, best_obj, bound, Status.FEASIBLE, time.perf_counter() - t0, "milp")
     while True:
-        if not run_highs(h, t0 + time_limit_s, start=model.columns_of(best)):
+        if not run_highs(h, deadline, start=model.columns_of(best)):
             break
         ms = h.getModelStatus()
         info = h.getInfo()
