@@ -202,6 +202,30 @@ def test_solve_of_a_marlin_file_writes_m18_and_says_so(tmp_path, capsys):
     assert main(["verify", str(src), str(out)]) == 0
 
 
+def test_verify_checks_a_reprapfirmware_output_as_reprapfirmware_s(tmp_path, capsys):
+    # RepRapFirmware's M18 E / M17 E read as Marlin's too: verify takes the dialect the file
+    # names, as solve did, and so reports solve's saving (a RepRap-flavour Cura file: verify said
+    # marlin, 0.33 %, against solve's reprap, 0.32 %)
+    src = tmp_path / "part.gcode"
+    # (slow travels between the layers: an idle extruder worth switching off)
+    src.write_text(square(";FLAVOR:RepRap").replace("G1 X80 Y80 F6000", "G1 X5 Y5 F600\nG1 X80 Y80 F600"))
+    out = tmp_path / "out.gcode"
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--json", str(tmp_path / "r.json")]) == 0
+    d = json.loads((tmp_path / "r.json").read_text())
+    assert d["firmware"] == "reprap" and "M18 E" in out.read_text()
+    capsys.readouterr()
+    assert main(["verify", str(src), str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "(firmware: reprap)" in printed
+    from gatesopt.verify import detect_firmware
+    assert detect_firmware(gatesopt.parse(str(src)), gatesopt.parse(str(out))) == "reprap"
+    # and a Marlin file's output stays Marlin's
+    src.write_text(square(";FLAVOR:Marlin").replace("G1 X80 Y80 F6000", "G1 X5 Y5 F600\nG1 X80 Y80 F600"))
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--force"]) == 0
+    assert "M18 " in out.read_text()
+    assert detect_firmware(gatesopt.parse(str(src)), gatesopt.parse(str(out))) == "marlin"
+
+
 def test_klipper_without_a_budget_gets_one(tmp_path, capsys):
     src = tmp_path / "part.gcode"
     src.write_text(square(";FLAVOR:Marlin", layers=6))
@@ -245,6 +269,15 @@ def test_batch_and_compare_read_each_file_s_firmware(tmp_path, capsys):
     capsys.readouterr()
     assert main(["compare", str(a), "--formulations", "dp"]) == 0
     assert "firmware marlin: read flavor setting" in capsys.readouterr().out
+    # a printer nothing is gated on: a row that says so, not an empty table
+    c = tmp_path / "c.gcode"
+    c.write_text(square(";FLAVOR:Griffin"))
+    assert main(["compare", str(c), "--json", str(tmp_path / "c.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "not gated" in printed and "no motor line for this printer; try --ordering" in printed
+    rows = json.loads((tmp_path / "c.json").read_text())
+    rows = rows["rows"] if isinstance(rows, dict) else rows
+    assert [(r["formulation"], r["status"]) for r in rows] == [("-", "not gated")]
 
 
 # -- the printer's kinematics and its printer.cfg --------------------------------------------------

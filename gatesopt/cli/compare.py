@@ -81,6 +81,9 @@ def run(args) -> int:
             choice = firmware_choice(args, program, **fields)   # per file: each names its printer
             print(f"{program.source}: firmware {choice.line}")
             if choice.options is None:
+                # a row that says so (not an empty table): nothing to gate on this printer
+                rows.append({"file": program.source, "formulation": "-", "status": "not gated",
+                             "error": "no motor line for this printer; try --ordering"})
                 continue
             # each row the run `gatesopt solve --formulation F` makes of the file (issue 37)
             rows += gating_rows(program, choice.options, forms, args.time_limit, order=not args.no_order,

@@ -519,6 +519,11 @@ def stall_durations(program: Program, firmware: str | Firmware = "3dgates", *, p
     return out
 
 
+#: the dialect written for each firmware family a file names (``slicers.FAMILIES``): what
+#: ``gatesopt solve`` writes for it (``rewrite.printer.choose``) and ``gatesopt verify`` checks
+DIALECT_OF_FAMILY = {"marlin": "marlin", "klipper": "klipper", "reprapfirmware": "reprap"}
+
+
 def detect(program) -> str:
     """The dialect a file's own motor enable/disable lines are written in: the first dialect (by
     ``detect_rank``) one of whose ``detect_words`` a motor line starts with ("klipper" for

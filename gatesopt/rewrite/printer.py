@@ -29,8 +29,8 @@ from .. import firmware as fwmod
 from .. import kinematics, slicers
 from ..gating.options import GatingOptions
 
-#: the dialect written for each firmware family a file names (``slicers.FAMILIES``)
-DIALECT_OF_FAMILY = {"marlin": "marlin", "klipper": "klipper", "reprapfirmware": "reprap"}
+#: the dialect written for each firmware family a file names (``firmware.DIALECT_OF_FAMILY``)
+DIALECT_OF_FAMILY = fwmod.DIALECT_OF_FAMILY
 #: the dialect assumed when the file names no firmware: the most common stock firmware
 ASSUMED_DIALECT = "marlin"
 #: the print time a stock firmware's stalls may add by default, in % (``--max-added-time-pct``)

@@ -6,6 +6,7 @@ import numpy as np
 
 from .. import firmware as fwmod
 from .. import kinematics as kinmod
+from .. import slicers
 from ..program import AXES, Program
 from .finding import Finding
 from .motor_lines import added_motor_lines
@@ -92,7 +93,9 @@ def check_firmware(output: Program, *, firmware="3dgates", original: Program | N
 
 
 def detect_firmware(original: Program | None, output: Program) -> str:
-    """The firmware ``gatesopt verify --firmware auto`` checks ``output`` for: ``firmware.detect``
+    """The firmware ``gatesopt verify --firmware auto`` checks ``output`` for: the dialect the
+    original names (``slicers.read_printer``, as ``gatesopt solve`` reads it) where that firmware
+    takes every line the rewrite added, else ``firmware.detect``
     (the dialect of the output's motor lines) when that firmware takes every line the rewrite added
     (``firmware_problem``), else the first preset that does -- so a start G-code's own ``M17`` does
     not make S-series output Marlin's. When no preset takes them all, ``detect``'s answer stands
@@ -104,4 +107,11 @@ def detect_firmware(original: Program | None, output: Program) -> str:
         return guess
     takes = [name for name in fwmod.PRESETS
              if all(firmware_problem(t, name) is None for t in texts)]
+    # the dialect the original names (its slicer's flavour, printer model or Klipper command, as
+    # ``gatesopt solve`` reads it) where it takes every added line: RepRapFirmware's M18 / M17
+    # read as Marlin's too, and its rules (stalls, motors) are not Marlin's
+    ev = None if original is None else slicers.read_printer(original.data).firmware
+    named = None if ev is None else fwmod.DIALECT_OF_FAMILY.get(ev.family)
+    if named in takes:
+        return named
     return guess if guess in takes or not takes else takes[0]
