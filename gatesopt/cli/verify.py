@@ -23,7 +23,8 @@ def add_arguments(p) -> None:
     p.add_argument("--firmware", choices=("auto",) + firmware_names(), default="auto",
                    help="firmware the output is meant for (its motor-instruction dialect, the motors "
                         "it may gate, stall times, automatic re-enable); auto: the claimed report's, else "
-                        "the dialect of the motor lines the rewrite added")
+                        "the dialect the original names (as solve reads it) where it takes every motor "
+                        "line the rewrite added, else the dialect of those lines")
     p.add_argument("--start-ahead-ms", type=float, default=1.8,
                    help="a motor must be on at least this long before it steps (default 1.8, paper)")
     p.add_argument("--end-late-ms", type=float, default=1.0,
