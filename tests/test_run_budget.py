@@ -134,3 +134,22 @@ def test_an_exact_gating_formulation_never_takes_the_orderings_floor(monkeypatch
     want = share_s if formulation == "dp" else (
         floor_s + (1.0 - budget.EXACT_GATING_SHARE) * (share_s - floor_s))
     assert seen["budget_s"] == pytest.approx(want)
+
+
+def test_an_exact_gating_formulation_keeps_at_most_its_reserve(monkeypatch):
+    # milp's gating solves take hundredths of a second where the ordering gains percents: of a
+    # 10 s share above a 2 s floor the ordering keeps all but EXACT_GATING_RESERVE_S
+    seen = {}
+    real = pipeline._order_curves
+
+    def spy(program, time_limit_s, workers=1, budget_s=None, *a, **kw):
+        seen["budget_s"] = budget_s
+        return real(program, time_limit_s, workers, budget_s, *a, **kw)
+    monkeypatch.setattr(pipeline, "_order_curves", spy)
+    monkeypatch.setattr(pipeline, "stage_floor_s", lambda program, slow=1.0: 2.0)
+    monkeypatch.setattr(pipeline, "ordering_budget_s", lambda *a, **k: 10.0)
+    program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
+    res = pipeline.run(program, GatingOptions(rotate="none"), formulation="milp",
+                       budget_s=20.0, time_limit_s=10.0)
+    assert res.report.ok and res.ordered
+    assert seen["budget_s"] == pytest.approx(10.0 - budget.EXACT_GATING_RESERVE_S)

@@ -50,8 +50,8 @@ from ..parse import parse
 from ..program import Kind, Program
 from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
 from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
-from .budget import (EXACT_GATING_SHARE, budget_clock, gating_limit_s, no_time_note,
-                     ordering_budget_s)
+from .budget import (EXACT_GATING_RESERVE_S, EXACT_GATING_SHARE, budget_clock, gating_limit_s,
+                     no_time_note, ordering_budget_s)
 from .figures import figures, print_time_s
 from .order import (READ_S_PER_LINE, NoTimeToOrder, greedy_work_budget_s, kept_slower_note,
                     order_summary, out_of_time_groups, out_of_time_note, reorder, stage_floor_s)
@@ -602,10 +602,11 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
                 if gating and _exact(formulation):
                     # an exact gating formulation's search is part of the budget too (issue 37):
                     # the ordering leaves it a share of what it has beyond its own floor, at most
-                    # --time-limit -- never the ordering itself: re-ordering gains percents, the
+                    # --time-limit and EXACT_GATING_RESERVE_S -- never the ordering itself: re-ordering gains percents, the
                     # search over dp's warm start hundredths (a 121k-line Cura file: the ordering
                     # skipped under milp, 1.47 % "optimal" against dp's 3.90 %)
                     b -= min(math.inf if time_limit_s is None else float(time_limit_s),
+                             EXACT_GATING_RESERVE_S,
                              EXACT_GATING_SHARE * max(b - stage_floor_s(program, rate), 0.0))
                 return b
             ob = ordering_share(spent_s, slow)
