@@ -44,7 +44,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 from _markdown import publish  # bench/_markdown.py
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -82,20 +81,13 @@ def _row(res, path: Path, form: str, parse_s: float, run_s: float) -> dict:
     # reported proven optimal in a layer put back, and not printed as reported (the guard
     # reports a put-back layer's groups with the path printed: ``guard.put_back_answer``)
     from gatesopt.ordering.chain import entry_positions
+    from gatesopt.verify.proofs import printed_as_answered
     first = entry_positions(problem, sol)
-    printed = np.asarray(sol.curve_order)
-    source = None if problem.curve_source is None else np.asarray(problem.curve_source)
-
-    def printed_as_reported(g, gs):
-        curves = np.asarray(problem.group_curves(g))
-        grp_curves = curves[np.asarray(problem.group(g, problem.origin_xy).cand_curve)[gs.order]]
-        if source is not None:
-            grp_curves = source[grp_curves]
-        at = int(first[g])
-        return np.array_equal(grp_curves, printed[at:at + len(grp_curves)])
     reverted = sum(1 for g, gs in enumerate(sol.groups)
                    if reorderable[g] and gs.status == "optimal"
-                   and int(problem.group_layer[g]) in kept_set and not printed_as_reported(g, gs))
+                   and int(problem.group_layer[g]) in kept_set
+                   and not printed_as_answered(problem, sol, g, problem.group(g, problem.origin_xy),
+                                               first))
     s.pop("per_layer", None)
     from gatesopt.verify.proofs import audit_proofs
     audited, audit_failed = audit_proofs(problem, sol)

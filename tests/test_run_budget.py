@@ -13,6 +13,18 @@ from gatesopt.rewrite import budget, pipeline
 from conftest import PROJECT_INSTANCES
 
 
+def _ordering_budget_seen(monkeypatch) -> dict:
+    """A dict that gets the budget ``pipeline.run`` hands the curve ordering (``"budget_s"``)."""
+    seen = {}
+    real = pipeline._order_curves
+
+    def spy(program, time_limit_s, workers=1, budget_s=None, *a, **kw):
+        seen["budget_s"] = budget_s
+        return real(program, time_limit_s, workers, budget_s, *a, **kw)
+    monkeypatch.setattr(pipeline, "_order_curves", spy)
+    return seen
+
+
 def test_slowdown_is_wall_over_cpu_clipped():
     f = budget.slowdown_factor
     assert f(10.0, 2.0, wall_now_s=13.0, cpu_now_s=3.0) == pytest.approx(3.0)
@@ -33,13 +45,7 @@ def test_a_slower_machine_leaves_the_ordering_less():
 
 
 def test_run_measures_the_slowdown_and_the_ordering_gets_the_smaller_budget(monkeypatch):
-    seen = {}
-    real = pipeline._order_curves
-
-    def spy(program, time_limit_s, workers=1, budget_s=None, *a, **kw):
-        seen["budget_s"] = budget_s
-        return real(program, time_limit_s, workers, budget_s, *a, **kw)
-    monkeypatch.setattr(pipeline, "_order_curves", spy)
+    seen = _ordering_budget_seen(monkeypatch)
     monkeypatch.setattr(budget, "slowdown_factor", lambda *clocks: 2.5)
     program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
     o = GatingOptions(rotate="none")
@@ -117,14 +123,8 @@ def test_an_exact_gating_formulation_never_takes_the_orderings_floor(monkeypatch
     # the exact gating's share comes out of what the ordering has beyond its floor: where dp's run
     # re-orders, milp's and cpsat's do too (a 121k-line Cura file was re-ordered under dp, 3.90 %,
     # and not under milp, 1.47 % reported "optimal")
-    seen = {}
-    real = pipeline._order_curves
-
-    def spy(program, time_limit_s, workers=1, budget_s=None, *a, **kw):
-        seen["budget_s"] = budget_s
-        return real(program, time_limit_s, workers, budget_s, *a, **kw)
+    seen = _ordering_budget_seen(monkeypatch)
     floor_s, share_s = 2.0, 3.0
-    monkeypatch.setattr(pipeline, "_order_curves", spy)
     monkeypatch.setattr(pipeline, "stage_floor_s", lambda program, slow=1.0: floor_s)
     monkeypatch.setattr(pipeline, "ordering_budget_s", lambda *a, **k: share_s)
     program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")
@@ -139,13 +139,7 @@ def test_an_exact_gating_formulation_never_takes_the_orderings_floor(monkeypatch
 def test_an_exact_gating_formulation_keeps_at_most_its_reserve(monkeypatch):
     # milp's gating solves take hundredths of a second where the ordering gains percents: of a
     # 10 s share above a 2 s floor the ordering keeps all but EXACT_GATING_RESERVE_S
-    seen = {}
-    real = pipeline._order_curves
-
-    def spy(program, time_limit_s, workers=1, budget_s=None, *a, **kw):
-        seen["budget_s"] = budget_s
-        return real(program, time_limit_s, workers, budget_s, *a, **kw)
-    monkeypatch.setattr(pipeline, "_order_curves", spy)
+    seen = _ordering_budget_seen(monkeypatch)
     monkeypatch.setattr(pipeline, "stage_floor_s", lambda program, slow=1.0: 2.0)
     monkeypatch.setattr(pipeline, "ordering_budget_s", lambda *a, **k: 10.0)
     program = gatesopt.parse(PROJECT_INSTANCES / "star_lines_m82.gcode")

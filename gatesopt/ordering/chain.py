@@ -119,6 +119,16 @@ def reprove(problem: OrderingProblem, g: int, start: Anchor, end,
     return GroupSolution.make(gs.order, gs.objective, gs.bound, status, gs.solve_s, gs.formulation)
 
 
+def path_curves(problem: OrderingProblem, g: int, grp, path) -> np.ndarray:
+    """The program curves (``curve_source`` applied) group g prints along ``path`` (indices of
+    ``grp``'s candidates, ``grp`` = ``problem.group(g, ...)``), in order."""
+    cand = np.asarray(grp.cand_curve, np.int64)[np.asarray(path, np.int64)]
+    curves = np.asarray(problem.group_curves(g), np.int64)[cand]
+    if problem.curve_source is not None:
+        curves = np.asarray(problem.curve_source, np.int64)[curves]
+    return curves
+
+
 def entry_positions(problem: OrderingProblem, solution) -> np.ndarray:
     """Per group, the position in ``solution``'s print order (an ``OrderingSolution``, program
     curve numbering) of the group's first curve printed; the number of curves for an empty

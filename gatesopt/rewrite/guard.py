@@ -39,7 +39,7 @@ import numpy as np
 from ..ordering import dp
 from ..ordering.bounds import lower_bound
 from ..ordering.chain import (BACKWARDS, KEPT, LOOKAHEAD_TO, anchor_at, anchor_before, end_of,
-                              entry_positions, quick_dp, reprove)
+                              entry_positions, path_curves, quick_dp, reprove)
 from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
 from ..ordering.problem import OPTIMAL_ABS_TOL, GroupSolution, OrderingProblem, OrderingSolution
@@ -410,9 +410,7 @@ def printed_path(problem: OrderingProblem, final: OrderingSolution, g: int, grp,
     None where ``final`` does not print the group's curves there as one run."""
     n = grp.n_curves
     at = int(first[g])
-    curves = np.asarray(problem.group_curves(g), np.int64)[np.asarray(grp.cand_curve, np.int64)]
-    if problem.curve_source is not None:
-        curves = np.asarray(problem.curve_source, np.int64)[curves]
+    curves = path_curves(problem, g, grp, np.arange(len(grp.cand_curve)))
     cand = {(int(c), bool(r), int(s)): k for k, (c, r, s) in
             enumerate(zip(curves, np.asarray(grp.cand_reversed, bool), np.asarray(grp.cand_seam)))}
     order = np.asarray(final.curve_order, np.int64)[at:at + n]

@@ -602,9 +602,10 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
                 if gating and _exact(formulation):
                     # an exact gating formulation's search is part of the budget too (issue 37):
                     # the ordering leaves it a share of what it has beyond its own floor, at most
-                    # --time-limit and EXACT_GATING_RESERVE_S -- never the ordering itself: re-ordering gains percents, the
-                    # search over dp's warm start hundredths (a 121k-line Cura file: the ordering
-                    # skipped under milp, 1.47 % "optimal" against dp's 3.90 %)
+                    # --time-limit and EXACT_GATING_RESERVE_S -- never the ordering itself:
+                    # re-ordering gains percents, the search over dp's warm start hundredths (a
+                    # 121k-line Cura file: the ordering skipped under milp, 1.47 % "optimal"
+                    # against dp's 3.90 %)
                     b -= min(math.inf if time_limit_s is None else float(time_limit_s),
                              EXACT_GATING_RESERVE_S,
                              EXACT_GATING_SHARE * max(b - stage_floor_s(program, rate), 0.0))

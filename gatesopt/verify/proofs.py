@@ -9,13 +9,22 @@ import numpy as np
 
 from ..ordering import dp
 from ..ordering.chain import (BACKWARDS, LOOKAHEAD_FROM, anchor_at, anchor_before, end_of,
-                              entry_positions)
+                              entry_positions, path_curves)
 from ..ordering.problem import OPTIMAL_ABS_TOL, OrderingProblem, OrderingSolution
 from ..ordering.repair import REPAIRED
 from ..solvers import Status
 
 #: the proof audit checks a group with the subset DP where that takes at most this long
 AUDIT_DP_MAX_S = 0.01
+
+
+def printed_as_answered(problem: OrderingProblem, solution: OrderingSolution, g: int, grp,
+                        first: np.ndarray) -> bool:
+    """Whether ``solution`` prints group g's reported path (``grp``: ``problem.group(g, ...)``,
+    any start) from position ``first[g]`` (``chain.entry_positions``) on."""
+    curves = path_curves(problem, g, grp, solution.groups[g].order)
+    at = int(first[g])
+    return np.array_equal(curves, np.asarray(solution.curve_order)[at:at + len(curves)])
 
 
 def audit_proofs(problem: OrderingProblem, solution: OrderingSolution) -> tuple[int, int]:
@@ -41,11 +50,7 @@ def audit_proofs(problem: OrderingProblem, solution: OrderingSolution) -> tuple[
             continue
         # (a layer the time guard put back prints the slicer's order, not the answer reported:
         # the "proven groups reverted")
-        curves = np.asarray(problem.group_curves(g))[np.asarray(grp.cand_curve)[gs.order]]
-        if problem.curve_source is not None:
-            curves = np.asarray(problem.curve_source)[curves]
-        printed = np.asarray(solution.curve_order)[int(first[g]):int(first[g]) + len(curves)]
-        if not np.array_equal(curves, printed):
+        if not printed_as_answered(problem, solution, g, grp, first):
             continue
         if ends[0] is None and g + 1 < problem.n_groups and first[g + 1] < n:
             ends.append(anchor_at(problem, solution, int(first[g + 1])))
