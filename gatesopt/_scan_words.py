@@ -203,7 +203,17 @@ def parse_words(buf, a, b, present, value, bad, info, touched):
             return EXT, np.nan, i, True
         if not first and i > a and (48 <= buf[i - 1] <= 57 or buf[i - 1] == 46):
             _glued_word(buf, a, i, b, L, i - 1 < cmd_end, info)
+        at = i
         i += 1
+        if first:
+            # a command's number after blanks ("G 28 W", a Prusa start G-code): Marlin reads on
+            # past them (GCodeParser::parse, "Skip spaces to get the numeric part"), as does
+            # Klipper (gcode.py joins the command letter and its stripped number)
+            j = i
+            while j < b and (buf[j] == 32 or buf[j] == 9):
+                j += 1
+            if j > i and j < b and 48 <= buf[j] <= 57:
+                i = j
         v, nd, j = scan_number(buf, i, b)
         k = L - _A
         if not first and present[k]:
@@ -234,7 +244,7 @@ def parse_words(buf, a, b, present, value, bad, info, touched):
         if first:
             cmd_letter = L
             cmd_number = v
-            first_pos = i - 1
+            first_pos = at
             first = False
             cmd_end = j
         else:

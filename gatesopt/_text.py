@@ -19,6 +19,10 @@ def code_words(line):
     words = line.split(semi, 1)[0].upper().split()
     if len(words) > 1 and words[0][:1] in (b"N", "N") and words[0][1:].isdigit():
         words = words[1:]
+    if len(words) > 1 and len(words[0]) == 1 and words[1][:1].isdigit():
+        # a command's number after blanks ("G 28 W"): one word, as the firmware reads it
+        # (``_scan_words.parse_words``)
+        words = [words[0] + words[1]] + words[2:]
     return words
 
 

@@ -387,3 +387,22 @@ def test_line_numbered_instructions_read_as_without_numbers():
     by_line = {int(prog.line[r]): bool(drains[r]) for r in range(prog.n_steps)}
     assert motor == [4, 5, 6]
     assert [by_line[i] for i in motor] == [False, False, True]     # M17 does not drain, M18 does
+
+
+def test_a_command_number_after_blanks_reads_as_the_firmware_reads_it():
+    """``G 28 W`` (a Prusa start G-code in a real Simplify3D 3.1 file, refused before as "unexpected
+    character in a G command"): Marlin skips blanks between a command's letter and its number
+    (GCodeParser::parse) and Klipper joins them, so it is G28; a spaced motion command moves."""
+    from gatesopt._text import code_words
+    p = parse("G 28 W ; home\nG 1 X10 Y5 F1200\nM 104 S200\nG1 X20 Y5\n")
+    assert p.line_letter[0] == ord("G") and p.line_number[0] == 28
+    assert p.line_letter[2] == ord("M") and p.line_number[2] == 104
+    assert Kind.HOME in p.kind.tolist()
+    moves = np.flatnonzero(p.kind == Kind.TRAVEL)
+    assert np.allclose(p.end_mm[moves[-2], :2], [10.0, 5.0])
+    assert np.allclose(p.end_mm[moves[-1], :2], [20.0, 5.0])
+    assert p.to_gcode() == "G 28 W ; home\nG 1 X10 Y5 F1200\nM 104 S200\nG1 X20 Y5\n"
+    assert code_words("G 28 W ; home") == ["G28", "W"]
+    assert code_words(b"N12 M 117 hi") == [b"M117", b"HI"]
+    # a lone letter is not joined to a word that is not its number
+    assert code_words("G W") == ["G", "W"]
