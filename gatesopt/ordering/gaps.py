@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..program import Kind, Program
-from .layout import (LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION, LINE_NEUTRAL,
-                     LINE_STATE, Layout)
+from .layout import (LINE_BARRIER, LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION,
+                     LINE_NEUTRAL, LINE_STATE, Layout)
 from .travel import TravelRule
 from .writer import Writer
 
@@ -159,16 +159,25 @@ class _GapLines:
 
 def _sort_lines(w: Writer, p: Program, line_sets) -> _GapLines:
     """Each gap's lines split where the slicer retracted, travelled and unretracted (see
-    ``rebuilt_gap``); its moves summed."""
+    ``rebuilt_gap``); its moves summed. A barrier or a neutral command (``Writer.command_set``:
+    progress, messages) of a later gap never goes before one of an earlier gap: it goes at least
+    where that one went (a Bambu Studio layer change holds ``M73 L2`` and the aux fan's barrier
+    ``M106 P2``; the next layer's first curve's own gap an ``M73 P38`` inside its wipe, which,
+    written before our retraction, went ahead of the barrier: verify reads the control commands
+    out of order)."""
     pre, mid, post, late = [], [], [], []
+    parts = (pre, mid, post, late)
+    floor = 0           # where the last barrier or command of an earlier gap went (index in parts)
     boundary_retracted = early_push = False
     fw_lines, fw_net, fw_boundary, fw_retracted = set(), 0, False, False
     r_boundary = r_internal = 0.0
     net = 0.0
     cls_of, de_of, travel_of = w.line_cls, w.line_de, w.line_travel
     marked = w.marker_moves
+    commands = w.command_set
     gap: list[int] = []
     for lines, boundary in line_sets:
+        set_floor = floor
         lines = list(lines)
         gap += lines
         cls = [cls_of[i] for i in lines]
@@ -210,7 +219,11 @@ def _sort_lines(w: Writer, p: Program, line_sets) -> _GapLines:
                     fw_net += 1
             if not boundary and cls[j] == LINE_NEUTRAL and TYPE_OR_WIPE.match(w.texts[i]):
                 continue
-            (pre if j < split_r else mid if j < split_t else post if j < split_u else late).append(i)
+            at = 0 if j < split_r else 1 if j < split_t else 2 if j < split_u else 3
+            if cls[j] == LINE_BARRIER or i in commands:
+                at = max(at, set_floor)
+                floor = max(floor, at)
+            parts[at].append(i)
     return _GapLines(pre, mid, post, late, gap, net, r_boundary, r_internal, boundary_retracted,
                      early_push, fw_lines, fw_net, fw_boundary, fw_retracted)
 
