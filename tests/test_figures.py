@@ -74,3 +74,21 @@ def test_every_command_gives_the_same_print_time_and_travel(tmp_path, capsys):
     assert main(["report", str(bj), "-o", str(html)]) == 0
     page = html.read_text()
     assert "print time" in page and "(planner)" in page
+
+
+def test_wipes_counted_and_the_ones_a_re_ordering_dropped_said():
+    """The slicer's wipes (retracting while moving back over the last extrusion) are counted, and
+    a re-ordered file that has fewer says so: a rebuilt travel retracts in place (a real Bambu
+    Studio cube, default solve: 252 of its 255 wipes gone, said nowhere before)."""
+    from gatesopt.rewrite.figures import figure_notes
+    head = "G90\nM83\n;LAYER_CHANGE\n;Z:0.2\nG1 Z0.2 F600\nG1 X0 Y0 F6000\n"
+    wiped = head + "G1 X10 Y0 E0.5 F1200\nG1 X8 Y0 E-0.4 F6000\nG1 E-0.4\nG1 X30 Y5 F9000\nG1 E0.8\nG1 X40 Y5 E0.5\n"
+    plain = head + "G1 X10 Y0 E0.5 F1200\nG1 E-0.8 F2100\nG1 X30 Y5 F9000\nG1 E0.8\nG1 X40 Y5 E0.5\n"
+    a, b = gatesopt.parse(wiped), gatesopt.parse(plain)
+    assert travel(a)["wipes"] == 1 and travel(a)["retractions"] == 1
+    assert travel(b)["wipes"] == 0 and travel(b)["retractions"] == 1
+    fig = figures(a, b)
+    assert (fig["wipes_before"], fig["wipes_after"]) == (1, 0)
+    notes = figure_notes(fig)
+    assert len(notes) == 1 and notes[0].startswith("1 of the slicer's 1 wipes are gone")
+    assert figure_notes(figures(a, a)) == []

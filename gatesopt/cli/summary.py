@@ -17,7 +17,9 @@ def figure_lines(s: dict) -> list[str]:
         f"travel        {s['travel_before_mm']:,.1f} mm -> {s['travel_after_mm']:,.1f} mm"
         f"   ({_pct(s['travel_after_mm'], s['travel_before_mm'])})"
         f"   travels {s['travels_before']:,} -> {s['travels_after']:,}"
-        f"   retractions {s['retractions_before']:,} -> {s['retractions_after']:,}",
+        f"   retractions {s['retractions_before']:,} -> {s['retractions_after']:,}"
+        + (f" (wipes {s['wipes_before']:,} -> {s['wipes_after']:,})"
+           if s.get("wipes_before") or s.get("wipes_after") else ""),
     ]
 
 

@@ -1,7 +1,7 @@
 """Travel as the reports measure it, on a parsed file (not the solver's model): every
 non-extruding XY move (straight or arc) from the first layer on, its time under the paper's
 T = L/F, and retractions (steps that pull filament back, and firmware retractions: a bare
-``G10``). Every report reads them here (``rewrite.figures``: ``solve``, ``order``, ``batch``,
+``G10``), of them the wipes (retracting while moving in XY). Every report reads them here (``rewrite.figures``: ``solve``, ``order``, ``batch``,
 ``compare``, the HTML report; ``ordering.plot``), so their numbers agree.
 
 Counts are of *paths*: consecutive travel moves are one travel, consecutive retracting moves one
@@ -41,12 +41,15 @@ def travel_stats(program: Program) -> dict:
     retract = printing & (d[:, 3] < 0)
     # a retraction spread over several wipe moves counts once
     n_retract = runs(retract, program) + len(firmware_retraction_lines(program))
+    # a wipe: the slicer's retraction while moving back over the last extrusion (XY and -E)
+    wipe = retract & (np.hypot(d[:, 0], d[:, 1]) > 0)
     return {"travel_mm": float(program.length_mm[travel].sum()),
             "travel_s": float(program.duration_s[travel].sum()),
             # everything from the first layer on (paper time model): extrusion is the same in
             # both files, so a change is travel, retractions and z-hops together
             "print_s": float(program.duration_s[printing].sum()),
-            "travels": runs(travel, program), "retractions": n_retract}
+            "travels": runs(travel, program), "retractions": n_retract,
+            "wipes": runs(wipe, program)}
 
 
 def firmware_retraction_lines(program: Program) -> np.ndarray:

@@ -26,7 +26,7 @@ from ..ordering.travel_stats import runs, travel_mask
 from ..program import Program
 from ..solvers import stop_requested
 from ..verify.ordering import check
-from .figures import figures
+from .figures import figure_notes, figures
 from .guard import (FROM_GREEDY, FROM_SOLVER, GUARD_TOL_S, emit_guarded,  # noqa: F401 (re-exported)
                     greedy_taken, keep_layers, layer_times_s, same_entry_groups, same_next_entries,
                     step_times_s)
@@ -485,6 +485,8 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
         slower.append(WORK_NET_NOTE)
     if proofs_put_back:
         slower.append(put_back_note(proofs_put_back))
+    if fig is not None:
+        slower += figure_notes(fig)
     time_obj = problem.cost_unit == "ms"
     repaired_groups = repaired_status_counts(solution, problem)
     return {

@@ -52,7 +52,7 @@ from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested
 from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
 from .budget import (EXACT_GATING_RESERVE_S, EXACT_GATING_SHARE, budget_clock, gating_limit_s,
                      no_time_note, ordering_budget_s)
-from .figures import figures, print_time_s
+from .figures import figure_notes, figures, print_time_s
 from .order import (READ_S_PER_LINE, NoTimeToOrder, greedy_work_budget_s, kept_slower_note,
                     order_summary, out_of_time_groups, out_of_time_note, reorder, stage_floor_s)
 from .printer import FirmwareChoice, choose
@@ -663,6 +663,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
         if summarize is not None:
             # without gating ``verify`` above ran the ordering checks itself: its findings are theirs
             order_report = summarize(extra if sol is not None else rep.findings)
+        notes += figure_notes(figs, rep.saving_pct, sol is not None) if ordered else []
     result = RunResult(program, base, sol, em, text, out, rep, ordered, tuple(notes),
                        time.perf_counter() - t0, order_problem=order_problem,
                        order_summary=order_report, choice=choice, rotation=rotation, times=times.s,
