@@ -94,3 +94,57 @@ def test_many_ambiguous_runs_are_looked_up_in_one_batch(monkeypatch):
                  start_ahead_s=0, end_late_s=0)
     assert not [f for f in rep.findings if f.check == "geometry"], [str(f) for f in rep.findings[:3]]
     assert len(calls) <= 6
+
+
+def _greedy_reading_reference(original_moves, s, e, k, j_end, tol_mm, join):
+    """The long runs' greedy reading as it was written first: one k-d tree query per (i, j)."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+    tree = cKDTree(original_moves)
+    i = k
+    while i < j_end:
+        best = None
+        for j in range(j_end, i, -1):
+            d, _ = tree.query(np.concatenate([s[i], e[j]]), k=1, p=np.inf, distance_upper_bound=tol_mm)
+            if np.isfinite(d):
+                best = j
+                break
+        if best is None:
+            i += 1
+            continue
+        join[i:best] = True
+        i = best + 1
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_long_runs_greedy_reading_is_the_per_query_one(seed):
+    """``_read_runs`` on runs longer than ``PARTITION_MAX_PIECES`` (a real Simplify3D 4.0 file's
+    verify took 19 s there, one tree query per pair of pieces) reads them as before: the same
+    joins on random runs of collinear pieces, some of them splits of an original move."""
+    import numpy as np
+    from gatesopt.verify.geometry import PARTITION_MAX_PIECES, _read_runs
+    rng = np.random.default_rng(seed)
+    n = 3 * PARTITION_MAX_PIECES
+    pts = np.zeros((n + 1, 3))
+    pts[:, 0] = np.cumsum(np.concatenate([[0.0], rng.uniform(0.1, 1.0, n)]))
+    s, e = pts[:-1].copy(), pts[1:].copy()
+    # the original: some single pieces, some stretches of pieces joined, both directions
+    moves = []
+    i = 0
+    while i < n:
+        j = min(n - 1, i + int(rng.integers(0, 4)))
+        if rng.random() < 0.8:
+            moves.append(np.concatenate([s[i], e[j]]))
+            if j > i + 1 and rng.random() < 0.5:
+                # a shorter original move from the same start: the reading takes the longest
+                moves.append(np.concatenate([s[i], e[i + 1]]))
+        i = j + 1
+    moves = np.asarray(moves)
+    moves = np.concatenate([moves, np.concatenate([moves[:, 3:], moves[:, :3]], axis=1)])
+    runs = [(0, n - 1), (5, 5 + PARTITION_MAX_PIECES + 7)]
+    for k, j_end in runs:
+        got, want = np.zeros(n, bool), np.zeros(n, bool)
+        _read_runs(moves, s, e, [(k, j_end)], 1e-6, got)
+        _greedy_reading_reference(moves, s, e, k, j_end, 1e-6, want)
+        assert np.array_equal(got, want)
+        assert got.any()

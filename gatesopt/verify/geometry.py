@@ -110,18 +110,25 @@ def _read_runs(original_moves: np.ndarray, s: np.ndarray, e: np.ndarray, runs, t
                 join[k + i:k + j - 1] = True
                 j = i
     if long_:
+        # the original's moves that start at piece i (one ball query), then every end of the
+        # run at once against theirs: the largest j whose end one of them ends at. (One k-d tree
+        # query per (i, j), from j_end down, took 19 s of a real Simplify3D 4.0 file's 21 s
+        # verify; the same test: a move within Chebyshev tol, strictly, at both ends.)
         from scipy.spatial import cKDTree
-        tree = cKDTree(original_moves)
+        starts = cKDTree(original_moves[:, :3])
         for k, j_end in long_:
             i = k
             while i < j_end:
+                cand = np.asarray(starts.query_ball_point(s[i], tol_mm, p=np.inf), np.int64)
+                if len(cand):
+                    cand = cand[np.max(np.abs(original_moves[cand, :3] - s[i]), axis=1) < tol_mm]
                 best = None
-                for j in range(j_end, i, -1):
-                    d, _ = tree.query(np.concatenate([s[i], e[j]]), k=1, p=np.inf,
-                                      distance_upper_bound=tol_mm)
-                    if np.isfinite(d):
-                        best = j
-                        break
+                if len(cand):
+                    ends = original_moves[cand, 3:]
+                    d = np.max(np.abs(e[i + 1:j_end + 1, None, :] - ends[None, :, :]), axis=2)
+                    hit = np.flatnonzero((d < tol_mm).any(axis=1))
+                    if len(hit):
+                        best = i + 1 + int(hit[-1])
                 if best is None:
                     i += 1
                     continue
