@@ -387,3 +387,16 @@ def test_a_marlin_flavour_alone_says_how_a_klipper_printer_gets_safe_lines(tmp_p
     assert hint in printer.choose(gatesopt.parse(square())).line            # nothing read: assumed
     assert hint not in printer.choose(gatesopt.parse(square(";FLAVOR:Marlin")), "marlin").line
     assert hint not in printer.choose(gatesopt.parse(square(";FLAVOR:Marlin")), printer=_cfg(tmp_path)).line
+
+
+def test_a_run_that_gates_nothing_says_firmware_none_in_its_json(tmp_path, capsys):
+    # a Bambu Lab printer: no motor line gatesopt knows to be safe, nothing gated; the JSON said
+    # "firmware": "3dgates" (the rules the output was checked by) beside the line saying none
+    src = tmp_path / "part.gcode"
+    src.write_text(square("; printer_model = Bambu Lab X1 Carbon"))
+    out, rj = tmp_path / "out.gcode", tmp_path / "r.json"
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--json", str(rj)]) == 0
+    assert "firmware      none: Bambu Lab firmware" in capsys.readouterr().out
+    d = json.loads(rj.read_text())
+    assert d["firmware"] == "none" and d["firmware_choice"]["firmware"] is None
+    assert d["status"] == "skipped" and d["verified"]

@@ -103,7 +103,9 @@ class RunResult:
         r, s = self.report, self.solution
         figs = self.figures or figures(self.original, self.output, r.firmware)
         d = {
-            "source": self.original.source, "firmware": r.firmware, "verified": r.ok,
+            # the dialect the output's motor lines are in; "none" where nothing was gated (the
+            # output was checked by the paper firmware's rules, which add nothing: not a choice)
+            "source": self.original.source, "firmware": r.firmware if s else "none", "verified": r.ok,
             "findings": [str(f) for f in r.findings],
             "energy_before_j": r.energy_before_j, "energy_after_j": r.energy_j,
             "saving_pct": r.saving_pct,
