@@ -287,6 +287,36 @@ def _curves(program: Program, cls: np.ndarray) -> tuple:
     return s0, s1, l0, l1
 
 
+#: a layer whose travels run at a median feed below this share of the file's keeps the slicer's
+#: order: a rebuilt travel runs at the file's travel feed (``travel.TravelStyle``), faster than
+#: the slicer moved there -- Cura's slower first layers (its second layer at 125 of 150 mm/s on
+#: an Ender-3 profile: re-ordered, its rebuilt travels ran at 150)
+SLOW_TRAVEL_SHARE = 0.9
+SLOW_TRAVEL_WHY = ("its travels run slower than the file's (the slicer's slower first layers): a "
+                   "rebuilt travel would run at the file's travel speed")
+
+
+def slow_travel_layers(program: Program) -> np.ndarray:
+    """Layers whose travels (XY travel moves longer than 1 mm, as ``travel.TravelStyle`` reads
+    the file's travel feed) run at a median feed below ``SLOW_TRAVEL_SHARE`` of the file's."""
+    tr = (program.kind == Kind.TRAVEL) & (program.length_mm > 1.0)
+    if not tr.any():
+        return np.zeros(0, np.int64)
+    feed = program.feed_mm_s[tr]
+    ref = float(np.median(feed))
+    lay = program.layer[tr]
+    keep = lay >= 0
+    lay, feed = lay[keep], feed[keep]
+    if not len(lay):
+        return np.zeros(0, np.int64)
+    order = np.argsort(lay, kind="stable")
+    lay, feed = lay[order], feed[order]
+    cuts = np.flatnonzero(np.diff(lay)) + 1
+    layers = lay[np.concatenate(([0], cuts))]
+    med = np.array([np.median(part) for part in np.split(feed, cuts)])
+    return layers[med < SLOW_TRAVEL_SHARE * ref].astype(np.int64)
+
+
 def _kept_layers(program: Program, cls: np.ndarray, s0, l0, l1, g92_xyz) -> tuple:
     """Per layer: whether it holds a fatal line, whether it keeps the slicer's order and why;
     and the notes to report (module docstring: tool changes, G92 with X/Y/Z, an X/Y motor
@@ -337,6 +367,10 @@ def _kept_layers(program: Program, cls: np.ndarray, s0, l0, l1, g92_xyz) -> tupl
         first = int(curve_layer[0])
         layer_keep[first] = True
         why[first] = why[first] or "first layer keeps the slicer's order"
+        for lay in slow_travel_layers(program):
+            if lay < n_layers:
+                layer_keep[lay] = True
+                why[lay] = why[lay] or SLOW_TRAVEL_WHY
     notes = []
     # extrusion in relative XYZ (G91) or inch units (G20): a curve's moves mean something else
     # elsewhere, and a travel rebuilt into one in G91 would be read as relative. Its layer keeps
