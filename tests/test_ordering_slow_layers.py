@@ -6,13 +6,7 @@ from __future__ import annotations
 
 import gatesopt
 
-
-def _square(x0: float, y0: float, e: float) -> tuple[list[str], float]:
-    out = []
-    for x, y in ((x0 + 5, y0), (x0 + 5, y0 + 5), (x0, y0 + 5), (x0, y0)):
-        e += 0.2
-        out.append(f"G1 X{x:.3f} Y{y:.3f} E{e:.5f}")
-    return out, e
+from test_ordering_trailing_marker import _square
 
 
 def _layers_with_travel_feeds(feeds) -> str:
@@ -26,7 +20,7 @@ def _layers_with_travel_feeds(feeds) -> str:
             out.append(f"G0 F{f} X{x0:.3f} Y10.000")
             out.append("G1 F1800")
             lines, e = _square(x0, 10.0, e)
-            out += lines
+            out += [ln.replace(" ; perimeter", "") for ln in lines]
     return "\n".join(out + ["M84"]) + "\n"
 
 
