@@ -296,10 +296,16 @@ SLOW_TRAVEL_WHY = ("its travels run slower than the file's (the slicer's slower 
                    "rebuilt travel would run at the file's travel speed")
 
 
+def feed_travels(program: Program) -> np.ndarray:
+    """(n_steps,) bool: the travel moves the file's travel feed is read from (``travel.
+    travel_style``'s median, the feed of every rebuilt travel): travels longer than 1 mm."""
+    return (program.kind == Kind.TRAVEL) & (program.length_mm > 1.0)
+
+
 def slow_travel_layers(program: Program) -> np.ndarray:
-    """Layers whose travels (XY travel moves longer than 1 mm, as ``travel.TravelStyle`` reads
-    the file's travel feed) run at a median feed below ``SLOW_TRAVEL_SHARE`` of the file's."""
-    tr = (program.kind == Kind.TRAVEL) & (program.length_mm > 1.0)
+    """Layers whose travels (``feed_travels``) run at a median feed below ``SLOW_TRAVEL_SHARE``
+    of the file's travel feed."""
+    tr = feed_travels(program)
     if not tr.any():
         return np.zeros(0, np.int64)
     feed = program.feed_mm_s[tr]

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..program import Kind, Program
 from ..slicers import WALL_FEATURE
-from .layout import LINE_FW_RETRACT, Layout
+from .layout import LINE_FW_RETRACT, Layout, feed_travels
 from .problem import OrderingProblem
 
 
@@ -297,7 +297,7 @@ def travel_style(program: Program, lay: Layout) -> TravelStyle:
     ur = kind == Kind.UNRETRACT
     if ur.any():
         style["unretract_feed_mm_s"] = float(np.median(program.feed_mm_s[ur]))
-    tr = (kind == Kind.TRAVEL) & (program.length_mm > 1.0)
+    tr = feed_travels(program)
     if tr.any():
         style["travel_feed_mm_s"] = float(np.median(program.feed_mm_s[tr]))
         lines = program.line[np.flatnonzero(tr)[:5000]]

@@ -1,8 +1,9 @@
 """Travel as the reports measure it, on a parsed file (not the solver's model): every
 non-extruding XY move (straight or arc) from the first layer on, its time under the paper's
 T = L/F, and retractions (steps that pull filament back, and firmware retractions: a bare
-``G10``), of them the wipes (retracting while moving in XY). Every report reads them here (``rewrite.figures``: ``solve``, ``order``, ``batch``,
-``compare``, the HTML report; ``ordering.plot``), so their numbers agree.
+``G10``), of them the wipes (retracting while moving in XY). Every report reads them here
+(``rewrite.figures``: ``solve``, ``order``, ``batch``, ``compare``, the HTML report;
+``ordering.plot``), so their numbers agree.
 
 Counts are of *paths*: consecutive travel moves are one travel, consecutive retracting moves one
 retraction, and motor lines between them (a gated file's instruction lines, which split a move in
