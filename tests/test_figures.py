@@ -90,5 +90,5 @@ def test_wipes_counted_and_the_ones_a_re_ordering_dropped_said():
     fig = figures(a, b)
     assert (fig["wipes_before"], fig["wipes_after"]) == (1, 0)
     notes = figure_notes(fig)
-    assert len(notes) == 1 and notes[0].startswith("1 of the slicer's 1 wipes are gone")
+    assert len(notes) == 1 and notes[0].startswith("1 fewer wipes than the slicer's 1")
     assert figure_notes(figures(a, a)) == []

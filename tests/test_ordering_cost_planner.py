@@ -1,6 +1,6 @@
 """The time objective against the planner (issue 36, "an objective that differs from what the
 printer pays makes proven optimal answers that lose in practice"): a rebuilt travel's cost
-(``cost._rebuilt_s``) is the planner's time of the travel as emitted (``planner.plan`` on the
+(``link_cost.rebuilt_s``) is the planner's time of the travel as emitted (``planner.plan`` on the
 re-parsed output), on a small layer whose re-ordering rebuilds diagonal travels with a
 retraction and a z-hop under classic jerk."""
 from __future__ import annotations
@@ -249,7 +249,7 @@ def test_a_reversed_arc_costs_what_the_planner_says_backwards():
                                        ("real_orca230_arcs", "safe")])
 def test_the_link_matrix_prices_each_link_as_one_by_one(name, mode):
     """A group's matrix (``cost._dense``: moves prepared once per candidate and per limits
-    regime) and the links priced one by one (``cost._link_one``, what a path is re-priced with)
+    regime) and the links priced one by one (``link_cost.link_one``, what a path is re-priced with)
     agree on every pair, with the curves' end moves, reversed curves, reversed gaps and the
     limits at each travel (real_orca230_arcs: a Klipper file that sets the acceleration per
     feature)."""

@@ -12,7 +12,8 @@ Modules: ``problem`` (options, Group, solutions), ``layout`` and ``groups`` (Pro
 ``polylines``; ``layers`` (the solve driver) with ``budget``, ``runner``, ``chain``, ``helper``;
 the formulations and what they share (``bounds``, ``greedy``, ``ils``, ``matching``,
 ``blossom``, ``symmetric_graph``, ``symmetric``, ``separation``); ``emitter`` (emit) with
-``writer``, ``travel``, ``gaps``; ``plot``. No module is named after a function exported here
+``writer``, ``travel``, ``gaps``, ``wipes``; the time objective's prices in ``cost`` (per link:
+``link_cost``); ``plot``. No module is named after a function exported here
 (``build`` lives in ``groups``, ``emit`` in ``emitter``), so ``gatesopt.ordering.emit`` is always
 the function and ``import gatesopt.ordering.emitter`` always the module.
 """

@@ -39,77 +39,20 @@ import numpy as np
 
 from ..limits import MachineLimits, machine_limits
 from ..program import Program
-from .gap_plan import (JOINED_MAX_MOVES, MOVE_EPS_MM, W_COLS, W_F, W_J, W_JREADY, W_L, e_row,
-                       end_side, joined_s, junction, regime_rows,
-                       reversed_gap_times_ms, same_z_s)
+from .gap_plan import (JOINED_MAX_MOVES, MOVE_EPS_MM, W_COLS, W_J, W_JREADY, e_row, end_side,
+                       junction, regime_rows, reversed_gap_times_ms, same_z_s)
 from .curve_time import CurveEnds, gap_rows
 from .file_end import FileEnd
-from .gaps import REVERSE_EPS, GapFacts, ReversibleGaps
+from .gaps import GapFacts, ReversibleGaps
 from .layout import Layout
 from .move_times import MT_CODE, MoveTimes, trapezoid_one_s
 from .._planner_kernel import JERK, SCV
 from .problem import DENSE_MAX_CANDS, FILE_END, Anchor, Group, LinkCosts, OrderingProblem
+from .link_cost import link_one, reversed_link, reversed_ms
 from .travel import TravelRule, cross_one
+from .wipes import SlicerWipes
 
 MS_PER_S = 1000.0
-
-
-@numba.njit(cache=True)
-def _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, co, ends, row):
-    """Time (s) of a rebuilt travel (``gaps.rebuilt_gap``): retraction (E, at the retract feed),
-    lift by the z-hop if it retracts, the straight XY travel (dx, dy), lowering, and the
-    unretraction that brings the consumed gaps to their net E (or that net E alone). ``mt``:
-    MoveTimes.vector(); ``style``: (retract feed, unretract feed, travel feed, z feed, hop).
-    With the file's limits (``mt[MT_CODE] >= 0``) the moves are planned together, as the planner
-    plans them (``plan_moves_s``, in the work array ``w``: ``work_array(JOINED_MAX_MOVES)``),
-    joined to the last move of curve p and the first of curve c (sides ``po`` / ``co``,
-    ``gap_plan.joined_s``), under the limits ``row`` (``TimePricer.gap_rows``); else each alone
-    from and to its kind's junction speed."""
-    v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
-    dist = np.sqrt(dx * dx + dy * dy)
-    z_up = max(z0, z1)
-    if retract and hop > 0.0:
-        z_up += hop
-    e_r = r if retract and not use_fw else 0.0
-    e_u = abs(net + r) if retract and not use_fw else abs(net)
-    e_u_sign = 1.0 if (net + r if retract and not use_fw else net) >= 0.0 else -1.0
-    if mt[MT_CODE] >= 0.0:
-        w[:, :] = 0.0
-        n = 0
-        if po >= 0:
-            w[n, :] = ends[1][p, po]
-            n += 1
-        if e_r > MOVE_EPS_MM:
-            w[n, 3], w[n, W_L], w[n, W_F] = -e_r, e_r, v_r
-            n += 1
-        if z_up - z0 > MOVE_EPS_MM:
-            w[n, 2], w[n, W_L], w[n, W_F] = z_up - z0, z_up - z0, v_z
-            n += 1
-        if dist > MOVE_EPS_MM:
-            w[n, 0], w[n, 1], w[n, W_L], w[n, W_F] = dx, dy, dist, v_xy
-            n += 1
-        if abs(z_up - z1) > MOVE_EPS_MM:
-            w[n, 2], w[n, W_L], w[n, W_F] = z1 - z_up, abs(z_up - z1), v_z
-            n += 1
-        if e_u > MOVE_EPS_MM:
-            w[n, 3], w[n, W_L], w[n, W_F] = e_u_sign * e_u, e_u, v_u
-            n += 1
-        if co >= 0:
-            w[n, :] = ends[0][c, co]
-            n += 1
-        return joined_s(w, n, int(mt[MT_CODE]), row, p, po, c, co, ends)
-    t = 0.0
-    if e_r > MOVE_EPS_MM:
-        t += trapezoid_one_s(e_r, min(v_r, mt[5]), mt[4], mt[6])
-    if e_u > MOVE_EPS_MM:
-        t += trapezoid_one_s(e_u, min(v_u, mt[5]), mt[4], mt[6])
-    if z_up - z0 > MOVE_EPS_MM:
-        t += trapezoid_one_s(z_up - z0, min(v_z, mt[8]), mt[7], mt[9])
-    if dist > MOVE_EPS_MM:
-        t += trapezoid_one_s(dist, min(v_xy, mt[1]), mt[0], mt[2])
-    if abs(z_up - z1) > MOVE_EPS_MM:
-        t += trapezoid_one_s(abs(z_up - z1), min(v_z, mt[8]), mt[7], mt[9])
-    return t
 
 
 def gap_times_ms(program: Program, move: MoveTimes, lay: Layout | None = None) -> np.ndarray:
@@ -242,6 +185,8 @@ class TimePricer:
         #: (``CurveEnds.reversal_ok``; not so where one is an arc Klipper chords from its own
         #: start, the chords then differ)
         self.mirror_ok = ends.reversal_ok() & ~self.closed if self.mirror_joined else np.zeros(n, bool)
+        #: each curve's wipe, written first by a rebuilt travel that leaves it retracting
+        self.wipes = SlicerWipes.of(program, lay, problem.curve_closed)
         self.gap_ms = self.copy_ms.copy()
         #: a reversed gap's link: ``gap_ms`` where the curves are not joined, else its moves
         #: backwards planned with the curves' (``gap_plan.reversed_gaps_ms``)
@@ -272,8 +217,10 @@ class TimePricer:
         """``ends`` for the kernels (``gap_plan.end_side``)."""
         e = self.ends
         ok = e.ok if self.joined else np.zeros_like(e.ok)   # unjoined: no end is joined
+        wp = self.wipes
         return (e.head, e.tail, e.head_exit_mm_s, e.tail_entry_mm_s, e.head_ms, e.tail_ms, ok,
-                self.closed, self.rev_ms, self.row_table, self.gap_row)
+                self.closed, self.rev_ms, self.row_table, self.gap_row,
+                wp.n_moves, wp.moves, wp.e_mm, wp.shift_xy)
 
 
     def links_ms(self, prev, prev_changed, from_xy, nxt, nxt_changed, to_xy) -> np.ndarray:
@@ -406,7 +353,7 @@ class _GroupLinks:
         self.exit_xy, self.entry_xy = exit_xy, entry_xy
 
     def copied_only(self, u, v) -> np.ndarray | None:
-        """``copy_ms`` (as ``_dense`` and ``_link_one`` give) if every link u[i] -> v[i] is the
+        """``copy_ms`` (as ``_dense`` and ``link_one`` give) if every link u[i] -> v[i] is the
         slicer's own gap, copied (v's curve right after u's, both as printed); else None."""
         gu, gv = self.gc[u], self.gc[v]
         if ((gv == gu + 1) & ~self.changed[u] & ~self.changed[v]).all():
@@ -419,96 +366,17 @@ class _GroupLinks:
                                     self.changed[v], self.entry_xy[v])
 
 
-@numba.njit(cache=True, inline="always")
-def _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_plain, rev_start,
-                   rev_end):
-    """``gaps.ReversibleGaps.applies`` for the link p -> c leaving p at (fx, fy) (the head stands
-    at p's end if p is printed as the slicer printed it) and entering c at (tx, ty)."""
-    if p != c + 1 or c < 0 or not rev_ok[p] or group_first[p] != group_first[c]:
-        return False
-    if c != group_first[c] and not rev_plain[c]:
-        return False
-    hx, hy = (fx, fy) if p_changed else (rev_end[p, 0], rev_end[p, 1])
-    return (abs(hx - rev_start[p, 0]) <= REVERSE_EPS and abs(hy - rev_start[p, 1]) <= REVERSE_EPS
-            and abs(tx - rev_end[c, 0]) <= REVERSE_EPS and abs(ty - rev_end[c, 1]) <= REVERSE_EPS)
-
-
-@numba.njit(cache=True, inline="always")
-def _reversed_ms(p, c, group_first, own_net, rev_ms, style, mt):
-    """A reversed gap's cost (ms): the gap's moves backwards (``rev_ms``:
-    ``TimePricer.rev_ms``), plus the E move of the net E of c's own gap, which the entry into c
-    consumes (``gaps.reversed_gap``)."""
-    t = rev_ms[p]
-    if c != group_first[c] and abs(own_net[c]) > MOVE_EPS_MM:
-        t += trapezoid_one_s(abs(own_net[c]), min(style[1], mt[5]), mt[4], mt[6]) * 1000.0
-    return t
-
-
-@numba.njit(cache=True, inline="always")
-def _link_one(p, p_changed, c, c_changed, fx, fy, tx, ty, z0, z1, group_first, own_net, own_r,
-              own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
-              rev_start, rev_end, rule, style, mt, w, ends):
-    """One link's cost (ms) as emitted, mirroring ``gaps.rebuilt_gap`` and ``travel.TravelRule``,
-    except the combing exemption: returns (cost, whether the exemption applies if the travel
-    crosses no wall, the cost then). ``rule``: TravelRule.vector(); ``w``: ``work_array()``."""
-    if p >= 0 and p == c - 1 and not p_changed and not c_changed:
-        return copy_ms[c], False, 0.0                   # the slicer's own gap, copied
-    if p >= 0 and _reversed_link(p, p_changed, c, fx, fy, tx, ty, group_first, rev_ok, rev_plain,
-                                 rev_start, rev_end):
-        return _reversed_ms(p, c, group_first, own_net, ends[8], style, mt), False, 0.0
-    retract_mm, min_travel, fw_style, comb_cap = rule[0], rule[1], rule[2] > 0.5, rule[3]
-    crossing = p < 0 or group_first[c] != group_first[p]
-    own = c != group_first[c]
-    net = 0.0
-    r_b = 0.0
-    r_i = 0.0
-    fw_net = 0
-    fw_ret = False
-    fw_bnd = False
-    if crossing:
-        net += bnd_net[c]
-        r_b = bnd_r[c]
-        fw_net += bnd_fw_net[c]
-        fw_ret = bnd_fw[c]
-        fw_bnd = bnd_fw[c]
-    if own:
-        net += own_net[c]
-        r_i = own_r[c]
-        fw_net += own_fw_net[c]
-        fw_ret = fw_ret or own_fw[c]
-    use_fw = fw_net == 0 and (fw_ret or (fw_style and r_b <= 0.0 and r_i <= 0.0))
-    r = r_b if r_b > 0.0 else retract_mm
-    dx = tx - fx
-    dy = ty - fy
-    dist = np.sqrt(dx * dx + dy * dy)
-    dz = abs(z1 - z0)
-    moving = dist > MOVE_EPS_MM or dz > MOVE_EPS_MM
-    if use_fw:
-        retract = moving and (fw_bnd or (fw_style and dist >= min_travel))
-    else:
-        retract = moving and r > 0.0 and (r_b > 0.0 or (retract_mm > 0.0 and dist >= min_travel))
-    po = end_side(p, p_changed, ends)
-    co = end_side(c, c_changed, ends)
-    row = ends[9][ends[10][c]]          # the limits at the slicer's travel into c
-    t = _rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, co,
-                   ends, row) * 1000.0
-    if retract and comb_cap > 0.0 and dist <= comb_cap and dz <= MOVE_EPS_MM:
-        return t, True, _rebuilt_s(dx, dy, z0, z1, False, use_fw, r, net, mt, style, w, p, po, c,
-                                   co, ends, row) * 1000.0
-    return t, False, 0.0
-
-
 @numba.njit(cache=True)
 def _links(prev, prev_changed, nxt, nxt_changed, from_xy, to_xy, z0, z1, group_first,
            own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms,
            rev_ok, rev_plain, rev_start, rev_end, rule, style, mt, out, need, no_retract, node,
            ends):
-    """``_link_one`` per link, plus what a reversed curve entered adds to its own moves
+    """``link_one`` per link, plus what a reversed curve entered adds to its own moves
     (``node``: ``TimePricer.node_ms``); the wall test is the caller's (``need``,
     ``no_retract``)."""
     w = np.zeros((JOINED_MAX_MOVES, W_COLS))
     for i in range(len(nxt)):
-        out[i], need[i], no_retract[i] = _link_one(
+        out[i], need[i], no_retract[i] = link_one(
             prev[i], prev_changed[i], nxt[i], nxt_changed[i], from_xy[i, 0], from_xy[i, 1],
             to_xy[i, 0], to_xy[i, 1], z0[i], z1[i], group_first, own_net, own_r, own_fw_net,
             own_fw, bnd_net, bnd_r, bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain, rev_start,
@@ -526,7 +394,8 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
     """A group's (m, m) link matrix (inf within one curve). Every link stays inside the group
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
-    (``_link_one`` where the two ends lie at different heights). The wall test is made here: once
+    (``link_one`` where the two ends lie at different heights, or the link leaves a curve the
+    slicer wiped after, as it printed it: ``wipes``). The wall test is made here: once
     per pair of points (a travel and its reverse cross the same walls), memoized. A link into a
     reversed candidate carries what reversing adds to its curve's own moves (``node``).
 
@@ -551,19 +420,23 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
     done = np.zeros((m, m), np.bool_)     # priced as the mirror of a link before it
     w = np.zeros((JOINED_MAX_MOVES, W_COLS))
     side = np.empty(m, np.int64)        # each candidate's rows in ``ends`` (``end_side``)
+    # a candidate whose curve the slicer wiped after (``wipes``): a link out of it that
+    # retracts writes a wipe first (``link_one`` prices it; no mirror)
+    wiper = np.zeros(m, np.bool_)
     for k in range(m):
         side[k] = end_side(gc[k], changed[k], ends)
+        wiper[k] = ends[11][gc[k], 1 if changed[k] else 0] > 0
     memo = np.full((n_points, n_points), -1, np.int8)
     stamp = np.full(max(len(a), 1), -1, np.int64)
     tag = 0
     retract_mm, min_travel, fw_style, comb_cap = rule[0], rule[1], rule[2] > 0.5, rule[3]
     v_r, v_u, v_xy, v_z, hop = style[0], style[1], style[2], style[3], style[4]
-    # per entered candidate: (use_fw, E time retracting, E time dry), as _rebuilt_s sums them
+    # per entered candidate: (use_fw, E time retracting, E time dry), as rebuilt_s sums them
     use_fw = np.zeros(m, np.bool_)
     e_wet = np.zeros(m)
     e_dry = np.zeros(m)
     net_v = np.zeros(m)
-    planned = mt[MT_CODE] >= 0.0       # the moves planned together (``_rebuilt_s``), per link
+    planned = mt[MT_CODE] >= 0.0       # the moves planned together (``rebuilt_s``), per link
     for v in range(m):
         c = gc[v]
         net, r_i, fw_net, fw_ret = 0.0, 0.0, 0, False
@@ -606,13 +479,16 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
             if p == c - 1 and not changed[u] and not changed[v]:
                 out[u, v] = copy_ms[c]
                 continue
-            if _reversed_link(p, changed[u], c, ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1],
+            if reversed_link(p, changed[u], c, ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1],
                               group_first, rev_ok, rev_plain, rev_start, rev_end):
-                out[u, v] = (_reversed_ms(p, c, group_first, own_net, ends[8], style, mt)
+                out[u, v] = (reversed_ms(p, c, group_first, own_net, ends[8], style, mt)
                              + (node[c] if changed[v] else 0.0))
                 continue
-            if abs(z_ext[u] - z_ent[v]) > MOVE_EPS_MM or group_first[p] != group_first[c]:
-                t, need, dry = _link_one(p, changed[u], c, changed[v], ext[u, 0], ext[u, 1],
+            pending = False     # the dry price is made below, where the link goes dry
+            dry_now = False
+            if (abs(z_ext[u] - z_ent[v]) > MOVE_EPS_MM or group_first[p] != group_first[c]
+                    or wiper[u]):
+                t, need, dry = link_one(p, changed[u], c, changed[v], ext[u, 0], ext[u, 1],
                                          ent[v, 0], ent[v, 1], z_ext[u], z_ent[v], group_first,
                                          own_net, own_r, own_fw_net, own_fw, bnd_net, bnd_r,
                                          bnd_fw_net, bnd_fw, copy_ms, rev_ok, rev_plain,
@@ -632,7 +508,7 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                     t = same_z_s(dx, dy, dist, retract, with_e, hop_on, pres[vreg[v]], u_rows, v,
                                   has_u[0 if retract else 1, v], w, code, rows_loc[vreg[v]], v_xy,
                                   p, side[u], c, side[v], ends) * 1000.0
-                    dry = -1.0          # made below where the link goes dry (no wall crossed)
+                    dry, pending = 0.0, True    # (a joined link's price may be < 0: no sentinel)
                 else:
                     t_xy = trapezoid_one_s(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
                     dry = (t_xy + e_dry[v]) * 1000.0
@@ -647,15 +523,18 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                     memo[j, i] = memo[i, j]
                 if memo[i, j] == 0:
                     t = dry
+                    dry_now = True
             elif need:
                 t = dry
-            if t < 0.0:
+                dry_now = True
+            if pending and dry_now:
                 t = same_z_s(dx, dy, dist, False, not use_fw[v] and retract_mm > MOVE_EPS_MM,
                               hop_on, pres[vreg[v]], u_rows, v, has_u[1, v], w, code,
                               rows_loc[vreg[v]],
                               v_xy, p, side[u], c, side[v], ends) * 1000.0
             out[u, v] = t + (node[c] if changed[v] else 0.0)
-            if (mirror and _mirrorable(u, side, flip, gc, mirror_ok)
+            if (mirror and not wiper[u] and not wiper[flip[v]]
+                    and _mirrorable(u, side, flip, gc, mirror_ok)
                     and _mirrorable(v, side, flip, gc, mirror_ok)
                     and abs(z_ext[u] - z_ent[v]) <= MOVE_EPS_MM and group_first[p] == group_first[c]):
                 fu, fv = flip[u], flip[v]
@@ -696,5 +575,5 @@ def _mirror_of(u, v, fu, fv, gc, changed, ent, ext, z_ent, z_ext, net_v, use_fw,
             or (p2 == c2 - 1 and not changed[fv] and not changed[fu])
             or abs(z_ext[fv] - z_ent[fu]) > MOVE_EPS_MM):
         return False
-    return not _reversed_link(p2, changed[fv], c2, ext[fv, 0], ext[fv, 1], ent[fu, 0], ent[fu, 1],
+    return not reversed_link(p2, changed[fv], c2, ext[fv, 0], ext[fv, 1], ent[fu, 0], ent[fu, 1],
                               group_first, rev_ok, rev_plain, rev_start, rev_end)

@@ -46,6 +46,7 @@ from .layout import LIMIT_STATE_HEADS, LINE_LABEL, Layout, layout, link_travel_s
 from ..slicers import LABEL_CLOSE
 from .problem import OrderingProblem, OrderingSolution
 from .travel import TravelRule
+from .wipes import SlicerWipes, side_of
 from .writer import (F_WORD, CurveMoves, PerLine, Writer, gcode_number, required_state,
                      states_at)
 
@@ -81,12 +82,16 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
         # them so); the travel objective rebuilds every link that is not the slicer's own
         rgaps = problem.pricer.reversible if problem.pricer is not None else None
         lists = Writer.per_line(program, lay)
-        fixed = (rule, lists, _Plan.per_curve(p, problem, lay, lists), rgaps)
+        # the slicer's wipes a rebuilt travel writes again (the pricer's, which priced them)
+        wipes = (problem.pricer.wipes if problem.pricer is not None
+                 else SlicerWipes.of(program, lay, problem.curve_closed))
+        fixed = (rule, lists, _Plan.per_curve(p, problem, lay, lists), rgaps, wipes)
         if memo is not None:
             memo[_FIXED] = fixed
-    rule, lists, per_curve, rgaps = fixed
+    rule, lists, per_curve, rgaps, wipes = fixed
     w = Writer(program, lay, lists)
     plan = _Plan(p, lay, rule, order, rev, seam, per_curve, rgaps)
+    plan.wipes = wipes
 
     # prefix + first gap: verbatim (the first layer keeps its order, so curve 0 stays first)
     prev = -1
@@ -180,6 +185,7 @@ class _Plan:
         self.follows = nxt.tolist()
         self.rev_arr, self.seam_arr = rev, seam
         self.moves = None       # the layer's curves written move by move (``layer_moves``)
+        self.wipes = None       # the slicer's wipes (``wipes.SlicerWipes``), set by ``emit``
 
     def layer_moves(self, k0: int, k1: int) -> None:
         """``moves``: the moves of the curves at positions k0..k1-1 written move by move (made
@@ -289,7 +295,8 @@ def _emit_curves(plan: _Plan, w: Writer, k: int, k_end: int, prev: int) -> int:
                 reversed_gap(w, p, lay, plan.rule, lines, c)
             else:
                 rebuilt_gap(w, p, lay, plan.rule, lines, c, entry, plan.layer[c],
-                            limits=(plan.travel_state, c))
+                            limits=(plan.travel_state, c),
+                            wipe=_wipe_of(plan, prev))
     w.reissue(plan.curve_state, c)      # state the curve saw in the original
     fi = plan.feature[c]
     if fi >= 0 and w.feature != p.feature_names[fi]:
@@ -316,6 +323,18 @@ def _emit_curves(plan: _Plan, w: Writer, k: int, k_end: int, prev: int) -> int:
         return last
     _curve(plan, w, p, lay, c, reverse)
     return k
+
+
+def _wipe_of(plan: _Plan, prev: int):
+    """The wipe out of curve ``prev`` (``wipes.SlicerWipes``) on the side the output leaves it
+    by: ``(moves, e_mm)``, the moves as (dX, dY, dE, feed mm/s) rows; else None.
+    ``gaps.rebuilt_gap`` writes it where its travel retracts."""
+    wp = plan.wipes
+    side = side_of(plan.changed[prev])
+    k = int(wp.n_moves[prev, side]) if wp is not None else 0
+    if not k:
+        return None
+    return wp.moves[prev, side, :k].tolist(), float(wp.e_mm[prev, side])
 
 
 def sets_feed(p: Program, steps: np.ndarray) -> np.ndarray:

@@ -61,7 +61,7 @@ class FileEnd:
         """Per point of ``xy`` ((m, 2)), the time (ms) of the end move from there: one move at its
         own feed, from and to the XY junction speed (the moves before it, an E-only retraction
         and a Z lift, are alike for every point), as a rebuilt travel's moves are priced alone
-        (``cost._rebuilt_s``)."""
+        (``link_cost.rebuilt_s``)."""
         xy = np.asarray(xy, float).reshape(-1, 2)
         mt = self.move_vec
         v = min(self.feed_mm_s, mt[1]) if self.feed_mm_s > 0 else mt[1]

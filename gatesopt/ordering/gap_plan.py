@@ -1,5 +1,5 @@
 """A rebuilt travel's moves planned as the planner plans them (issue 36; formulations/ordering.md,
-"Cost model"): the kernels ``cost._rebuilt_s`` and ``cost._dense`` price a link with, and
+"Cost model"): the kernels ``link_cost.rebuilt_s`` and ``cost._dense`` price a link with, and
 ``move_times.MoveTimes.gaps_s`` prices a file's gaps with. Each move gets its nominal speed,
 acceleration and safe speed by its kind and the per-axis caps (``prep_move``, as
 ``_planner_kernel.prepare_moves``), the junctions between them the firmware's rule
@@ -148,16 +148,19 @@ def klipper_smoothing(w, n, row):
         w[k, W_V] = min(cap[k], cap_b[n - 1 - k])
 
 
-#: ``plan_moves_s``'s work array: columns per move (a rebuilt travel has at most 5 moves)
+#: ``plan_moves_s``'s work array: columns per move (a rebuilt travel has at most 5 moves,
+#: after the slicer's wipe it writes first)
 W_L, W_F, W_U, W_V, W_A, W_SAFE, W_J, W_E, W_READY, W_JREADY, W_COLS = (
     4, 5, 6, 10, 11, 12, 13, 14, 15, 16, 17)
+#: the slicer's wipe moves a rebuilt travel writes first at most (``wipes.SlicerWipes``)
+WIPE_MAX_MOVES = 8
 #: a rebuilt travel's moves, and with the curves' moves around it (``plan_ends_s``)
-REBUILT_MAX_MOVES = 5
+REBUILT_MAX_MOVES = 5 + WIPE_MAX_MOVES
 JOINED_MAX_MOVES = REBUILT_MAX_MOVES + 2
 
 
 def work_array(n: int = REBUILT_MAX_MOVES) -> np.ndarray:
-    """A work array for ``plan_moves_s`` (and ``_rebuilt_s``) of ``n`` moves."""
+    """A work array for ``plan_moves_s`` (and ``link_cost.rebuilt_s``) of ``n`` moves."""
     return np.zeros((n, W_COLS))
 
 
@@ -222,7 +225,7 @@ def joined_s(w, n, code, row, p, po, c, co, ends):
 @numba.njit(cache=True)
 def same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v, has_u, w, code, row, v_xy,
              p, po, c, co, ends):
-    """``_rebuilt_s`` for a link at one height inside a group (``_dense``), from prepared rows:
+    """``link_cost.rebuilt_s`` for a link at one height inside a group (``_dense``), from prepared rows:
     ``pre`` the retraction, lift and lowering (the lift's junction from the retraction made),
     ``u_rows[0 / 1, v]`` the unretraction into candidate v retracting / dry (with, retracting,
     its junction from the lowering); per link only the travel and its junctions are made. Joined

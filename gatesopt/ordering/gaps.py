@@ -22,6 +22,7 @@ from ..program import Kind, Program
 from .layout import (LINE_BARRIER, LINE_CURVE, LINE_FW_RETRACT, LINE_FW_UNRETRACT, LINE_MOTION,
                      LINE_NEUTRAL, LINE_STATE, Layout)
 from .travel import TravelRule
+from .wipes import WIPE_E_EPS_MM
 from .writer import Writer
 
 #: a gap's E-only steps (plain ints: an enum lookup per step is slow)
@@ -94,7 +95,7 @@ class ReversibleGaps:
         ``entry_xy``) is the gap before p written reversed: p follows c in the file, in one group,
         the gap between them reversible, the head where that gap ended and c entered where it
         began; a gap that c's entry consumes (c not its group's first) plain. The pricer's
-        kernels (``cost._reversed_link``) test the same."""
+        kernels (``link_cost.reversed_link``) test the same."""
         if p != c + 1 or c < 0 or not self.ok[p] or group_first[p] != group_first[c]:
             return False
         if c != group_first[c] and not self.plain[c]:
@@ -229,7 +230,7 @@ def _sort_lines(w: Writer, p: Program, line_sets) -> _GapLines:
 
 
 def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets, c: int,
-                target, layer: int = -1, limits=None) -> None:
+                target, layer: int = -1, limits=None, wipe=None) -> None:
     """One rebuilt travel into curve c, with the non-motion lines of the given original gaps.
 
     Each gap's lines split where the slicer retracted, travelled and unretracted: lines before
@@ -242,6 +243,11 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
     retraction length is the boundary gap's, else the file's median. ``limits``: (states, k) of
     ``writer.states_at`` -- the motion limits the travel runs under, re-issued (``Writer.reissue``)
     after the lines that come before it (``emitter``: those in force at the slicer's travel).
+    ``wipe``: the wipe the slicer made after the curve the head leaves, printed as the slicer
+    printed it (``(moves, e_mm)``, ``emitter._wipe_of``): where the travel retracts (by E, and
+    no more than the wipe pulls back), its moves come first, then the rest of the retraction in
+    place, and the travel starts where the wipe ended (``wipes``; ``link_cost.rebuilt_s`` prices
+    the same).
     """
     style = rule.style
     g = _sort_lines(w, p, line_sets)
@@ -303,7 +309,19 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
     if retract and use_fw:
         w.write("G10")
     elif retract:
-        move_e(-r, style.retract_feed_mm_s)
+        if wipe is not None and wipe[1] <= r + WIPE_E_EPS_MM:
+            x, y, z = (float(v) for v in w.xyz)
+            for d_x, d_y, d_e, feed in wipe[0]:
+                if abs(d_x) <= 1e-9 and abs(d_y) <= 1e-9:
+                    move_e(d_e, feed)           # its E-only retraction
+                    continue
+                x, y = x + d_x, y + d_y
+                w.move_xy_e(x, y, d_e, feed, relative_e, off)
+                emitted += d_e
+            if r - wipe[1] > 1e-9:
+                move_e(-(r - wipe[1]), style.retract_feed_mm_s)
+        else:
+            move_e(-r, style.retract_feed_mm_s)
     for i in mid:
         copy(i)
     if moving:

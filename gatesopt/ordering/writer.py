@@ -458,6 +458,20 @@ class Writer:
         val = d_e if relative else self.e - self.e_off
         self.write(f"G1 E{gcode_number(val, 6)}{self._f(feed_mm_s)}")
 
+    def move_xy_e(self, x: float, y: float, d_e: float, feed_mm_s: float, relative: bool,
+                  offset) -> None:
+        """``G1 X Y E`` to (x, y) moving the filament by ``d_e`` (a wipe: ``wipes``; 0: an XY
+        travel among its moves)."""
+        ox, oy = offset[:2] if isinstance(offset, (list, tuple)) else offset[:2].tolist()
+        e_word = ""
+        if d_e != 0.0:
+            self.e += d_e
+            val = d_e if relative else self.e - self.e_off
+            e_word = f" E{gcode_number(val, 6)}"
+        self.write(f"G1 X{gcode_number(x - ox, 5)} Y{gcode_number(y - oy, 5)}{e_word}"
+                   f"{self._f(feed_mm_s)}")
+        self.xyz = (x, y, self.xyz[2])
+
     def move_xyz(self, xyz, feed_mm_s: float, cmd: str, offset) -> None:
         # plain floats: numpy scalar arithmetic, three axes per travel, was a tenth of the emit
         x, y, z = (float(v) for v in xyz)

@@ -147,16 +147,18 @@ def figures(before: Program, after: Program, firmware: str | None = None,
 
 
 def figure_notes(fig: dict, saving_pct: float | None = None, gated: bool = True) -> list[str]:
-    """What the figures of a re-ordered run say that its numbers alone do not: the slicer's wipes
-    its rebuilt travels left out (``ordering.gaps.rebuilt_gap`` retracts in place), and, where
-    nothing was gated, why the energy can grow while the print time falls (two time models)."""
+    """What the figures of a re-ordered run say that its numbers alone do not: fewer wipes than
+    the slicer's (a rebuilt travel wipes where it retracts and can: ``ordering.wipes``), and,
+    where nothing was gated, why the energy can grow while the print time falls (two time
+    models)."""
     notes = []
     lost = fig.get("wipes_before", 0) - fig.get("wipes_after", 0)
     if lost > 0:
-        notes.append(f"{lost:,} of the slicer's {fig['wipes_before']:,} wipes are gone: a rebuilt "
-                     "travel retracts in place where the slicer wiped (moved back over the last "
-                     "extrusion while retracting); the slicer's own travels keep theirs, and the "
-                     "slicer's order (--no-order) keeps them all")
+        notes.append(f"{lost:,} fewer wipes than the slicer's {fig['wipes_before']:,}: a rebuilt "
+                     "travel wipes where it retracts, as the slicer does, except out of a loop "
+                     "left at another seam, a curve that begins with an arc, or where its wipe "
+                     "would pull back more than the retraction; a travel the re-ordering made "
+                     "short enough not to retract does not wipe; --no-order keeps them all")
     if (not gated and saving_pct is not None and saving_pct < 0
             and fig["print_time_after_s"] < fig["print_time_before_s"]):
         notes.append(f"nothing gated: the energy change ({-saving_pct:.2f} % more) is the "
