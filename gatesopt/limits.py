@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import firmware
+from . import firmware, slicers
 from .errors import GatesoptError
 from .headers import PREFIX as GATESOPT_PREFIX
 from .program import MOTION_KINDS, Program
@@ -397,13 +397,40 @@ def _apply_config(config: dict, v: np.ndarray, source: dict[str, str], rules, ju
     return junction
 
 
+def default_family(program: Program) -> tuple[str, str]:
+    """(planner rules, why) a file is planned by when no one chose: those of the dialect
+    ``gatesopt solve --firmware auto`` writes for it (``slicers.read_printer``, read once per
+    program: a Klipper command, a printer model, the slicer's flavor setting;
+    ``firmware.DIALECT_OF_FAMILY``), so that every command plans one file by one family (an
+    ideaMaker file with PRINT_START, Marlin-flavoured: 1,223.7 s by Marlin's rules in ``profile``
+    and ``order``, 1,308.6 s by Klipper's in ``solve``). A file that names no firmware gatesopt
+    has a dialect for (none, Bambu Lab's, Repetier, ...): its flavor, Klipper with a
+    ``SET_VELOCITY_LIMIT`` line, else Marlin."""
+    ev = slicers.program_printer(program).firmware
+    dialect = firmware.DIALECT_OF_FAMILY.get(ev.family) if ev is not None else None
+    rules = firmware.get(dialect).planner if dialect is not None else None
+    if rules is not None:
+        return rules.family, f"{ev.kind} {ev.where()}: {ev.why}"
+    flavor = _flavor(program.data)
+    said = f"flavor {flavor!r}" if flavor else "default (no flavor)"
+    if "klipper" in flavor or any(m.group(1).upper() == b"SET_VELOCITY_LIMIT"
+                                  for _, m in _limit_commands(program)):
+        return "klipper", said
+    if "reprapfirmware" in flavor or flavor == "rrf":
+        # RepRapFirmware (M203 in mm/min, M566 jerk). Slic3r's "reprap" flavor is RepRap/Sprinter,
+        # i.e. Marlin-like firmware: planned as Marlin.
+        return "reprap", said
+    return "marlin", said
+
+
 def machine_limits(program: Program, profile: str | None = None, *, family: str | None = None,
                    printer=None) -> MachineLimits:
     """Planner limits for ``program``: file lines, then the slicer's config block, then defaults.
 
     ``profile`` names a ``PRINTER_DEFAULTS`` row for the values the file does not give (default:
     recognised from the header, else the firmware's stock configuration). ``family``: the planner
-    rules ("marlin", "klipper", "reprap"; default: read from the file's flavor).
+    rules ("marlin", "klipper", "reprap"; default: ``default_family``, those ``gatesopt solve``
+    plans the file by).
 
     ``printer``: the printer's Klipper config (``gatesopt.printer_config.PrinterConfig``): the
     machine is known, so its values replace the defaults, the slicer's config block (what the
@@ -414,7 +441,7 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
     data = program.data
     flavor = _flavor(data)
     cmds = _limit_commands(program)
-    has_klipper_cmd = any(m.group(1).upper() == b"SET_VELOCITY_LIMIT" for _, m in cmds)
+    said = "requested"
     if printer is not None:
         if family not in (None, "klipper"):
             raise GatesoptError(f"a Klipper printer config plans with Klipper's rules, not {family!r}")
@@ -423,16 +450,10 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
         profile = profile or family
     if family is not None:
         firmware.planner_rules(family)      # an unknown family is an error
-    elif "klipper" in flavor or has_klipper_cmd:
-        family = "klipper"
-    elif "reprapfirmware" in flavor or flavor == "rrf":
-        # RepRapFirmware (M203 in mm/min, M566 jerk). Slic3r's "reprap" flavor is RepRap/Sprinter,
-        # i.e. Marlin-like firmware: planned as Marlin.
-        family = "reprap"
     else:
-        family = "marlin"
+        family, said = default_family(program)
     rules = firmware.planner_rules(family)
-    source: dict[str, str] = {"firmware": f"flavor {flavor!r}" if flavor else "default (no flavor)"}
+    source: dict[str, str] = {"firmware": f"{family}: {said}"}
 
     # --- 3: defaults --------------------------------------------------------------------------
     if profile is None:

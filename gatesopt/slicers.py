@@ -16,6 +16,7 @@ One table per kind of knowledge, read by every module that needs to know what a 
 from __future__ import annotations
 
 import re
+import weakref
 from dataclasses import dataclass
 
 #: where a ``LayerMarker`` is written: a comment line of its own, or a comment after the G-code
@@ -421,6 +422,19 @@ def read_printer(data: bytes) -> PrinterFacts:
     found = [e for e in (klipper_evidence(data), model_evidence(data), flavor) if e is not None]
     deciding = next((e for e in found if e.family), None)
     return PrinterFacts(deciding, tuple(found), flavor.value if flavor else "", read_bed(data))
+
+
+_FACTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def program_printer(program) -> PrinterFacts:
+    """``read_printer`` of a parsed ``Program``'s bytes, read once per program (a Program is never
+    mutated; the Klipper-command search reads the whole file, ~0.13 s on a 1.4 MB file, and every
+    planner call asks: ``limits.default_family``, ``rewrite.printer.choose``)."""
+    facts = _FACTS.get(program)
+    if facts is None:
+        facts = _FACTS[program] = read_printer(bytes(program.data))
+    return facts
 
 
 # -- the bed ---------------------------------------------------------------------------------------

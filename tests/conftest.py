@@ -57,6 +57,23 @@ def read_bytes(path: Path) -> bytes:
     return gzip.decompress(raw) if path.name.endswith(".gz") else raw
 
 
+@pytest.fixture
+def plan_as(monkeypatch):
+    """``plan_as("marlin")``: every program the test plans without a family of its own is planned
+    by that family's rules (``limits.default_family``, which otherwise reads the file as ``gatesopt
+    solve`` does): the family passed explicitly where the ordering's API takes none. For tests of
+    one family's arithmetic on a file that names another (real_cura410_cubic and
+    real_prusa240_m486_arcwelder, the classic-jerk examples those tests measured, are sliced
+    Marlin-flavoured for Klipper printers: their PRINT_START / print_start macros make them
+    Klipper files)."""
+    from gatesopt import firmware, limits
+
+    def plan(family: str) -> None:
+        firmware.planner_rules(family)      # a family that exists
+        monkeypatch.setattr(limits, "default_family", lambda program: (family, f"test: {family} rules"))
+    return plan
+
+
 needs_shared = pytest.mark.skipif(
     not shared_files(), reason=f"development corpus not found at {SHARED_INSTANCES}")
 

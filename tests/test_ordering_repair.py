@@ -9,6 +9,7 @@ import dataclasses
 import time
 
 import numpy as np
+import pytest
 
 import gatesopt
 from gatesopt.ordering import OrderingOptions, build, solve
@@ -34,16 +35,21 @@ def _proven_in(prob, sol, layers) -> int:
                and int(prob.group_layer[g]) in layers)
 
 
-def _cubic():
+@pytest.fixture
+def cubic(plan_as):
     # classic jerk (Marlin): the default links are not joined to the curves' moves, and the
-    # auto answer of layer 13 (its group proven optimal on those costs) prints slower
+    # auto answer of layer 13 (its group proven optimal on those costs) prints slower. The file
+    # is Cura's for a Klipper printer (PRINT_START: planned by Klipper's rules by default); no
+    # Marlin file of the corpus shows such a layer (11 classic-jerk files searched): Marlin's
+    # rules are passed explicitly
+    plan_as("marlin")
     prog = _corpus("real_cura410_cubic")
     prob = build(prog, OrderingOptions(mode="safe"))
     return prog, prob, solve(prob, "auto")
 
 
-def test_planner_priced_joins_classic_jerk_links_only_where_they_were_not():
-    prog, prob, _ = _cubic()
+def test_planner_priced_joins_classic_jerk_links_only_where_they_were_not(cubic):
+    prog, prob, _ = cubic
     assert can_repair(prob) and not prob.program_problem.pricer.joined
     joined = planner_priced(prog, prob)
     assert joined is not None and joined.program_problem.pricer.joined
@@ -52,8 +58,8 @@ def test_planner_priced_joins_classic_jerk_links_only_where_they_were_not():
     assert planner_priced(prog, joined) is None and not can_repair(joined)
 
 
-def test_a_put_back_layer_reports_the_path_it_prints_not_the_proof_it_reverted():
-    prog, prob, sol = _cubic()
+def test_a_put_back_layer_reports_the_path_it_prints_not_the_proof_it_reverted(cubic):
+    prog, prob, sol = cubic
     old = guard.emit_guarded(prog, prob, sol)
     # without the repair pass a layer with a proven group is put back ...
     assert _proven_in(prob, sol, old.kept) >= 1
@@ -77,8 +83,8 @@ def test_a_put_back_layer_reports_the_path_it_prints_not_the_proof_it_reverted()
     assert audit_proofs(prob, old.solution)[1] == 0
 
 
-def test_the_repair_pass_runs_past_the_budgets_end():
-    prog, prob, sol = _cubic()
+def test_the_repair_pass_runs_past_the_budgets_end(cubic):
+    prog, prob, sol = cubic
     old = guard.emit_guarded(prog, prob, sol)
     late = repair_pass(prog, prob, "auto", deadline_s=time.perf_counter() - 100.0)
     new = guard.emit_guarded(prog, prob, sol, repair=late)
@@ -102,8 +108,8 @@ def test_greedys_answer_taken_for_want_of_time_gets_the_repair_pass_too(monkeypa
     assert np.all(got.source != guard.FROM_SOLVER)       # (greedy's answer, not an exact one)
 
 
-def test_a_reverted_proven_layer_is_solved_again_and_kept_reordered():
-    prog, prob, sol = _cubic()
+def test_a_reverted_proven_layer_is_solved_again_and_kept_reordered(cubic):
+    prog, prob, sol = cubic
     old = guard.emit_guarded(prog, prob, sol)
     assert _proven_in(prob, sol, old.kept) >= 1
     new = guard.emit_guarded(prog, prob, sol, repair=repair_pass(prog, prob, "auto"))
@@ -125,8 +131,8 @@ def test_a_reverted_proven_layer_is_solved_again_and_kept_reordered():
     assert guard.layer_times_s(new.output)[lay] <= slicer[lay] + guard.GUARD_TOL_S
 
 
-def test_a_repair_that_prints_slower_is_not_taken_and_its_status_is_reported():
-    prog, prob, sol = _cubic()
+def test_a_repair_that_prints_slower_is_not_taken_and_its_status_is_reported(cubic):
+    prog, prob, sol = cubic
     old = guard.emit_guarded(prog, prob, sol)
     joined = planner_priced(prog, prob)
     pp = prob.program_problem
@@ -166,8 +172,8 @@ def test_a_repair_that_prints_slower_is_not_taken_and_its_status_is_reported():
     assert _proven_in(prob, new.solution, new.kept) == 0
 
 
-def test_resolve_layers_keeps_every_other_layer_and_the_layers_contiguous():
-    prog, prob, sol = _cubic()
+def test_resolve_layers_keeps_every_other_layer_and_the_layers_contiguous(cubic):
+    prog, prob, sol = cubic
     printed = guard.mix_layers(prob, None, sol, np.zeros(prog.n_layers, np.int64), with_cost=False)
     joined = planner_priced(prog, prob)
     out = resolve_layers(joined, printed, [13], group_solver("auto"))

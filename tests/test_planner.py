@@ -307,11 +307,19 @@ def test_stop_cost_of_a_motor_line_in_the_file(header, footer):
     rng = np.random.default_rng(3)
     steps = [s for s in random_path(rng, 40) if s[0] == "move"]
     k = 20
-    without = planner.plan(make_program((0, 0, 0, 0), steps, header, footer))
+    base = make_program((0, 0, 0, 0), steps, header, footer)
+    without = planner.plan(base)
+    # every variant planned by the header's rules: a SET_STEPPER_ENABLE line is a Klipper command,
+    # which would make the file's own default family Klipper's (limits.default_family)
+    family = without.limits.firmware
+
+    def planned(prog):
+        return planner.plan(prog, machine_limits(prog, family=family))
+
     for text, drains in (("M18 X", True), ("SET_STEPPER_ENABLE STEPPER=stepper_x ENABLE=0", True),
                          ("S0 X", False), ("M17 X", False)):
         p = make_program((0, 0, 0, 0), steps[:k] + [("motor", text)] + steps[k:], header, footer)
-        pl = planner.plan(p)
+        pl = planned(p)
         assert bool(planner.drains_queue(p)[k]) == drains
         extra = pl.total_s - without.total_s
         if not drains:
@@ -319,7 +327,7 @@ def test_stop_cost_of_a_motor_line_in_the_file(header, footer):
         assert pl.stop_cost_s(k, firmware="marlin") == pytest.approx(max(extra, 0.0), abs=1e-9)
         # a dwell right beside it also stops the head: then the motor line adds nothing
         q = make_program((0, 0, 0, 0), steps[:k] + [("motor", text), ("dwell", 0.0)] + steps[k:], header, footer)
-        assert planner.plan(q).stop_cost_s(k, firmware="marlin") == 0.0
+        assert planned(q).stop_cost_s(k, firmware="marlin") == 0.0
 
 
 def test_stop_cost_closed_form_and_klipper_dwell():

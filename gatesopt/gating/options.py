@@ -72,7 +72,7 @@ class GatingOptions:
     schedule: Schedule | None = None    # the firmware times its own switches (``firmware.Schedule``):
                                         # the off line goes right after the motors' last step
     time_model: str = "paper"           # "paper": T = L / F (3DGates Eq. 2); "planner": gatesopt.planner
-    planner_family: str | None = None   # the planner's rules ("klipper"; None: the file's flavor)
+    planner_family: str | None = None   # the planner's rules ("klipper"; None: limits.default_family)
     printer: PrinterConfig | None = None  # the printer's Klipper config: planner limits, shaper
 
     def __post_init__(self):

@@ -61,7 +61,8 @@ def print_time_s(program: Program, firmware: str = "3dgates",
     (``Firmware.enable_fixed_s``: 28.6 ms at mzv 30 Hz where 2 ms without), as the gating problem
     prices them; without it the file's limits and the dialect's defaults. ``family``: the planner
     rules to plan by (``GatingOptions.planner_family``, as the gating problem and the verifier
-    plan a dialect's output; None: the file's flavor's, or Klipper's with a printer config)."""
+    plan a dialect's output; None: the file's own, ``limits.default_family``, or Klipper's with a
+    printer config)."""
     if planned_s is not None:
         planned = planned_s
     elif printer is None and family is None:

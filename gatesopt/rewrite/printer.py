@@ -138,7 +138,8 @@ def choose(program, requested: str = "auto", *, force: bool = False, max_added_t
     printer."""
     data = program if isinstance(program, (bytes, bytearray)) else program.data
     source = "<text>" if isinstance(program, (bytes, bytearray)) else program.source
-    facts = slicers.read_printer(bytes(data))
+    facts = (slicers.read_printer(bytes(data)) if isinstance(program, (bytes, bytearray))
+             else slicers.program_printer(program))
     ev = facts.firmware
     printer_cfg = gating.get("printer")
     if requested == "auto":

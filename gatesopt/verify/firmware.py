@@ -110,7 +110,7 @@ def detect_firmware(original: Program | None, output: Program) -> str:
     # the dialect the original names (its slicer's flavour, printer model or Klipper command, as
     # ``gatesopt solve`` reads it) where it takes every added line: RepRapFirmware's M18 / M17
     # read as Marlin's too, and its rules (stalls, motors) are not Marlin's
-    ev = None if original is None else slicers.read_printer(original.data).firmware
+    ev = None if original is None else slicers.program_printer(original).firmware
     named = None if ev is None else fwmod.DIALECT_OF_FAMILY.get(ev.family)
     if named in takes:
         return named

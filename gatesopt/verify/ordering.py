@@ -354,11 +354,12 @@ _EXTRUDING_LIMITS = tuple(i for i, k in enumerate(KEYS)
                           if k not in ("accel_travel", "accel_retract", "min_travel_feed"))
 
 
-def limits_at(program: Program, rows: np.ndarray) -> np.ndarray:
+def limits_at(program: Program, rows: np.ndarray, family: str | None = None) -> np.ndarray:
     """(len(rows), n) int64: the machine limits in force at steps ``rows`` that bear on an
     extruded move (``_EXTRUDING_LIMITS``: the file's M201-M205 / SET_VELOCITY_LIMIT lines over
-    its defaults, ``limits.machine_limits``), in thousandths (inf as -1), as compared."""
-    table = machine_limits(program).per_step(program)[np.asarray(rows, np.int64)]
+    its defaults, ``limits.machine_limits`` under ``family``'s rules, None: the file's own), in
+    thousandths (inf as -1), as compared."""
+    table = machine_limits(program, family=family).per_step(program)[np.asarray(rows, np.int64)]
     table = table[:, _EXTRUDING_LIMITS]
     finite = np.isfinite(table)
     return np.where(finite, np.round(np.where(finite, table, 0.0) * 1000.0), -1.0).astype(np.int64)
@@ -382,8 +383,11 @@ def check_limits(original: Program, output: Program, *, max_findings: int = 3,
         return Finding("limits", int(output.line[rb[j]]) + 1,
                        f"layer {L}: extruded move with {names[k]} = {got[k] / 1000:g}, "
                        f"{orig} in the original")
-    return _moves_keep(original, output, limits_at(original, ra), limits_at(output, rb), keys,
-                       max_findings, finding)
+    # both under the original's planner rules: the lines gating adds (a SET_STEPPER_ENABLE
+    # forced onto a Marlin file) would change the output's default family, not its limits
+    family = machine_limits(original).firmware
+    return _moves_keep(original, output, limits_at(original, ra, family), limits_at(output, rb, family),
+                       keys, max_findings, finding)
 
 
 #: the checks ``check`` shares with ``gatesopt.verify.verify``, which runs them on every output
