@@ -15,7 +15,7 @@ GATING_KEYS = ("saving_pct", "energy_before_j", "energy_after_j", "lines_added",
                "size_change_pct", "added_time_pct", "print_time_before_s", "print_time_after_s",
                "print_time_change_pct", "paper_added_time_pct", "travel_before_mm", "travel_after_mm",
                "ordered", "firmware", "status", "stopped", "gap", "bound", "solve_s", "wall_s",
-               "rotation_deg", "verified")
+               "rotation_deg", "verified", "message")
 #: the values of an ordering run (``OrderResult.summary``) a row keeps
 ORDERING_KEYS = ("travel_before_mm", "travel_after_mm", "travel_change_pct", "model_travel_after_mm",
                  "print_time_before_s", "print_time_after_s", "print_time_model", "groups_reordered",

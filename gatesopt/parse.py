@@ -316,9 +316,36 @@ def _line_text(data: bytes, line_start, ln: int) -> str:
     return data[line_start[ln]:line_start[ln + 1]].decode("utf-8", "replace").strip()
 
 
-def _number_warnings(data, line_start, l_flags, name, line_offset) -> list[str]:
-    """A line each for numbers written with an exponent (not on a move: those are refused) and
-    letters given twice, at the first such line, with the count."""
+#: words of the reasons ``per_command`` gives (``stream`` counts those warnings over its chunks)
+PER_COMMAND_WORDS = ("unexpanded slicer placeholder", "no firmware reads exponents",
+                     "a letter given twice", "a hexadecimal number")
+
+
+def per_command(lines, data, line_start, l_letter, l_number, name, line_offset, say) -> list[str]:
+    """One warning line per command among ``lines`` (its letter and number: M624, G1), at its
+    first line, with how many more lines of that command it is said of: a warning repeated on many
+    lines is said once, and one on another command is not hidden under it (a Bambu Studio file:
+    one ``M970.3`` line with a letter given twice, then 128 base64 ``M624`` lines, once said as
+    "M970.3 ... (128 more lines like it)"). ``say(text)``: the reason, from the first line's text."""
+    if not len(lines):
+        return []
+    from ._text import code_words
+    key = np.stack([l_letter[lines].astype(np.float64),
+                    np.nan_to_num(l_number[lines].astype(np.float64), nan=-1.0)], axis=1)
+    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    out = []
+    for i in np.argsort(first, kind="stable"):
+        ln = int(lines[first[i]])
+        text = _line_text(data, line_start, ln)
+        cmd = (code_words(text) or [text])[0]
+        more = f" ({counts[i] - 1} more {cmd} lines like it)" if counts[i] > 1 else ""
+        out.append(f"{name}:{ln + 1 + line_offset}: {text[:60]}: {say(text)}{more}")
+    return out
+
+
+def _number_warnings(data, line_start, l_flags, l_letter, l_number, name, line_offset) -> list[str]:
+    """Numbers written with an exponent (not on a move: those are refused), letters given twice
+    and hexadecimal numbers: a line per command each is on (``per_command``)."""
     out = []
     for flag, say in ((_scan.FLAG_EXPONENT, lambda t: _exponent_reason(t, refused=False)),
                       # Marlin's FASTER_GCODE_PARSER (its default) keeps the last pointer set per
@@ -328,12 +355,8 @@ def _number_warnings(data, line_start, l_flags, name, line_offset) -> list[str]:
                       (_scan.FLAG_HEX, lambda t: "a hexadecimal number (0x..): firmware reads it "
                        "as 0 and an X word, or as hexadecimal (Marlin on some boards); read here "
                        "as 0 and an X word")):
-        lines = np.flatnonzero(l_flags & flag)
-        if len(lines):
-            ln = int(lines[0])
-            text = _line_text(data, line_start, ln)
-            more = f" ({len(lines) - 1} more lines like it)" if len(lines) > 1 else ""
-            out.append(f"{name}:{ln + 1 + line_offset}: {text[:60]}: {say(text)}{more}")
+        out += per_command(np.flatnonzero(l_flags & flag), data, line_start, l_letter, l_number,
+                           name, line_offset, say)
     return out
 
 
@@ -470,14 +493,10 @@ def parse(path_or_text, *, source: str | None = None, time=None, flavor: str | N
         raise GcodeError(name, int(err_line) + 1 + line_offset, reason, text=text)
     (s_line, s_kind, s_pos, s_feed, s_len, s_dur, s_fan, s_hot, s_bed, s_arc, s_ccw,
      s_off, s_relxyz, s_rele, s_inch, s_en, l_letter, l_number, l_flags) = arrs
-    ph = np.flatnonzero(l_flags & 1)
-    for ln in ph[:5]:
-        text = data[line_start[ln]:line_start[ln + 1]].decode("utf-8", "replace").strip()
-        warnings.append(f"{name}:{ln + 1}: {text[:60]}: unexpanded slicer placeholder ignored "
-                        "(as the firmware ignores a word without a value)")
-    if len(ph) > 5:
-        warnings.append(f"{name}: {len(ph) - 5} more lines with unexpanded placeholders")
-    warnings += _number_warnings(data, line_start, l_flags, name, line_offset)
+    warnings += per_command(np.flatnonzero(l_flags & 1), data, line_start, l_letter, l_number, name,
+                            line_offset, lambda t: "unexpanded slicer placeholder ignored (as the "
+                            "firmware ignores a word without a value)")
+    warnings += _number_warnings(data, line_start, l_flags, l_letter, l_number, name, line_offset)
     s = slice(0, n)
     step_line, kind = s_line[s], s_kind[s]
     start, end = s_pos[:n], s_pos[1:n + 1]     # views of one buffer: start of step i = end of step i-1

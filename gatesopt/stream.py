@@ -26,7 +26,7 @@ from .energy import EnergyReport, load_profile, profile
 from .errors import GatesoptError, GcodeError
 from .firmware import FirmwareError
 from .kinematics import check_gateable
-from .parse import BGCODE_MAGIC, DEFAULT_FEED_MM_S, GZIP_MAGIC, parse
+from .parse import BGCODE_MAGIC, DEFAULT_FEED_MM_S, GZIP_MAGIC, PER_COMMAND_WORDS, parse
 
 DEFAULT_CHUNK_BYTES = 64 << 20
 
@@ -63,19 +63,43 @@ def iter_chunks(path, chunk_bytes: int = DEFAULT_CHUNK_BYTES):
         yield rest, line0
 
 
-def _warning_kind(message: str) -> str:
+#: the count ``parse.per_command`` gives a warning said of more lines
+_MORE = re.compile(r" \((\d+) more (\S+) lines like it\)$")
+
+
+def _warning_kind(message: str, prog=None, line0: int = 0) -> str:
     """A parse warning without its place and counts: each chunk finds the same M101 or foreign
-    axis again, and the user needs to read it once (with the first line where it applies)."""
+    axis again, and the user needs to read it once (with the first line where it applies). A
+    warning quoting its line's text (``parse.per_command``: one per command) is of its command,
+    whatever the rest of that line (Bambu's base64 ``M624`` lines differ in letters)."""
+    if prog is not None and message.startswith(prog.source + ":"):
+        m = re.match(r"(\d+): ", message[len(prog.source) + 1:])
+        local = int(m.group(1)) - 1 - line0 if m else -1
+        if 0 <= local < len(prog.line_start) - 1:
+            text = prog.data[prog.line_start[local]:prog.line_start[local + 1]]
+            text = text.decode("utf-8", "replace").strip()[:60]
+            after = message[len(prog.source) + 1 + m.end():]
+            if text and after.startswith(text + ": "):
+                from ._text import code_words
+                return (code_words(text) or [text])[0] + "|" + re.sub(r"\d+", "#", after[len(text):])
     return re.sub(r"\d+", "#", message)
 
 
-def _keep_new_warnings(prog, warnings: list, warned: set) -> None:
-    """Append ``prog``'s parse warnings of a kind not given yet (``_warning_kind``)."""
+def _keep_new_warnings(prog, warnings: list, warned: dict, line0: int = 0) -> None:
+    """Append ``prog``'s parse warnings of a kind not given yet (``_warning_kind``); a per-command
+    one (``parse.per_command``) given already is counted instead: its line says how many more
+    lines, over every chunk so far, it is said of, as ``parse`` of the whole file says."""
     for w in prog.warnings:
-        kind = _warning_kind(w)
+        m = _MORE.search(w)
+        base, n = (w[:m.start()], 1 + int(m.group(1))) if m else (w, 1)
+        kind = _warning_kind(base, prog, line0)
         if kind not in warned:
-            warned.add(kind)
+            warned[kind] = [len(warnings), n, base]
             warnings.append(w)
+        elif "|" in kind and any(word in kind for word in PER_COMMAND_WORDS):
+            k = warned[kind]
+            k[1] += n
+            warnings[k[0]] = f"{k[2]} ({k[1] - 1} more {kind.split('|')[0]} lines like it)"
 
 
 def _parse_piece(piece: bytes, name: str, state, line0: int, flavor: str | None):
@@ -104,7 +128,7 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
     layer_t, layer_e, layer_z = [], [], []
     n_lines = n_steps = n_moves = 0
     flavor = None
-    warnings, warned = [], set()
+    warnings, warned = [], {}
     method = ""
     any_moves = False
     last_ext_z = np.nan         # Z where the previous chunk's last extrusion ended
@@ -113,7 +137,7 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
         prog = _parse_piece(piece, name, state, line0, flavor)
         if flavor is None:      # the header (first chunk) says which G90/G91 semantics apply
             flavor = prog.header.get("flavor", "") or "marlin"
-        _keep_new_warnings(prog, warnings, warned)
+        _keep_new_warnings(prog, warnings, warned, line0)
         n_lines += prog.n_lines
         if prog.n_steps == 0:
             continue
@@ -275,7 +299,7 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
     e_before = e_after = 0.0
     lines_before = lines_after = 0
     findings = []
-    warnings, warned = [], set()
+    warnings, warned = [], {}
     chunks = 0
     flavor = None
     try:
@@ -284,7 +308,7 @@ def gate_stream(path, out_path, *, formulation: str = "dp", firmware: str = "3dg
                 chunks += 1
                 prog = _parse_piece(piece, name, state_in, line0, flavor)
                 prog.check_rewritable(line0)
-                _keep_new_warnings(prog, warnings, warned)
+                _keep_new_warnings(prog, warnings, warned, line0)
                 if flavor is None:
                     flavor = prog.header.get("flavor", "") or "marlin"
                 lines_before += prog.n_lines

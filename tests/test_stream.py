@@ -90,8 +90,10 @@ def test_streamed_gating_gives_the_input_warnings_once(tmp_path):
     assert res.chunks > 2 and res.verified
     first = next(i for i, ln in enumerate(text.splitlines()) if ln.startswith("M204")) + 1
     placeholder = [w for w in res.warnings if "placeholder" in w]
+    n = text.count("M204 S{accel}")
     assert placeholder == [f"{src}:{first}: M204 S{{accel}}: unexpanded slicer placeholder ignored "
-                           "(as the firmware ignores a word without a value)"]
+                           f"(as the firmware ignores a word without a value) ({n - 1} more M204 lines "
+                           "like it)"]
     assert placeholder[0] in parse(text, source=str(src)).warnings
 
 

@@ -117,8 +117,14 @@ def format_compare(rows: list[dict]) -> str:
     if any("saving_pct" in r for r in rows):
         out.append("each row: the run `gatesopt solve --formulation F` makes (curve ordering included "
                    "unless --no-order); print +%: print time against the file as given, planner "
-                   "model, what --max-added-time-pct bounds; solve s: every solve of the run "
+                   "model, what --max-added-time-pct bounds (status infeasible: a run over it or "
+                   "over the line budget); solve s: every solve of the run "
                    "(ordering, rotation search, the solve again after rotating); run s: the whole run")
+    for r in rows:
+        if r.get("status") == "infeasible" and r.get("message"):
+            # why (greedy, the paper's re-compiler, knows no budget): over the time budget on the
+            # print +% column's planner time, or over the line budget
+            out.append(f"infeasible: {r['file'][:28]} {r['formulation']}: {r['message']}")
     if any(r.get("stopped") for r in rows):
         out.append("*: stopped before its gap (" + ", ".join(sorted({str(r['stopped']) for r in rows
                                                                      if r.get("stopped")})) + ")")

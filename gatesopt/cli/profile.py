@@ -108,15 +108,15 @@ def run(args) -> int:
         return run_stream(args)
     program = read_program(args.file)       # its warnings on stderr
     prof = load_profile(args.profile)
-    from ..rewrite.figures import file_firmware
-    firmware = file_firmware(program)
+    from ..rewrite.printer import NOT_GATED, file_firmware
+    name, firmware = file_firmware(program)     # the name and detection `solve` and `verify` use
     report, duration_s = time_and_energy(program, prof, args.time_model, args.energy_time_model, firmware)
     if args.plot:
         from ..plot import plot_profile
         plot_profile(report, args.plot)
     if args.json:
         d = _json(report, args, program)
-        d["firmware"] = firmware
+        d["firmware"] = name
         if args.time_model != "paper":
             d["paper_time_s"] = float(program.duration_s.sum())
         json.dump(d, sys.stdout, indent=2)
@@ -124,8 +124,12 @@ def run(args) -> int:
         return 0
     print(format_report(report, args.time_model, args.energy_time_model,
                         paper_time_s=None if args.time_model == "paper" else float(program.duration_s.sum())))
-    print(f"firmware    {firmware}: the stalls of the file's motor lines counted, as `solve` and "
-          "`verify` count them")
+    if name == NOT_GATED:
+        print(f"firmware    {name}: gatesopt gates nothing on this printer (see `solve`); none of "
+              "the file's motor lines counted as a stall, as `solve` and `verify` count them")
+    else:
+        print(f"firmware    {name}: the stalls of the file's motor lines counted, as `solve` and "
+              "`verify` count them")
     print(_slicer_line(program, duration_s, args.time_model))
     if args.per_layer:
         print()

@@ -115,6 +115,8 @@ def format_solve_report(s: dict) -> str:
                  f"{s['ordering_solve_s']:.2f} s, gating {s['gating_solve_s']:.2f} s)")
     lines.append(time_spent_line(s))
     lines.append(f"verified      {'yes' if s['verified'] else 'NO'}")
+    if s.get("status") == "infeasible" and s.get("message"):
+        lines.append(f"note          {s['message']}")   # greedy: which budget it broke
     for n in s.get("notes", []):
         lines.append(f"note          {n}")
     return "\n".join(lines)

@@ -30,7 +30,7 @@ from ..limits import machine_limits
 from ..planner import durations
 from ..program import Kind, Program
 from ..verify.energy import stall_s
-from .printer import choose
+from .printer import file_firmware as printer_file_firmware
 
 #: the model of the print time the reports give, and how they say it
 PRINT_TIME_MODEL = "planner"
@@ -111,14 +111,26 @@ def pct(after: float, before: float) -> float:
 
 
 def file_firmware(program: Program) -> str:
-    """The dialect the file's own printer runs (``printer.choose``, "auto": what ``solve`` would
+    """The dialect the file's own printer runs (``printer.file_firmware``: what ``solve`` would
     write for it), "3dgates" where gatesopt writes nothing for it: the firmware a file's print
     time is figured under when no gating chose one (``order``, ``solve --no-gating``), so that
     every command gives one print time for one file."""
-    try:
-        return choose(program).firmware or "3dgates"
-    except fwmod.FirmwareError:
-        return "3dgates"
+    return printer_file_firmware(program)[1]
+
+
+def print_times(original: Program, output: Program, firmware: str, gated: bool, printer=None) -> tuple:
+    """(before s, after s): the print times (planner model, ``print_time_s``) of a rewrite as
+    ``solve`` reports them: a gated output (``gated``: it has motor lines the rewrite added) and
+    its original by ``firmware``'s planner rules and the printer's config, as gating priced them;
+    else both by the file's own (``figures`` without a firmware). What ``verify`` reports beside
+    the paper's time."""
+    if not gated:
+        f = file_firmware(original)
+        return print_time_s(original, f), print_time_s(output, f)
+    fw = fwmod.get(firmware)
+    family = fw.planner.family if fw.planner else None
+    return (print_time_s(original, firmware, printer=printer, family=family),
+            print_time_s(output, firmware, printer=printer, family=family))
 
 
 def figures(before: Program, after: Program, firmware: str | None = None,

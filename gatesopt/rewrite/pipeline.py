@@ -51,7 +51,7 @@ from ..program import Kind, Program
 from ..solvers import Interrupted, Status, Stopped, request_stop, stop_requested, stop_scope
 from ..verify import SHARED_CHECKS, VerifyReport, check_ordering, check_positions, energy_of, verify
 from .budget import (EXACT_GATING_RESERVE_S, EXACT_GATING_SHARE, budget_clock, gating_limit_s,
-                     no_time_note, ordering_budget_s)
+                     no_time_note, on_print, ordering_budget_s)
 from .figures import figure_notes, figures, print_time_s
 from .order import (READ_S_PER_LINE, NoTimeToOrder, greedy_work_budget_s, kept_slower_note,
                     order_summary, out_of_time_groups, out_of_time_note, reorder, stage_floor_s)
@@ -382,14 +382,14 @@ def _within_limit(base: Program, planned: _Planned, sol: GatingSolution, em: Emi
     """(solution, emitted, output parsed) whose planner print time is within ``limit_s``: where the
     output's is over (the problem's stall model and the planner's stops differ: a Marlin stop from
     a fast travel costs more than 0.05 s), the stall budget shrinks by the planner's seconds per
-    problem second measured on this output and the problem is solved again."""
+    problem second measured on this output and solved again (greedy: labelled, ``budget.on_print``)."""
     if limit_s is None or sol.problem.options.max_added_time_pct is None:
         return sol, em, out
     problem = sol.problem
     for k in range(LIMIT_ROUNDS + 1):
         after_s = print_time_s(out, o.firmware, printer=o.printer, family=o.planner_family)
-        if after_s <= limit_s * (1.0 + 1e-9):
-            return sol, em, out
+        if after_s <= limit_s * (1.0 + 1e-9) or sol.formulation == "greedy":   # greedy: no budget
+            return on_print(sol, after_s, limit_s), em, out
         planner_added = after_s - planned.s
         model_added = sol.time_after_s - problem.time_before_s
         left_s = max(0.0, limit_s - planned.s)

@@ -74,6 +74,26 @@ class FirmwareChoice:
                 "motors": list(self.motors), "line": self.line}
 
 
+#: the name every report gives the firmware of a file whose printer gatesopt writes no motor line
+#: for (``choose``: None, e.g. Bambu Lab's), and the dialect its own motor lines are priced and
+#: checked in then: the paper's S0 / S1, which no stock firmware's line is, so none of them stalls
+NOT_GATED, NOT_GATED_DIALECT = "none", "3dgates"
+
+
+def file_firmware(program, printer=None) -> tuple[str, str]:
+    """(name, dialect) of the firmware of ``program``'s printer: ``choose(program, "auto")`` (with
+    ``printer``, a ``--printer-config``), the one detection every command reports: `solve`,
+    `compare` and `batch` (their firmware line), `profile` and `order` (the stalls of the file's
+    own motor lines, the print time) and `verify` (an output with no added motor line). The name
+    is the dialect, or ``NOT_GATED`` where gatesopt gates nothing on that printer; the dialect,
+    ``NOT_GATED_DIALECT`` there."""
+    try:
+        name = choose(program, printer=printer).firmware
+    except fwmod.FirmwareError:
+        name = None
+    return (name or NOT_GATED, name or NOT_GATED_DIALECT)
+
+
 def _stalls(name: str) -> bool:
     fw = fwmod.get(name)
     return fw.stall_off_s > 0 or fw.stall_on_s > 0

@@ -6,7 +6,6 @@ import numpy as np
 
 from .. import firmware as fwmod
 from .. import kinematics as kinmod
-from .. import slicers
 from ..program import AXES, Program
 from .finding import Finding
 from .motor_lines import added_motor_lines
@@ -92,26 +91,33 @@ def check_firmware(output: Program, *, firmware="3dgates", original: Program | N
     return [Finding("firmware", int(output.line[rows[h]]) + 1, problem[inverse[h]]) for h in hit.tolist()]
 
 
-def detect_firmware(original: Program | None, output: Program) -> str:
-    """The firmware ``gatesopt verify --firmware auto`` checks ``output`` for: the dialect the
-    original names (``slicers.read_printer``, as ``gatesopt solve`` reads it) where that firmware
-    takes every line the rewrite added, else ``firmware.detect``
-    (the dialect of the output's motor lines) when that firmware takes every line the rewrite added
-    (``firmware_problem``), else the first preset that does -- so a start G-code's own ``M17`` does
-    not make S-series output Marlin's. When no preset takes them all, ``detect``'s answer stands
-    (and ``check_firmware`` reports the lines)."""
+def detect_firmware(original: Program | None, output: Program, printer=None) -> str:
+    """The firmware ``gatesopt verify --firmware auto`` checks ``output`` for (``firmware_of``)."""
+    return firmware_of(original, output, printer)[1]
+
+
+def firmware_of(original: Program | None, output: Program, printer=None) -> tuple[str, str, bool]:
+    """(name, dialect, gated) of the firmware ``gatesopt verify --firmware auto`` checks ``output``
+    for. ``gated``: the rewrite added motor lines. Then the dialect is the one of the file's
+    printer (``rewrite.printer.file_firmware``, as ``gatesopt solve`` reads it) where that
+    firmware takes every line the rewrite added, else ``firmware.detect`` (the dialect of the
+    output's motor lines) when that firmware takes them all (``firmware_problem``), else the
+    first preset that does -- so a start G-code's own ``M17`` does not make S-series output
+    Marlin's; when no preset takes them all, ``detect``'s answer stands (and ``check_firmware``
+    reports the lines); the name is the dialect's. Without added lines: the firmware of the
+    file's printer, named as `solve` and `profile` name it ("none" where gatesopt gates nothing
+    on it, checked in the paper's dialect, which prices none of the file's own lines)."""
+    from ..rewrite.printer import file_firmware     # the one detection (not at import: a cycle)
     guess = fwmod.detect(output)
     _, inverse, texts = added_motor_lines(original, output)
     texts = [texts[k] for k in np.unique(inverse).tolist()]
     if not texts:
-        return guess
+        return (guess, guess, False) if original is None else (*file_firmware(original, printer), False)
     takes = [name for name in fwmod.PRESETS
              if all(firmware_problem(t, name) is None for t in texts)]
-    # the dialect the original names (its slicer's flavour, printer model or Klipper command, as
-    # ``gatesopt solve`` reads it) where it takes every added line: RepRapFirmware's M18 / M17
-    # read as Marlin's too, and its rules (stalls, motors) are not Marlin's
-    ev = None if original is None else slicers.program_printer(original).firmware
-    named = None if ev is None else fwmod.DIALECT_OF_FAMILY.get(ev.family)
-    if named in takes:
-        return named
-    return guess if guess in takes or not takes else takes[0]
+    # the dialect the original's printer runs (its slicer's flavour, printer model or Klipper
+    # command, as ``gatesopt solve`` reads it) where it takes every added line: RepRapFirmware's
+    # M18 / M17 read as Marlin's too, and its rules (stalls, motors) are not Marlin's
+    named = None if original is None else file_firmware(original, printer)[1]
+    name = named if named in takes else guess if guess in takes or not takes else takes[0]
+    return name, name, True
