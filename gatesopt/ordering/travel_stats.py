@@ -17,6 +17,13 @@ from ..program import Kind, Program
 from .layout import firmware_retraction
 
 
+#: an E move back by less than this is no retraction: the float noise of a slicer's rounded
+#: retraction and unretraction (PrusaSlicer's -.76 -.04 +.8001), which a rebuilt travel keeps
+#: (net E per gap is kept exactly: ``gaps.rebuilt_gap``) as ``G1 E-.00001``; counted, a free-mode
+#: output showed 245 retractions more than it made
+RETRACT_NOISE_MM = 1e-4
+
+
 def travel_mask(program: Program) -> np.ndarray:
     """(n_steps,) bool: the travel moves the report counts: every non-extruding XY move
     (straight or arc) from the first layer on."""
@@ -39,7 +46,7 @@ def travel_stats(program: Program) -> dict:
     d = program.delta_mm
     printing = program.layer >= 0
     travel = travel_mask(program)
-    retract = printing & (d[:, 3] < 0)
+    retract = printing & (d[:, 3] < -RETRACT_NOISE_MM)
     # a retraction spread over several wipe moves counts once
     n_retract = runs(retract, program) + len(firmware_retraction_lines(program))
     # a wipe: the slicer's retraction while moving back over the last extrusion (XY and -E)
