@@ -22,24 +22,26 @@ from conftest import SHARED_INSTANCES, needs_shared
 HEAD = "G90\nM83\nG28\n"
 
 
-def _island(x0: float, y0: float, z: float) -> str:
+def _island(x0: float, y0: float, z: float, arc: bool = False) -> str:
     """A 6 mm square printed counter-clockwise from (x0, y0), then the slicer's wipe back along
-    its last side while retracting 0.6 of 0.8 mm, the rest in place, a lifted travel."""
+    its last side while retracting 0.6 of 0.8 mm (``arc``: a quarter circle of 1 mm radius
+    into the square, as Bambu Studio wipes), the rest in place, a lifted travel."""
+    wipe = (f"G2 X{x0 + 1:g} Y{y0 + 2:g} I1 J0 E-0.6" if arc else f"G1 X{x0:g} Y{y0 + 3:g} E-0.6")
     return (f"G1 X{x0:g} Y{y0:g} F9000\nG1 Z{z:g} F600\nG1 E0.8 F2100\n;TYPE:Perimeter\n"
             f"G1 X{x0 + 6:g} Y{y0:g} E0.3 F1800\nG1 X{x0 + 6:g} Y{y0 + 6:g} E0.3\n"
             f"G1 X{x0:g} Y{y0 + 6:g} E0.3\nG1 X{x0:g} Y{y0 + 1:g} E0.25\n"
-            f";WIPE_START\nG1 F7200\nG1 X{x0:g} Y{y0 + 3:g} E-0.6\n;WIPE_END\n"
+            f";WIPE_START\nG1 F7200\n{wipe}\n;WIPE_END\n"
             f"G1 E-0.2 F2100\nG1 Z{z + 0.4:g} F600\n")
 
 
-def _plate(order) -> str:
+def _plate(order, arc: bool = False) -> str:
     """Islands on a line, two layers: the first in line (a first layer keeps its order) and one
     more island 8 mm on (the shortest travel the slicer retracted for: 14.3 mm), the second
     printed by the slicer in ``order`` (a zigzag the ordering undoes)."""
     spots = [(10.0 + 20.0 * k, 10.0) for k in range(len(order))]
-    first = "".join(_island(*spots[k], 0.2) for k in range(len(order)))
-    first += _island(spots[-1][0] + 14.0, 10.0, 0.2)
-    second = "".join(_island(*spots[k], 0.4) for k in order)
+    first = "".join(_island(*spots[k], 0.2, arc) for k in range(len(order)))
+    first += _island(spots[-1][0] + 14.0, 10.0, 0.2, arc)
+    second = "".join(_island(*spots[k], 0.4, arc) for k in order)
     return (HEAD + ";LAYER_CHANGE\n;Z:0.2\n" + first + ";LAYER_CHANGE\n;Z:0.4\n" + second
             + "G1 X0 Y0 F9000\nM84\n")
 
@@ -59,8 +61,9 @@ def _unwiped_retractions(program) -> int:
     return count + (run and not wiped)
 
 
-def test_the_slicers_own_wipe_is_written_again_on_a_rebuilt_travel():
-    src = _plate([0, 3, 1, 4, 2, 5])
+@pytest.mark.parametrize("arc", [False, True])
+def test_the_slicers_own_wipe_is_written_again_on_a_rebuilt_travel(arc):
+    src = _plate([0, 3, 1, 4, 2, 5], arc)
     prog = gatesopt.parse(src)
     # (copied gaps priced move by move, as ``gap_times_ms`` measures: tests/test_ordering_cost.py)
     prob = build(prog, OrderingOptions(mode="free", copied_gaps="moves"))
@@ -74,7 +77,11 @@ def test_the_slicers_own_wipe_is_written_again_on_a_rebuilt_travel():
     # filament, then -0.2 in place), written by a rebuilt travel (``Writer.move_xy_e``'s
     # numbers: the slicer wrote "E-0.6")
     text = emit(prog, prob, sol)
-    assert re.search(r"G1 X\d+ Y13 E-\.6\b.*\nG1 E-\.2 ", text)
+    if arc:
+        # the quarter circle as 3 chords (sagitta <= 0.04 mm at 1 mm radius), 0.2 mm each
+        assert re.search(r"(G1 X[\d.]+ Y[\d.]+ E-\.2\b.*\n){3}G1 E-\.2 ", text)
+    else:
+        assert re.search(r"G1 X\d+ Y13 E-\.6\b.*\nG1 E-\.2 ", text)
     # what the solver priced is what was written (the wipe's moves included)
     measured = gap_times_ms(out, prob.pricer.move)
     assert sol.cost_after == pytest.approx(measured.sum(), rel=1e-6, abs=1e-3)

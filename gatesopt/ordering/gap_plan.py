@@ -153,7 +153,7 @@ def klipper_smoothing(w, n, row):
 W_L, W_F, W_U, W_V, W_A, W_SAFE, W_J, W_E, W_READY, W_JREADY, W_COLS = (
     4, 5, 6, 10, 11, 12, 13, 14, 15, 16, 17)
 #: the slicer's wipe moves a rebuilt travel writes first at most (``wipes.SlicerWipes``)
-WIPE_MAX_MOVES = 8
+WIPE_MAX_MOVES = 16
 #: a rebuilt travel's moves, and with the curves' moves around it (``plan_ends_s``)
 REBUILT_MAX_MOVES = 5 + WIPE_MAX_MOVES
 JOINED_MAX_MOVES = REBUILT_MAX_MOVES + 2

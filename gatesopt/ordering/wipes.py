@@ -22,6 +22,7 @@ before, and the report counts the wipes that are gone.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -52,8 +53,8 @@ class SlicerWipes:
     Where the slicer wiped after u: side 0 is its own wipe, the first steps of the gap after u
     up to its last that moves in XY at one height while retracting (``Kind.RETRACT`` with an XY
     move), with the E-only retractions and XY travels at one height among them, at most
-    ``WIPE_MAX_MOVES`` steps (an arc ends it: the rest of a wipe that goes on in arcs, as
-    PrusaSlicer 2.7's with arc fitting, is retracted in place). Where the
+    ``WIPE_MAX_MOVES`` moves, an arc among them written as chords within ``ARC_SAGITTA_MM`` of it
+    (``arc_chords``: Bambu Studio, Orca and PrusaSlicer with arc fitting wipe along arcs). Where the
     slicer wipes (after ``WIPING_SHARE`` of its retractions after a curve, as PrusaSlicer's,
     Orca's and Bambu Studio's "wipe while retracting" does after every one), every other side of
     an open curve, and side 0 of a loop, gets a wipe of the slicer's usual length (the median of
@@ -87,36 +88,48 @@ class SlicerWipes:
         retract = program.kind == int(Kind.RETRACT)
         xy_mm = np.hypot(d[:, 0], d[:, 1])
         flat = np.abs(d[:, 2]) <= MOVE_EPS_MM
-        wipe = retract & (xy_mm > MOVE_EPS_MM) & flat & (d[:, 3] < 0.0)
+        # a wipe move: XY at one height pulling filament back, straight or an arc (Bambu Studio
+        # and Orca wipe along arcs; written again as chords, ``arc_chords``)
+        arc_wipe = (program.kind == ARC) & flat & (d[:, 3] < 0.0) & (xy_mm > MOVE_EPS_MM)
+        wipe = (retract & (xy_mm > MOVE_EPS_MM) & flat & (d[:, 3] < 0.0)) | arc_wipe
         # what may come before or between a wipe's moves: E-only retractions (PrusaSlicer's
         # "retract before wipe") and XY travels at one height (its move inwards after an
         # external perimeter, before the wipe)
-        lead = flat & (retract | (program.kind == int(Kind.TRAVEL)))
+        lead = flat & (retract | (program.kind == int(Kind.TRAVEL)) | arc_wipe)
         a = lay.curve_s1[:-1]                       # the gap after curve u: steps [a, b)
         b = lay.curve_s0[1:]
         hit = np.zeros(len(wipe) + 1, np.int64)
         hit[1:] = np.cumsum(wipe)
         last = np.minimum(a + WIPE_MAX_MOVES, b)
+        feed_of, start, centre, ccw = program.feed_mm_s, program.start_mm, program.arc_center_mm, program.arc_ccw
         xy_len, xy_e = [], []
         for u in np.flatnonzero(hit[last] > hit[a]).tolist():
-            k = 0           # the wipe: steps a[u] .. a[u] + k - 1, its last one an XY wipe move
-            for j in range(int(last[u] - a[u])):
-                st = int(a[u]) + j
+            rows: list = []
+            n_ok = 0        # the wipe: the rows up to its last XY move pulling filament back
+            for st in range(int(a[u]), int(last[u])):
                 if not lead[st]:
                     break
+                if program.kind[st] == ARC:
+                    rows += [(dx, dy, float(d[st, 3]) * f, float(feed_of[st])) for dx, dy, f in
+                             arc_chords(start[st, :2], centre[st], bool(ccw[st]), d[st, :2])]
+                else:
+                    rows.append((float(d[st, 0]), float(d[st, 1]), float(d[st, 3]),
+                                 float(feed_of[st])))
+                if len(rows) > WIPE_MAX_MOVES:
+                    break
                 if wipe[st]:
-                    k = j + 1
-            if not k:
+                    n_ok = len(rows)
+            if not n_ok:
                 continue
-            st = np.arange(int(a[u]), int(a[u]) + k)
-            n_moves[u, 0] = k
-            moves[u, 0, :k, 0:3] = d[st][:, [0, 1, 3]]
-            moves[u, 0, :k, 3] = program.feed_mm_s[st]
-            e_mm[u, 0] = -d[st, 3].sum()
-            shift[u, 0] = d[st, 0:2].sum(axis=0)
-            w = st[wipe[st]]
-            xy_len.append(float(xy_mm[w].sum()))
-            xy_e.append(float(-d[w, 3].sum()))
+            r = np.asarray(rows[:n_ok])
+            n_moves[u, 0] = n_ok
+            moves[u, 0, :n_ok] = r
+            e_mm[u, 0] = -r[:, 2].sum()
+            shift[u, 0] = r[:, 0:2].sum(axis=0)
+            xy = np.hypot(r[:, 0], r[:, 1])
+            w = (xy > MOVE_EPS_MM) & (r[:, 2] < 0.0)
+            xy_len.append(float(xy[w].sum()))
+            xy_e.append(float(-r[w, 2].sum()))
         us = np.flatnonzero(n_moves[:, 0])
         cum = np.concatenate(([0], np.cumsum(retract)))
         n_retracting = int(np.count_nonzero(cum[b] - cum[a]))
@@ -210,6 +223,28 @@ def _walk(kind, d, start, centre, ccw, first, stop, step, want_mm, e_per_mm, fee
     e_out[side] = e
     shift[side, 0], shift[side, 1] = sx, sy
     return j
+
+
+def arc_chords(start_xy, centre_xy, ccw: bool, d_xy) -> list:
+    """An arc (from ``start_xy`` by ``d_xy`` around ``centre_xy``, counter-clockwise or not) as
+    equal chords within ``ARC_SAGITTA_MM`` of it: (dX, dY, share of the arc) each."""
+    cx, cy = float(centre_xy[0]), float(centre_xy[1])
+    ax, ay = float(start_xy[0]) - cx, float(start_xy[1]) - cy
+    bx, by = ax + float(d_xy[0]), ay + float(d_xy[1])
+    r = math.hypot(ax, ay)
+    turn = 1.0 if ccw else -1.0
+    sweep = turn * (math.atan2(by, bx) - math.atan2(ay, ax))
+    while sweep <= 1e-12:
+        sweep += 2.0 * math.pi
+    per = 2.0 * math.acos(1.0 - ARC_SAGITTA_MM / r) if ARC_SAGITTA_MM < r else math.pi / 2.0
+    n = max(1, math.ceil(sweep / per))
+    th = math.atan2(ay, ax)
+    out = []
+    for _ in range(n):
+        th2 = th + turn * sweep / n
+        out.append((r * (math.cos(th2) - math.cos(th)), r * (math.sin(th2) - math.sin(th)), 1.0 / n))
+        th = th2
+    return out
 
 
 def side_of(changed: bool) -> int:
