@@ -168,10 +168,9 @@ def figure_notes(fig: dict, saving_pct: float | None = None, gated: bool = True)
     lost = fig.get("wipes_before", 0) - fig.get("wipes_after", 0)
     if lost > 0:
         notes.append(f"{lost:,} fewer wipes than the slicer's {fig['wipes_before']:,}: a rebuilt "
-                     "travel wipes where it retracts, as the slicer does, except out of a loop "
-                     "left at another seam, a curve that begins with an arc, or where its wipe "
-                     "would pull back more than the retraction; a travel the re-ordering made "
-                     "short enough not to retract does not wipe; --no-order keeps them all")
+                     "travel wipes where it retracts, as the slicer does (except out of a loop "
+                     "left at another seam); a travel the re-ordering made short enough not to "
+                     "retract does not wipe; --no-order keeps them all")
     if (not gated and saving_pct is not None and saving_pct < 0
             and fig["print_time_after_s"] < fig["print_time_before_s"]):
         notes.append(f"nothing gated: the energy change ({-saving_pct:.2f} % more) is the "
