@@ -225,11 +225,12 @@ def joined_s(w, n, code, row, p, po, c, co, ends):
 @numba.njit(cache=True)
 def same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v, has_u, w, code, row, v_xy,
              p, po, c, co, ends):
-    """``link_cost.rebuilt_s`` for a link at one height inside a group (``_dense``), from prepared rows:
-    ``pre`` the retraction, lift and lowering (the lift's junction from the retraction made),
-    ``u_rows[0 / 1, v]`` the unretraction into candidate v retracting / dry (with, retracting,
-    its junction from the lowering); per link only the travel and its junctions are made. Joined
-    to the last move of curve p and the first of curve c (``joined_s``)."""
+    """``link_cost.rebuilt_s`` for a link at one height inside a group (``_dense``), from
+    prepared rows: ``pre`` the retraction, lift and lowering (the lift's junction from the
+    retraction made), ``u_rows[0 / 1, v]`` the unretraction into candidate v retracting / dry
+    (with, retracting, its junction from the lowering); per link only the travel and its
+    junctions are made. Joined to the last move of curve p and the first of curve c
+    (``joined_s``)."""
     n = 0
     if po >= 0:
         w[n, :] = ends[1][p, po]

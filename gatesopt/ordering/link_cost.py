@@ -25,8 +25,9 @@ def rebuilt_s(dx, dy, z0, z1, retract, use_fw, r, net, mt, style, w, p, po, c, c
     """Time (s) of a rebuilt travel (``gaps.rebuilt_gap``): retraction (E, at the retract feed),
     lift by the z-hop if it retracts, the straight XY travel (dx, dy), lowering, and the
     unretraction that brings the consumed gaps to their net E (or that net E alone). ``wipe``
-    >= 0: curve p's wipe on that side first (``wipes.SlicerWipes``, ``ends[11:15]``), its moves at their feeds,
-    then the rest of the retraction in place and the travel from where the wipe ended. ``mt``:
+    >= 0: curve p's wipe on that side first (``wipes.SlicerWipes``, ``ends[11:15]``), its
+    moves at their feeds, then the rest of the retraction in place and the travel from where
+    the wipe ended. ``mt``:
     MoveTimes.vector(); ``style``: (retract feed, unretract feed, travel feed, z feed, hop).
     With the file's limits (``mt[MT_CODE] >= 0``) the moves are planned together, as the planner
     plans them (``plan_moves_s``, in the work array ``w``: ``work_array(JOINED_MAX_MOVES)``),

@@ -101,7 +101,8 @@ class SlicerWipes:
         hit = np.zeros(len(wipe) + 1, np.int64)
         hit[1:] = np.cumsum(wipe)
         last = np.minimum(a + WIPE_MAX_MOVES, b)
-        feed_of, start, centre, ccw = program.feed_mm_s, program.start_mm, program.arc_center_mm, program.arc_ccw
+        feed_of, start = program.feed_mm_s, program.start_mm
+        centre, ccw = program.arc_center_mm, program.arc_ccw
         xy_len, xy_e = [], []
         for u in np.flatnonzero(hit[last] > hit[a]).tolist():
             rows: list = []
@@ -242,7 +243,8 @@ def arc_chords(start_xy, centre_xy, ccw: bool, d_xy) -> list:
     out = []
     for _ in range(n):
         th2 = th + turn * sweep / n
-        out.append((r * (math.cos(th2) - math.cos(th)), r * (math.sin(th2) - math.sin(th)), 1.0 / n))
+        out.append((r * (math.cos(th2) - math.cos(th)), r * (math.sin(th2) - math.sin(th)),
+                    1.0 / n))
         th = th2
     return out
 
