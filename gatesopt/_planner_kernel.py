@@ -108,10 +108,12 @@ def junction_speed_rows(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row_p, row
     if cos_theta > 0.999999:
         # a full reversal: Marlin gives MINIMUM_PLANNER_SPEED, Klipper no junction speed at all
         return min(MINIMUM_PLANNER_SPEED, vmax) if code == DEVIATION else 0.0
-    cos_theta = max(cos_theta, -0.999999)
-    sin_d2 = math.sqrt(0.5 * (1.0 - cos_theta))
-    cos_d2 = math.sqrt(0.5 * (1.0 + cos_theta))
-    r_jd = sin_d2 / (1.0 - sin_d2)
+    if code == DEVIATION:
+        # Marlin: NOLESS(junction_cos_theta, -0.999999) against round-off (Klipper clamps nothing)
+        cos_theta = max(cos_theta, -0.999999)
+    sin_d2 = math.sqrt(max(0.5 * (1.0 - cos_theta), 0.0))
+    cos_d2 = math.sqrt(max(0.5 * (1.0 + cos_theta), 0.0))
+    r_jd = sin_d2 / (1.0 - sin_d2) if sin_d2 < 1.0 else math.inf
     if code == DEVIATION:
         # Marlin planner.cpp (junction deviation): v^2 = a * JD * sin(theta/2) / (1 - sin(theta/2)),
         # and JD_HANDLE_SMALL_SEGMENTS: a short move turning less than 45 degrees is part of a
@@ -134,8 +136,15 @@ def junction_speed_rows(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row_p, row
     jd = scv * scv * (math.sqrt(2.0) - 1.0) / row[C_ACCEL_PRINT]
     scv_p = row_p[C_SCV]
     jd_p = scv_p * scv_p * (math.sqrt(2.0) - 1.0) / row_p[C_ACCEL_PRINT]
-    quarter_tan = 0.25 * sin_d2 / max(cos_d2, 1e-12)
-    v2 = min(r_jd * jd * ac, r_jd * jd_p * ap, 2.0 * lc * ac * quarter_tan, 2.0 * lp * ap * quarter_tan)
+    v2 = math.inf
+    if sin_d2 < 1.0 and cos_d2 > 0.0:
+        # Klipper skips the rule where the moves are straight in line (one_minus_sin_theta_d2 or
+        # cos_theta_d2 is 0): a move split in two pieces, however short one is, keeps its speed
+        # through the cut (with Marlin's clamp a 0.00013 mm first piece of a 22.7 mm/s move would
+        # cap it at 19.2 mm/s: real_cura410_cubic's greedy output, the stop there mispriced).
+        quarter_tan = 0.25 * sin_d2 / cos_d2
+        v2 = min(r_jd * jd * ac, r_jd * jd_p * ap, 2.0 * lc * ac * quarter_tan,
+                 2.0 * lp * ap * quarter_tan)
     # extruder.calc_junction: instant_corner_velocity on the change of E per mm of XYZ path
     diff_r = abs(uc[3] / nc - up[3] / np_)
     if diff_r > 1e-9:

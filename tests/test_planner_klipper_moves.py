@@ -240,3 +240,36 @@ def test_a_junction_across_an_acceleration_change_keeps_each_moves_own_deviation
     a, b = pl.move_step
     assert pl.accel_mm_s2[a] == 2000 and pl.accel_mm_s2[b] == 10000
     assert pl.exit_mm_s[a] == pytest.approx(5.0, rel=1e-9)
+
+
+CUT_GCODE = """G28
+G90
+M83
+SET_VELOCITY_LIMIT VELOCITY=300 ACCEL=4000 SQUARE_CORNER_VELOCITY=5
+G1 X10 Y10 F6000
+G1 E1 F1800
+G1 X10.00013 Y10 E0.000004 F1359
+G1 X30 Y10 E0.6
+G1 X30 Y30 F6000
+"""
+
+
+def test_a_move_cut_in_line_keeps_its_speed_through_the_cut_on_klipper():
+    # toolhead.py Move.calc_junction: for moves straight in line junction_cos_theta is -1,
+    # cos_theta_d2 is 0 and the junction-deviation / centripetal rule is skipped, so the cut
+    # costs nothing however short the first piece (0.00013 mm here, as a gating line placed
+    # 5.7 us into a move cuts it). A clamp at -0.999999 (Marlin's) capped the junction at
+    # sqrt(0.5 * 0.00013 * 4000 * tan) = 19.2 mm/s; the same move uncut is the reference.
+    cut = planner.plan(parse(CUT_GCODE, source="cut.gcode"))
+    whole = planner.plan(parse(CUT_GCODE.replace("G1 X10.00013 Y10 E0.000004 F1359\n", "")
+                               .replace("G1 X30 Y10 E0.6", "G1 X30 Y10 E0.600004 F1359"),
+                               source="whole.gcode"))
+    assert cut.firmware == "klipper"
+    k = int(np.flatnonzero(cut.move_step == cut.move_step[-2])[0])     # the long piece
+    assert cut._vj_free[k] == pytest.approx(1359 / 60, rel=1e-12)
+    assert cut.duration_s.sum() == pytest.approx(whole.duration_s.sum(), abs=1e-9)
+    # the stop a gating line at the cut costs is the one inside the uncut move
+    row = int(cut.move_step[k])
+    inside = int(whole.move_step[-2])
+    assert planner.stop_restart_s(cut, [row])[0] == pytest.approx(
+        planner.stop_restart_s(whole, [inside], True)[0], rel=1e-12)
