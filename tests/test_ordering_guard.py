@@ -45,7 +45,7 @@ def _stand_in(monkeypatch, prog, prob, times):
                                extruding=np.arange(2 * L) % 2 == 0)
     monkeypatch.setattr(guard, "emit", fake_emit)
     monkeypatch.setattr(guard, "parse", fake_parse)
-    monkeypatch.setattr(guard, "step_times_s", lambda program: program.duration_s)
+    monkeypatch.setattr(guard, "step_times_s", lambda program, options=None: program.duration_s)
     # the slicer's file: 1 s per layer and per layer change
     return fake_parse(np.ones(2 * L).tobytes())
 
@@ -145,8 +145,8 @@ def test_a_layer_slower_re_ordered_keeps_the_slicers_order_the_others_stay(monke
     slow = still[0]
     real = guard.step_times_s
 
-    def times(p):
-        t = real(p).copy()
+    def times(p, options=None):
+        t = real(p, options).copy()
         if p is not prog and not np.array_equal(_layer_xy(p, slow), _layer_xy(prog, slow)):
             t[np.flatnonzero((p.layer == slow) & p.extruding)[0]] += 1.0
         return t

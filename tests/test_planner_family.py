@@ -137,3 +137,30 @@ def test_every_command_plans_the_file_by_one_family(src, tmp_path, capsys):
     assert f["firmware"] == "marlin"
     _approx(f["print_time_before_s"], marlin_s, "solve --force-firmware marlin")
     assert not np.isclose(marlin_s, klipper_s)
+
+
+def test_an_explicit_firmware_orders_and_guards_by_its_own_rules():
+    # the ordering's link prices and its time guard plan the print as the report does: by the
+    # rules of the firmware chosen (Marlin's here), not by the file's own (Klipper's, from its
+    # macros) -- else a layer the guard measured faster could print slower as reported
+    from gatesopt.gating import GatingOptions
+    from gatesopt.ordering.problem import OrderingOptions
+    from gatesopt.rewrite import guard, pipeline
+
+    program = gatesopt.parse(klipper_macro_file(), source="macros.gcode")
+    r = pipeline.run(program, GatingOptions.for_firmware("marlin"), formulation="dp")
+    assert r.ordered and r.report.ok
+    opts = r.order_problem.options
+    assert opts.planner_family == "marlin"
+    assert r.order_problem.pricer.limits.firmware == "marlin"
+    assert r.order_problem.pricer.limits.junction == "jerk"
+    marlin_steps = guard.step_times_s(program, opts)
+    assert np.allclose(marlin_steps, guard.step_times_s(program, OrderingOptions(planner_family="marlin")))
+    assert not np.allclose(marlin_steps, guard.step_times_s(program))       # the file's own: Klipper
+    # the file's own firmware: the ordering plans by Klipper's rules, as before
+    r = pipeline.run(program, formulation="dp")
+    assert r.order_problem.options.planner_family == "klipper"
+    assert r.order_problem.pricer.limits.firmware == "klipper"
+    # options that name their own rules keep them
+    own = OrderingOptions(planner_family="klipper")
+    assert own.planned_by("marlin") is own

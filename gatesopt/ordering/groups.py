@@ -15,7 +15,6 @@ import re
 
 import numpy as np
 
-from ..limits import machine_limits
 from ..program import Kind, Program
 from ..planner import plan
 from ..slicers import FIXED_FEATURE
@@ -139,7 +138,7 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
         curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), layout=lay)
     step_plan = None
     if options.objective == "time":
-        step_plan = plan(program) if options.copied_gaps == "planner" else None
+        step_plan = plan(program, options.limits_of(program)) if options.copied_gaps == "planner" else None
         problem = with_pricer(program, problem, step_plan)
         first_pricer = problem.pricer
     if options.mode == "safe" and options.blocks:
@@ -165,10 +164,10 @@ def with_pricer(program: Program, problem: OrderingProblem, step_plan=None,
     ``ends``: its ``curve_time.CurveEnds`` where made already."""
     lay = problem.layout
     rule = TravelRule.of(program, problem, lay)
-    lim = machine_limits(program)
+    lim = problem.options.limits_of(program)
     move = MoveTimes.from_limits(lim)
     if step_plan is None and problem.options.copied_gaps == "planner":
-        step_plan = plan(program)
+        step_plan = plan(program, lim)
     step_s = None if step_plan is None else step_plan.duration_s
     return dataclasses.replace(problem, cost_unit=COST_UNIT["time"],
                                pricer=TimePricer(program, lay, problem, rule, move, step_s, lim,

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import GatesoptError
+from ..limits import machine_limits
 from ..solvers import STATUSES, Status, relative_gap
 
 #: closed-loop tolerance: a curve whose end lies within this of its start is a closed loop
@@ -78,6 +79,25 @@ class OrderingOptions:
     #: "all": joined under every rule (classic jerk too: a link and its mirror then differ);
     #: "none": never joined
     joined_links: str = "symmetric"
+    #: the rules and limits the print is planned by, as the gating problem and the report plan it
+    #: (``GatingOptions.planner_family`` / ``printer``): None, the file's own
+    #: (``limits.default_family``); ``printer``: the printer's Klipper config (``--printer-config``),
+    #: whose limits replace the file's. The time objective prices links and the time guard
+    #: measures layers with them (``limits_of``)
+    planner_family: str | None = None
+    printer: object = field(default=None, repr=False)
+
+    def planned_by(self, family: str | None, printer=None) -> "OrderingOptions":
+        """These options planned by ``family`` / ``printer`` (the gating options': one plan of the
+        print in every stage), unless they name their own."""
+        if self.planner_family is not None or self.printer is not None:
+            return self
+        return dataclasses.replace(self, planner_family=family, printer=printer)
+
+    def limits_of(self, program):
+        """The planner limits of ``program`` (the input or a re-ordered copy) under these options
+        (``limits.machine_limits``)."""
+        return machine_limits(program, family=self.planner_family, printer=self.printer)
 
     def __post_init__(self):
         if self.mode not in ("safe", "free"):

@@ -92,10 +92,12 @@ class Guarded:
         return int(np.count_nonzero(self.source == FROM_GREEDY))
 
 
-def step_times_s(program: Program) -> np.ndarray:
+def step_times_s(program: Program, options=None) -> np.ndarray:
     """Per step, its time under the planner model (``planner.plan``: acceleration, junction
-    speeds, the file's machine limits): what the time guard and the report's print time use."""
-    return planned_durations_s(program)
+    speeds, the file's machine limits, or those of ``options``, an ``OrderingOptions``: the
+    family and printer the print is planned by): what the time guard and the report's print time
+    use."""
+    return planned_durations_s(program, options.limits_of(program) if options is not None else None)
 
 
 def layer_times_s(program: Program, durations_s: np.ndarray | None = None) -> np.ndarray:
@@ -296,7 +298,7 @@ def _stage(program: Program, problem: OrderingProblem, base: _Measured, solution
     def measured(states) -> _Measured:
         sol = mix_layers(problem, base.solution, solution, states, with_cost=False)
         text, out = emitted(sol)
-        return _Measured(sol, text, out, step_times_s(out))
+        return _Measured(sol, text, out, step_times_s(out, problem.options))
     states1 = changed.astype(np.int64)
     first = measured(states1)
     if first.output.n_layers != L:
@@ -344,7 +346,7 @@ def _repair_stage(program: Program, problem: OrderingProblem, base: _Measured,
     def measured(states):
         sol = mix_layers(problem, base.solution, solution, states, with_cost=False)
         text, out = emitted(sol)
-        m = _Measured(sol, text, out, step_times_s(out))
+        m = _Measured(sol, text, out, step_times_s(out, problem.options))
         if out.n_layers != L:
             return m, None
         return m, layer_times_s(out, m.durations_s)
@@ -532,7 +534,7 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
         return Guarded(solution, text, out, np.zeros(0, np.int64), np.full(L, FROM_SOLVER))
     # a safety net: the time objective prices each travel as emitted (cost.py), but not every
     # junction of the planner (formulations/ordering.md, "Time guard")
-    slicer = _Measured(None, "", program, step_times_s(program))
+    slicer = _Measured(None, "", program, step_times_s(program, problem.options))
     base = slicer
     if greedy is not None:
         may = np.ones(L, bool) if greedy_layers is None else np.asarray(greedy_layers, bool)[:L]

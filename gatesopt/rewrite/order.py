@@ -471,7 +471,8 @@ def order_summary(program: Program, out: Program, problem: OrderingProblem,
     per-step planner durations where the time guard has them (``guard.Guarded.planned_s``);
     ``repaired``: the layers the guard's repair pass solved again (``guard.Guarded.repaired``);
     ``proofs_put_back``: ``guard.Guarded.proofs_put_back``."""
-    fig = figures(program, out, planned_s=planned_s) if with_figures else None
+    fig = (figures(program, out, planned_s=planned_s, printer=options.printer,
+                   family=options.planner_family) if with_figures else None)
     layers, counts, lay_counts, decided = _solve_counts(problem, solution, slower_layers)
     sizes = np.diff(problem.group_curve_start)
     slower = _slower_notes(fig, slower_layers)

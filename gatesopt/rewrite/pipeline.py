@@ -628,7 +628,8 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
             with times.stage("ordering_s"):
                 base, ordered, note, order_problem, summarize, order_solve_s = _order_curves(
                     program, order_time_limit_s, order_workers, ob, order_progress,
-                    order_options, order_formulation,
+                    (order_options or OrderingOptions()).planned_by(o.planner_family, o.printer),
+                    order_formulation,
                     slow=slow if budget_s is not None else None, work_budget_s=order_work_s)
             times.add("ordering_solve_s", order_solve_s)
             if note:
