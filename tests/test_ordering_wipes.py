@@ -144,3 +144,32 @@ def test_float_noise_of_e_is_no_retraction():
             "G1 X40 Y0 F9000\nG1 E0.8\nG1 X50 Y0 E0.5\n")
     stats = travel_stats(gatesopt.parse(text))
     assert stats["retractions"] == 1 and stats["travels"] == 2
+
+
+@pytest.mark.parametrize("r_mm, sweep_deg, ccw", [(5.0, 90.0, True), (5.0, 270.0, False),
+                                                  (0.5, 360.0, True), (0.02, 360.0, False)])
+def test_arc_chords_stay_on_the_arc_and_close_it(r_mm, sweep_deg, ccw):
+    # one rule (``arc_span``) for the slicer's own arc wipes (``arc_chords``) and the usual wipe
+    # along an arc (``_walk``): chords within ARC_SAGITTA_MM of the arc, a tiny circle as four
+    # quarter turns, never a chord of no length (a full circle once came out as one move of 0 mm)
+    from gatesopt.ordering.wipes import ARC_SAGITTA_MM, arc_chords, arc_span
+    sweep = np.radians(sweep_deg) * (1 if ccw else -1)
+    start = np.array([10.0 + r_mm, 20.0])
+    end = np.array([10.0 + r_mm * np.cos(sweep), 20.0 + r_mm * np.sin(sweep)])
+    chords = arc_chords(start, (10.0, 20.0), ccw, end - start)
+    r, span, per = arc_span(r_mm, 0.0, end[0] - 10.0, end[1] - 20.0, ccw)
+    assert r == pytest.approx(r_mm) and span == pytest.approx(np.radians(sweep_deg))
+    assert len(chords) == max(1, int(np.ceil(span / per - 1e-12)))
+    p = start.copy()
+    for dx, dy, share in chords:
+        q = p + (dx, dy)
+        mid = (p + q) / 2 - (10.0, 20.0)
+        assert np.hypot(dx, dy) > 1e-6                                   # a move, not a point
+        assert r_mm - np.hypot(*mid) <= max(ARC_SAGITTA_MM, r_mm) + 1e-9  # on the arc
+        if r_mm > ARC_SAGITTA_MM:
+            assert r_mm - np.hypot(*mid) <= ARC_SAGITTA_MM + 1e-9
+        assert share == pytest.approx(1 / len(chords))
+        p = q
+    assert np.allclose(p, end, atol=1e-9)
+    if r_mm < ARC_SAGITTA_MM:
+        assert len(chords) == 4

@@ -90,8 +90,7 @@ def emit(program: Program, problem: OrderingProblem, solution: OrderingSolution,
             memo[_FIXED] = fixed
     rule, lists, per_curve, rgaps, wipes = fixed
     w = Writer(program, lay, lists)
-    plan = _Plan(p, lay, rule, order, rev, seam, per_curve, rgaps)
-    plan.wipes = wipes
+    plan = _Plan(p, lay, rule, order, rev, seam, per_curve, rgaps, wipes)
 
     # prefix + first gap: verbatim (the first layer keeps its order, so curve 0 stays first)
     prev = -1
@@ -166,7 +165,7 @@ class _Plan:
     scalar indexing curve by curve was a fifth of the emit)."""
 
     def __init__(self, p: Program, lay: Layout, rule: TravelRule, order, rev, seam,
-                 per_curve: tuple, rgaps=None):
+                 per_curve: tuple, rgaps=None, wipes: SlicerWipes | None = None):
         self.p, self.lay, self.rule, self.rgaps = p, lay, rule, rgaps
         self.order, self.rev, self.seam = order.tolist(), rev.tolist(), seam.tolist()
         self.order_arr = order
@@ -185,7 +184,7 @@ class _Plan:
         self.follows = nxt.tolist()
         self.rev_arr, self.seam_arr = rev, seam
         self.moves = None       # the layer's curves written move by move (``layer_moves``)
-        self.wipes = None       # the slicer's wipes (``wipes.SlicerWipes``), set by ``emit``
+        self.wipes = wipes      # the slicer's wipes a rebuilt travel writes (``wipes.SlicerWipes``)
 
     def layer_moves(self, k0: int, k1: int) -> None:
         """``moves``: the moves of the curves at positions k0..k1-1 written move by move (made

@@ -148,6 +148,20 @@ class SlicerWipes:
 
 
 @numba.njit(cache=True)
+def arc_span(ax, ay, bx, by, ccw):
+    """(radius, sweep, chord turn) of an arc from (ax, ay) to (bx, by) about the origin,
+    counter-clockwise or not: its sweep in (0, 2 pi] radians (a full turn where it ends where it
+    starts) and the turn of the longest chord within ``ARC_SAGITTA_MM`` of it (a quarter turn
+    below that radius: a tiny circle as four chords, never one of no length)."""
+    r = math.sqrt(ax * ax + ay * ay)
+    sweep = (1.0 if ccw else -1.0) * (math.atan2(by, bx) - math.atan2(ay, ax))
+    while sweep <= 1e-12:
+        sweep += 2.0 * math.pi
+    per = 2.0 * math.acos(1.0 - ARC_SAGITTA_MM / r) if ARC_SAGITTA_MM < r else math.pi / 2.0
+    return r, sweep, per
+
+
+@numba.njit(cache=True)
 def _walks(kind, d, start, centre, ccw, s0, s1, closed, want_mm, e_per_mm, feed_mm_s, n_moves,
            moves, e_mm, shift):
     """The usual wipe on every side without one (``SlicerWipes``: side 0 of a curve the slicer
@@ -179,18 +193,13 @@ def _walk(kind, d, start, centre, ccw, first, stop, step, want_mm, e_per_mm, fee
             cx, cy = centre[s, 0], centre[s, 1]
             ax, ay = start[s, 0] - cx, start[s, 1] - cy
             bx, by = ax + d[s, 0], ay + d[s, 1]
-            r = np.sqrt(ax * ax + ay * ay)
+            r, sweep, per = arc_span(ax, ay, bx, by, ccw[s])
             if not r > MOVE_EPS_MM:
                 break
-            dirn = 1.0 if ccw[s] else -1.0          # the arc's turn, printed forwards
-            sweep = dirn * (np.arctan2(by, bx) - np.arctan2(ay, ax))
-            while sweep <= 1e-12:
-                sweep += 2.0 * np.pi
             # walked forwards from its start, or backwards from its end
             th = np.arctan2(ay, ax) if step > 0 else np.arctan2(by, bx)
-            turn = dirn * step
-            chord_max = 2.0 * r * np.arccos(max(-1.0, 1.0 - ARC_SAGITTA_MM / r)) \
-                if ARC_SAGITTA_MM < 2.0 * r else 2.0 * np.pi * r
+            turn = (1.0 if ccw[s] else -1.0) * step
+            chord_max = per * r
             done = 0.0
             arc_len = sweep * r
             while done < arc_len - MOVE_EPS_MM and j < WIPE_MAX_MOVES and left > MOVE_EPS_MM:
@@ -232,12 +241,8 @@ def arc_chords(start_xy, centre_xy, ccw: bool, d_xy) -> list:
     cx, cy = float(centre_xy[0]), float(centre_xy[1])
     ax, ay = float(start_xy[0]) - cx, float(start_xy[1]) - cy
     bx, by = ax + float(d_xy[0]), ay + float(d_xy[1])
-    r = math.hypot(ax, ay)
+    r, sweep, per = arc_span(ax, ay, bx, by, bool(ccw))
     turn = 1.0 if ccw else -1.0
-    sweep = turn * (math.atan2(by, bx) - math.atan2(ay, ax))
-    while sweep <= 1e-12:
-        sweep += 2.0 * math.pi
-    per = 2.0 * math.acos(1.0 - ARC_SAGITTA_MM / r) if ARC_SAGITTA_MM < r else math.pi / 2.0
     n = max(1, math.ceil(sweep / per))
     th = math.atan2(ay, ax)
     out = []
