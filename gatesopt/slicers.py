@@ -98,7 +98,12 @@ FIXED_FEATURE_WORDS = ("perimeter", "wall", "ironing", "skirt", "brim", "wipe", 
 #: feature names of walls a travel crosses only with a retraction (the slicers' combing rule)
 WALL_FEATURE_WORDS = ("wall", "perimeter", "shell", "skirt", "brim")
 
+#: feature names of passes over what their layer printed before them (ironing smooths the top
+#: surface already printed): they keep their place in either order mode, free mode included
+PASS_OVER_FEATURE_WORDS = ("ironing", "iron")
+
 FIXED_FEATURE = re.compile("|".join(FIXED_FEATURE_WORDS), re.I)
+PASS_OVER_FEATURE = re.compile("|".join(PASS_OVER_FEATURE_WORDS), re.I)
 WALL_FEATURE = re.compile("|".join(WALL_FEATURE_WORDS), re.I)
 
 

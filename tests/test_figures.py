@@ -92,3 +92,6 @@ def test_wipes_counted_and_the_ones_a_re_ordering_dropped_said():
     notes = figure_notes(fig)
     assert len(notes) == 1 and notes[0].startswith("1 fewer wipes than the slicer's 1")
     assert figure_notes(figures(a, a)) == []
+    # and more wipes than the slicer's: said too (the usual wipe where the slicer's travel did not)
+    notes = figure_notes(figures(b, a))
+    assert len(notes) == 1 and notes[0].startswith("1 more wipes than the slicer's 0")

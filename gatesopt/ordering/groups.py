@@ -6,7 +6,9 @@ splits at every change of feature (``;TYPE:``) and keeps walls, ironing, skirt/b
 slicer orders on purpose (monotonic, concentric) and (without feature comments) closed loops, or
 loops whose end stops short of their start by at most ``LOOP_GAP_MM`` (the seam gap slicers clip),
 in the slicer's order and direction; ``free`` puts each layer's curves in one group, as the paper
-does. Layers the layout keeps (the first, fatal lines, ...) are fixed in both modes.
+does, but for a pass over what the layer printed before it (ironing: ``slicers.PASS_OVER_FEATURE``),
+which keeps its place, the curves before and after it in groups of their own. Layers the layout
+keeps (the first, fatal lines, ...) are fixed in both modes.
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import numpy as np
 
 from ..program import Kind, Program
 from ..planner import plan
-from ..slicers import FIXED_FEATURE
+from ..slicers import FIXED_FEATURE, PASS_OVER_FEATURE
 from .cost import TimePricer
 from .move_times import MoveTimes
 from .layout import Layout, layout
@@ -96,6 +98,7 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
     feature = program.feature[s0].astype(np.int64)
     fixed_feat = _fixed_features(program) | _pattern_fixed(program)
     has_features = len(program.feature_names) > 0
+    pass_over = np.array([bool(PASS_OVER_FEATURE.search(nm)) for nm in program.feature_names], bool)
     # ---- groups: per curve whether it keeps the slicer's order, and the key a group shares
     fixed = np.zeros(n, bool)
     key = np.zeros(n, np.int64)
@@ -112,7 +115,9 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
                 fx = bool(wall_like[c])
             key[c] = 2 * (feature[c] + 1) + fx
         else:
-            fx = keep
+            # one group per layer, but a pass over what was printed before it (ironing) keeps
+            # its place: the curves before it and those after it are groups of their own
+            fx = keep or bool(has_features and feature[c] >= 0 and pass_over[feature[c]])
             key[c] = fx
         fixed[c] = fx
         fname = program.feature_names[feature[c]] if feature[c] >= 0 else ("loops" if wall_like[c] else "curves")

@@ -160,8 +160,8 @@ def figures(before: Program, after: Program, firmware: str | None = None,
 
 
 def figure_notes(fig: dict, saving_pct: float | None = None, gated: bool = True) -> list[str]:
-    """What the figures of a re-ordered run say that its numbers alone do not: fewer wipes than
-    the slicer's (a rebuilt travel wipes where it retracts and can: ``ordering.wipes``), and,
+    """What the figures of a re-ordered run say that its numbers alone do not: fewer or more wipes
+    than the slicer's (a rebuilt travel wipes where it retracts and can: ``ordering.wipes``), and,
     where nothing was gated, why the energy can grow while the print time falls (two time
     models)."""
     notes = []
@@ -171,6 +171,11 @@ def figure_notes(fig: dict, saving_pct: float | None = None, gated: bool = True)
                      "travel wipes where it retracts, as the slicer does (except out of a loop "
                      "left at another seam); a travel the re-ordering made short enough not to "
                      "retract does not wipe; --no-order keeps them all")
+    elif lost < 0:
+        notes.append(f"{-lost:,} more wipes than the slicer's {fig['wipes_before']:,}: a rebuilt "
+                     "travel that retracts wipes as the slicer wipes after most of its "
+                     "retractions (ordering.wipes.WIPING_SHARE), also where the slicer's own "
+                     "travel there retracted without one; --no-order keeps the slicer's")
     if (not gated and saving_pct is not None and saving_pct < 0
             and fig["print_time_after_s"] < fig["print_time_before_s"]):
         notes.append(f"nothing gated: the energy change ({-saving_pct:.2f} % more) is the "
