@@ -69,6 +69,16 @@ def status_text(s: dict) -> str:
     return str(s["status"]) + (f" (stopped: {s['stopped']})" if s.get("stopped") else "")
 
 
+def _off_model_part(s: dict) -> str:
+    """Which timeline the off times are on: the energy model's (the paper's T = L/F, shorter than
+    the printer's: Klipper replays measured X 19.2 s off where this said 12.5 s) or the planner's."""
+    model = s.get("off_time_model")
+    if not s.get("off_time_s") or model is None:
+        return ""
+    return ("   (planner times)" if model == "planner"
+            else "   (the energy model's T = L/F times; the printer's are longer)")
+
+
 def _waits_part(waits: dict) -> str:
     """"   (in heat-up waits: X 92.50 s ...)": the off time that lies in M109 / M190 waits."""
     shown = {m: t for m, t in waits.items() if t > 0.005}
@@ -100,7 +110,7 @@ def format_solve_report(s: dict) -> str:
         f"rotation      {s.get('rotation_line') or 'none'}"
         + (f"   largest single-axis snap {s['max_snap_mm'] * 1e3:.3f} um" if s["rotation_deg"] else ""),
         "off time      " + ("  ".join(f"{m} {t:.2f} s" for m, t in s["off_time_s"].items()) or "-")
-        + _waits_part(s.get("off_time_waits_s") or {}),
+        + _waits_part(s.get("off_time_waits_s") or {}) + _off_model_part(s),
         figure_lines(s)[1],
     ]
     o = s.get("ordering")
