@@ -44,7 +44,8 @@ def add_arguments(p) -> None:
     p.add_argument("--no-order", action="store_true", help="do not re-order curves")
     p.add_argument("--order-mode", choices=("safe", "free"), default="safe",
                    help="as `solve --order-mode`: safe keeps the slicer's feature groups, walls and "
-                        "objects (default); free re-orders every curve of a layer")
+                        "objects (default); free re-orders every curve of a layer (ironing keeps "
+                        "its place)")
     p.add_argument("--budget", type=float, default=10.0, metavar="S",
                    help="finish each file's run in about S seconds (default 10, as `solve --budget`: "
                         "every solve included: the curve ordering gets what an estimate of the rest "

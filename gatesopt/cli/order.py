@@ -32,7 +32,8 @@ def add_arguments(p) -> None:
                         "open), cpsat, milp (exact), auto (exact where small enough; default)")
     p.add_argument("--order-mode", choices=("safe", "free"), default="safe",
                    help="safe: keep the slicer's feature groups, walls and objects (default); "
-                        "free: re-order every curve of a layer, as the paper does")
+                        "free: re-order every curve of a layer, as the paper does (ironing keeps "
+                        "its place)")
     p.add_argument("--move-seams", action="store_true",
                    help="closed loops may start at another vertex (default: keep the seam)")
     p.add_argument("--objective", choices=("time", "travel"), default="time",

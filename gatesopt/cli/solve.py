@@ -39,7 +39,8 @@ def add_arguments(p) -> None:
     p.add_argument("--no-order", action="store_true", help="do not re-order curves")
     p.add_argument("--order-mode", choices=("safe", "free"), default="safe",
                    help="as `order --order-mode`: safe keeps the slicer's feature groups, walls and "
-                        "objects (default); free re-orders every curve of a layer")
+                        "objects (default); free re-orders every curve of a layer (ironing keeps "
+                        "its place)")
     p.add_argument("--move-seams", action="store_true",
                    help="closed loops may start at another vertex (default: keep the seam)")
     p.add_argument("--objective", choices=("time", "travel"), default="time",
