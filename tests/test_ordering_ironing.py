@@ -26,10 +26,12 @@ def ironed_file() -> str:
                                               (14, "Top solid infill"), (184, "Ironing")]):
             out.append(f";TYPE:{feature}")
             e = 0.02 if feature == "Ironing" else 0.5
+            ironing = feature == "Ironing"
             for k in range(5):
                 y = 20 + 9 * k + (4 if part >= 2 else 0)
-                out += [f"G1 X{x0} Y{y} F9000", "G1 E0.5 F2100" if feature != "Ironing" else "G1 F2100",
-                        f"G1 X{x0 + 3} Y{y} E{e} F1800", "G1 E-0.5 F2100" if feature != "Ironing" else "G1 F9000"]
+                out += [f"G1 X{x0} Y{y} F9000", "G1 F2100" if ironing else "G1 E0.5 F2100",
+                        f"G1 X{x0 + 3} Y{y} E{e} F1800",
+                        "G1 F9000" if ironing else "G1 E-0.5 F2100"]
     out += ["M104 S0", "M84"]
     return "\n".join(out) + "\n"
 
@@ -45,7 +47,8 @@ def _features_in_order(program):
         if not seq or seq[-1][0] != f:
             seq.append((f, set()))
         # both ends: a line printed backwards is the same curve
-        seq[-1][1].update((round(float(program.start_mm[r, 0])), round(float(program.end_mm[r, 0]))))
+        seq[-1][1].update((round(float(program.start_mm[r, 0])),
+                           round(float(program.end_mm[r, 0]))))
     return per
 
 

@@ -155,8 +155,9 @@ def test_an_explicit_firmware_orders_and_guards_by_its_own_rules():
     assert r.order_problem.pricer.limits.firmware == "marlin"
     assert r.order_problem.pricer.limits.junction == "jerk"
     marlin_steps = guard.step_times_s(program, opts)
-    assert np.allclose(marlin_steps, guard.step_times_s(program, OrderingOptions(planner_family="marlin")))
-    assert not np.allclose(marlin_steps, guard.step_times_s(program))       # the file's own: Klipper
+    marlin_opts = OrderingOptions(planner_family="marlin")
+    assert np.allclose(marlin_steps, guard.step_times_s(program, marlin_opts))
+    assert not np.allclose(marlin_steps, guard.step_times_s(program))   # the file's own: Klipper
     # the file's own firmware: the ordering plans by Klipper's rules, as before
     r = pipeline.run(program, formulation="dp")
     assert r.order_problem.options.planner_family == "klipper"

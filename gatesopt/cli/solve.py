@@ -72,7 +72,8 @@ def status_text(s: dict) -> str:
 
 def _off_model_part(s: dict) -> str:
     """Which timeline the off times are on: the energy model's (the paper's T = L/F, shorter than
-    the printer's: Klipper replays measured X 19.2 s off where this said 12.5 s) or the planner's."""
+    the printer's: Klipper replays measured X 19.2 s off where this said 12.5 s) or the
+    planner's."""
     model = s.get("off_time_model")
     if not s.get("off_time_s") or model is None:
         return ""

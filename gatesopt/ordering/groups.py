@@ -143,7 +143,8 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
         curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), layout=lay)
     step_plan = None
     if options.objective == "time":
-        step_plan = plan(program, options.limits_of(program)) if options.copied_gaps == "planner" else None
+        step_plan = (plan(program, options.limits_of(program)) if options.copied_gaps == "planner"
+                     else None)
         problem = with_pricer(program, problem, step_plan)
         first_pricer = problem.pricer
     if options.mode == "safe" and options.blocks:

@@ -81,9 +81,9 @@ class OrderingOptions:
     joined_links: str = "symmetric"
     #: the rules and limits the print is planned by, as the gating problem and the report plan it
     #: (``GatingOptions.planner_family`` / ``printer``): None, the file's own
-    #: (``limits.default_family``); ``printer``: the printer's Klipper config (``--printer-config``),
-    #: whose limits replace the file's. The time objective prices links and the time guard
-    #: measures layers with them (``limits_of``)
+    #: (``limits.default_family``); ``printer``: the printer's Klipper config
+    #: (``--printer-config``), whose limits replace the file's. The time objective prices links
+    #: and the time guard measures layers with them (``limits_of``)
     planner_family: str | None = None
     printer: object = field(default=None, repr=False)
 

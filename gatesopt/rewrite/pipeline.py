@@ -135,7 +135,8 @@ class RunResult:
             "instruction_lines": self.emitted.instruction_lines if self.emitted else 0,
             "splits": self.emitted.splits if self.emitted else 0,
             "max_snap_mm": float(self.emitted.max_snap_mm) if self.emitted else 0.0,
-            "off_time_s": s.off_time_s() if s else {}, "off_time_model": s.problem.options.time_model if s else None,
+            "off_time_s": s.off_time_s() if s else {},
+            "off_time_model": s.problem.options.time_model if s else None,
             # of which during heat-up waits (M109 / M190 / TEMPERATURE_WAIT): their length is the
             # energy profile's heating assumption, and a host that skips them (klippy's batch
             # mode) sees the rest only
