@@ -438,15 +438,81 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
     (``M204`` and ``SET_VELOCITY_LIMIT`` without the ``ACCEL_TO_DECEL`` that Klipper 84104bb no
     longer has; ``M201``/``M203``/``M205`` are unknown commands there).
     """
+    v, source, junction, reading = _settings_limits(program, profile, family, printer)
+    changes, jd_from_line = reading.apply(program, v, source)
+    return reading.finish(v, source, junction, changes, jd_from_line)
+
+
+@dataclass(frozen=True, eq=False)
+class _Reading:
+    """How one file's limit lines read (``machine_limits``): its planner rules, M203's unit,
+    Marlin's legacy M204, and the config block's caps on the accelerations lines ask for."""
+
+    rules: object               # firmware.PlannerRules
+    family: str
+    profile: str
+    mm_min: bool
+    legacy_m204: bool
+    caps: dict
+    printer: object = None
+
+    def lines(self, program: Program):
+        """Per limit line of ``program``: (line, [(key, value) capped], sets junction deviation,
+        its text)."""
+        cmds = _limit_commands(program)
+        if self.printer is not None:
+            cmds = [(line, m) for line, m in cmds
+                    if m.group(1).upper() in (b"M204", b"SET_VELOCITY_LIMIT")]
+        for line, m in cmds:
+            sets, jd = _line_sets(m, self.rules, self.mm_min, self.legacy_m204, self.printer)
+            sets = [(k, min(x, self.caps[k]) if self.caps.get(k, 0) > 0 else x) for k, x in sets]
+            yield line, sets, jd, m.group(0).decode("utf-8", "replace").strip()
+
+    def apply(self, program: Program, v, source) -> tuple[list, bool]:
+        """Source 1 of the module docstring: ``program``'s limit lines before its first motion
+        step set the values in force there (``v``, ``source`` in place), the later ones are
+        returned as ``changes``; and whether a line set a junction deviation."""
+        motion = np.isin(program.kind, np.asarray(MOTION_KINDS, dtype=program.kind.dtype))
+        first_motion_line = int(program.line[motion][0]) if motion.any() else program.n_lines
+        changes: list[tuple[int, str, float]] = []
+        jd_from_line = False
+        for line, sets, jd, text in self.lines(program):
+            jd_from_line |= jd
+            for key, x in sets:
+                if line < first_motion_line:
+                    v[K[key]] = x
+                    source[key] = f"line {line + 1}: {text}"
+                else:
+                    changes.append((line, key, x))
+        return changes, jd_from_line
+
+    def finish(self, v, source, junction: str, changes, jd_from_line: bool) -> MachineLimits:
+        """The limits from the values ``v`` in force at the first motion and the later
+        ``changes``: the junction model the lines and the values imply."""
+        if jd_from_line and self.rules.config_picks_junction:
+            junction = "deviation"
+            source["junction"] = "M205 J (junction deviation)"
+        if junction == "jerk" and np.isnan(v[K["jerk_x"]]):
+            junction = "deviation"
+        if junction == "scv" and np.isnan(v[K["square_corner_velocity"]]):
+            # a printer profile without one (Cura's definitions) planned by Klipper's rules:
+            # Klipper's own default (klippy/toolhead.py square_corner_velocity 5.0); NaN would
+            # leave every junction speed undefined
+            v[K["square_corner_velocity"]] = self.rules.defaults.get("square_corner_velocity", 5.0)
+            source["square_corner_velocity"] = (f"default: {self.family} (the {self.profile} "
+                                                "profile has none)")
+        return _from_vector(v, self.family, junction, source, changes, self.profile)
+
+
+def _settings_limits(program: Program, profile, family, printer):
+    """Sources 3 and 2 of the module docstring (defaults, then the slicer's config block; the
+    printer's config where given): ``(values, sources, junction model, _Reading)``."""
     data = program.data
-    flavor = _flavor(data)
-    cmds = _limit_commands(program)
     said = "requested"
     if printer is not None:
         if family not in (None, "klipper"):
             raise GatesoptError(f"a Klipper printer config plans with Klipper's rules, not {family!r}")
         family = "klipper"
-        cmds = [(line, m) for line, m in cmds if m.group(1).upper() in (b"M204", b"SET_VELOCITY_LIMIT")]
         profile = profile or family
     if family is not None:
         firmware.planner_rules(family)      # an unknown family is an error
@@ -488,35 +554,49 @@ def machine_limits(program: Program, profile: str | None = None, *, family: str 
     # acceleration with the maximum")
     caps = {k: v[K[k]] for k in ("accel_print", "accel_travel", "accel_retract")
             if source[k].startswith("config:")}
+    flavor = _flavor(data)
+    reading = _Reading(rules, family, profile, rules.feed_per_min,
+                       flavor in ("marlin", "marlinlegacy", "marlin_legacy"), caps, printer)
+    return v, source, junction, reading
 
-    # --- 1: lines of the file -----------------------------------------------------------------
-    motion = np.isin(program.kind, np.asarray(MOTION_KINDS, dtype=program.kind.dtype))
-    first_motion_line = int(program.line[motion][0]) if motion.any() else program.n_lines
-    legacy_m204 = flavor in ("marlin", "marlinlegacy", "marlin_legacy")
-    mm_min = rules.feed_per_min
-    changes: list[tuple[int, str, float]] = []
-    jd_from_line = False
-    for line, m in cmds:
-        sets, jd = _line_sets(m, rules, mm_min, legacy_m204, printer)
-        jd_from_line |= jd
-        text = m.group(0).decode("utf-8", "replace").strip()
-        for key, x in sets:
-            if key in caps and caps[key] > 0:
-                x = min(x, caps[key])
-            if line < first_motion_line:
-                v[K[key]] = x
-                source[key] = f"line {line + 1}: {text}"
-            else:
-                changes.append((line, key, x))
-    if jd_from_line and rules.config_picks_junction:
-        junction = "deviation"
-        source["junction"] = "M205 J (junction deviation)"
-    if junction == "jerk" and np.isnan(v[K["jerk_x"]]):
-        junction = "deviation"
-    if junction == "scv" and np.isnan(v[K["square_corner_velocity"]]):
-        # a printer profile without one (Cura's definitions) planned by Klipper's rules: Klipper's
-        # own default (klippy/toolhead.py square_corner_velocity 5.0); NaN would leave every
-        # junction speed undefined
-        v[K["square_corner_velocity"]] = rules.defaults.get("square_corner_velocity", 5.0)
-        source["square_corner_velocity"] = f"default: {family} (the {profile} profile has none)"
-    return _from_vector(v, family, junction, source, changes, profile)
+
+@dataclass(frozen=True, eq=False)
+class PieceLimits:
+    """The limits of a file read in pieces (``gatesopt.stream``): the values in force where the
+    next piece starts and how the file's lines read, both from the file's settings (its head and
+    tail, where slicers write the config block and the printer, which a piece in the middle does
+    not have). ``of_piece`` gives one piece's limits, its own limit lines applying from their
+    lines on as in the whole file, and what is in force after it: the next piece's start."""
+
+    start: MachineLimits
+    reading: _Reading
+    jd_from_line: bool = False
+    first: bool = True          # the next piece is the file's first
+
+    @classmethod
+    def of_settings(cls, settings: Program, family: str | None = None,
+                    printer=None) -> "PieceLimits":
+        """Before the file's first line, from ``settings`` (the head and tail of the file,
+        parsed: its lines set nothing here, the pieces' own lines do)."""
+        v, source, junction, reading = _settings_limits(settings, None, family, printer)
+        return cls(_from_vector(v, reading.family, junction, source, (), reading.profile),
+                   reading)
+
+    def of_piece(self, program: Program) -> tuple[MachineLimits, "PieceLimits"]:
+        """``(limits of the piece, the state after it)``: the first piece's lines before its
+        first motion step set the values in force there, as ``machine_limits`` reads a file."""
+        v = self.start.vector()
+        source = dict(self.start.source)
+        if self.first:
+            changes, jd = self.reading.apply(program, v, source)
+        else:
+            changes, jd = [], False
+            for line, sets, jd_line, _ in self.reading.lines(program):
+                jd |= jd_line
+                changes += [(line, key, x) for key, x in sets]
+        jd |= self.jd_from_line
+        limits = self.reading.finish(v, source, self.start.junction, changes, jd)
+        _, table = limits.regimes()
+        after = _from_vector(table[-1], limits.firmware, limits.junction, limits.source, (),
+                             limits.profile)
+        return limits, PieceLimits(after, self.reading, jd, first=False)

@@ -22,11 +22,14 @@ from pathlib import Path
 import numpy as np
 
 from . import _scan, slicers
-from .energy import EnergyReport, load_profile, profile
+from .energy import EnergyReport, load_profile
 from .errors import GatesoptError, GcodeError
 from .firmware import FirmwareError
 from .kinematics import check_gateable
+from .limits import PieceLimits
 from .parse import BGCODE_MAGIC, DEFAULT_FEED_MM_S, GZIP_MAGIC, PER_COMMAND_WORDS, parse
+from .rewrite.figures import profile_report
+from .rewrite.printer import file_firmware
 
 DEFAULT_CHUNK_BYTES = 64 << 20
 
@@ -114,9 +117,11 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
     ``time_model``: the times reported (total, by kind, per layer); ``energy_time_model`` (default:
     the same): the durations the energy integrates over (``gatesopt profile`` keeps the paper's,
     as ``solve`` and ``verify`` do, and reports the planner's time).
-    With a "planner" model the machine limits are read once, from the first chunk (where the
-    slicer writes them), and each chunk is planned on its own: the look-ahead restarts at a chunk
-    boundary, a few moves in millions.
+    With a "planner" model the planner rules, the printer and the slicer's config block are read
+    once, from the file's head and tail (``_head_and_tail``: PrusaSlicer writes its config block
+    at the end), and each chunk's limit lines apply from their lines on, carried to the chunks
+    after it (``limits.PieceLimits``), as in the whole file; each chunk is planned on its own:
+    the look-ahead restarts at a chunk boundary, a few moves in millions.
     """
     energy_time_model = energy_time_model or time_model
     prof = load_profile(profile_name)
@@ -132,31 +137,30 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
     method = ""
     any_moves = False
     last_ext_z = np.nan         # Z where the previous chunk's last extrusion ended
-    limits = None
+    pieces = None               # the limits in force where the next chunk starts
+    firmware = None             # the file's printer's (its stalls count, as in `profile`)
+    planned = "planner" in (time_model, energy_time_model)
     for piece, line0 in iter_chunks(path, chunk_bytes):
         prog = _parse_piece(piece, name, state, line0, flavor)
         if flavor is None:      # the header (first chunk) says which G90/G91 semantics apply
             flavor = prog.header.get("flavor", "") or "marlin"
+            # the printer, the planner's rules and the slicer's config block are in the file's
+            # head and tail: read once (a middle chunk has none of them)
+            settings = parse(_head_and_tail(Path(path)), source=name, flavor=flavor,
+                             require_moves=False)
+            firmware = file_firmware(settings)[1]
+            pieces = PieceLimits.of_settings(settings) if planned else None
         _keep_new_warnings(prog, warnings, warned, line0)
         n_lines += prog.n_lines
+        limits = None
+        if pieces is not None:      # a chunk's limit lines apply to the chunks after it too
+            limits, pieces = pieces.of_piece(prog)
         if prog.n_steps == 0:
             continue
         any_moves = any_moves or bool((prog.kind <= 5).any())
-        planned = None
-        if "planner" in (time_model, energy_time_model):
-            from .limits import machine_limits
-            from .planner import durations
-            limits = limits if limits is not None else machine_limits(prog)
-            planned = durations(prog, model="planner", limits=limits)
-        dur = planned if energy_time_model == "planner" else None
-        r = profile(prog, prof, duration_s=dur)
-        if time_model != energy_time_model:     # times under the other model: a second profile
-            rt = profile(prog, prof, duration_s=planned if time_model == "planner" else None)
-            r = dataclasses.replace(r, time_s=rt.time_s, by_kind_s=rt.by_kind_s,
-                                    layer_time_s=rt.layer_time_s)
-            dur = planned if time_model == "planner" else None
+        r, dur = profile_report(prog, prof, time_model, energy_time_model, firmware, limits)
         tot["time"] += r.time_s
-        tot["energy_time"] += float((prog.duration_s if energy_time_model == "paper" else planned).sum())
+        tot["energy_time"] += r.time_s if r.energy_time_s is None else r.energy_time_s
         tot["energy"] += r.energy_j
         n_steps += r.n_steps
         n_moves += r.n_moves
@@ -168,7 +172,7 @@ def profile_stream(path, profile_name: str = "paper", chunk_bytes: int = DEFAULT
         # steps before this chunk's first layer marker belong to the previous chunk's last layer
         pre = prog.layer < 0
         if pre.any() and layer_t:
-            d = (prog.duration_s if dur is None else dur)[pre]
+            d = dur[pre]
             layer_t[-1] += float(d.sum())
             layer_e[-1] += float(r.step_energy_j[pre].sum())
         lt, le, lz = r.layer_time_s.tolist(), r.layer_energy_j.tolist(), prog.layer_z_mm.tolist()
@@ -243,6 +247,30 @@ def _spaced_from_the_chunk_before(problem, sol, keep: np.ndarray) -> np.ndarray:
                 break
             keep[j] = False
     return keep
+
+
+def _head_and_tail(p: Path) -> bytes:
+    """The whole lines of the file's first and last ``slicers.HEAD_BYTES`` (the whole file if it
+    is shorter than both), a gzip file's too (its tail read through once)."""
+    n = slicers.HEAD_BYTES
+    with p.open("rb") as f:
+        gz = f.read(2) == GZIP_MAGIC
+    opener = gzip.open if gz else open
+    with opener(p, "rb") as f:
+        head = f.read(n)
+        tail = b""
+        while True:                 # the last n bytes (a gzip file cannot seek to them)
+            if not gz:
+                f.seek(max(f.tell(), p.stat().st_size - n))
+            block = f.read(1 << 24)
+            if not block:
+                break
+            tail = (tail + block)[-n:]
+    if not tail:
+        return head
+    head = head[:head.rfind(b"\n") + 1] if len(head) == n else head
+    cut = tail.find(b"\n") + 1
+    return head + b"\n" + tail[cut:]
 
 
 def _settings_bytes(p: Path, file_lines: bool = False) -> bytes:

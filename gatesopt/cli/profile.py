@@ -1,16 +1,13 @@
 """``gatesopt profile FILE``: energy and time of a print under the instruction-level model."""
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import sys
 
-import numpy as np
-
-from ..energy import SECTORS, load_profile, profile
+from ..energy import SECTORS, load_profile
 from ..errors import GatesoptError
-from ..planner import TIME_MODELS, comparable_total_s, durations, slicer_estimate_s
+from ..planner import TIME_MODELS, comparable_total_s, slicer_estimate_s
 from .files import check_input, check_new_file, print_warnings, read_program
 
 NAME = "profile"
@@ -72,26 +69,6 @@ def run_stream(args) -> int:
     return 0
 
 
-def time_and_energy(program, prof, time_model: str, energy_time_model: str, firmware: str = "3dgates"):
-    """The report of ``program``: energy over ``energy_time_model``'s durations, times (total, by
-    kind, per layer, the plot's time axis) under ``time_model``'s; and those durations. The
-    stalls of the file's motor lines in ``firmware`` (the dialect its printer runs,
-    ``figures.file_firmware``) count in both, as ``solve`` and ``verify`` count them
-    (``figures.stalls_s``): a gated output profiles to the energy and print time its run reported."""
-    from ..rewrite.figures import stall_enable, stalls_s
-    shown = durations(program, model=time_model) + stalls_s(program, firmware, time_model)
-    stall = stalls_s(program, firmware, energy_time_model)
-    under = shown if energy_time_model == time_model else durations(program, model=energy_time_model) + stall
-    en = stall_enable(program, stall)
-    report = profile(program, prof, duration_s=under, enable=en)
-    if energy_time_model != time_model:
-        rt = profile(program, prof, duration_s=shown, enable=en)
-        report = dataclasses.replace(report, time_s=rt.time_s, by_kind_s=rt.by_kind_s,
-                                     layer_time_s=rt.layer_time_s, step_end_s=rt.step_end_s,
-                                     energy_time_s=float(np.sum(under)))
-    return report, shown
-
-
 def _json(report, args, program=None) -> dict:
     d = report.to_dict(per_layer=args.per_layer)
     d["time_model"] = args.time_model
@@ -108,9 +85,11 @@ def run(args) -> int:
         return run_stream(args)
     program = read_program(args.file)       # its warnings on stderr
     prof = load_profile(args.profile)
+    from ..rewrite.figures import profile_report
     from ..rewrite.printer import NOT_GATED, file_firmware
     name, firmware = file_firmware(program)     # the name and detection `solve` and `verify` use
-    report, duration_s = time_and_energy(program, prof, args.time_model, args.energy_time_model, firmware)
+    report, duration_s = profile_report(program, prof, args.time_model, args.energy_time_model,
+                                           firmware)
     if args.plot:
         from ..plot import plot_profile
         plot_profile(report, args.plot)

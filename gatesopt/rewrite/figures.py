@@ -22,9 +22,12 @@ travel (``travel``)
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .. import firmware as fwmod
+from ..energy import profile
 from ..ordering.travel_stats import travel_stats
 from ..limits import machine_limits
 from ..planner import durations
@@ -97,6 +100,31 @@ def stall_enable(program: Program, stall: np.ndarray) -> np.ndarray:
     en = np.asarray(program.enabled, bool).copy()
     en[(stall > 0) & (program.kind == Kind.MOTOR)] = True
     return en
+
+
+def profile_report(program: Program, prof, time_model: str, energy_time_model: str,
+                   firmware: str = "3dgates", limits=None) -> tuple:
+    """The report of ``program``: energy over ``energy_time_model``'s durations, times (total, by
+    kind, per layer, the plot's time axis) under ``time_model``'s; and those durations. The
+    stalls of the file's motor lines in ``firmware`` (the dialect its printer runs,
+    ``figures.file_firmware``) count in both, as ``solve`` and ``verify`` count them
+    (``stalls_s``): a gated output profiles to the energy and print time its run reported.
+    ``limits``: the planner's (default: ``machine_limits`` of the program; a piece of a file read
+    in pieces gets the file's, ``limits.PieceLimits``). ``gatesopt profile``'s report, whole or
+    streamed."""
+    shown = durations(program, model=time_model, limits=limits) + stalls_s(program, firmware,
+                                                                             time_model)
+    stall = stalls_s(program, firmware, energy_time_model)
+    under = shown if energy_time_model == time_model else durations(program, model=energy_time_model,
+                                                                         limits=limits) + stall
+    en = stall_enable(program, stall)
+    report = profile(program, prof, duration_s=under, enable=en)
+    if energy_time_model != time_model:
+        rt = profile(program, prof, duration_s=shown, enable=en)
+        report = dataclasses.replace(report, time_s=rt.time_s, by_kind_s=rt.by_kind_s,
+                                     layer_time_s=rt.layer_time_s, step_end_s=rt.step_end_s,
+                                     energy_time_s=float(np.sum(under)))
+    return report, shown
 
 
 def travel(program: Program) -> dict:
