@@ -46,7 +46,8 @@ def test_bad_formulations_and_options_are_one_line_errors():
     for call in (lambda: lookup("nope"), lambda: solve(prob, "nope"),
                  lambda: solve(prob, "greedy", workers=3),
                  lambda: OrderingOptions(mode="fast"), lambda: OrderingOptions(objective="money"),
-                 lambda: OrderingOptions(seam_candidates=0)):
+                 lambda: OrderingOptions(seam_candidates=0),
+                 lambda: OrderingOptions(planner_family="prusa")):
         with pytest.raises(OrderingOptionsError) as err:
             call()
         assert isinstance(err.value, GatesoptError) and isinstance(err.value, ValueError)
@@ -54,6 +55,9 @@ def test_bad_formulations_and_options_are_one_line_errors():
     with pytest.raises(OrderingOptionsError, match="unknown ordering formulation 'nope': choose one "
                                                    "of greedy, tsp, cpsat, milp, auto, dp"):
         solve(prob, "nope")
+    with pytest.raises(OrderingOptionsError, match="planner_family must be one of marlin, "):
+        OrderingOptions(planner_family="Klipper")
+    assert OrderingOptions(planner_family="klipper").planner_family == "klipper"
 
 
 def test_group_solutions_speak_the_solver_vocabulary():

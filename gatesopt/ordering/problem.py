@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import GatesoptError
+from ..firmware import planner_families
 from ..limits import machine_limits
 from ..solvers import STATUSES, Status, relative_gap
 
@@ -111,6 +112,9 @@ class OrderingOptions:
                                        f"not {self.joined_links!r}")
         if self.seam_candidates < 1:
             raise OrderingOptionsError("seam_candidates must be >= 1")
+        if self.planner_family is not None and self.planner_family not in planner_families():
+            known = ", ".join(planner_families())
+            raise OrderingOptionsError(f"planner_family must be one of {known}, not {self.planner_family!r}")
 
 
 #: ``Anchor.curve`` of the file's end: the steps after the slicer's last curve, which the emitter

@@ -15,7 +15,8 @@ sits above the two problem families (``gatesopt.gating``, ``gatesopt.ordering``)
 verification (``gatesopt.verify``), which never import it.
 """
 from .order import OrderResult, order_program, order_summary, reorder
-from .pipeline import RunResult, energy_time, run
+from .pipeline import energy_time, run
+from .result import RunResult
 from .printer import FirmwareChoice, choose
 
 __all__ = ["run", "RunResult", "energy_time", "choose", "FirmwareChoice", "order_program", "OrderResult",
