@@ -165,3 +165,11 @@ def test_an_explicit_firmware_orders_and_guards_by_its_own_rules():
     # options that name their own rules keep them
     own = OrderingOptions(planner_family="klipper")
     assert own.planned_by("marlin") is own
+    # the guard measures the input with the plan the pricer made of it (same limits, same
+    # program), never with another program's
+    assert np.array_equal(r.order_problem.pricer.planned_steps_s(program),
+                          guard.step_times_s(program, r.order_problem.options))
+    assert r.order_problem.pricer.planned_steps_s(
+        gatesopt.parse(klipper_macro_file(), source="macros.gcode")) is None
+    import pickle
+    assert pickle.loads(pickle.dumps(r.order_problem.pricer)).planned_steps_s(program) is None

@@ -534,7 +534,9 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
         return Guarded(solution, text, out, np.zeros(0, np.int64), np.full(L, FROM_SOLVER))
     # a safety net: the time objective prices each travel as emitted (cost.py), but not every
     # junction of the planner (formulations/ordering.md, "Time guard")
-    slicer = _Measured(None, "", program, step_times_s(program, problem.options))
+    own = problem.pricer.planned_steps_s(program) if problem.pricer is not None else None
+    slicer = _Measured(None, "", program,
+                       own if own is not None else step_times_s(program, problem.options))
     base = slicer
     if greedy is not None:
         may = np.ones(L, bool) if greedy_layers is None else np.asarray(greedy_layers, bool)[:L]
