@@ -443,4 +443,5 @@ def permuted(problem: OrderingProblem, perm: np.ndarray, cg: CurveGroups,
         group_fixed=cg.fixed[heads], group_label=tuple(cg.labels[c] for c in heads.tolist()),
         curve_step_start=problem.curve_step_start[perm], curve_step_stop=problem.curve_step_stop[perm],
         notes=notes, curve_source=perm.astype(np.int64), base=base, block_report=report,
-        pricer=None)
+        pricer=None, curve_one_way=(None if problem.curve_one_way is None
+                                    else problem.curve_one_way[perm]))

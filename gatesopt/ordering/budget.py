@@ -244,12 +244,15 @@ WORK_NET_MIN_S = 5.0
 
 
 def group_cands(problem: OrderingProblem) -> tuple[np.ndarray, np.ndarray]:
-    """Per group (curves, candidates): one candidate per loop (its seam), two per open curve
-    (either direction); with ``move_seams`` a loop's extra seams are not counted (a lower
-    estimate, the same on every run)."""
+    """Per group (curves, candidates): one candidate per loop (its seam) and per one-way curve,
+    two per other open curve (either direction); with ``move_seams`` a loop's extra seams are not
+    counted (a lower estimate, the same on every run)."""
     start = np.asarray(problem.group_curve_start, np.int64)
     n = np.diff(start)
-    open_cum = np.concatenate([[0], np.cumsum(~np.asarray(problem.curve_closed, bool))])
+    two = ~np.asarray(problem.curve_closed, bool)
+    if problem.curve_one_way is not None:
+        two &= ~np.asarray(problem.curve_one_way, bool)
+    open_cum = np.concatenate([[0], np.cumsum(two)])
     return n, n + (open_cum[start[1:]] - open_cum[start[:-1]])
 
 

@@ -73,6 +73,11 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
     start_xy = program.start_mm[s0, :2] if n else np.zeros((0, 2))
     end_xy = program.end_mm[s1 - 1, :2] if n else np.zeros((0, 2))
     closed = np.hypot(*(end_xy - start_xy).T) <= CLOSED_TOL_MM if n else np.zeros(0, bool)
+    # a curve that ends in the slicer's coasting is never a loop, even where the coast reaches
+    # its start (Cura coasts along the wall's last stretch): a loop started elsewhere would coast
+    # mid-way
+    coast = np.asarray(lay.curve_coast, bool) if len(lay.curve_coast) == n else np.zeros(n, bool)
+    closed = closed & ~coast
     # polyline vertices: the start of each step and the end of the last
     counts = (s1 - s0) + 1
     pstart = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
@@ -94,6 +99,11 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
     # against a seam bulge: 0.06-0.1 mm); safe mode keeps such curves' order and direction
     gap_mm = np.hypot(*(end_xy - start_xy).T) if n else np.zeros(0)
     wall_like = closed | ((gap_mm <= LOOP_GAP_MM) & (s1 - s0 >= 3))
+    # printed in their own direction only (``candidates``), in free mode too: the clipped loops
+    # (a wall's direction is the slicer's choice) and the loops the slicer coasted to their
+    # seam. A coasted curve that is no loop (Cura's infill wipe: a line's tail run on into the
+    # wall) may be reversed: its tail, run backwards, then leads into it
+    one_way = wall_like & ~closed
     layer = program.layer[s0].astype(np.int64)
     feature = program.feature[s0].astype(np.int64)
     fixed_feat = _fixed_features(program) | _pattern_fixed(program)
@@ -140,7 +150,8 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
         group_curve_start=gstart, group_layer=np.asarray(glayer, np.int64),
         group_fixed=np.asarray(gfixed, bool), group_label=tuple(glabel), origin_xy=origin,
         options=options, cost_unit=COST_UNIT[options.objective],
-        curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), layout=lay)
+        curve_step_start=s0, curve_step_stop=s1, notes=tuple(notes), layout=lay,
+        curve_one_way=one_way)
     step_plan = None
     if options.objective == "time":
         # the limits read once (~0.13 s on a 170k-line Klipper file): the plan, both pricers

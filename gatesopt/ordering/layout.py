@@ -82,6 +82,8 @@ class Layout:
     notes: tuple = ()
     #: line -> (family, kind, object name) of each LINE_LABEL line (``slicers.object_label``)
     labels: dict = field(default_factory=dict)
+    #: (n,) bool: the curve ends in the slicer's coasting (``_coast_tails``), its moves included
+    curve_coast: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
 def _line_text_bytes(program: Program, i: int) -> bytes:
@@ -169,6 +171,7 @@ def layout(program: Program) -> Layout:
         first_of_key.setdefault(k, i)
     cls[list(first_of_key.values())] = LINE_BARRIER
     s0, s1, l0, l1 = _curves(program, cls)
+    s1, l1, coast = _coast_tails(program, cls, s1, l1)
     n = len(s0)
     barrier_count = np.concatenate(([0], np.cumsum((cls == LINE_BARRIER) | (cls == LINE_FATAL)
                                                    | (cls == LINE_LABEL))))
@@ -182,7 +185,7 @@ def layout(program: Program) -> Layout:
     prefix = fm.group(1).decode() if fm else ";TYPE:"
     return Layout(cls, step_of_line, s0.astype(np.int64), s1.astype(np.int64), l0.astype(np.int64),
                   l1.astype(np.int64), gap_boundary, layer_fatal, layer_keep, tuple(why), prefix,
-                  skey, tuple(notes), labels)
+                  skey, tuple(notes), labels, coast)
 
 
 def _line_classes(program: Program, step_of_line: np.ndarray) -> tuple[np.ndarray, list[int], dict]:
@@ -285,6 +288,72 @@ def _curves(program: Program, cls: np.ndarray) -> tuple:
         s0 = s1 = np.zeros(0, np.int64)
     l0, l1 = program.line[s0], program.line[s1 - 1] if len(s1) else np.zeros(0, np.int64)
     return s0, s1, l0, l1
+
+
+#: the longest coasting ``_coast_tails`` keeps with its curve (Cura's coasting_volume of 0.064 mm3
+#: is ~0.8 mm of a 0.4 mm wall; Simplify3D's coasting distance ~0.2-1 mm): longer non-extruding
+#: runs before a retraction are the travel's
+COAST_MAX_MM = 5.0
+#: at most this many moves of it
+COAST_MAX_MOVES = 8
+
+
+def _coast_tails(program: Program, cls: np.ndarray, s1: np.ndarray, l1: np.ndarray):
+    """Curves that end in the slicer's coasting (Cura ``coasting_enable``, Simplify3D, ideaMaker:
+    the last stretch of a wall printed as moves without extrusion, on the ooze): a run of at most
+    ``COAST_MAX_MOVES`` XY moves without E at the curve's height, ``COAST_MAX_MM`` long in all, at
+    one feed no faster than the curve's last extrusion, straight after it, ended by a retraction
+    (an E-only move back, a firmware ``G10``) or by the travel (a move at another feed), only
+    neutral lines between. It belongs to what is printed there, not to the travel: the curve
+    takes it (``s1``, ``l1`` extended, its lines LINE_CURVE), so that a re-ordered print keeps it
+    with its curve; such a curve is printed in its own direction only (``candidates``). Returns
+    (s1, l1, coast per curve)."""
+    n = len(s1)
+    coast = np.zeros(n, bool)
+    kind, n_steps = program.kind, program.n_steps
+    if n == 0:
+        return s1, l1, coast
+    nxt = np.minimum(s1, n_steps - 1)
+    cand = np.flatnonzero((s1 < n_steps) & (kind[nxt] == Kind.TRAVEL))
+    if not len(cand):
+        return s1, l1, coast
+    s1, l1 = s1.copy(), l1.copy()
+    start, end, length = program.start_mm, program.end_mm, program.length_mm
+    feed = program.feed_mm_s
+    neutral = cls == LINE_NEUTRAL
+    for c in cand.tolist():
+        a = int(s1[c])
+        z, f = end[a - 1, 2], feed[a]
+        if f > feed[a - 1] * (1.0 + 1e-9):         # faster than it printed: the travel
+            continue
+        k, mm = a, 0.0
+        while (k < n_steps and k - a < COAST_MAX_MOVES and kind[k] == Kind.TRAVEL
+               and feed[k] == f and start[k, 2] == z and end[k, 2] == z):
+            mm += length[k]
+            k += 1
+        if mm > COAST_MAX_MM or k - a == COAST_MAX_MOVES:
+            continue
+        # what comes next: a retraction, with only neutral lines (and the run's own) before it
+        last_line = int(program.line[k - 1])
+        lines = program.line[a:k]
+        if not (neutral[l1[c] + 1:last_line + 1] | np.isin(
+                np.arange(l1[c] + 1, last_line + 1), lines)).all():
+            continue
+        j = last_line + 1
+        while j < program.n_lines and neutral[j]:
+            j += 1
+        ends = j < program.n_lines and (
+            cls[j] == LINE_FW_RETRACT
+            or (k < n_steps and program.line[k] == j
+                and ((kind[k] == Kind.RETRACT and start[k, 0] == end[k, 0]
+                      and start[k, 1] == end[k, 1])
+                     or (kind[k] in (Kind.TRAVEL, Kind.Z_ONLY) and feed[k] != f))))
+        if not ends:
+            continue
+        cls[lines] = LINE_CURVE
+        s1[c], l1[c] = k, last_line
+        coast[c] = True
+    return s1, l1, coast
 
 
 #: a layer whose travels run at a median feed below this share of the file's keeps the slicer's

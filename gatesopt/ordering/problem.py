@@ -16,6 +16,8 @@ Each curve becomes a *cluster* of oriented candidates (formulations/ordering.md,
   (reversing a loop changes no travel; keeping its direction keeps the slicer's wall direction);
   with ``move_seams`` one candidate per vertex (up to ``seam_candidates``), each still in the
   loop's own direction;
+- a one-way curve (``curve_one_way``: a loop clipped short of its seam, a curve that ends in the
+  slicer's coasting): one candidate, forward;
 - a curve of a fixed-order group: one candidate (the group is never re-ordered).
 
 Solvers see one ``Group`` at a time: a start point plus the candidates' entry and exit points.
@@ -460,6 +462,9 @@ class OrderingProblem:
     #: safe mode's block pass (``blocks.order_blocks``): segments with three islands or more,
     #: their blocks, segments whose islands moved, block orders proven optimal, seconds
     block_report: dict = field(default_factory=dict)
+    #: (n,) bool: open curves printed in their own direction only (``candidates``): a loop the
+    #: slicer clipped short of its start, a curve with the slicer's coasting at its end; None: none
+    curve_one_way: np.ndarray | None = None
 
     @property
     def program_problem(self) -> "OrderingProblem":
@@ -501,10 +506,9 @@ class OrderingProblem:
         start_xy, end_xy = start.xy, (None if end is None else end.xy)
         curves = self.group_curves(g)
         fixed = bool(self.group_fixed[g])
-        if fixed or not self.options.move_seams:
-            cc, ent, ext, flip, rev, seam = self._candidates(curves, fixed)
-        else:
-            cc, ent, ext, flip, rev, seam = self._candidates_loop(curves, fixed)
+        from .candidates import candidates, candidates_with_seams
+        make = candidates if fixed or not self.options.move_seams else candidates_with_seams
+        cc, ent, ext, flip, rev, seam = make(self, curves, fixed)
         grp = Group(np.asarray(start_xy, float).copy(), cc, ent, ext, flip, len(curves),
                     int(self.group_layer[g]), self.group_label[g] if self.group_label else "",
                     rev, seam, None if end_xy is None else np.asarray(end_xy, float).copy())
@@ -512,56 +516,6 @@ class OrderingProblem:
             return grp
         return dataclasses.replace(grp, costs=self.pricer.group_costs(
             self.source_curves(curves), grp, self._source_anchor(start), self._source_anchor(end)))
-
-    def _candidates(self, curves, fixed: bool) -> tuple:
-        """A group's candidates (module docstring) where each loop keeps its seam: per curve in
-        order, one candidate (a fixed group's curve, a loop entered and left at its seam) or two
-        (an open curve forward, then reversed). Arrays throughout, as ``_candidates_loop``
-        makes them one curve at a time (the same candidates, in the same order): passing a
-        file's ~2,000 groups of ~30 curves cost ~0.4 s in that loop."""
-        n = len(curves)
-        two = np.zeros(n, bool) if fixed else ~np.asarray(self.curve_closed[curves], bool)
-        cnt = 1 + two.astype(np.int64)
-        first = np.cumsum(cnt) - cnt
-        m = int(cnt.sum())
-        cc = np.repeat(np.arange(n, dtype=np.int64), cnt)
-        rev = np.zeros(m, bool)
-        rev[first[two] + 1] = True
-        a, b = self.curve_start_xy[curves], self.curve_end_xy[curves]
-        ent, ext = a[cc], b[cc]
-        ent[rev], ext[rev] = b[cc[rev]], a[cc[rev]]
-        loop = np.flatnonzero(~two) if not fixed else np.zeros(0, np.int64)
-        if len(loop):
-            # a loop is entered and left at its seam: its first vertex
-            p = self.points_xy[self.curve_point_start[curves[loop]]]
-            ent[first[loop]] = p
-            ext[first[loop]] = p
-        flip = np.arange(m, dtype=np.int64)
-        flip[first[two]], flip[first[two] + 1] = first[two] + 1, first[two]
-        return (cc, np.asarray(ent, float).reshape(m, 2), np.asarray(ext, float).reshape(m, 2),
-                flip, rev, np.zeros(m, np.int64))
-
-    def _candidates_loop(self, curves, fixed: bool) -> tuple:
-        """``_candidates`` one curve at a time, with ``move_seams``' several seams per loop."""
-        cc, ent, ext, flip, rev, seam = [], [], [], [], [], []
-        for local, c in enumerate(curves):
-            a, b = self.curve_start_xy[c], self.curve_end_xy[c]
-            k0 = len(cc)
-            if fixed:
-                cc.append(local); ent.append(a); ext.append(b); flip.append(k0)
-                rev.append(False); seam.append(0)
-            elif self.curve_closed[c]:
-                for v in self.seam_vertices(c):
-                    p = self.points_xy[self.curve_point_start[c] + v]
-                    flip.append(len(cc)); cc.append(local); ent.append(p); ext.append(p)
-                    rev.append(False); seam.append(int(v))
-            else:
-                cc += [local, local]; ent += [a, b]; ext += [b, a]; flip += [k0 + 1, k0]
-                rev += [False, True]; seam += [0, 0]
-        m = len(cc)
-        return (np.asarray(cc, np.int64), np.asarray(ent, float).reshape(m, 2),
-                np.asarray(ext, float).reshape(m, 2), np.asarray(flip, np.int64),
-                np.asarray(rev, bool), np.asarray(seam, np.int64))
 
     def _source_anchor(self, a: "Anchor | None") -> "Anchor | None":
         """An anchor with its curve in the program's numbering (the pricer's)."""
