@@ -455,6 +455,30 @@ def xy_disable_rows(program: Program) -> np.ndarray:
     return rows[off_xy[inverse]]
 
 
+#: lines where the machine is handed to the user or to a macro whose moves gatesopt does not
+#: know: stops and pauses (M0 / M1, M25, M125 park, M226, M601, Klipper's PAUSE), filament change
+#: and load / unload (M600, M602, M701, M702), tool changes (T<n>: on an IDEX or tool-changer
+#: printer they move X). No motor is switched off across one (``gating.problem``; the verifier
+#: checks it): during a pause the user may move the head by hand, and a motor without holding
+#: torque loses its position. The curve ordering keeps such a layer's order (``ordering.layout``)
+HANDOFF_M = (0, 1, 25, 125, 226, 600, 601, 602, 701, 702)
+HANDOFF_COMMANDS = ("PAUSE",)
+
+
+def handoff_lines(program: Program) -> np.ndarray:
+    """Lines of ``program`` that hand the machine over (``HANDOFF_M``: M-codes, T tool changes,
+    ``HANDOFF_COMMANDS``), ascending."""
+    letter, number = program.line_letter, program.line_number
+    out = ((letter == ord("M")) & np.isin(number, HANDOFF_M)) | (letter == ord("T"))
+    ext = np.flatnonzero(letter == ord("@"))
+    if len(ext):
+        inverse, texts = _text.distinct_lines(program, ext)
+        hit = np.array([(_text.code_words(t) or [""])[0] in HANDOFF_COMMANDS for t in texts],
+                       bool)
+        out[ext[hit[inverse]]] = True
+    return np.flatnonzero(out)
+
+
 def motor_line_is_on(text: str) -> bool | None:
     """True for an enable line, False for a disable line, None if ``text`` is neither."""
     r = parse_motor_line(text)

@@ -556,7 +556,8 @@ def time_model_durations(program: Program, o: GatingOptions) -> np.ndarray:
 
 def _barrier_cum(program: Program, o: GatingOptions, enables_only: bool) -> np.ndarray:
     """(n+1, 4) cumulative count, per motor, of the steps where the firmware switches that motor
-    itself: homing, and the file's own motor lines it carries out (``Firmware.reads``). With
+    itself: homing, and the file's own motor lines it carries out (``Firmware.reads``), and
+    those beside a line that hands the machine over (``firmware.handoff_lines``). With
     ``enables_only`` (a stock dialect, whose lines switch at once) only the own lines that switch
     it on: a start G-code ``M17`` enables every motor, while an own disable inside an off interval
     leaves the motor as the interval has it, and homing enables only the axes it homes, which step
@@ -566,6 +567,13 @@ def _barrier_cum(program: Program, o: GatingOptions, enables_only: bool) -> np.n
     barrier = np.zeros((program.n_steps, 4), bool)
     if not enables_only:
         barrier[program.kind == Kind.HOME] = True
+    # the lines that hand the machine over (a pause, a filament or tool change:
+    # ``firmware.HANDOFF_M``): no motor off across one, in any dialect. They are no steps: the
+    # steps on both sides of each count (an interval across the line holds at least one of them)
+    at = np.searchsorted(program.line, fw_mod.handoff_lines(program))
+    if program.n_steps and len(at):
+        barrier[np.minimum(at, program.n_steps - 1)] = True
+        barrier[np.maximum(at - 1, 0)] = True
     fw = fw_mod.get(o.firmware)
     for r in np.flatnonzero(program.kind == Kind.MOTOR).tolist():
         parsed = fw.reads(program.line_text(int(program.line[r])))

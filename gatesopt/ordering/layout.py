@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._text import code_words
-from ..firmware import xy_disable_rows
+from ..firmware import HANDOFF_M, xy_disable_rows
 from ..limits import LIMIT_COMMANDS
 from ..program import Kind, Program
 from ..slicers import LABEL_OTHER, OBJECT_LABEL_WORDS, object_label
@@ -57,7 +57,8 @@ STATE_M = (201, 203, 204, 205, 220, 221, 900)
 #: which slicers write mid-layer by print time (Bambu, Orca, PrusaSlicer, Creality Print,
 #: Kiri:Moto); neutral, they travel with the next curve instead of splitting the layer's groups
 NEUTRAL_M = (73, 117)
-FATAL_M = (0, 1, 25, 125, 600, 601, 602, 701, 702)
+#: the lines that hand the machine over (pauses, filament and tool changes: ``firmware.HANDOFF_M``)
+FATAL_M = HANDOFF_M
 STATE_EXT = (b"SET_VELOCITY_LIMIT", b"SET_PRESSURE_ADVANCE", b"M204")
 FEATURE_LINE = re.compile(rb"\n(;[ \t]*(?:TYPE:|FEATURE:|feature )[ \t]*)([^\r\n]*)")
 MOTION_KINDS = (Kind.TRAVEL, Kind.RETRACT, Kind.UNRETRACT, Kind.Z_ONLY, Kind.ARC, Kind.EXTRUDE)

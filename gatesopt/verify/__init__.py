@@ -74,6 +74,7 @@ from .finding import Finding
 from .firmware import check_firmware, detect_firmware, firmware_problem
 from .geometry import (GEOMETRY_TOL_MM, PARTITION_MAX_PIECES, SHORT_MM, check_geometry, order_changed,
                        segment_pair)
+from .handoff import check_handoffs
 from .motor_lines import without_added_motor_lines
 from .ordering import SHARED_CHECKS, check_barriers, check_moves, check_objects
 from .ordering import check as check_ordering
@@ -200,6 +201,10 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
         findings += check_timing(output, firmware=fw, start_ahead_s=start_ahead_s, end_late_s=end_late_s,
                                  original=original, tol_s=time_tol_s)
         checks.append("timing")
+        # the output's own motor lines (a firmware with a schedule switches by itself, between
+        # them: the gating problem keeps its intervals clear of these lines)
+        findings += check_handoffs(original, output)
+        checks.append("handoff")
     if reordered:
         if move_by_move:
             # extrusion and commands ran above (``SHARED_CHECKS``): the ordering's own checks only

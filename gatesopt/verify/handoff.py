@@ -1,0 +1,39 @@
+"""No motor off where the machine is handed over: a pause, a filament or tool change
+(``firmware.handoff_lines``). During a pause the user may move the head by hand and a motor
+without holding torque loses its position; on an IDEX or tool-changer printer a tool change moves
+X. The gating problem never switches a motor off across such a line (``gating.problem``); this
+check reads the output's own motor lines, independently of the solver."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..firmware import handoff_lines
+from ..program import AXES, Program
+from .finding import Finding
+
+
+def state_at_lines(program: Program, lines: np.ndarray) -> np.ndarray:
+    """(len(lines), 4) bool: the motors on at each of ``lines``: as the last step before the line
+    left them (the first step's state where none is before it; all on in a file without steps)."""
+    if program.n_steps == 0:
+        return np.ones((len(lines), 4), bool)
+    before = np.searchsorted(program.line, lines) - 1
+    return np.asarray(program.enabled, bool)[np.maximum(before, 0)]
+
+
+def check_handoffs(original: Program, output: Program) -> list[Finding]:
+    """A finding per hand-over line of ``output`` where a motor is off that the original had on
+    at the same line (the k-th such line of each file: they keep their order, ``commands``)."""
+    a, b = handoff_lines(original), handoff_lines(output)
+    if len(a) != len(b) or not len(b):
+        return []               # the commands check says what was lost or added
+    off = state_at_lines(original, a) & ~state_at_lines(output, b)
+    out = []
+    for k in np.flatnonzero(off.any(axis=1)).tolist():
+        motors = " ".join(AXES[m] for m in np.flatnonzero(off[k]).tolist())
+        text = output.line_text(int(b[k])).strip()[:40]
+        out.append(Finding("handoff", int(b[k]) + 1,
+                           f"motor {motors} off at {text!r}: a pause or a filament or tool change "
+                           "with a motor off (the head may be moved by hand, a tool change moves "
+                           "it)"))
+    return out
