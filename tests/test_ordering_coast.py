@@ -22,8 +22,9 @@ from conftest import SHARED_INSTANCES
 
 def coasted_file() -> str:
     """Cura-like layers: a square wall loop whose last 1 mm is coasted (G0 at 90 % of its feed)
-    before the retraction; infill lines each with a 0.3 mm tail at their own feed, then a travel
-    at 150 mm/s; one line followed by a 6 mm run at its feed (too long for a coast: travel)."""
+    before the retraction; six infill lines, the even ones coasted 0.3 mm (at 90 % of their feed)
+    before a retraction, the odd ones with Cura's infill wipe (0.3 mm at their own feed: the
+    gap's, as before); a last line followed by a 6 mm run at 90 % (too long for a coast)."""
     out = [";FLAVOR:Marlin", ";Generated with Cura_SteamEngine 4.13.1", "G21", "G90", "M82",
            "G28", "G92 E0", "G1 Z0.2 F720"]
     e = 0.0
@@ -39,64 +40,57 @@ def coasted_file() -> str:
             y = 20 + 4 * k
             x0, x1 = (60, 80) if k % 2 == 0 else (90, 110)
             e += 0.6
-            out += [f"G0 F9000 X{x0} Y{y}", f"G1 F3600 X{x1} Y{y} E{e:.5f}",
-                    f"G1 X{x1 + 0.3} Y{y}"]
+            out += [f"G0 F9000 X{x0} Y{y}", f"G1 F3600 X{x1} Y{y} E{e:.5f}"]
+            if k % 2 == 0:
+                out += [f"G0 F3240 X{x1 + 0.3} Y{y}", f"G1 F2700 E{e - 5:.5f}",
+                        f"G0 F9000 X{x1 + 0.3} Y{y + 1}", f"G1 F2700 E{e:.5f}"]
+            else:
+                out.append(f"G1 X{x1 + 0.3} Y{y}")
         e += 0.6
-        out += ["G0 F9000 X60 Y50", f"G1 F3600 X80 Y50 E{e:.5f}", "G1 X86 Y50",
-                "G0 F9000 X60 Y60"]
+        out += ["G0 F9000 X60 Y50", f"G1 F3600 X80 Y50 E{e:.5f}", "G0 F3240 X86 Y50",
+                f"G1 F2700 E{e - 5:.5f}", "G0 F9000 X60 Y60", f"G1 F2700 E{e:.5f}"]
     out += ["M104 S0", "M84"]
     return "\n".join(out) + "\n"
 
 
-def test_coasting_and_infill_tails_belong_to_their_curves():
+def test_coasting_belongs_to_its_curve():
     program = gatesopt.parse(coasted_file(), source="coasted.gcode")
     lay = layout(program)
     coast = lay.curve_coast
     assert len(coast) == len(lay.curve_s0)
     for c in range(len(coast)):
-        last = program.end_mm[lay.curve_s1[c] - 1, :2]
         tail = program.kind[lay.curve_s1[c] - 1] == Kind.TRAVEL
         assert tail == coast[c]
         if coast[c]:
-            # every line of the curve, its tail's too, is a curve line
-            assert (lay.line_class[lay.curve_l1[c]] == LINE_CURVE)
-    per_layer = int(np.count_nonzero(program.layer[lay.curve_s0] == 1))
-    # per layer: the wall (coasted) and six lines with tails; the seventh line's 6 mm run is a
-    # travel
-    assert coast[program.layer[lay.curve_s0] == 1].tolist() == [True] * 7 + [False]
-    assert per_layer == 8
+            assert lay.line_class[lay.curve_l1[c]] == LINE_CURVE
+    # per layer: the wall and the even lines coasted; the odd lines' infill wipe (at their own
+    # feed) and the last line's 6 mm run are the gaps'
+    assert coast[program.layer[lay.curve_s0] == 1].tolist() == [True, True, False, True, False,
+                                                                True, False, False]
     problem = build(program, OrderingOptions(mode="free"))
     walls = np.flatnonzero(np.hypot(*(problem.curve_end_xy - problem.curve_start_xy).T) < 0.5)
     assert len(walls) == 3 and problem.curve_one_way[walls].all()
     assert not problem.curve_closed[walls].any()        # no loop: its seam may not move
-    lines = np.setdiff1d(np.arange(problem.n_curves), walls)
-    assert not problem.curve_one_way[lines].any()       # lines with a tail may still turn round
+    # coasted curves keep their direction (backwards they would coast into their start); the
+    # others may turn round
+    assert problem.curve_one_way.tolist() == coast.tolist()
 
 
-def test_free_mode_keeps_every_coast_and_tail():
+def test_free_mode_keeps_every_coast():
     program = gatesopt.parse(coasted_file(), source="coasted.gcode")
     res = order_program(program, OrderingOptions(mode="free"))
     assert res.ok
     out = res.output
-    # the coasted walls: each still ends in its two coast moves at F1620 (the retraction after
-    # them is the travel's: none where free mode printed the wall last and the next layer starts
-    # where it ended)
-    coast_in = np.flatnonzero((program.kind == Kind.TRAVEL) & np.isclose(program.feed_mm_s, 27.0))
-    coast_out = np.flatnonzero((out.kind == Kind.TRAVEL) & np.isclose(out.feed_mm_s, 27.0))
-    assert len(coast_out) == len(coast_in) == 6
-    first = coast_out[0::2]
-    assert out.extruding[first - 1].all() and (coast_out[1::2] == first + 1).all()
-    assert np.allclose(out.end_mm[first - 1, :2], [20, 21])
-    # each line's tail: after it (forward) or, reversed, leading into it (the tail run backwards)
-    def tails(p):
-        t = (p.kind == Kind.TRAVEL) & np.isclose(p.length_mm, 0.3)
-        after = np.flatnonzero(t[1:] & p.extruding[:-1])
-        before = np.flatnonzero(t[:-1] & p.extruding[1:])
-        return len(after), len(before)
-    a_in, b_in = tails(program)
-    a_out, b_out = tails(out)
-    assert (a_in, b_in) == (18, 0)
-    assert a_out + b_out == 18
+    for feed_mm_s, n in ((27.0, 6), (54.0, 9)):
+        coast_in = np.flatnonzero((program.kind == Kind.TRAVEL)
+                                  & np.isclose(program.feed_mm_s, feed_mm_s))
+        coast_out = np.flatnonzero((out.kind == Kind.TRAVEL) & np.isclose(out.feed_mm_s, feed_mm_s))
+        # (the 6 mm run at 54 mm/s is the gap's: rebuilt where the last line moved)
+        assert len(coast_in) == n + (3 if feed_mm_s == 54.0 else 0)
+        kept = [r for r in coast_out if out.length_mm[r] < 1.0]
+        assert len(kept) == n
+        # each right after its curve's last extrusion, or after the coast move before it
+        assert all(out.extruding[r - 1] or out.kind[r - 1] == Kind.TRAVEL for r in kept)
     assert res.summary["travel_after_mm"] < res.summary["travel_before_mm"]
 
 

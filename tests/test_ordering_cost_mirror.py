@@ -24,10 +24,12 @@ from test_ordering_cost_planner import mk3_layers
 
 
 def _pairs(grp):
-    """(u, v, flip(v), flip(u)) of every link between two curves of ``grp``."""
+    """(u, v, flip(v), flip(u)) of every link between two curves of ``grp`` that may both be
+    reversed (a loop or a one-way curve, ``candidates``, has no mirror: its flip is itself)."""
     m = grp.n_cands
     u, v = np.divmod(np.arange(m * m), m)
-    ok = grp.cand_curve[u] != grp.cand_curve[v]
+    two_way = grp.cand_flip != np.arange(m)
+    ok = (grp.cand_curve[u] != grp.cand_curve[v]) & two_way[u] & two_way[v]
     u, v = u[ok], v[ok]
     return u, v, grp.cand_flip[v], grp.cand_flip[u]
 
@@ -76,7 +78,8 @@ def test_a_joined_link_is_its_mirrors_price_under_klipper(name):
         b = ref[fv[sel], fu[sel]] - node[fu[sel]]
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
         joined_pairs += int(sel.sum())
-    assert joined_pairs >= 200, joined_pairs
+    # (>= 200 before the slicers' clipped loops became one-way curves, which have no mirror)
+    assert joined_pairs >= 150, joined_pairs
 
 
 def test_klipper_window_takes_the_same_time_backwards():

@@ -186,8 +186,12 @@ class TimePricer:
         self.mirror_joined = joined and reversal_symmetric(code)
         #: per curve: its boundary moves printed backwards are its boundary moves run backwards
         #: (``CurveEnds.reversal_ok``; not so where one is an arc Klipper chords from its own
-        #: start, the chords then differ)
-        self.mirror_ok = ends.reversal_ok() & ~self.closed if self.mirror_joined else np.zeros(n, bool)
+        #: start, the chords then differ); never a curve printed one way only (a loop, a
+        #: one-way curve: ``candidates``), which has no reversal to mirror
+        one_way = (np.zeros(n, bool) if problem.curve_one_way is None
+                   else np.asarray(problem.curve_one_way, bool))
+        self.mirror_ok = (ends.reversal_ok() & ~self.closed & ~one_way if self.mirror_joined
+                          else np.zeros(n, bool))
         #: each curve's wipe, written first by a rebuilt travel that leaves it retracting
         self.wipes = SlicerWipes.of(program, lay, problem.curve_closed)
         self.gap_ms = self.copy_ms.copy()

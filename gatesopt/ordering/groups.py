@@ -100,10 +100,9 @@ def build(program: Program, options: OrderingOptions | None = None, lay: Layout 
     gap_mm = np.hypot(*(end_xy - start_xy).T) if n else np.zeros(0)
     wall_like = closed | ((gap_mm <= LOOP_GAP_MM) & (s1 - s0 >= 3))
     # printed in their own direction only (``candidates``), in free mode too: the clipped loops
-    # (a wall's direction is the slicer's choice) and the loops the slicer coasted to their
-    # seam. A coasted curve that is no loop (Cura's infill wipe: a line's tail run on into the
-    # wall) may be reversed: its tail, run backwards, then leads into it
-    one_way = wall_like & ~closed
+    # (a wall's direction is the slicer's choice) and the coasted curves, which printed
+    # backwards would coast into their start
+    one_way = (wall_like & ~closed) | coast
     layer = program.layer[s0].astype(np.int64)
     feature = program.feature[s0].astype(np.int64)
     fixed_feat = _fixed_features(program) | _pattern_fixed(program)

@@ -300,10 +300,12 @@ COAST_MAX_MOVES = 8
 
 
 def _coast_tails(program: Program, cls: np.ndarray, s1: np.ndarray, l1: np.ndarray):
-    """Curves that end in the slicer's coasting (Cura ``coasting_enable``, Simplify3D, ideaMaker:
-    the last stretch of a wall printed as moves without extrusion, on the ooze): a run of at most
-    ``COAST_MAX_MOVES`` XY moves without E at the curve's height, ``COAST_MAX_MM`` long in all, at
-    one feed no faster than the curve's last extrusion, straight after it, ended by a retraction
+    """Curves that end in the slicer's coasting (Cura ``coasting_enable``: the last stretch of a
+    wall printed as moves without extrusion, on the ooze, at ``coasting_speed``, 90 % of the
+    wall's): a run of at most ``COAST_MAX_MOVES`` XY moves without E at the curve's height,
+    ``COAST_MAX_MM`` long in all, at one feed slower than the curve's last extrusion (coasting at
+    the print feed, as Simplify3D writes it, is not told from a travel: left in the gap), straight
+    after it, ended by a retraction
     (an E-only move back, a firmware ``G10``) or by the travel (a move at another feed), only
     neutral lines between. It belongs to what is printed there, not to the travel: the curve
     takes it (``s1``, ``l1`` extended, its lines LINE_CURVE), so that a re-ordered print keeps it
@@ -325,7 +327,10 @@ def _coast_tails(program: Program, cls: np.ndarray, s1: np.ndarray, l1: np.ndarr
     for c in cand.tolist():
         a = int(s1[c])
         z, f = end[a - 1, 2], feed[a]
-        if f > feed[a - 1] * (1.0 + 1e-9):         # faster than it printed: the travel
+        if f >= feed[a - 1] * (1.0 - 1e-9):
+            # no slower than it printed: the travel, or Cura's infill wipe (a line's tail at the
+            # line's own feed, into the wall), which the gap keeps (``gaps.ReversibleGaps``
+            # writes it backwards with the gap where two lines swap)
             continue
         k, mm = a, 0.0
         while (k < n_steps and k - a < COAST_MAX_MOVES and kind[k] == Kind.TRAVEL
