@@ -22,7 +22,7 @@ def paused_file(handoff: str) -> str:
            "G1 Z0.2 F720"]
     for layer in range(12):
         z = 0.2 * (layer + 1)
-        out += [f";LAYER_CHANGE", f";Z:{z:.1f}", f"G1 Z{z:.1f} F720"]
+        out += [";LAYER_CHANGE", f";Z:{z:.1f}", f"G1 Z{z:.1f} F720"]
         if layer == 6:
             out.append(handoff)
         out += ["G1 X20 Y20 F9000", "G1 E1 F2100", "G1 X120 Y20 E5 F1800", "G1 E-1 F2100",

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import gatesopt
+from gatesopt.ordering.candidates import candidates, candidates_with_seams
 from gatesopt.ordering import OrderingOptions, build, layers
 from gatesopt.ordering.chain import end_of
 from gatesopt.ordering.problem import Anchor
@@ -143,7 +144,7 @@ def test_candidates_made_with_arrays_are_the_loops(mode):
     fields = ("cc", "entry", "exit", "flip", "reversed", "seam")
     for g in range(prob.n_groups):
         curves, fixed = prob.group_curves(g), bool(prob.group_fixed[g])
-        fast, loop = prob._candidates(curves, fixed), prob._candidates_loop(curves, fixed)
+        fast, loop = candidates(prob, curves, fixed), candidates_with_seams(prob, curves, fixed)
         for name, a, b in zip(fields, fast, loop):
             assert a.dtype == b.dtype and np.array_equal(a, b), f"group {g}: {name}"
 
