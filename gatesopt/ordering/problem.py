@@ -35,6 +35,7 @@ from ..errors import GatesoptError
 from ..firmware import planner_families
 from ..limits import machine_limits
 from ..solvers import STATUSES, Status, relative_gap
+from .candidates import candidates, candidates_with_seams
 
 #: closed-loop tolerance: a curve whose end lies within this of its start is a closed loop
 CLOSED_TOL_MM = 1e-3
@@ -506,7 +507,6 @@ class OrderingProblem:
         start_xy, end_xy = start.xy, (None if end is None else end.xy)
         curves = self.group_curves(g)
         fixed = bool(self.group_fixed[g])
-        from .candidates import candidates, candidates_with_seams
         make = candidates if fixed or not self.options.move_seams else candidates_with_seams
         cc, ent, ext, flip, rev, seam = make(self, curves, fixed)
         grp = Group(np.asarray(start_xy, float).copy(), cc, ent, ext, flip, len(curves),
