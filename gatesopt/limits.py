@@ -468,12 +468,15 @@ class _Reading:
             sets = [(k, min(x, self.caps[k]) if self.caps.get(k, 0) > 0 else x) for k, x in sets]
             yield line, sets, jd, m.group(0).decode("utf-8", "replace").strip()
 
-    def apply(self, program: Program, v, source) -> tuple[list, bool]:
+    def apply(self, program: Program, v, source, initial: bool = True) -> tuple[list, bool]:
         """Source 1 of the module docstring: ``program``'s limit lines before its first motion
-        step set the values in force there (``v``, ``source`` in place), the later ones are
-        returned as ``changes``; and whether a line set a junction deviation."""
+        step set the values in force there (``v``, ``source`` in place; none with ``initial``
+        False: a later piece of a file, ``PieceLimits``), the later ones are returned as
+        ``changes``; and whether a line set a junction deviation."""
         motion = np.isin(program.kind, np.asarray(MOTION_KINDS, dtype=program.kind.dtype))
         first_motion_line = int(program.line[motion][0]) if motion.any() else program.n_lines
+        if not initial:
+            first_motion_line = -1
         changes: list[tuple[int, str, float]] = []
         jd_from_line = False
         for line, sets, jd, text in self.lines(program):
@@ -587,13 +590,7 @@ class PieceLimits:
         first motion step set the values in force there, as ``machine_limits`` reads a file."""
         v = self.start.vector()
         source = dict(self.start.source)
-        if self.first:
-            changes, jd = self.reading.apply(program, v, source)
-        else:
-            changes, jd = [], False
-            for line, sets, jd_line, _ in self.reading.lines(program):
-                jd |= jd_line
-                changes += [(line, key, x) for key, x in sets]
+        changes, jd = self.reading.apply(program, v, source, initial=self.first)
         jd |= self.jd_from_line
         limits = self.reading.finish(v, source, self.start.junction, changes, jd)
         _, table = limits.regimes()

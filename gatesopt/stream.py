@@ -255,17 +255,15 @@ def _head_and_tail(p: Path) -> bytes:
     n = slicers.HEAD_BYTES
     with p.open("rb") as f:
         gz = f.read(2) == GZIP_MAGIC
-    opener = gzip.open if gz else open
-    with opener(p, "rb") as f:
+    with (gzip.open if gz else open)(p, "rb") as f:
         head = f.read(n)
-        tail = b""
-        while True:                 # the last n bytes (a gzip file cannot seek to them)
-            if not gz:
-                f.seek(max(f.tell(), p.stat().st_size - n))
-            block = f.read(1 << 24)
-            if not block:
-                break
-            tail = (tail + block)[-n:]
+        if gz:                      # a gzip file cannot seek to its last n bytes: read through
+            tail = b""
+            while block := f.read(1 << 24):
+                tail = (tail + block)[-n:]
+        else:
+            f.seek(max(len(head), p.stat().st_size - n))
+            tail = f.read()
     if not tail:
         return head
     head = head[:head.rfind(b"\n") + 1] if len(head) == n else head

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .candidates import one_way
 from .problem import OrderingProblem
 
 #: groups up to this many curves are settled by the subset DP (``dp.fits``) in milliseconds
@@ -249,9 +250,7 @@ def group_cands(problem: OrderingProblem) -> tuple[np.ndarray, np.ndarray]:
     counted (a lower estimate, the same on every run)."""
     start = np.asarray(problem.group_curve_start, np.int64)
     n = np.diff(start)
-    two = ~np.asarray(problem.curve_closed, bool)
-    if problem.curve_one_way is not None:
-        two &= ~np.asarray(problem.curve_one_way, bool)
+    two = ~np.asarray(problem.curve_closed, bool) & ~one_way(problem)
     open_cum = np.concatenate([[0], np.cumsum(two)])
     return n, n + (open_cum[start[1:]] - open_cum[start[:-1]])
 

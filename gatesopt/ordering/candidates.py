@@ -20,8 +20,10 @@ from __future__ import annotations
 import numpy as np
 
 
-def one_way(problem, curves) -> np.ndarray:
-    """(len(curves),) bool: the one-way curves among ``curves``."""
+def one_way(problem, curves=None) -> np.ndarray:
+    """Per curve of ``curves`` (None: every curve of ``problem``), whether it is one-way."""
+    if curves is None:
+        curves = np.arange(problem.n_curves)
     if problem.curve_one_way is None:
         return np.zeros(len(curves), bool)
     return np.asarray(problem.curve_one_way[curves], bool)

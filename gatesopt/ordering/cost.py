@@ -42,6 +42,7 @@ from ..limits import MachineLimits, machine_limits
 from ..program import Program
 from .gap_plan import (JOINED_MAX_MOVES, MOVE_EPS_MM, W_COLS, W_J, W_JREADY, e_row, end_side,
                        junction, regime_rows, reversed_gap_times_ms, same_z_s)
+from .candidates import one_way
 from .curve_time import CurveEnds, gap_rows
 from .file_end import FileEnd
 from .gaps import GapFacts, ReversibleGaps
@@ -188,10 +189,8 @@ class TimePricer:
         #: (``CurveEnds.reversal_ok``; not so where one is an arc Klipper chords from its own
         #: start, the chords then differ); never a curve printed one way only (a loop, a
         #: one-way curve: ``candidates``), which has no reversal to mirror
-        one_way = (np.zeros(n, bool) if problem.curve_one_way is None
-                   else np.asarray(problem.curve_one_way, bool))
-        self.mirror_ok = (ends.reversal_ok() & ~self.closed & ~one_way if self.mirror_joined
-                          else np.zeros(n, bool))
+        self.mirror_ok = (ends.reversal_ok() & ~self.closed & ~one_way(problem)
+                          if self.mirror_joined else np.zeros(n, bool))
         #: each curve's wipe, written first by a rebuilt travel that leaves it retracting
         self.wipes = SlicerWipes.of(program, lay, problem.curve_closed)
         self.gap_ms = self.copy_ms.copy()
