@@ -207,3 +207,55 @@ def test_a_proof_holds_only_for_the_start_and_the_end_it_was_made_for():
     assert proof_holds(prob, plans, [to, frm], 1, start)
     assert not proof_holds(prob, plans, [to, picked_next(other)], 0, start)
     assert not proof_holds(prob, plans, [gs, frm], 1, start)
+
+
+def one_way_group(seed: int, n_lines: int, n_one_way: int, loops: int = 0):
+    """Random open lines (``n_one_way`` of them one-way: one candidate, forward, as
+    ``candidates.one_way`` makes for a slicer's clipped loop or a coasted curve) and ``loops``
+    closed squares."""
+    rng = np.random.default_rng(seed)
+    polys = [rng.uniform(0, 40, (2, 2)) for _ in range(n_lines)]
+    for _ in range(loops):
+        c = rng.uniform(5, 35, 2)
+        polys.append(np.array([c, c + [3, 0], c + [3, 3], c + [0, 3], c]))
+    prob = from_polylines([polys])
+    one_way = np.zeros(prob.n_curves, bool)
+    one_way[rng.choice(n_lines, n_one_way, replace=False)] = True
+    prob = dataclasses.replace(prob, curve_one_way=one_way)
+    return prob.group(0, prob.origin_xy), one_way
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_symmetric_model_takes_one_way_curves(seed):
+    # a one-way curve is two nodes joined by its fixed edge with arcs into its entry and out of
+    # its exit only: the symmetric model relaxes it (each edge the cheaper way round), the
+    # directed model prices it exactly; what either proves is the subset DP's optimum
+    grp, one_way = one_way_group(seed, n_lines=9 + seed % 4, n_one_way=1 + seed % 6, loops=seed % 2)
+    assert symmetric_graph.applies(grp)
+    assert (np.bincount(grp.cand_curve)[np.flatnonzero(one_way)] == 1).all()
+    best = dp.solve(grp).objective
+    start = np.array([int(np.flatnonzero(grp.cand_curve == c)[0]) for c in range(grp.n_curves)])
+    order, obj, bound, proven = symmetric.solve(grp, start, time.perf_counter() + 20.0)
+    grp.check_order(order)
+    assert obj == pytest.approx(grp.path_cost(order))
+    assert bound <= best + OPTIMAL_ABS_TOL
+    assert proven and obj <= best + OPTIMAL_ABS_TOL
+    gs = auto.solve(grp, time_limit_s=5.0)
+    grp.check_order(gs.order)
+    assert gs.bound <= best + OPTIMAL_ABS_TOL
+    assert gs.status == Status.OPTIMAL and gs.objective <= best + OPTIMAL_ABS_TOL
+
+
+def test_paths_built_from_the_graph_visit_every_curve_when_all_are_one_way():
+    # between two one-way curves' entries (or exits) there is no travel edge: the matching's
+    # patching and the LP's greedy edge matching must still close one tour
+    # (``symmetric_graph.joinable_costs``), and the path printed visits every curve its own way
+    for seed in range(6):
+        grp, _ = one_way_group(50 + seed, n_lines=14, n_one_way=14)
+        assert grp.n_cands == grp.n_curves
+        order, bound = symmetric_graph.matching_path(grp)
+        grp.check_order(order)
+        assert bound <= dp.solve(grp).objective + OPTIMAL_ABS_TOL
+        model = symmetric.SymmetricModel(grp, np.arange(grp.n_curves))
+        x = np.zeros(len(model.eu))          # no LP point: the tour is joined from the graph alone
+        grp.check_order(model.tour_from(x))

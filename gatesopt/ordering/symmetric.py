@@ -40,8 +40,8 @@ from . import separation
 from . import ils
 from .problem import OPTIMAL_ABS_TOL, Group
 from .separation import COLUMN_EPS, gomory_hu_sides, residual_arcs
-from .symmetric_graph import (components, decode_edges, fixed_edges, graph_and_arcs, match_edges,
-                              matching_of, odd_sets)
+from .symmetric_graph import (components, decode_edges, fixed_edges, graph_and_arcs,
+                              joinable_costs, match_edges, matching_of, odd_sets)
 
 _OPT = highspy.HighsModelStatus.kOptimal
 _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
@@ -364,7 +364,7 @@ class SymmetricModel:
         key = np.lexsort((self.C[self.eu, self.ev], -np.round(x, 6)))
         cols = key[x[key] > COLUMN_EPS]
         u, v = match_edges(self.N, self.deg.astype(np.int64), self.fixed_u, self.fixed_v,
-                      self.eu[cols], self.ev[cols], self.C)
+                           self.eu[cols], self.ev[cols], joinable_costs(self.C, self.node_curve))
         return self.decode_edges(u, v)
 
     # -- the solve ----------------------------------------------------------------------------
@@ -608,10 +608,12 @@ class DirectedModel(SymmetricModel):
 
 def asymmetric(arcs: np.ndarray) -> bool:
     """Whether some travel edge costs otherwise one way than the other in the arc matrix
-    ``arcs`` (``symmetric_graph.arc_costs``; S's and E's edges have one way only)."""
+    ``arcs`` (``symmetric_graph.arc_costs``; S's and E's edges have one way only), or exists one
+    way only (at a one-way curve's end points)."""
     A = arcs[2:, 2:]
-    fin = np.isfinite(A) & np.isfinite(A.T)
-    return bool(np.any(np.abs(A[fin] - A.T[fin]) > ASYMMETRY_TOL))
+    fin, fin_t = np.isfinite(A), np.isfinite(A.T)
+    both = fin & fin_t
+    return bool(np.any(fin != fin_t) or np.any(np.abs(A[both] - A.T[both]) > ASYMMETRY_TOL))
 
 
 def solve(group: Group, incumbent: np.ndarray, deadline: float):

@@ -2,7 +2,10 @@
 curve is an open curve with its two directions or a loop with one seam, the orientation choice
 disappears into an undirected graph: nodes S (the start), E (the end), both end points of each
 open curve (joined by the curve itself: a *fixed* edge) and the seam of each loop. The path
-S -> ... -> E plus the fixed edge E-S is a tour.
+S -> ... -> E plus the fixed edge E-S is a tour. A one-way curve (``candidates.one_way``: one
+candidate, entered at one end, left at the other) is an open curve whose travel edges exist one
+way only (into its entry, out of its exit): the undirected graph relaxes it, the directed model
+(``symmetric.DirectedModel``) is exact for it.
 
 Here: the graph (``travel_graph``), whether a group has one (``applies``), the cheapest perfect
 matching of its end points as a bound with its odd sets (``odd_sets``), the path patched from that
@@ -48,14 +51,12 @@ def _components(n, r, c):
 
 
 def applies(group: Group) -> bool:
-    """Every curve: one candidate entering and leaving at one point (a loop's seam), or exactly
-    two candidates that are each other's reverse."""
+    """Every curve: one candidate (a loop's seam, entered and left at one point, or a one-way
+    curve, entered at one end and left at the other), or exactly two candidates that are each
+    other's reverse."""
     cc = group.cand_curve
     counts = np.bincount(cc, minlength=group.n_curves)
     if counts.max(initial=0) > 2:
-        return False
-    one = counts[cc] == 1
-    if not np.allclose(group.cand_entry_xy[one], group.cand_exit_xy[one]):
         return False
     two = np.nonzero(counts[cc] == 2)[0]
     f = group.cand_flip[two]
@@ -77,7 +78,8 @@ def arc_costs(group: Group) -> np.ndarray:
 
 def graph_and_arcs(group: Group):
     """The symmetric model's graph: node 0 = S, 1 = E, then the end points of each open curve
-    (joined by the curve: a fixed edge) and each loop's seam. Returns (positions, curve per node
+    (joined by the curve: a fixed edge; a one-way curve's arcs go into its entry and out of its
+    exit only) and each loop's seam. Returns (positions, curve per node
     (-1 S, -2 E), degree per node (travel edges: 1, a seam 2), cost matrix (inf where no travel
     edge exists: same curve, S-E, the diagonal; 0 into E when the path may end anywhere), nodes
     per curve, each curve's first candidate).
@@ -95,7 +97,14 @@ def graph_and_arcs(group: Group):
     counts = np.bincount(cc, minlength=n)
     by_curve = np.argsort(cc, kind="stable")
     first_cand = by_curve[np.searchsorted(cc[by_curve], np.arange(n))]
-    loop = counts == 1                          # a loop: one node (its seam), degree 2
+    one = counts == 1
+    # a loop: one node (its seam), degree 2; a one-way curve (one candidate, entered at one end
+    # and left at the other: ``candidates.one_way``) has two nodes like an open curve, with arcs
+    # into its entry and out of its exit only
+    loop = one.copy()
+    loop[one] = np.all(np.isclose(group.cand_entry_xy[first_cand[one]],
+                                  group.cand_exit_xy[first_cand[one]]), axis=1)
+    one_way = one & ~loop
     per_curve = np.where(loop, 1, 2)            # open: entry of its first candidate, then exit
     first_node = 2 + np.cumsum(per_curve) - per_curve
     N = 2 + int(per_curve.sum())
@@ -119,16 +128,41 @@ def graph_and_arcs(group: Group):
     leave[first_node] = np.where(loop, first_cand, group.cand_flip[first_cand])
     enter[opened + 1] = group.cand_flip[first_cand[~loop]]
     leave[opened + 1] = first_cand[~loop]
+    # a one-way curve is never left at its entry nor entered at its exit: no such arcs
+    single = first_node[one_way]
+    leave[single] = -1
+    enter[single + 1] = -1
     inner = np.arange(2, N)
     D = group.arc_cost()
     A = np.full((N, N), np.inf)                 # arcs u -> v
-    A[2:, 2:] = D[leave[inner][:, None], enter[inner][None, :]]
-    A[0, 2:] = group.start_cost()[enter[inner]]
-    A[2:, 1] = group.end_cost()[leave[inner]]   # 0: the path just ends
+    lv, en = leave[inner], enter[inner]
+    A[2:, 2:] = D[lv[:, None], en[None, :]]
+    A[0, 2:] = group.start_cost()[en]
+    A[2:, 1] = group.end_cost()[lv]             # 0: the path just ends
+    A[2:][lv < 0] = np.inf
+    A[:, 2:][:, en < 0] = np.inf
     np.fill_diagonal(A, np.inf)                 # no travel edge within a curve, nor S-E
     A[opened, opened + 1] = A[opened + 1, opened] = np.inf
     C = np.minimum(A, A.T)
     return pos, node_curve, deg, C, curve_nodes, first_cand, A
+
+
+def joinable_costs(C: np.ndarray, node_curve: np.ndarray) -> np.ndarray:
+    """``C`` for building tours (``_patch``, ``match_edges``): every two nodes of different
+    curves joinable. Where one-way curves leave no travel edge between two of their end points
+    (both entries, both exits), such an edge costs more than any real one: a tour that takes it
+    anyway traverses a one-way curve against its way, and ``decode_edges`` prints that curve its
+    own way (the path priced as printed, ``Group.path_cost``). ``C`` itself where nothing is
+    missing."""
+    other = node_curve[:, None] != node_curve[None, :]
+    other[0, 1] = other[1, 0] = False           # S-E is the fixed edge
+    miss = other & ~np.isfinite(C)
+    if not miss.any():
+        return C
+    fin = C[np.isfinite(C)]
+    H = C.copy()
+    H[miss] = 2.0 * float(fin.max(initial=0.0)) + 1.0
+    return H
 
 
 def fixed_edges(curve_nodes):
@@ -184,7 +218,7 @@ def matching_path(group: Group):
         return None, 0.0
     fixed_u, fixed_v = fixed_edges(curve_nodes)
     eu, ev = _patch(len(pos), fixed_u, fixed_v, edges[0].astype(np.int64),
-                    edges[1].astype(np.int64), C)
+                    edges[1].astype(np.int64), joinable_costs(C, node_curve))
     return decode_edges(group, node_curve, curve_nodes, first_cand, eu, ev), bound
 
 
@@ -202,7 +236,8 @@ def decode_edges(group: Group, node_curve, curve_nodes, first_cand, eu, ev) -> n
         if len(nodes) == 1:                     # loop: leave by its other travel edge
             k, out = k0, cur
             nxt = [v for v in adj[cur] if v != came][0]
-        else:                                   # open: traverse to the other end point
+        else:                                   # open: traverse to the other end point (a
+            # one-way curve entered at its exit, flip == itself, is printed its own way)
             k = k0 if cur == nodes[0] else int(group.cand_flip[k0])
             out = nodes[1] if cur == nodes[0] else nodes[0]
             nxt = adj[out][0]
