@@ -393,6 +393,24 @@ def test_cli_order_writes_verified_output_and_json(tmp_path, capsys):
     assert main(["order", str(src), "-o", str(tmp_path / "x.gcode"), "--time-limit", "0"]) == 2
 
 
+def test_cli_order_has_solves_default_budget(tmp_path, capsys):
+    # `order` finishes in about 10 s by default, as `solve` and `compare --ordering` do (a 28 MB
+    # file ran > 300 s without one); --budget none gives every group its --time-limit
+    import json
+    from gatesopt.cli import main
+    src = tmp_path / "in.gcode"
+    src.write_text(_handmade_gcode())
+    for args, budget in (([], 10.0), (["--budget", "none"], None), (["--budget", "3"], 3.0)):
+        rep = tmp_path / f"r{budget}.json"
+        assert main(["order", str(src), "-o", str(tmp_path / f"o{budget}.gcode"), "--json", str(rep),
+                     "--workers", "1", *args]) == 0
+        assert json.loads(rep.read_text())["budget_s"] == budget
+        printed = capsys.readouterr().out
+        assert ("budget" in printed) == (budget is not None)
+    assert main(["order", str(src), "-o", str(tmp_path / "y.gcode"), "--budget", "soon"]) == 2
+    assert main(["order", str(src), "-o", str(tmp_path / "y.gcode"), "--budget", "0"]) == 2
+
+
 def test_move_seams_on_gcode_rotates_loops_and_verifies():
     prog = gatesopt.parse(_handmade_gcode())
     # travel distance: a moved seam shortens it here (under the time objective a moved seam

@@ -39,6 +39,17 @@ def positive_s(value: float, flag: str) -> None:
         raise GatesoptError(f"{flag} must be > 0 s, not {value}")
 
 
+def seconds_or_none(text: str):
+    """``order --budget``: seconds, or "none" for no budget."""
+    import argparse
+    if str(text).strip().lower() == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: seconds, or none") from None
+
+
 def budget_pct(text: str):
     """``--max-added-time-pct``: a number, or "none" for no budget."""
     import argparse
