@@ -64,3 +64,42 @@ def test_the_verifier_finds_a_motor_off_at_a_handoff():
     found = [f for f in rep.findings if f.check == "handoff"]
     assert len(found) == 1 and "motor X Y off at 'M600'" in found[0].message
     assert found[0].line == bad.splitlines().index("M600") + 1
+
+
+@pytest.mark.parametrize("handoff", ["M600", "PAUSE"])
+def test_klipper_gating_schedules_no_motor_off_across_a_handoff(handoff):
+    # the firmware switches by itself (``klipper-gating``): a gated interval runs from its line to
+    # the motor's next step; none may hold a hand-over line (the verifier reads the intervals)
+    from gatesopt.verify.schedule import scheduled_lines
+    program = gatesopt.parse(paused_file(handoff), source="paused.gcode")
+    opts = GatingOptions.for_firmware("klipper-gating", max_added_time_pct=None)
+    r = run(program, opts, formulation="dp", order=False)
+    assert r.report.ok, r.report.findings
+    assert "handoff(schedule)" in r.report.checks
+    out = r.output
+    lines = [s for s in scheduled_lines(out, firmware="klipper-gating", start_ahead_s=opts.start_ahead_s,
+                                        end_late_s=opts.end_late_s, original=program) if s.gated]
+    assert len(lines) > 4                                # gated elsewhere
+    at = int(np.searchsorted(out.line, handoff_lines(out)[0]))
+    assert not any(s.row < at <= s.next_row for s in lines)
+
+
+def test_the_verifier_finds_a_scheduled_interval_across_a_handoff():
+    # a GATESOPT_GATE line before the dwell that ends the layer before the pause: X and Y next
+    # step after it, so the firmware holds them off through the pause
+    text = paused_file("M600")
+    program = gatesopt.parse(text, source="paused.gcode")
+    gate = "GATESOPT_GATE STEPPERS=stepper_x,stepper_y"
+    before = "G4 S20\n;LAYER_CHANGE\n;Z:1.4"
+    bad = text.replace(before, f"{gate}\n{before}")
+    assert bad != text
+    # the same line at the layer's other dwell (X and Y step between it and the pause): none
+    mid = text.rfind("G4 S20\nG1 X20 Y120", 0, text.index(before))
+    good = text[:mid] + f"{gate}\n" + text[mid:]
+    reps = [verify(program, gatesopt.parse(t, source="out.gcode"), firmware="klipper-gating")
+            for t in (bad, good)]
+    found = [[f for f in rep.findings if f.check == "handoff"] for rep in reps]
+    assert len(found[0]) == 1 and "motor X Y switched off by the firmware across 'M600'" in found[0][0].message
+    assert found[0][0].line == bad.splitlines().index("M600") + 1
+    assert found[1] == []
+    assert all("handoff(schedule)" in rep.checks for rep in reps)

@@ -74,7 +74,7 @@ from .finding import Finding
 from .firmware import check_firmware, detect_firmware, firmware_problem
 from .geometry import (GEOMETRY_TOL_MM, PARTITION_MAX_PIECES, SHORT_MM, check_geometry, order_changed,
                        segment_pair)
-from .handoff import check_handoffs
+from .handoff import check_handoffs, check_scheduled_handoffs
 from .motor_lines import without_added_motor_lines
 from .ordering import SHARED_CHECKS, check_barriers, check_moves, check_objects
 from .ordering import check as check_ordering
@@ -197,6 +197,8 @@ def verify(original: Program, output: Program, *, firmware="3dgates", start_ahea
                                     printer=printer, original=original, duration_s=dur_out)
         findings += check_schedule(output, scheduled)
         checks.append("timing(schedule)")
+        findings += check_scheduled_handoffs(original, output, scheduled)
+        checks.append("handoff(schedule)")
     else:
         findings += check_timing(output, firmware=fw, start_ahead_s=start_ahead_s, end_late_s=end_late_s,
                                  original=original, tol_s=time_tol_s)

@@ -1,8 +1,10 @@
 """No motor off where the machine is handed over: a pause, a filament or tool change
 (``firmware.handoff_lines``). During a pause the user may move the head by hand and a motor
 without holding torque loses its position; on an IDEX or tool-changer printer a tool change moves
-X. The gating problem never switches a motor off across such a line (``gating.problem``); this
-check reads the output's own motor lines, independently of the solver."""
+X. The gating problem never switches a motor off across such a line (``gating.problem``); these
+checks read the output's own lines, independently of the solver: its motor lines
+(``check_handoffs``), or, for a firmware that switches by itself (``klipper-gating``), the
+intervals its protocol makes of the added lines (``check_scheduled_handoffs``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -36,4 +38,31 @@ def check_handoffs(original: Program, output: Program) -> list[Finding]:
                            f"motor {motors} off at {text!r}: a pause or a filament or tool change "
                            "with a motor off (the head may be moved by hand, a tool change moves "
                            "it)"))
+    return out
+
+
+def check_scheduled_handoffs(original: Program, output: Program, scheduled) -> list[Finding]:
+    """As ``check_handoffs`` for a firmware that switches by itself: a finding per hand-over line
+    of ``output`` inside a gated interval (``verify.schedule.ScheduledLine``: off from its line to
+    the motor's next step, ``next_row``) of a motor the original had on at that line."""
+    a, b = handoff_lines(original), handoff_lines(output)
+    gated = [s for s in scheduled if s.gated]
+    if len(a) != len(b) or not len(b) or not gated:
+        return []
+    on_before = state_at_lines(original, a)
+    # the first step row after each hand-over line: the line lies inside an interval (r, q] of
+    # step rows when r < row <= q
+    row = np.searchsorted(np.asarray(output.line), b)
+    off = np.zeros((len(b), 4), bool)
+    for s in gated:
+        off[:, s.motor] |= (row > s.row) & (row <= s.next_row)
+    off &= on_before
+    out = []
+    for k in np.flatnonzero(off.any(axis=1)).tolist():
+        motors = " ".join(AXES[m] for m in np.flatnonzero(off[k]).tolist())
+        text = output.line_text(int(b[k])).strip()[:40]
+        out.append(Finding("handoff", int(b[k]) + 1,
+                           f"motor {motors} switched off by the firmware across {text!r}: a pause or "
+                           "a filament or tool change with a motor off (the head may be moved by "
+                           "hand, a tool change moves it)"))
     return out

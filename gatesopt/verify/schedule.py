@@ -55,6 +55,7 @@ class ScheduledLine:
     reason: str         # "" when gated, else the firmware's skip reason
     off_s: float        # stall-free times of the pin's off and on (nan when skipped;
     on_s: float         # on = the end of the print when the motor never steps again)
+    next_row: int = -1  # the motor's next step row (n_steps: none); the pin is off in between
 
 
 def _barriers(output: Program, rows, parsed, mask, own, fw) -> np.ndarray:
@@ -140,7 +141,7 @@ def scheduled_lines(output: Program, *, firmware, start_ahead_s: float, end_late
                 continue
             anchor, anchor_line = q, r
             t_on = start[q] - on_lead if q < n else start[n]
-            out.append(ScheduledLine(r, m, True, "", float(start[r] + off_delay), float(t_on)))
+            out.append(ScheduledLine(r, m, True, "", float(start[r] + off_delay), float(t_on), q))
     out.sort(key=lambda s: (s.row, s.motor))
     return out
 
