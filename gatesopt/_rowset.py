@@ -85,14 +85,26 @@ def _canonical(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return rows, _hashes(rows.view(np.uint64))
 
 
+class RowSet:
+    """The rows of ``points`` hashed once, for several ``member`` questions."""
+
+    def __init__(self, points: np.ndarray):
+        self.points, hp = _canonical(points)
+        self.table = _build(self.points, hp)[0] if len(self.points) else None
+
+    def member(self, q: np.ndarray) -> np.ndarray:
+        """(len(q),) bool: row q[i] equals a row of the set (value by value)."""
+        if self.table is None or len(q) == 0:
+            return np.zeros(len(q), bool)
+        q, hq = _canonical(q)
+        return _member(self.points, self.table, q, hq)
+
+
 def member(points: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(len(q),) bool: row q[i] equals a row of ``points`` (value by value)."""
     if len(points) == 0 or len(q) == 0:
         return np.zeros(len(q), bool)
-    points, hp = _canonical(points)
-    q, hq = _canonical(q)
-    table, _ = _build(points, hp)
-    return _member(points, table, q, hq)
+    return RowSet(points).member(q)
 
 
 def repeated(rows: np.ndarray) -> np.ndarray:

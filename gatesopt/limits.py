@@ -24,6 +24,7 @@ Units: accelerations mm/s^2 (``_mm_s2``), speeds mm/s, times s; axis order X Y Z
 from __future__ import annotations
 
 import re
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -231,9 +232,24 @@ def _config(data: bytes) -> dict[str, str]:
     return out
 
 
+#: program -> its ``_limit_commands``, for as long as the program lives: a run plans one program
+#: several times (the print time before, the gating problem, the figures), each reading its
+#: limit lines (0.23 s a time on a 28 MB file)
+_COMMANDS: "weakref.WeakKeyDictionary[Program, list]" = weakref.WeakKeyDictionary()
+
+
 def _limit_commands(program: Program) -> list:
     """``(line, match)`` for each limit-setting line (M201/M203/M204/M205/M566/SET_VELOCITY_LIMIT).
-    Uses the parser's per-line command columns when present so that only those lines are read."""
+    Read once per program (``_COMMANDS``; the list is not to be changed by callers)."""
+    got = _COMMANDS.get(program)
+    if got is None:
+        got = _COMMANDS[program] = _read_limit_commands(program)
+    return got
+
+
+def _read_limit_commands(program: Program) -> list:
+    """``_limit_commands`` read: the parser's per-line command columns, when present, say which
+    lines to read."""
     data, ls = program.data, program.line_start
     letter = getattr(program, "line_letter", None)
     number = getattr(program, "line_number", None)
@@ -463,10 +479,17 @@ class _Reading:
         if self.printer is not None:
             cmds = [(line, m) for line, m in cmds
                     if m.group(1).upper() in (b"M204", b"SET_VELOCITY_LIMIT")]
+        # a line's reading depends on its text alone: a slicer repeats a few texts (PrusaSlicer's
+        # per-feature "M204 P800": 43,000 lines of a 28 MB file, ~1 s a reading)
+        read: dict[bytes, tuple] = {}
         for line, m in cmds:
-            sets, jd = _line_sets(m, self.rules, self.mm_min, self.legacy_m204, self.printer)
-            sets = [(k, min(x, self.caps[k]) if self.caps.get(k, 0) > 0 else x) for k, x in sets]
-            yield line, sets, jd, m.group(0).decode("utf-8", "replace").strip()
+            key = m.group(0)
+            got = read.get(key)
+            if got is None:
+                sets, jd = _line_sets(m, self.rules, self.mm_min, self.legacy_m204, self.printer)
+                sets = [(k, min(x, self.caps[k]) if self.caps.get(k, 0) > 0 else x) for k, x in sets]
+                got = read[key] = (sets, jd, key.decode("utf-8", "replace").strip())
+            yield line, got[0], got[1], got[2]
 
     def apply(self, program: Program, v, source, initial: bool = True) -> tuple[list, bool]:
         """Source 1 of the module docstring: ``program``'s limit lines before its first motion

@@ -381,3 +381,29 @@ def test_whole_print_extrusion_is_not_called_layer_minus_one():
     assert len(found) == 1
     assert "layer -1" not in found[0].message and "whole print" in found[0].message
     assert "net E 5.50000 mm, original 5.00000 mm" in found[0].message
+
+
+@pytest.mark.parametrize("dim", [3, 6])
+def test_near_equals_brute_force_and_its_index_lives_with_the_array(dim):
+    # ``geometry._near``: exact copies by hashing, the rest by a k-d tree (unbalanced), both made
+    # once per points array and kept for as long as that array lives
+    import gc
+    from gatesopt.verify import geometry
+    rng = np.random.default_rng(dim)
+    tol = 1.1e-3
+    pts = np.round(rng.uniform(0, 5, (400, dim)), 3)
+    pts[::7, 0] = -0.0                                   # -0.0 equals 0.0
+    q = np.concatenate([pts[::3] * 1.0,                  # exact copies
+                        pts[1::3] + rng.uniform(-0.9, 0.9, (len(pts[1::3]), dim)) * tol,   # within
+                        pts[2::3] + rng.choice([-1, 1], (len(pts[2::3]), dim)) * 1.2 * tol,  # beyond
+                        rng.uniform(0, 5, (50, dim))])
+    q[0, 0] = 0.0
+    brute = (np.abs(q[:, None, :] - pts[None, :, :]).max(axis=2) < tol).any(axis=1)
+    assert geometry._near(pts, q, tol).tolist() == brute.tolist()
+    assert brute.sum() >= len(pts[::3]) + len(pts[1::3])   # the cases are what they say
+    assert geometry._near(pts, q, tol).tolist() == brute.tolist()       # from the kept index
+    assert id(pts) in geometry._INDEXES
+    key = id(pts)
+    del pts
+    gc.collect()
+    assert key not in geometry._INDEXES
