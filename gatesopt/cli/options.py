@@ -39,19 +39,8 @@ def positive_s(value: float, flag: str) -> None:
         raise GatesoptError(f"{flag} must be > 0 s, not {value}")
 
 
-def seconds_or_none(text: str):
-    """``order --budget``: seconds, or "none" for no budget."""
-    import argparse
-    if str(text).strip().lower() == "none":
-        return None
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: seconds, or none") from None
-
-
-def budget_pct(text: str):
-    """``--max-added-time-pct``: a number, or "none" for no budget."""
+def number_or_none(text: str):
+    """A number, or "none" (``--max-added-time-pct``, ``order --budget``: no budget)."""
     import argparse
     if str(text).strip().lower() == "none":
         return None
@@ -59,6 +48,9 @@ def budget_pct(text: str):
         return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"a number or none, not {text!r}") from None
+
+
+budget_pct = number_or_none
 
 
 class _NotGiven:

@@ -13,7 +13,7 @@ import time
 from ..errors import GatesoptError
 from .files import (STDIO, check_distinct, check_input, check_new_file, check_output, read_program,
                     write_atomic, write_json, write_stdout)
-from .options import ordering_formulations, positive_s, seconds_or_none
+from .options import ordering_formulations, positive_s, number_or_none
 from .progress import default_workers, group_progress, wants_progress
 from .summary import figure_lines, ordering_result_lines
 
@@ -40,7 +40,7 @@ def add_arguments(p) -> None:
                    help="what the curve ordering minimises: time (default), the travels' print time as emitted, retractions, z-hops and the slicer's own copied travels included; travel, their length (Fleming et al.)")
     p.add_argument("--time-limit", type=float, default=2.0, metavar="S",
                    help="time limit per group for the exact formulations (default 2 s)")
-    p.add_argument("--budget", type=seconds_or_none, default=10.0, metavar="S|none",
+    p.add_argument("--budget", type=number_or_none, default=10.0, metavar="S|none",
                    help="finish in about S seconds, from reading the file to the verified output: the "
                         "solve gets what an estimate of the rest leaves (groups share it; default "
                         "10, as `solve --budget`); none: every group gets its --time-limit")

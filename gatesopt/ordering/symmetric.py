@@ -40,8 +40,8 @@ from . import separation
 from . import ils
 from .problem import OPTIMAL_ABS_TOL, Group
 from .separation import COLUMN_EPS, gomory_hu_sides, residual_arcs
-from .symmetric_graph import (components, decode_edges, fixed_edges, graph_and_arcs,
-                              joinable_costs, match_edges, matching_of, odd_sets)
+from .symmetric_graph import (components, decode_edges, fixed_edges, graph_and_arcs, joinable_costs,
+                              match_edges, matching_of, odd_sets)
 
 _OPT = highspy.HighsModelStatus.kOptimal
 _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
@@ -607,13 +607,11 @@ class DirectedModel(SymmetricModel):
 
 
 def asymmetric(arcs: np.ndarray) -> bool:
-    """Whether some travel edge costs otherwise one way than the other in the arc matrix
-    ``arcs`` (``symmetric_graph.arc_costs``; S's and E's edges have one way only), or exists one
-    way only (at a one-way curve's end points)."""
+    """Whether a travel edge of ``arcs`` (``symmetric_graph.arc_costs``; S's and E's edges aside)
+    costs otherwise one way than the other, or exists one way only (at one-way curves' ends)."""
     A = arcs[2:, 2:]
-    fin, fin_t = np.isfinite(A), np.isfinite(A.T)
-    both = fin & fin_t
-    return bool(np.any(fin != fin_t) or np.any(np.abs(A[both] - A.T[both]) > ASYMMETRY_TOL))
+    fin, both = np.isfinite(A), np.isfinite(A) & np.isfinite(A.T)
+    return bool(np.any(fin != fin.T) or np.any(np.abs(A[both] - A.T[both]) > ASYMMETRY_TOL))
 
 
 def solve(group: Group, incumbent: np.ndarray, deadline: float):

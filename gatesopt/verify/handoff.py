@@ -30,12 +30,17 @@ def check_handoffs(original: Program, output: Program) -> list[Finding]:
     if len(a) != len(b) or not len(b):
         return []               # the commands check says what was lost or added
     off = state_at_lines(original, a) & ~state_at_lines(output, b)
+    return _findings(output, b, off, "off at")
+
+
+def _findings(output: Program, lines: np.ndarray, off: np.ndarray, how: str) -> list[Finding]:
+    """A finding per hand-over line ``lines[k]`` with a motor off (``off[k]``)."""
     out = []
     for k in np.flatnonzero(off.any(axis=1)).tolist():
         motors = " ".join(AXES[m] for m in np.flatnonzero(off[k]).tolist())
-        text = output.line_text(int(b[k])).strip()[:40]
-        out.append(Finding("handoff", int(b[k]) + 1,
-                           f"motor {motors} off at {text!r}: a pause or a filament or tool change "
+        text = output.line_text(int(lines[k])).strip()[:40]
+        out.append(Finding("handoff", int(lines[k]) + 1,
+                           f"motor {motors} {how} {text!r}: a pause or a filament or tool change "
                            "with a motor off (the head may be moved by hand, a tool change moves "
                            "it)"))
     return out
@@ -57,12 +62,4 @@ def check_scheduled_handoffs(original: Program, output: Program, scheduled) -> l
     for s in gated:
         off[:, s.motor] |= (row > s.row) & (row <= s.next_row)
     off &= on_before
-    out = []
-    for k in np.flatnonzero(off.any(axis=1)).tolist():
-        motors = " ".join(AXES[m] for m in np.flatnonzero(off[k]).tolist())
-        text = output.line_text(int(b[k])).strip()[:40]
-        out.append(Finding("handoff", int(b[k]) + 1,
-                           f"motor {motors} switched off by the firmware across {text!r}: a pause or "
-                           "a filament or tool change with a motor off (the head may be moved by "
-                           "hand, a tool change moves it)"))
-    return out
+    return _findings(output, b, off, "switched off by the firmware across")
