@@ -23,6 +23,11 @@ import sys
 import threading
 import time
 
+#: when this process first imported gatesopt (its package imports this module first, before
+#: numpy and numba): ``cli.clock``, the process itself may have started long before, where a
+#: shell ran other commands in it before it exec'd the interpreter
+FIRST_IMPORT_S = time.perf_counter()
+
 import hashlib
 import os
 from pathlib import Path

@@ -34,6 +34,6 @@ def started_s() -> float:
     execs the last command of ``( a && b && gatesopt solve ... )``: README's first command in a
     subshell counted the venv and pip install's 14 s as the run's reading and skipped its
     ordering)."""
-    from .. import _IMPORTED_S
+    from .. import _jit
     now = time.perf_counter()
-    return max(now - process_age_s(), _IMPORTED_S - INTERPRETER_START_S)
+    return max(now - process_age_s(), _jit.FIRST_IMPORT_S - INTERPRETER_START_S)
