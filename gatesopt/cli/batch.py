@@ -8,8 +8,8 @@ from ..batch import STDIN_FILE, BatchOptions, expand_paths, output_name, run_bat
 from ..errors import GatesoptError
 from .files import check_input, check_new_file, check_one_stdin, refuse_existing
 from .progress import default_workers, pause_status, resume_status, wants_progress
-from .options import (BUDGET_NOT_GIVEN, add_firmware_options, budget_pct, gating_formulations, motor_list,
-                      positive_s, printer_config)
+from .options import (BUDGET_NOT_GIVEN, add_firmware_options, gating_formulations, motor_list,
+                      number_or_none, positive_s, printer_config)
 
 NAME = "batch"
 HELP = "solve + verify many files, one result row each (CSV or JSON)"
@@ -34,7 +34,7 @@ def add_arguments(p) -> None:
     p.add_argument("--bed", default=None, metavar="WxD",
                    help="bed size in mm for every file, as `solve --bed` (default: the bed each file names; a "
                         "file that names none is not rotated)")
-    p.add_argument("--max-added-time-pct", type=budget_pct, default=BUDGET_NOT_GIVEN, metavar="P|none",
+    p.add_argument("--max-added-time-pct", type=number_or_none, default=BUDGET_NOT_GIVEN, metavar="P|none",
                    help="budget: the print takes at most P %% longer than the file as given (planner "
                         "model; default: 1 for stock firmware, none for the paper's), as `solve`")
     p.add_argument("--max-added-lines-pct", type=float, metavar="P", help="budget: at most P %% more lines")

@@ -50,16 +50,13 @@ def number_or_none(text: str):
         raise argparse.ArgumentTypeError(f"a number or none, not {text!r}") from None
 
 
-budget_pct = number_or_none
-
-
 class _NotGiven:
     def __repr__(self) -> str:
         return "the firmware's default"
 
 
 #: ``--max-added-time-pct`` not given: the firmware's default (``rewrite.printer.choose``); not a
-#: string, which argparse would pass through ``budget_pct``
+#: string, which argparse would pass through ``number_or_none``
 BUDGET_NOT_GIVEN = _NotGiven()
 
 
@@ -110,7 +107,7 @@ def add_gating_options(p) -> None:
                    help="switch a motor on at least this long before it steps (default 1.8, paper)")
     p.add_argument("--end-late-ms", type=float, default=DEFAULT_END_LATE_MS,
                    help="keep a motor on at least this long after it steps (default 1.0, paper)")
-    p.add_argument("--max-added-time-pct", type=budget_pct, default=BUDGET_NOT_GIVEN, metavar="P|none",
+    p.add_argument("--max-added-time-pct", type=number_or_none, default=BUDGET_NOT_GIVEN, metavar="P|none",
                    help="budget: the print takes at most P %% longer than the file as given (its print "
                         "time as every report gives it, planner model; re-ordering, rotation and "
                         "stalls together) (default: 1 for firmware whose motor lines stall the print, "

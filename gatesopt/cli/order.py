@@ -13,7 +13,7 @@ import time
 from ..errors import GatesoptError
 from .files import (STDIO, check_distinct, check_input, check_new_file, check_output, read_program,
                     write_atomic, write_json, write_stdout)
-from .options import ordering_formulations, positive_s, number_or_none
+from .options import number_or_none, ordering_formulations, positive_s
 from .progress import default_workers, group_progress, wants_progress
 from .summary import figure_lines, ordering_result_lines
 

@@ -170,7 +170,8 @@ def _run_starts(order: np.ndarray, keys) -> np.ndarray:
     change = np.zeros(len(order), bool)
     change[0] = True
     for arr in keys:
-        change[1:] |= arr[order][1:] != arr[order][:-1]
+        a = arr[order]
+        change[1:] |= a[1:] != a[:-1]
     return np.flatnonzero(change)
 
 

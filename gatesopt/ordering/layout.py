@@ -306,10 +306,10 @@ def _coast_tails(program: Program, cls: np.ndarray, s1: np.ndarray, l1: np.ndarr
     ``COAST_MAX_MM`` long in all, at one feed slower than the curve's last extrusion (coasting at
     the print feed, as Simplify3D writes it, is not told from a travel: left in the gap), straight
     after it, ended by a retraction (an E-only move back, a firmware ``G10``) or by the travel (a
-    move at another feed), only neutral lines between. It belongs to what is printed there, not to the travel: the curve
-    takes it (``s1``, ``l1`` extended, its lines LINE_CURVE), so that a re-ordered print keeps it
-    with its curve; such a curve is printed in its own direction only (``candidates``). Returns
-    (s1, l1, coast per curve)."""
+    move at another feed), only neutral lines between. It belongs to what is printed there, not
+    to the travel: the curve takes it (``s1``, ``l1`` extended, its lines LINE_CURVE), so that a
+    re-ordered print keeps it with its curve; such a curve is printed in its own direction only
+    (``candidates``). Returns (s1, l1, coast per curve)."""
     n = len(s1)
     coast = np.zeros(n, bool)
     kind, n_steps = program.kind, program.n_steps

@@ -86,7 +86,7 @@ class SymmetricModel:
         (self.pos, self.node_curve, self.deg, self.C, self.curve_nodes,
          self.first_cand, self.A) = graph_and_arcs(group) if graph is None else graph
         N = self.N = len(self.pos)
-        C = self.C
+        self.C_join = joinable_costs(self.C, self.node_curve)      # the costs tours are built by
         self.fixed_u, self.fixed_v = fixed_edges(self.curve_nodes)
         # edges (u < v), the HiGHS columns over them (here one per edge; ``DirectedModel``: one
         # per direction), cuts (node mask "inside", row index cut_row0 + i, teeth as node pairs)
@@ -109,7 +109,7 @@ class SymmetricModel:
         k = min(K_NEIGHBOURS, N - 1)
         # a partial selection: the full row sort took ~1 ms of the model's ~1.6 ms build on a
         # 100-curve group (which k of equal distances enter matters not: pricing adds the rest)
-        near = np.argpartition(C, k - 1, axis=1)[:, :k] if k > 0 else np.zeros((N, 0), np.int64)
+        near = np.argpartition(self.C, k - 1, axis=1)[:, :k] if k > 0 else np.zeros((N, 0), np.int64)
         r = np.repeat(np.arange(N), k)
         c = near.ravel()
         inc = self.tour_edges(incumbent)
@@ -364,7 +364,7 @@ class SymmetricModel:
         key = np.lexsort((self.C[self.eu, self.ev], -np.round(x, 6)))
         cols = key[x[key] > COLUMN_EPS]
         u, v = match_edges(self.N, self.deg.astype(np.int64), self.fixed_u, self.fixed_v,
-                           self.eu[cols], self.ev[cols], joinable_costs(self.C, self.node_curve))
+                           self.eu[cols], self.ev[cols], self.C_join)
         return self.decode_edges(u, v)
 
     # -- the solve ----------------------------------------------------------------------------
