@@ -3,6 +3,8 @@ proof rate; docs/BENCHMARKS.md, "Link-cost build"). CPU seconds (``time.process_
 loaded machine inflates them less than wall time.
 
     python bench/ordering_link_build.py FILE [FILE ...] [--modes safe,free]
+    python bench/ordering_link_build.py --before /path/to/other/checkout FILE [...] [--write]
+
 
 Per file and mode: ``pass``: every group built from where the slicer's order of the one before
 ends and its slicer's order priced, as ``layers.solve`` passes a group the budget leaves
@@ -10,10 +12,20 @@ unsearched (best of 2); ``matrices``: every re-orderable group's link matrix on 
 (``cost._dense``, each same-height link and its mirror priced once); ``reference``: the same
 matrices with every link priced itself (``mirror=False``), checked equal (bit for bit where
 the mirror is unjoined, within 1e-9 ms where it is joined: Klipper, ``cost._mirrorable``).
+
+``--before``: the same measure in another checkout (a git worktree, its own process, its kernels
+compiled or loaded by a first untimed pass), both sides run twice alternately, the best of each
+kept: matrices CPU seconds before and after, their ratio, and whether every matrix is the same bit
+for bit (a digest of all of them); ``--write`` puts the table into docs/BENCHMARKS.md ("Link-cost
+build against the previous checkout").
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -21,11 +33,14 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+#: the checkout measured: this one, or the one a ``--before`` run hands its worker process
+CHECKOUT = Path(os.environ.get("GATESOPT_BENCH_CHECKOUT", ROOT))
+sys.path.insert(0, str(CHECKOUT))
 INSTANCES = ROOT.parent / "shared" / "instances"
+SECTION = "Link-cost build against the previous checkout"
 
 
-def measure(path: Path, mode: str) -> dict:
+def measure(path: Path, mode: str, check: bool = True) -> dict:
     import gatesopt
     from gatesopt.ordering import OrderingOptions, build
     from gatesopt.ordering.chain import end_of
@@ -48,6 +63,13 @@ def measure(path: Path, mode: str) -> dict:
     walk(False)                                 # kernels loaded
     pass_s = min(walk(False)[0] for _ in range(2))
     made_s, mats = walk(True)
+    digest = hashlib.sha1()
+    for g, grp, arc in mats:
+        digest.update(np.ascontiguousarray(arc).tobytes())
+    if not check:
+        return {"file": path.name, "mode": mode, "matrices": len(mats),
+                "links": sum(arc.size for _, _, arc in mats), "matrices_s": made_s - pass_s,
+                "digest": digest.hexdigest()}
     t = time.process_time()
     links = 0
     for g, grp, arc in mats:
@@ -67,11 +89,69 @@ def measure(path: Path, mode: str) -> dict:
             "matrices_s": made_s - pass_s, "reference_s": ref_s}
 
 
+def _side(checkout: Path, path: Path, mode: str) -> dict:
+    """``measure`` (without the reference matrices) in ``checkout``, in a process of its own."""
+    env = dict(os.environ, GATESOPT_BENCH_CHECKOUT=str(checkout), PYTHONPATH=str(checkout))
+    p = subprocess.run([sys.executable, __file__, "--worker", str(path), "--modes", mode],
+                       env=env, capture_output=True, text=True, check=True)
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def compare(args) -> None:
+    """``--before``: this checkout against another, alternately, best of ``--repeat``."""
+    sides = {"before": Path(args.before).resolve(), "after": CHECKOUT}
+    rows = []
+    for name in args.files:
+        path = Path(name) if Path(name).exists() else INSTANCES / name
+        for mode in args.modes.split(","):
+            for side in sides.values():         # kernels compiled or loaded, untimed
+                _side(side, path, mode)
+            best: dict = {}
+            for _ in range(args.repeat):
+                for key, side in sides.items():
+                    r = _side(side, path, mode)
+                    if key not in best or r["matrices_s"] < best[key]["matrices_s"]:
+                        best[key] = r
+            b, a = best["before"], best["after"]
+            same = b["digest"] == a["digest"]
+            rows.append((path.name, mode, a["matrices"], a["links"], b["matrices_s"],
+                         a["matrices_s"], same))
+            print(f"{path.name} {mode}: {a['matrices']:,} matrices, {a['links'] / 1e6:.1f} M links: "
+                  f"{b['matrices_s']:.2f} -> {a['matrices_s']:.2f} s CPU "
+                  f"({a['matrices_s'] / b['matrices_s']:.2f}x), same matrices: {same}", flush=True)
+    lines = [f"## {SECTION}", "", "```",
+             f"python bench/ordering_link_build.py --before <checkout> {' '.join(args.files)}"
+             f" --modes {args.modes} --repeat {args.repeat}", "```", "",
+             "CPU seconds of making every re-orderable group's time-objective link matrix "
+             "(`cost._dense`), best of the alternating runs; same: every matrix equal bit for bit.",
+             "", "| file | mode | matrices | links (M) | before s | after s | after / before | same |",
+             "|---|---|---:|---:|---:|---:|---:|---|"]
+    for f, mode, n, links, b, a, same in rows:
+        lines.append(f"| {f} | {mode} | {n:,} | {links / 1e6:.1f} | {b:.2f} | {a:.2f} | "
+                     f"{a / b:.2f} | {'yes' if same else 'NO'} |")
+    text = "\n".join(lines) + "\n"
+    print(text)
+    if args.write:
+        sys.path.insert(0, str(ROOT / "bench"))
+        from _markdown import replace_section
+        replace_section(ROOT / "docs" / "BENCHMARKS.md", text)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("files", nargs="+")
     ap.add_argument("--modes", default="safe,free")
+    ap.add_argument("--before", help="another checkout to compare with (a git worktree)")
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--write", action="store_true", help="write the --before table into docs/BENCHMARKS.md")
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.worker:
+        print(json.dumps(measure(Path(args.files[0]), args.modes, check=False)))
+        return
+    if args.before:
+        compare(args)
+        return
     for name in args.files:
         path = Path(name) if Path(name).exists() else INSTANCES / name
         for mode in args.modes.split(","):

@@ -34,7 +34,12 @@ KLIPPER_INSTANT_CORNER_V = 1.0    # Klipper kinematics/extruder.py instant_corne
 ARC_SEGMENT_MM = 1.0              # firmware arc segment (Marlin MM_PER_ARC_SEGMENT, Klipper gcode_arcs resolution)
 
 
-@njit(cache=True)
+# The per-move rules below are inlined into their callers (``inline="always"``): the ordering
+# prices each link by planning its few moves (``ordering.gap_plan``), where a call passing row
+# views of its work array cost as much as the rule itself
+
+
+@njit(cache=True, inline="always")
 def safe_speed(code, u, vnom, row):
     """Speed from which a move may start at rest and to which it may stop.
 
@@ -54,7 +59,7 @@ def safe_speed(code, u, vnom, row):
     return 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def junction_speed(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row):
     """Highest speed at the junction from a move (direction ``up`` at its end, nominal ``vp``,
     acceleration ``ap``, length ``lp``, safe speed ``sp``) into the next (``uc``, ``vc``, ...).
@@ -64,7 +69,7 @@ def junction_speed(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row):
     return junction_speed_rows(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row, row)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def junction_speed_rows(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row_p, row):
     """``junction_speed`` where the two moves were planned under different limits: ``row_p``
     the previous move's, ``row`` the next's (Klipper keeps each move's own junction deviation)."""
@@ -152,7 +157,7 @@ def junction_speed_rows(code, up, uc, vp, vc, ap, ac, lp, lc, sp, sc, row_p, row
     return min(math.sqrt(v2), vmax)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _axis_capped(v, ua, row, col, e_caps):
     """``v`` (a speed or an acceleration along unit vector ``ua``) capped so that no axis
     exceeds its own limit ``row[col + ax]`` (M203 / M201 per axis); E only where ``e_caps``."""
@@ -165,7 +170,7 @@ def _axis_capped(v, ua, row, col, e_caps):
     return v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def nominal_speed_accel(code, ua, feed, length, has_e, e_only, no_xy, retract, row):
     """A move's nominal speed (mm/s) and acceleration (mm/s^2) by its kind and the firmware's
     caps: ``ua`` its unit vector X Y Z E (signs ignored), ``feed`` its requested speed, ``length`` its path

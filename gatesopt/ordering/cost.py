@@ -415,8 +415,9 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
     (no boundary gap), so what a rebuilt link's E and Z moves cost depends on the curve it enters
     only: made once per candidate, and per link only the XY travel and the retraction rule
     (``link_one`` where the two ends lie at different heights, or the link leaves a curve the
-    slicer wiped after, as it printed it: ``wipes``). The wall test is made here: once
-    per pair of points (a travel and its reverse cross the same walls), memoized. A link into a
+    slicer wiped after, as it printed it: ``wipes``). The wall test is made here, before a link
+    is planned (``_crosses``: once per pair of points, memoized), so each link's moves are
+    planned once, as they will be written. A link into a
     reversed candidate carries what reversing adds to its curve's own moves (``node``).
 
     ``mirror``: a rebuilt link at one height and its mirror flip(v) -> flip(u) (the same two
@@ -488,6 +489,7 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                 w[1, :] = u_rows[0, v]
                 u_rows[0, v, W_J] = junction(w, 1, code, lim_row)
                 u_rows[0, v, W_JREADY] = 1.0
+    grid_args = (trim, a, b, x0, y0, h, nx, ny, start, items)
     for u in range(m):
         for v in range(m):
             if done[u, v]:
@@ -504,8 +506,7 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                 out[u, v] = (reversed_ms(p, c, group_first, own_net, ends[8], style, mt)
                              + (node[c] if changed[v] else 0.0))
                 continue
-            pending = False     # the dry price is made below, where the link goes dry
-            dry_now = False
+            need, dry = False, 0.0      # (set by ``link_one``: its wall test is made below)
             if (abs(z_ext[u] - z_ent[v]) > MOVE_EPS_MM or group_first[p] != group_first[c]
                     or wiper[u]):
                 t, need, dry = link_one(p, changed[u], c, changed[v], ext[u, 0], ext[u, 1],
@@ -522,36 +523,24 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                     retract = moving and fw_style and dist >= min_travel
                 else:
                     retract = moving and retract_mm > 0.0 and dist >= min_travel
-                need = retract and comb_cap > 0.0 and dist <= comb_cap
+                if retract and comb_cap > 0.0 and dist <= comb_cap:
+                    # a travel the slicer would have combed retracts only where it crosses a
+                    # wall: the test comes first, so each link is planned once, as it goes
+                    retract = has_walls and _crosses(u, v, pid_ext, pid_ent, memo, ext, ent, tag,
+                                                     stamp, grid_args)
+                    tag += 1
                 if planned:
-                    with_e = not use_fw[v] and retract_mm > MOVE_EPS_MM
-                    t = same_z_s(dx, dy, dist, retract, with_e, hop_on, pres[vreg[v]], u_rows, v,
-                                  has_u[0 if retract else 1, v], w, code, rows_loc[vreg[v]], v_xy,
-                                  p, side[u], c, side[v], ends) * 1000.0
-                    dry, pending = 0.0, True    # (a joined link's price may be < 0: no sentinel)
+                    t = same_z_s(dx, dy, dist, retract, not use_fw[v] and retract_mm > MOVE_EPS_MM,
+                                 hop_on, pres[vreg[v]], u_rows, v, has_u[0 if retract else 1, v],
+                                 w, code, rows_loc[vreg[v]], v_xy, p, side[u], c, side[v],
+                                 ends) * 1000.0
                 else:
                     t_xy = trapezoid_one_s(dist, v_xy_cap, mt[0], mt[2]) if moving else 0.0
-                    dry = (t_xy + e_dry[v]) * 1000.0
-                    t = (t_xy + e_wet[v] + t_hop) * 1000.0 if retract else dry
-            if need and has_walls:
-                i, j = pid_ext[u], pid_ent[v]
-                if memo[i, j] < 0:
-                    hit = cross_one(ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1], tag, stamp, trim,
-                                    a, b, x0, y0, h, nx, ny, start, items)
-                    tag += 1
-                    memo[i, j] = 1 if hit else 0
-                    memo[j, i] = memo[i, j]
-                if memo[i, j] == 0:
-                    t = dry
-                    dry_now = True
-            elif need:
+                    t = ((t_xy + e_wet[v] + t_hop) if retract else (t_xy + e_dry[v])) * 1000.0
+            if need and not (has_walls and _crosses(u, v, pid_ext, pid_ent, memo, ext, ent, tag,
+                                                    stamp, grid_args)):
                 t = dry
-                dry_now = True
-            if pending and dry_now:
-                t = same_z_s(dx, dy, dist, False, not use_fw[v] and retract_mm > MOVE_EPS_MM,
-                              hop_on, pres[vreg[v]], u_rows, v, has_u[1, v], w, code,
-                              rows_loc[vreg[v]],
-                              v_xy, p, side[u], c, side[v], ends) * 1000.0
+            tag += 1
             out[u, v] = t + (node[c] if changed[v] else 0.0)
             if (mirror and not wiper[u] and not wiper[flip[v]]
                     and _mirrorable(u, side, flip, gc, mirror_ok)
@@ -569,6 +558,21 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                     out[fv, fu] = t + (node[gc[fu]] if changed[fu] else 0.0)
                     done[fv, fu] = True
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _crosses(u, v, pid_ext, pid_ent, memo, ext, ent, tag, stamp, grid):
+    """Whether ``_dense``'s link u -> v crosses a wall of its layer (``travel.cross_one`` on the
+    layer's ``grid``; ``tag`` a number unique to this test), memoized per pair of points
+    (``memo``: -1 not tested; a travel and its reverse cross the same walls)."""
+    i, j = pid_ext[u], pid_ent[v]
+    if memo[i, j] < 0:
+        trim, a, b, x0, y0, h, nx, ny, start, items = grid
+        hit = cross_one(ext[u, 0], ext[u, 1], ent[v, 0], ent[v, 1], tag, stamp, trim, a, b, x0,
+                        y0, h, nx, ny, start, items)
+        memo[i, j] = 1 if hit else 0
+        memo[j, i] = memo[i, j]
+    return memo[i, j] != 0
 
 
 @numba.njit(cache=True, inline="always")

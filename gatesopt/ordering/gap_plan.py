@@ -6,6 +6,13 @@ acceleration and safe speed by its kind and the per-axis caps (``prep_move``, as
 (``_planner_kernel.junction_speed``), then the look-ahead passes and trapezoids
 (``plan_moves_s``). The moves live in one work array (``work_array``), so a link allocates
 nothing.
+
+The per-move steps (``prep_move``, ``junction``, ``plan_ends_s``, ``joined_s``, ``same_z_s``, and
+the planner's rules they call) are inlined into their callers (``inline="always"``): a link is a
+few moves, and calls passing row views of the work array and the ``ends`` tuple cost as much as
+the arithmetic (``cost._dense`` per link 0.69 -> 0.35 us on the Cura bunny, the same numbers bit
+for bit; a first run's compile ~13 % longer; docs/BENCHMARKS.md, "Link-cost build against the
+previous checkout").
 """
 from __future__ import annotations
 
@@ -21,7 +28,7 @@ MOVE_EPS_MM = 1e-9
 R_JD_RIGHT_ANGLE = float(np.sqrt(0.5) / (1.0 - np.sqrt(0.5)))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def prep_move(w, k, code, row):
     """Row k of the work array: unit vector, nominal speed and acceleration by the move's kind
     and the per-axis caps (``_planner_kernel.nominal_speed_accel``, as the planner), safe speed;
@@ -38,7 +45,7 @@ def prep_move(w, k, code, row):
     w[k, W_READY] = 1.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def junction(w, k, code, row):
     """The planner's junction speed from work row k - 1 into row k (both ready)."""
     return pk.junction_speed(code, w[k - 1, W_U:W_U + 4], w[k, W_U:W_U + 4], w[k - 1, W_V],
@@ -58,7 +65,7 @@ def plan_moves_s(w, n, code, row):
     return plan_ends_s(w, n, code, row, -1.0, -1.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def plan_ends_s(w, n, code, row, v_first, v_last):
     """``plan_moves_s`` with the speeds at the two ends given: the first move's entry at most
     ``v_first`` and the last move's exit at most ``v_last`` (a link joined to the curves around
@@ -206,7 +213,7 @@ def end_side(c, changed, ends):
     return 0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def joined_s(w, n, code, row, p, po, c, co, ends):
     """Time (s) of a link's moves ``w[:n]`` joined to the curves around it (``plan_ends_s``):
     row 0 the last move of curve p (side ``po``) where ``po >= 0``, the last row the first move
@@ -222,7 +229,7 @@ def joined_s(w, n, code, row, p, po, c, co, ends):
     return t
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def same_z_s(dx, dy, dist, retract, with_e, hop_on, pre, u_rows, v, has_u, w, code, row, v_xy,
              p, po, c, co, ends):
     """``link_cost.rebuilt_s`` for a link at one height inside a group (``_dense``), from
