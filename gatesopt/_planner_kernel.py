@@ -483,11 +483,11 @@ def klipper_cruise_cap(L, a, a_smooth, vnom, vj, stop_before):
     forward pass ``min(cruise of the move before, its own start)``. All in v^2.
     """
     m = L.shape[0]
-    cap2 = np.empty(m)
-    ms = np.empty(m)       # max_start_v2
-    msm = np.empty(m)      # max_mcr_start_v2
-    dv2 = np.empty(m)
-    sdv2 = np.empty(m)
+    # one allocation for all of it (the ordering calls this per link of a Klipper file,
+    # ``ordering.gap_plan.klipper_smoothing``): max_start_v2, max_mcr_start_v2, ...
+    tmp = np.empty((8, m))
+    cap2, ms, msm, dv2, sdv2, cruise, start_v2, out = (tmp[0], tmp[1], tmp[2], tmp[3], tmp[4],
+                                                       tmp[5], tmp[6], tmp[7])
     for k in range(m):
         dv2[k] = 2.0 * L[k] * a[k]
         sdv2[k] = min(2.0 * L[k] * a_smooth[k], dv2[k])
@@ -498,8 +498,6 @@ def klipper_cruise_cap(L, a, a_smooth, vnom, vj, stop_before):
         else:
             ms[k] = min(vj[k] * vj[k], cap2[k], cap2[k - 1], ms[k - 1] + dv2[k - 1])
             msm[k] = min(ms[k], msm[k - 1] + sdv2[k - 1])
-    cruise = np.empty(m)
-    start_v2 = np.empty(m)
     k = m - 1
     while k >= 0:
         # one queue: from the last move back to the first one after a stop (the queue ends at rest)
@@ -532,7 +530,6 @@ def klipper_cruise_cap(L, a, a_smooth, vnom, vj, stop_before):
                 cruise[i] = min(prev, start_v2[i])
             prev = cruise[i]
         k -= 1
-    out = np.empty(m)
     for k in range(m):
         out[k] = math.sqrt(max(min(cruise[k], cap2[k]), 0.0))
     return out

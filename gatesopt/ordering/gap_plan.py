@@ -127,30 +127,34 @@ def klipper_smoothing(w, n, row):
     applies it to a Klipper file (``_planner_kernel.klipper_cruise_cap``: each move's peak
     capped as if the moves accelerated at min(accel_to_decel, its acceleration, max_accel
     (1 - minimum_cruise_ratio))): lowers the nominal speeds ``W_V`` (the junctions stay those of
-    the uncapped speeds, the trapezoids clip to the cap, as the planner does)."""
-    a_s = np.empty(n)
+    the uncapped speeds, the trapezoids clip to the cap, as the planner does). Called per
+    link on a Klipper file: the work array's columns go to ``klipper_cruise_cap`` as views and
+    its own scratch is one array (each allocation here costs as much as a junction)."""
+    a_print = row[pk.C_ACCEL_PRINT] * (1.0 - row[pk.C_MIN_CRUISE_RATIO])
     smooth = False
     for k in range(n):
-        a_s[k] = min(row[pk.C_ACCEL_TO_DECEL], w[k, W_A],
-                     row[pk.C_ACCEL_PRINT] * (1.0 - row[pk.C_MIN_CRUISE_RATIO]))
-        smooth = smooth or a_s[k] < w[k, W_A]
+        if min(row[pk.C_ACCEL_TO_DECEL], w[k, W_A], a_print) < w[k, W_A]:
+            smooth = True
+            break
     if not smooth:
         return
+    scratch = np.empty((2, n))
+    a_s, vj_b = scratch[0], scratch[1]
+    for k in range(n):
+        a_s[k] = min(row[pk.C_ACCEL_TO_DECEL], w[k, W_A], a_print)
     stop = np.zeros(n, np.bool_)
     stop[0] = True
-    cap = pk.klipper_cruise_cap(w[:n, W_L].copy(), w[:n, W_A].copy(), a_s, w[:n, W_V].copy(),
-                                w[:n, W_J].copy(), stop)
+    cap = pk.klipper_cruise_cap(w[:n, W_L], w[:n, W_A], a_s, w[:n, W_V], w[:n, W_J], stop)
     # and the window run backwards: Klipper's flush assigns a run's smoothed peak from its end,
     # so the caps of a window and of the same moves backwards differ by a few 0.1 ms at its short
     # boundary moves (a Klipper queue is not cut there; the window is). The lower of the two
     # caps, so that a link and its mirror -- the link run backwards where the rule is the same
     # both ways (``cost._dense``) -- are one price
-    vj_b = np.empty(n)
     vj_b[0] = 0.0
     for j in range(1, n):
         vj_b[j] = w[n - j, W_J]
-    cap_b = pk.klipper_cruise_cap(w[:n, W_L][::-1].copy(), w[:n, W_A][::-1].copy(),
-                                  a_s[::-1].copy(), w[:n, W_V][::-1].copy(), vj_b, stop)
+    cap_b = pk.klipper_cruise_cap(w[:n, W_L][::-1], w[:n, W_A][::-1], a_s[::-1],
+                                  w[:n, W_V][::-1], vj_b, stop)
     for k in range(n):
         w[k, W_V] = min(cap[k], cap_b[n - 1 - k])
 
