@@ -483,11 +483,13 @@ def klipper_cruise_cap(L, a, a_smooth, vnom, vj, stop_before):
     forward pass ``min(cruise of the move before, its own start)``. All in v^2.
     """
     m = L.shape[0]
-    # one allocation for all of it (the ordering calls this per link of a Klipper file,
-    # ``ordering.gap_plan.klipper_smoothing``): max_start_v2, max_mcr_start_v2, ...
-    tmp = np.empty((8, m))
-    cap2, ms, msm, dv2, sdv2, cruise, start_v2, out = (tmp[0], tmp[1], tmp[2], tmp[3], tmp[4],
-                                                       tmp[5], tmp[6], tmp[7])
+    # the temporaries in one allocation (the ordering calls this per link of a Klipper file,
+    # ``ordering.gap_plan.klipper_smoothing``): max_start_v2, max_mcr_start_v2, ...; the result
+    # apart, so that a whole file's plan keeps m numbers alive, not 8 m
+    tmp = np.empty((7, m))
+    cap2, ms, msm, dv2, sdv2, cruise, start_v2 = (tmp[0], tmp[1], tmp[2], tmp[3], tmp[4], tmp[5],
+                                                  tmp[6])
+    out = np.empty(m)
     for k in range(m):
         dv2[k] = 2.0 * L[k] * a[k]
         sdv2[k] = min(2.0 * L[k] * a_smooth[k], dv2[k])

@@ -528,7 +528,6 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
                     # wall: the test comes first, so each link is planned once, as it goes
                     retract = has_walls and _crosses(u, v, pid_ext, pid_ent, memo, ext, ent, tag,
                                                      stamp, grid_args)
-                    tag += 1
                 if planned:
                     t = same_z_s(dx, dy, dist, retract, not use_fw[v] and retract_mm > MOVE_EPS_MM,
                                  hop_on, pres[vreg[v]], u_rows, v, has_u[0 if retract else 1, v],
@@ -540,7 +539,7 @@ def _dense(gc, changed, ent, ext, local, flip, pid_ent, pid_ext, n_points, z_ent
             if need and not (has_walls and _crosses(u, v, pid_ext, pid_ent, memo, ext, ent, tag,
                                                     stamp, grid_args)):
                 t = dry
-            tag += 1
+            tag += 1        # (one wall test at most per link: the two above exclude each other)
             out[u, v] = t + (node[c] if changed[v] else 0.0)
             if (mirror and not wiper[u] and not wiper[flip[v]]
                     and _mirrorable(u, side, flip, gc, mirror_ok)
