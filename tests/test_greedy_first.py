@@ -5,6 +5,7 @@ solve after it reuses the matrix, and a group the budget leaves no time for keep
 budget already spent, a stand-in solver that must not be called), never by timing a run."""
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 
@@ -90,6 +91,42 @@ def test_the_exact_solve_reuses_greedys_link_matrices():
     for g in made:
         grp = gp.with_matrix(g, prob.group(g, prob.origin_xy))
         assert grp.arc_cost() is gp.matrices[g]
+
+
+def test_the_exact_chain_takes_greedys_group_where_it_starts_and_ends_alike(monkeypatch):
+    """A group the exact chain enters where greedy's chain did (and leaves to the same end) is
+    the very Group greedy planned, not built again (``GreedyPass.planned_at``); elsewhere it is
+    built afresh. The answer is the one the exact solve gives building every group."""
+    prog = gatesopt.parse(str(PROJECT_INSTANCES / "star_lines_m82.gcode"))
+    from gatesopt.ordering.groups import build
+    prob = build(prog, OrderingOptions(mode="free"))
+    gp = layers.solve_greedy(prob)
+    assert len(gp.planned) == prob.n_groups
+    taken = []
+    planned_at = layers.GreedyPass.planned_at
+
+    def recording(self, g, start, end):
+        grp = planned_at(self, g, start, end)
+        if grp is not None:
+            taken.append(g)
+        return grp
+    monkeypatch.setattr(layers.GreedyPass, "planned_at", recording)
+    sol = layers.solve(prob, "auto", greedy=gp)
+    assert len(taken) >= prob.n_groups // 2         # most groups start where greedy's did
+    assert all(gp.planned[g][0].costs.arc is None or gp.matrices[g] is None
+               or gp.planned[g][0].costs.arc is gp.matrices[g] for g in taken)
+    n_taken = len(taken)
+    ref = layers.solve(prob, "auto", greedy=dataclasses.replace(gp, planned=()))
+    assert len(taken) == n_taken                    # without: every group built afresh
+    assert np.array_equal(sol.curve_order, ref.curve_order)
+    assert np.array_equal(sol.curve_reversed, ref.curve_reversed)
+    assert [gs.objective for gs in sol.groups] == [gs.objective for gs in ref.groups]
+    assert [gs.status for gs in sol.groups] == [gs.status for gs in ref.groups]
+    # another start: not greedy's group
+    g = taken[-1]
+    grp, start, end = gp.planned[g]
+    moved = dataclasses.replace(start, xy=np.asarray(start.xy, float) + 1.0)
+    assert gp.planned_at(g, moved, end) is None
 
 
 def test_a_starved_exact_solve_prints_no_slower_than_greedy(monkeypatch):
