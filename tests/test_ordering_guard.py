@@ -442,3 +442,29 @@ def test_a_layer_put_back_counts_among_the_re_orderable_layers():
     _, _, with_one, _ = pipeline._solve_counts(prob, sol, np.array([nothing[0]]))
     assert with_one["reorderable"] == counts["reorderable"] + 1
     assert res.summary["layers_kept_slower"] <= res.summary["layers_reorderable"]
+
+
+@pytest.mark.parametrize("name", ["real_orca230_arcs.gcode.gz",      # a Klipper command
+                                  "real_prusa261_benchy.gcode.gz",   # a flavor setting
+                                  "real_icesl.gcode.gz"])            # nothing said
+def test_the_guards_files_are_for_the_inputs_printer_read_once(monkeypatch, name):
+    # each file the guard measures is a copy of the input: its printer's facts are the input's
+    # (``slicers.same_printer``), not read again from its text -- and read again, they decide the
+    # same firmware by the same kind of evidence (or none)
+    from conftest import SHARED_INSTANCES
+    from gatesopt import slicers
+    path = SHARED_INSTANCES / name
+    if not path.exists():
+        pytest.skip(f"development corpus not found at {SHARED_INSTANCES}")
+    prog = gatesopt.parse(str(path))
+    prob = build(prog, OrderingOptions(mode="free"))
+    sol = solve(prob, "greedy")
+    facts = slicers.program_printer(prog)
+    reads = []
+    read = slicers.read_printer
+    monkeypatch.setattr(slicers, "read_printer", lambda data: reads.append(1) or read(data))
+    got = guard.emit_guarded(prog, prob, sol)
+    assert not reads                                    # no file the guard measured was read
+    assert slicers.program_printer(got.output) is facts
+    again, was = read(bytes(got.output.data)).firmware, facts.firmware
+    assert (again and (again.family, again.kind)) == (was and (was.family, was.kind))

@@ -47,6 +47,7 @@ from ..ordering.repair import REPAIRED
 from ..parse import parse
 from ..planner import planned_durations_s
 from ..program import Program
+from ..slicers import same_printer
 from ..solvers import Status
 
 #: a layer counts as slower re-ordered only by more than this (s): the planner's look-ahead runs
@@ -528,7 +529,9 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
 
     def emitted(sol):
         text = emit(program, problem, sol, memo)
-        return text, parse(text, source=f"{program.source} (re-ordered)")
+        out = parse(text, source=f"{program.source} (re-ordered)")
+        same_printer(out, program)          # its printer's facts: the input's, not read again
+        return text, out
     if not time_guard:
         text, out = emitted(solution)
         return Guarded(solution, text, out, np.zeros(0, np.int64), np.full(L, FROM_SOLVER))
