@@ -38,29 +38,17 @@ def measure(path: str, mode: str, repeat: int) -> dict:
     prob = build(parse(path), OrderingOptions(mode=mode))
     gp = layers.solve_greedy(prob)
     without = dataclasses.replace(gp, planned=())
-    taken = []
-    planned_at = layers.GreedyPass.planned_at
-
-    def recording(self, g, start, end):
-        grp = planned_at(self, g, start, end)
-        if grp is not None:
-            taken.append(g)
-        return grp
-    layers.GreedyPass.planned_at = recording
-    try:
-        best = {"with": np.inf, "without": np.inf}
-        sols = {}
-        layers.solve(prob, "auto", budget_s=0.0, greedy=gp)      # warm-up (kernels, imports)
-        for _ in range(repeat):
-            for name, g in (("without", without), ("with", gp)):
-                taken.clear()
-                t = time.perf_counter()
-                sols[name] = layers.solve(prob, "auto", budget_s=0.0, greedy=g)
-                best[name] = min(best[name], time.perf_counter() - t)
-                if name == "with":
-                    n_taken = len(taken)
-    finally:
-        layers.GreedyPass.planned_at = planned_at
+    best = {"with": np.inf, "without": np.inf}
+    sols = {}
+    layers.solve(prob, "auto", budget_s=0.0, greedy=gp)          # warm-up (kernels, imports)
+    for _ in range(repeat):
+        for name, g in (("without", without), ("with", gp)):
+            chain = []          # the exact chain's (Group, start, end) per group
+            t = time.perf_counter()
+            sols[name] = layers.solve(prob, "auto", budget_s=0.0, greedy=g, planned=chain)
+            best[name] = min(best[name], time.perf_counter() - t)
+            if name == "with":
+                n_taken = sum(grp is p[0] for (grp, _, _), p in zip(chain, gp.planned))
     a, b = sols["with"], sols["without"]
     same = (np.array_equal(a.curve_order, b.curve_order)
             and np.array_equal(a.curve_reversed, b.curve_reversed)

@@ -93,7 +93,7 @@ def test_the_exact_solve_reuses_greedys_link_matrices():
         assert grp.arc_cost() is gp.matrices[g]
 
 
-def test_the_exact_chain_takes_greedys_group_where_it_starts_and_ends_alike(monkeypatch):
+def test_the_exact_chain_takes_greedys_group_where_it_starts_and_ends_alike():
     """A group the exact chain enters where greedy's chain did (and leaves to the same end) is
     the very Group greedy planned, not built again (``GreedyPass.planned_at``); elsewhere it is
     built afresh. The answer is the one the exact solve gives building every group."""
@@ -102,22 +102,15 @@ def test_the_exact_chain_takes_greedys_group_where_it_starts_and_ends_alike(monk
     prob = build(prog, OrderingOptions(mode="free"))
     gp = layers.solve_greedy(prob)
     assert len(gp.planned) == prob.n_groups
-    taken = []
-    planned_at = layers.GreedyPass.planned_at
-
-    def recording(self, g, start, end):
-        grp = planned_at(self, g, start, end)
-        if grp is not None:
-            taken.append(g)
-        return grp
-    monkeypatch.setattr(layers.GreedyPass, "planned_at", recording)
-    sol = layers.solve(prob, "auto", greedy=gp)
+    chain = []              # the exact chain's (Group, start, end) per group
+    sol = layers.solve(prob, "auto", greedy=gp, planned=chain)
+    taken = [g for g, ((grp, _, _), p) in enumerate(zip(chain, gp.planned)) if grp is p[0]]
     assert len(taken) >= prob.n_groups // 2         # most groups start where greedy's did
-    assert all(gp.planned[g][0].costs.arc is None or gp.matrices[g] is None
-               or gp.planned[g][0].costs.arc is gp.matrices[g] for g in taken)
-    n_taken = len(taken)
-    ref = layers.solve(prob, "auto", greedy=dataclasses.replace(gp, planned=()))
-    assert len(taken) == n_taken                    # without: every group built afresh
+    assert all(gp.planned_at(g, s, e) is None for g, (grp, s, e) in enumerate(chain)
+               if g not in taken)                   # the others start or end elsewhere
+    chain_ref = []
+    ref = layers.solve(prob, "auto", greedy=dataclasses.replace(gp, planned=()), planned=chain_ref)
+    assert not any(grp is p[0] for (grp, _, _), p in zip(chain_ref, gp.planned))
     assert np.array_equal(sol.curve_order, ref.curve_order)
     assert np.array_equal(sol.curve_reversed, ref.curve_reversed)
     assert [gs.objective for gs in sol.groups] == [gs.objective for gs in ref.groups]

@@ -45,6 +45,7 @@ def _stand_in(monkeypatch, prog, prob, times):
                                extruding=np.arange(2 * L) % 2 == 0)
     monkeypatch.setattr(guard, "emit", fake_emit)
     monkeypatch.setattr(guard, "parse", fake_parse)
+    monkeypatch.setattr(guard, "same_printer", lambda copy, program: None)     # no printer here
     monkeypatch.setattr(guard, "step_times_s", lambda program, options=None: program.duration_s)
     # the slicer's file: 1 s per layer and per layer change
     return fake_parse(np.ones(2 * L).tobytes())
