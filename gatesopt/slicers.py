@@ -430,24 +430,22 @@ def read_printer(data: bytes) -> PrinterFacts:
 
 
 _FACTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-_COPY_OF: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # ``same_printer``
 
 
 def same_printer(copy, program) -> None:
     """``copy``, parsed from a re-ordered copy of ``program``'s text (every line naming the printer
     kept), has ``program``'s printer facts, not read again (~0.1 s a read on 200,000 lines)."""
-    _COPY_OF[copy] = program
+    _FACTS[copy] = program_printer(program)
 
 
 def program_printer(program) -> PrinterFacts:
     """``read_printer`` of a parsed ``Program``'s bytes, read once per program (a Program is never
     mutated; the Klipper-command search reads the whole file, ~0.13 s on a 1.4 MB file, and every
     planner call asks: ``limits.default_family``, ``rewrite.printer.choose``; a copy: its original's)."""
-    if program not in _FACTS:
-        original = _COPY_OF.get(program)
-        _FACTS[program] = (program_printer(original) if original is not None
-                           else read_printer(bytes(program.data)))
-    return _FACTS[program]
+    facts = _FACTS.get(program)
+    if facts is None:
+        facts = _FACTS[program] = read_printer(bytes(program.data))
+    return facts
 
 
 # -- the bed ---------------------------------------------------------------------------------------
