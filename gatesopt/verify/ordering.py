@@ -205,16 +205,29 @@ def _row_hash(q: np.ndarray) -> np.ndarray:
     return h
 
 
+#: bits of ``_by_layer``'s sort key taken from the row's hash (the layer above them)
+KEY_HASH_BITS = 40
+
+
 def _by_layer(layer: np.ndarray, q: np.ndarray) -> np.ndarray:
     """The rows of ``column_stack([layer, q])`` sorted by layer, then by a hash of the row: two
     layers hold the same multiset of rows iff their sorted rows are equal, except where rows of
-    equal hash but different values lie in another order (a collision of 64-bit hashes), which
-    only makes the layer look different: ``_layers_differing`` then says it differs, and the
-    exact move-by-move comparison the caller runs on such layers decides. (A lexicographic sort
-    of the 12 columns took ~0.13 s per file of 600 k moves; one key sorts several times faster.)"""
+    equal hash but different values lie in another order (a collision of the hash's top
+    ``KEY_HASH_BITS`` bits), which only makes the layer look different: ``_layers_differing``
+    then says it differs, and the exact move-by-move comparison the caller runs on such layers
+    decides. (A lexicographic sort of the 12 columns took ~0.13 s per file of 600 k moves; one
+    key sorts several times faster. Layer and hash in one uint64 sorted once: 0.6x the time of
+    sorting by the two, 42 vs 72 ms on prusa25_xend_honey25_acp's 204 k moves.)"""
     rows = np.column_stack([layer, q]).astype(np.int64, copy=False)
-    order = np.lexsort((_row_hash(q), layer))
-    return rows[order]
+    h = _row_hash(q)
+    lay = rows[:, 0]
+    lo = int(lay.min()) if len(lay) else 0
+    if len(lay) and int(lay.max()) - lo >= 1 << (64 - KEY_HASH_BITS):
+        return rows[np.lexsort((h, lay))]           # (more layers than the key holds)
+    with np.errstate(over="ignore"):
+        key = (((lay - lo).astype(np.uint64) << np.uint64(KEY_HASH_BITS))
+               | (h >> np.uint64(64 - KEY_HASH_BITS)))
+    return rows[np.argsort(key)]
 
 
 def _layers_differing(layer_a, qa, layer_b, qb) -> np.ndarray:
