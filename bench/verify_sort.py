@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from _markdown import publish  # bench/_markdown.py
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 SHARED = ROOT.parent / "shared" / "instances"
@@ -86,12 +88,7 @@ def main() -> None:
     for name, n, t_old, t_new, t_check, _ in rows:
         lines.append(f"| {name} | {n:,} | {1e3 * t_old:.1f} | {1e3 * t_new:.1f} | "
                      f"{t_new / t_old:.2f} | {6e3 * (t_old - t_new):.0f} | {t_check:.2f} |")
-    text = "\n".join(lines) + "\n"
-    print(text)
-    if a.write:
-        sys.path.insert(0, str(ROOT / "bench"))
-        from _markdown import replace_section
-        replace_section(ROOT / "docs" / "BENCHMARKS.md", text)
+    publish("\n".join(lines) + "\n", str(ROOT / "docs" / "BENCHMARKS.md") if a.write else None)
 
 
 if __name__ == "__main__":
