@@ -325,16 +325,17 @@ def _stage(program: Program, problem: OrderingProblem, base: _Measured, solution
     if p0 is not None and p1 is not None:
         has = (p0[0] > 0) | (p0[1] > 0) | changed
         open_ = open_layers(changed, has, slower)
+        kept_on = changed & ~open_          # re-ordered in every file this stage measures
         terms = _Terms(L)
         terms.add(p0, zero, has)
         terms.add(p1, states1, has)
-        for states in _alternate(open_, has, on=changed & ~open_):
+        for states in _alternate(open_, has, on=kept_on):
             m = measured(states)
             tried.append((m.total_s, 2, m, states))
             parts = layer_parts_s(m.output, m.durations_s) if m.output.n_layers == L else None
             if parts is not None:
                 terms.add(parts, states, has)
-        states, _ = _best_states(terms, has, changed, on=changed & ~open_)
+        states, _ = _best_states(terms, has, changed, on=kept_on)
         if not np.array_equal(states, states1):
             m = measured(states)
             tried.append((m.total_s, 0, m, states))

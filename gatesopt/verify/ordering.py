@@ -224,9 +224,8 @@ def _by_layer(layer: np.ndarray, q: np.ndarray) -> np.ndarray:
     lo = int(lay.min()) if len(lay) else 0
     if len(lay) and int(lay.max()) - lo >= 1 << (64 - KEY_HASH_BITS):
         return rows[np.lexsort((h, lay))]           # (more layers than the key holds)
-    with np.errstate(over="ignore"):
-        key = (((lay - lo).astype(np.uint64) << np.uint64(KEY_HASH_BITS))
-               | (h >> np.uint64(64 - KEY_HASH_BITS)))
+    key = (((lay - lo).astype(np.uint64) << np.uint64(KEY_HASH_BITS))
+           | (h >> np.uint64(64 - KEY_HASH_BITS)))
     return rows[np.argsort(key)]
 
 
