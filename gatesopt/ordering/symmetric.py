@@ -36,12 +36,12 @@ import numba
 import numpy as np
 
 from .._native import run_highs
-from . import separation
+from . import rc_search, separation
 from . import ils
 from .problem import OPTIMAL_ABS_TOL, Group
 from .separation import COLUMN_EPS, gomory_hu_sides, residual_arcs
-from .symmetric_graph import (components, decode_edges, fixed_edges, graph_and_arcs, joinable_costs,
-                              match_edges, matching_of, odd_sets)
+from .symmetric_graph import (asymmetric, components, decode_edges, fixed_edges, graph_and_arcs,
+                              joinable_costs, match_edges, matching_of, odd_sets)
 
 _OPT = highspy.HighsModelStatus.kOptimal
 _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
@@ -61,9 +61,6 @@ PRICE_PER_NODE = 1
 EXACT_BLOSSOM_SHARE = 0.25
 #: separation rounds per branch-and-cut node (then it is branched on its last LP point)
 MAX_NODE_CUT_ROUNDS = 50
-#: refine with ``DirectedModel`` when the group's arcs differ from their reverse by more than
-#: this somewhere (ms or mm; a symmetric group never needs it)
-ASYMMETRY_TOL = OPTIMAL_ABS_TOL
 #: whether a group with direction-dependent costs left open by the symmetric root goes on in
 #: ``DirectedModel`` (else: the symmetric branch-and-cut with no-good cuts). Free mode, 0.3 s
 #: per group: prusa25_ymotor_grid30_zhop 1 -> 49 of 60 sampled groups proven (docs/RESULTS.md,
@@ -606,14 +603,6 @@ class DirectedModel(SymmetricModel):
         self.add_cuts(cuts)
 
 
-def asymmetric(arcs: np.ndarray) -> bool:
-    """Whether a travel edge of ``arcs`` (``symmetric_graph.arc_costs``; S's and E's edges aside)
-    costs otherwise one way than the other, or exists one way only (at one-way curves' ends)."""
-    A = arcs[2:, 2:]
-    fin, both = np.isfinite(A), np.isfinite(A) & np.isfinite(A.T)
-    return bool(np.any(fin != fin.T) or np.any(np.abs(A[both] - A.T[both]) > ASYMMETRY_TOL))
-
-
 def solve(group: Group, incumbent: np.ndarray, deadline: float):
     """Root LP (cuts and pricing); a path built from the LP point and polished by ILS may improve
     the incumbent; then branch-and-cut if a gap is left. Returns (order, objective, bound,
@@ -635,9 +624,13 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
         return best, best_obj, bound, True
     if not model.complete:
         return best, best_obj, bound, False
+    best, best_obj, proof = rc_search.after_root(model, best, best_obj, bound, deadline)
+    if proof is not None:       # (a group the search proved needs no branching)
+        return proof
     if directed and not isinstance(model, DirectedModel):
         return _directed(model, best, best_obj, bound, deadline)
     return model.branch(best, best_obj, bound, deadline)
+
 
 
 def _directed(sym: SymmetricModel, best, best_obj: float, bound: float, deadline: float):
@@ -656,6 +649,9 @@ def _directed(sym: SymmetricModel, best, best_obj: float, bound: float, deadline
         return best, best_obj, bound, True
     if not model.complete:
         return best, best_obj, bound, False
+    best, best_obj, proof = rc_search.after_root(model, best, best_obj, bound, deadline)
+    if proof is not None:       # (a group the search proved needs no branching)
+        return proof
     return model.branch(best, best_obj, bound, deadline)
 
 

@@ -18,10 +18,13 @@ import numba
 import numpy as np
 
 from . import matching
-from .problem import Group
+from .problem import OPTIMAL_ABS_TOL, Group
 
 #: edges per vertex the matching's blossom algorithm starts from (``odd_sets``)
 MATCHING_NEIGHBOURS = 10
+#: refine with ``symmetric.DirectedModel`` when the group's arcs differ from their reverse by more
+#: than this somewhere (ms or mm; a symmetric group never needs it)
+ASYMMETRY_TOL = OPTIMAL_ABS_TOL
 
 
 def components(n_nodes: int, r, c):
@@ -48,6 +51,14 @@ def _components(n, r, c):
             k += 1
         lab[v] = root_lab[root]
     return k, lab
+
+
+def asymmetric(arcs: np.ndarray) -> bool:
+    """Whether a travel edge of ``arcs`` (``arc_costs``; S's and E's edges aside)
+    costs otherwise one way than the other, or exists one way only (at one-way curves' ends)."""
+    A = arcs[2:, 2:]
+    fin, both = np.isfinite(A), np.isfinite(A) & np.isfinite(A.T)
+    return bool(np.any(fin != fin.T) or np.any(np.abs(A[both] - A.T[both]) > ASYMMETRY_TOL))
 
 
 def applies(group: Group) -> bool:
