@@ -45,7 +45,7 @@ def _stand_in(monkeypatch, prog, prob, times):
                                extruding=np.arange(2 * L) % 2 == 0)
     monkeypatch.setattr(guard, "emit", fake_emit)
     monkeypatch.setattr(guard, "parse", fake_parse)
-    monkeypatch.setattr(guard, "same_printer", lambda copy, program: None)     # no printer here
+    monkeypatch.setattr(guard, "same_settings", lambda copy, program: None)    # no printer here
     monkeypatch.setattr(guard, "step_times_s", lambda program, options=None: program.duration_s)
     # the slicer's file: 1 s per layer and per layer change
     return fake_parse(np.ones(2 * L).tobytes())
@@ -449,9 +449,9 @@ def test_a_layer_put_back_counts_among_the_re_orderable_layers():
                                   "real_prusa261_benchy.gcode.gz",   # a flavor setting
                                   "real_icesl.gcode.gz"])            # nothing said
 def test_the_guards_files_are_for_the_inputs_printer_read_once(monkeypatch, name):
-    # each file the guard measures is a copy of the input: its printer's facts are the input's
-    # (``slicers.same_printer``), not read again from its text -- and read again, they decide the
-    # same firmware by the same kind of evidence (or none)
+    # each file the guard measures is a copy of the input: its printer's facts and settings are
+    # the input's (``limits.same_settings``), not read again from its text -- and read again,
+    # they decide the same firmware by the same kind of evidence (or none), the same limits
     from conftest import SHARED_INSTANCES
     from gatesopt import slicers
     path = SHARED_INSTANCES / name
@@ -460,15 +460,25 @@ def test_the_guards_files_are_for_the_inputs_printer_read_once(monkeypatch, name
     prog = gatesopt.parse(str(path))
     prob = build(prog, OrderingOptions(mode="free"))
     sol = solve(prob, "greedy")
+    from gatesopt import limits
     facts = slicers.program_printer(prog)
-    reads = []
-    read = slicers.read_printer
+    reads, settings = [], []
+    read, read_settings = slicers.read_printer, limits._read_settings
     monkeypatch.setattr(slicers, "read_printer", lambda data: reads.append(1) or read(data))
+    monkeypatch.setattr(limits, "_read_settings",
+                        lambda *a: settings.append(1) or read_settings(*a))
     got = guard.emit_guarded(prog, prob, sol)
-    assert not reads                                    # no file the guard measured was read
+    assert not reads and not settings                   # no file the guard measured was read
     assert slicers.program_printer(got.output) is facts
     again, was = read(bytes(got.output.data)).firmware, facts.firmware
     assert (again and (again.family, again.kind)) == (was and (was.family, was.kind))
+    shared = prob.options.limits_of(got.output)
+    del limits._SETTINGS[got.output]                    # its own text read
+    own = prob.options.limits_of(got.output)
+    assert settings                                     # (it was read this time)
+    assert np.array_equal(shared.vector(), own.vector(), equal_nan=True)
+    assert (shared.firmware, shared.junction, shared.changes) == (own.firmware, own.junction,
+                                                                  own.changes)
 
 
 def test_only_the_layers_around_a_slower_one_are_weighed_again(monkeypatch, star):

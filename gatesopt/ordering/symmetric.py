@@ -686,11 +686,12 @@ def _subtract_cut_duals(rc, inside, w):
 
 def load_kernels() -> None:
     """Compile (or load from numba's cache) the kernels of the exact blossom separation, of
-    the reduced costs and of the matching on made-up graphs, so that the first group that needs
-    them does not pay for it."""
+    the reduced costs, of the matching and of the reduced-cost search on made-up graphs, so that
+    the first group that needs them does not pay for it."""
     pts = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [5.0, 0.0]])
     odd_sets(np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1)) + np.diag(np.full(4, np.inf)),
              np.ones(4), True)
     arcs = residual_arcs(3, np.array([0, 1, 2]), np.array([1, 2, 0]), np.full(3, 0.5))
     gomory_hu_sides(3, *arcs, 1.0)
     _subtract_cut_duals(np.zeros((3, 3)), np.array([[True, False, False]]), np.ones(1))
+    rc_search.load_kernel()

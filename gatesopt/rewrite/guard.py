@@ -47,10 +47,10 @@ from ..ordering.emitter import emit
 from ..ordering.layers import model_travel_mm
 from ..ordering.problem import OPTIMAL_ABS_TOL, GroupSolution, OrderingProblem, OrderingSolution
 from ..ordering.repair import REPAIRED
+from ..limits import same_settings
 from ..parse import parse
 from ..planner import planned_durations_s
 from ..program import Program
-from ..slicers import same_printer
 from ..solvers import Status
 
 #: a layer counts as slower re-ordered only by more than this (s): the planner's look-ahead runs
@@ -544,7 +544,7 @@ def emit_guarded(program: Program, problem: OrderingProblem, solution: OrderingS
     def emitted(sol):
         text = emit(program, problem, sol, memo)
         out = parse(text, source=f"{program.source} (re-ordered)")
-        same_printer(out, program)          # its printer's facts: the input's, not read again
+        same_settings(out, program)         # its printer's facts and settings: the input's
         return text, out
     if not time_guard:
         text, out = emitted(solution)
