@@ -47,7 +47,7 @@ from .problem import OPTIMAL_ABS_TOL
 MAX_NODES = 20_000
 #: the search runs on groups of at most this many curves: on 5 corpus files (80 groups of 13-79
 #: curves each, 1 s per group) it proved 117 of 125 calls on groups of 10-19 curves, 26 of 109
-#: on 20-29, 3 of 73 on 30-39 and none of 93 above, those at ~12 ms a call
+#: on 20-29, 3 of 73 on 30-39 and 1 of 162 above, those at ~8-12 ms a call
 MAX_CURVES = 29
 #: whether ``symmetric.solve`` runs the search after its complete roots
 ENABLED = True
