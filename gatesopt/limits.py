@@ -137,10 +137,16 @@ class MachineLimits:
                 lines.append(line)
         return np.asarray(lines, dtype=np.int64), np.vstack(rows)
 
+    def regimes_at(self, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(table, regime)``: the table of ``regimes`` and, per file line of ``line`` (steps'
+        ``Program.line``), the row of it in force there (int64)."""
+        change_line, table = self.regimes()
+        return table, np.searchsorted(change_line, line, side="right").astype(np.int64)
+
     def per_step(self, program: Program) -> np.ndarray:
         """(n_steps, len(KEYS)): the limits in force at each step."""
-        lines, table = self.regimes()
-        return table[np.searchsorted(lines, program.line, side="right")]
+        table, regime = self.regimes_at(program.line)
+        return table[regime]
 
     def with_values(self, **values) -> "MachineLimits":
         """A copy with some scalar limits replaced everywhere (keys as in ``KEYS``)."""

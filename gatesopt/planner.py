@@ -371,8 +371,7 @@ def _profile(program: Program, limits: MachineLimits | None):
     L = length[idx]
 
     # limits in force at each move: one table row per limit-changing line
-    change_line, table = limits.regimes()
-    regime = np.searchsorted(change_line, program.line[idx], side="right").astype(np.int64)
+    table, regime = limits.regimes_at(program.line[idx])
 
     d = program.end_mm[idx] - program.start_mm[idx]
     arc = is_arc[idx]

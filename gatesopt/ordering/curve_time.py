@@ -86,8 +86,7 @@ def _alone(program: Program, lim: MachineLimits, s0: np.ndarray, s1: np.ndarray,
         L[ai] = arc_path
     stop_before = np.ones(m, np.bool_)
     stop_before[1:] = owner[1:] != owner[:-1]
-    change_line, table = lim.regimes()
-    regime = np.searchsorted(change_line, program.line[steps], side="right").astype(np.int64)
+    table, regime = lim.regimes_at(program.line[steps])
     code = pk.JUNCTION_CODE[lim.junction]
     vnom, acc, safe, vj, _ = pk.prepare_moves(
         code, d, L, program.feed_mm_s[steps].astype(float), arc_row, arc_us, arc_ue, arc_phi,
@@ -237,9 +236,7 @@ def gap_rows(program: Program, lay, lim: MachineLimits) -> tuple[np.ndarray, np.
     of ``lay`` the regime in force at the slicer's last travel in the gap before c (its last
     motion step without one, c's first step in a gap without motion): what a link into c runs
     under (``layout.link_travel_steps``: the emitter re-issues those limits before its travel)."""
-    change_line, table = lim.regimes()
-    step = link_travel_steps(program, lay)
-    regime = np.searchsorted(change_line, program.line[step], side="right").astype(np.int64)
+    table, regime = lim.regimes_at(program.line[link_travel_steps(program, lay)])
     return np.ascontiguousarray(table, float), regime
 
 

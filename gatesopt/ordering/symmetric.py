@@ -632,7 +632,6 @@ def solve(group: Group, incumbent: np.ndarray, deadline: float):
     return model.branch(best, best_obj, bound, deadline)
 
 
-
 def _directed(sym: SymmetricModel, best, best_obj: float, bound: float, deadline: float):
     """The symmetric root left a gap on a group whose links cost otherwise one way than the
     other: the same root again in ``DirectedModel`` (the symmetric model's edges and cuts to

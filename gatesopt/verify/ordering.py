@@ -374,8 +374,8 @@ def limits_at(program: Program, rows: np.ndarray,
     at ``rows[i]``, in thousandths (inf as -1), as compared; one row of ``table`` per regime of
     the file (``MachineLimits.regimes``: a few thousand rows where a slicer writes an M204 per
     feature, against hundreds of thousands of moves)."""
-    lines, table = machine_limits(program, family=family).regimes()
-    at = np.searchsorted(lines, program.line[np.asarray(rows, np.int64)], side="right")
+    table, at = machine_limits(program, family=family).regimes_at(
+        program.line[np.asarray(rows, np.int64)])
     table = table[:, _EXTRUDING_LIMITS]
     finite = np.isfinite(table)
     table = np.where(finite, np.round(np.where(finite, table, 0.0) * 1000.0), -1.0).astype(np.int64)
