@@ -136,3 +136,27 @@ def run_highs(h, deadline: float | None = None, start=None, stop_when=None) -> H
     if raise_after and run.stopped == Stopped.INTERRUPTED:
         raise KeyboardInterrupt
     return run
+
+
+def run_lp(h, deadline: float | None = None) -> HighsRun:
+    """``run_highs`` for the small LPs solved one after another (the curve ordering's cutting-plane
+    rounds and branch-and-cut nodes: ~0.2-1 ms each): a stop request (Ctrl-C) is looked at
+    before each run, not from HiGHS's interrupt callbacks, whose Python calls (~28 a run) and
+    subscriptions took ~10 % of the ordering's exact step (docs/BENCHMARKS.md, "LP runs without
+    callbacks"); a run this short ends a millisecond or two after the request. Native stdout
+    still goes to stderr; a second Ctrl-C waits for HiGHS to return (``native_call``). Falsy,
+    without running, where the deadline has passed or a stop was requested (``stopped`` set)."""
+    import time
+    run = HighsRun(False)
+    if stop_requested():
+        run.stopped = Stopped.INTERRUPTED
+        return run
+    if deadline is not None:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            return run
+        h.setOptionValue("time_limit", float(h.getRunTime() + left))   # (as ``run_highs``)
+    run.ran = True
+    with native_call(), native_stdout_to_stderr():
+        h.run()
+    return run

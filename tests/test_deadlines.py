@@ -10,7 +10,7 @@ import highspy
 import numpy as np
 import pytest
 
-from gatesopt._native import run_highs
+from gatesopt._native import run_highs, run_lp
 from gatesopt.ordering import auto, budget, formulations, layers, milp, runner, symmetric, symmetric_graph
 from gatesopt.ordering.polylines import from_polylines
 from gatesopt.ordering.problem import GroupSolution, OrderingOptions
@@ -151,15 +151,15 @@ def _symmetric_group():
 
 def test_symmetric_model_gives_every_highs_run_the_same_deadline(monkeypatch):
     """The root's and the branch-and-cut's LPs all run to the one deadline of the group (each run
-    gets the time left to it, ``run_highs``), never a fresh time limit per round."""
+    gets the time left to it, ``run_lp``), never a fresh time limit per round."""
     symmetric.load_kernels()
     seen = []
 
-    def recording(h, deadline=None, start=None, **kw):
+    def recording(h, deadline=None):
         seen.append(deadline)
-        return run_highs(h, deadline, start=start, **kw)
+        return run_lp(h, deadline)
 
-    monkeypatch.setattr(symmetric, "run_highs", recording)
+    monkeypatch.setattr(symmetric, "run_lp", recording)
     grp = _symmetric_group()
     deadline = time.perf_counter() + 30.0
     start = np.asarray(auto.greedy.solve(grp).order)
@@ -173,12 +173,12 @@ def test_symmetric_model_with_its_deadline_passed_runs_no_lp(monkeypatch):
     symmetric.load_kernels()
     ran = []
 
-    def recording(h, deadline=None, start=None, **kw):
-        r = run_highs(h, deadline, start=start, **kw)
+    def recording(h, deadline=None):
+        r = run_lp(h, deadline)
         ran.append(bool(r))
         return r
 
-    monkeypatch.setattr(symmetric, "run_highs", recording)
+    monkeypatch.setattr(symmetric, "run_lp", recording)
     grp = _symmetric_group()
     start = np.asarray(auto.greedy.solve(grp).order)
     order, obj, bound, proven = symmetric.solve(grp, start, time.perf_counter() - 1.0)
@@ -217,6 +217,23 @@ def test_run_highs_gives_highs_the_time_left_to_the_deadline():
     h2 = _FakeHighs(run_time_s=5.0)
     assert not run_highs(h2, time.perf_counter() - 0.1)
     assert h2.runs == 0 and "time_limit" not in h2.options
+
+
+def test_run_lp_gives_highs_the_time_left_and_runs_nothing_after_a_stop_request():
+    """``run_lp`` (the ordering's small LPs, no interrupt callbacks) sets the time limit as
+    ``run_highs`` does, runs nothing past the deadline, and, a stop requested (Ctrl-C inside a
+    ``stop_scope``), runs nothing and says it was stopped: the cutting-plane loop then ends with
+    what it has."""
+    from gatesopt.solvers import Stopped, request_stop, stop_scope
+    h = _FakeHighs(run_time_s=100.0)
+    assert run_lp(h, time.perf_counter() + 2.0)
+    assert h.runs == 1 and 100.0 < h.options["time_limit"] <= 102.0
+    assert not run_lp(h, time.perf_counter() - 0.1) and h.runs == 1
+    with stop_scope():
+        request_stop()
+        r = run_lp(h, time.perf_counter() + 2.0)
+    assert not r and r.stopped == Stopped.INTERRUPTED and h.runs == 1
+    assert run_lp(h, None) and h.runs == 2      # (the scope's end clears the request)
 
 
 def test_a_budget_below_the_ordering_floor_skips_the_ordering(monkeypatch):

@@ -257,13 +257,13 @@ def test_a_node_lp_stopped_by_highs_is_never_taken_for_pruned(monkeypatch):
             def getModelStatus(self):
                 return highspy.HighsModelStatus.kTimeLimit
 
-        def run(h, deadline=None, start=None):
+        def run(h, deadline=None):
             with native_stdout_to_stderr():
                 h._h.run()
             return True
 
         model.h = Stopped(model.h)
-        monkeypatch.setattr(symmetric, "run_highs", run)
+        monkeypatch.setattr(symmetric, "run_lp", run)
         order, obj, b, proven = model.branch(start, start_obj, bound, time.perf_counter() + 30)
         monkeypatch.undo()
         assert not proven and b <= obj - OPTIMAL_ABS_TOL

@@ -35,7 +35,7 @@ import highspy
 import numba
 import numpy as np
 
-from .._native import run_highs
+from .._native import run_lp
 from . import rc_search, separation
 from . import ils
 from .problem import OPTIMAL_ABS_TOL, Group
@@ -380,7 +380,7 @@ class SymmetricModel:
         t_round = 0.0                           # the longest round so far
         for _ in range(max_rounds):
             t = time.perf_counter()
-            if not run_highs(self.h, deadline) or self.h.getModelStatus() != _OPT:
+            if not run_lp(self.h, deadline) or self.h.getModelStatus() != _OPT:
                 break
             x = np.asarray(self.h.getSolution().col_value)
             obj = float(self.h.getInfo().objective_function_value)
@@ -466,7 +466,7 @@ class SymmetricModel:
             applied.update(want)
             lp_obj, x, outcome = None, None, "branch"
             for _ in range(MAX_NODE_CUT_ROUNDS):
-                if not run_highs(h, deadline):
+                if not run_lp(h, deadline):
                     outcome = "stopped"
                     break
                 ms = h.getModelStatus()
