@@ -1065,6 +1065,10 @@ SCHEDULED = ("klipper-gating",)
 def solve(path: Path, firmware: str, extra: list[str], out_dir: Path, tag_extra: str = "") -> tuple[Path, dict]:
     """``gatesopt solve`` from this worktree (its installed package, the same Python): the
     output file and its JSON report."""
+    if firmware == "klipper" and not any(w in extra for w in ("--printer-config", "--motors")):
+        # the replay's printer is cartesian: said, as a user without the printer.cfg says it
+        # (of unknown kinematics stock Klipper gates no X/Y by default: ``rewrite.printer``)
+        extra = [*extra, "--motors", "X,Y"]
     words = [w for w in extra if not w.endswith(".cfg")] + ([tag_extra] if tag_extra else [])
     tag = re.sub(r"[^A-Za-z0-9]+", "_", " ".join(words)).strip("_") or "default"
     stem = path.name.removesuffix(".gz").removesuffix(".gcode")

@@ -6,7 +6,9 @@ X or Y move, so a motor switched off while "its" axis rests is stepped by the ot
 move; such motors are not gated (``rewrite.printer.choose``) and the verifier reports a line that
 gates one (``verify.firmware``). The kinematics is read from the printer.cfg where given (Klipper's
 ``[printer] kinematics``), else from the printer model the slicer names (``PRINTER_KINEMATICS``);
-unknown is taken as cartesian, and said where it decides.
+unknown is taken as cartesian where the firmware enables a motor before a move steps it, and
+said where it decides; stock Klipper gates no X/Y motor of an unknown kinematics
+(``UNKNOWN_KINEMATICS_UNSAFE``).
 """
 from __future__ import annotations
 
@@ -23,6 +25,10 @@ from .slicers import printer_models
 #: decides (Voron's Switchwire is corexz, every other Voron corexy).
 PRINTER_KINEMATICS = (
     (r"switchwire", "corexz"),
+    # common bed-slingers, one motor per axis (the Ender-3 V3 without SE/KE is corexz: not here;
+    # a model not listed is unknown, which stock Klipper does not gate X/Y on)
+    (r"ender[- ]?3(?![- ]?v3(?![- ]?(se|ke)))|\bcr-?10\b|prusa i3|^(original prusa )?mk(2|3|4)"
+     r"|^(original prusa )?mini\b|sovol sv0[67]\b", "cartesian"),
     (r"voron", "corexy"),
     (r"\bk1\b|k1 ?max|\bk1c\b|cr-k1|\bk2 ?(plus|pro)\b", "corexy"),    # Creality K1 / K2
     (r"v-core", "corexy"),                                            # RatRig V-Core
@@ -42,6 +48,13 @@ class Kinematics:
 
     name: str
     source: str         # e.g. "printer model '; printer_model = Voron_v2_250' (line 12)"
+
+
+#: dialects that must know the kinematics before X or Y is gated by default (``rewrite.printer.
+#: choose``): stock Klipper enables a disabled stepper when a move has begun stepping it, so on a
+#: corexy printer gating X or Y shifts the layer; Marlin and RepRapFirmware enable the motors a
+#: move needs before it steps (there gating a coupled motor only counts a saving not made)
+UNKNOWN_KINEMATICS_UNSAFE = frozenset({"klipper"})
 
 
 def model_kinematics(data: bytes) -> Kinematics | None:

@@ -185,7 +185,7 @@ def test_the_reports_print_time_prices_the_printers_restart_and_limits(tmp_path)
 
 
 def test_the_choice_says_what_klipper_cannot_honour():
-    choice = printer.choose(gatesopt.parse(RETRACT), "klipper")
+    choice = printer.choose(gatesopt.parse(RETRACT), "klipper", motors=("X", "Y"))
     assert "SET_STEPPER_ENABLE lines" in choice.line and "0.1 s" in choice.line
     assert "60 ms" in choice.line
 

@@ -230,14 +230,16 @@ def test_klipper_without_a_budget_gets_one(tmp_path, capsys):
     src = tmp_path / "part.gcode"
     src.write_text(square(";FLAVOR:Marlin", layers=6))
     out = tmp_path / "out.gcode"
+    # (--motors X,Y: a cartesian printer; of unknown kinematics stock Klipper gates no X/Y)
     assert main(["solve", str(src), "-o", str(out), "--no-order", "--firmware", "klipper",
-                 "--json", str(tmp_path / "r.json")]) == 0
+                 "--motors", "X,Y", "--json", str(tmp_path / "r.json")]) == 0
     d = json.loads((tmp_path / "r.json").read_text())
     assert d["added_time_pct"] <= 1.0 + 1e-6 and d["firmware_choice"]["budget_is_default"]
     assert "the file says marlin" in capsys.readouterr().out
     # lifted by name: more stalls, more saving
     assert main(["solve", str(src), "-o", str(out), "--no-order", "--firmware", "klipper", "--force",
-                 "--max-added-time-pct", "none", "--json", str(tmp_path / "r2.json"), "--force"]) == 0
+                 "--motors", "X,Y", "--max-added-time-pct", "none", "--json", str(tmp_path / "r2.json"),
+                 "--force"]) == 0
     d2 = json.loads((tmp_path / "r2.json").read_text())
     assert d2["added_time_pct"] > 1.0 and d2["saving_pct"] >= d["saving_pct"]
 
@@ -252,14 +254,16 @@ def test_solve_refuses_marlin_lines_for_a_klipper_file_in_one_line(tmp_path, cap
     assert not out.exists()
     assert main(["solve", str(src), "-o", str(out), "--no-order", "--force-firmware", "marlin"]) == 0
     assert "M18 " in out.read_text()
-    assert main(["solve", str(src), "-o", str(out), "--no-order", "--force"]) == 0
+    # (auto: Klipper's own lines; --motors X,Y: a cartesian printer, as no model is named)
+    assert main(["solve", str(src), "-o", str(out), "--no-order", "--force", "--motors", "X,Y"]) == 0
     assert "SET_STEPPER_ENABLE" in out.read_text() and "M18 X" not in out.read_text()
 
 
 def test_batch_and_compare_read_each_file_s_firmware(tmp_path, capsys):
     a, b = tmp_path / "a.gcode", tmp_path / "b.gcode"
     a.write_text(square(";FLAVOR:Marlin"))
-    b.write_text(square("; gcode_flavor = klipper"))
+    # (a cartesian model named: of unknown kinematics stock Klipper gates no X/Y)
+    b.write_text(square("; gcode_flavor = klipper\n; printer_model = ENDER3V2"))
     assert main(["batch", str(a), str(b), "--out", str(tmp_path / "r.json"), "--no-order", "--quiet"]) == 0
     rows = json.loads((tmp_path / "r.json").read_text())
     rows = rows["rows"] if isinstance(rows, dict) else rows
@@ -295,7 +299,9 @@ def _cfg(tmp_path, kinematics="cartesian", gating=False):
 
 @pytest.mark.parametrize("model, expected", [("Voron_v2_250", "corexy"), ("CR-K1 Max", "corexy"),
                                                ("Voron Switchwire", "corexz"), ("COREONE", "corexy"),
-                                               ("MK3S", None), ("ENDER3V2", None), ("Bambu Lab A1", None)])
+                                               ("MK3S", "cartesian"), ("ENDER3V2", "cartesian"),
+                                               ("Ender-3 V3", None), ("Ender-3 V3 SE", "cartesian"),
+                                               ("Bambu Lab A1", None), ("Anycubic Kobra S1", None)])
 def test_printer_models_name_their_kinematics(model, expected):
     k = kinematics.model_kinematics(f"; printer_model = {model}\n".encode())
     assert (k.name if k else None) == expected
@@ -313,6 +319,27 @@ def test_a_corexy_printer_gets_no_x_y_gating_and_says_why():
     # corexz (Voron Switchwire): X and Z are coupled, Y is one motor: Y is gated
     sw = printer.choose(gatesopt.parse(square("; printer_model = Voron Switchwire", start="PRINT_START")))
     assert sw.motors == ("Y",) and "X are not gated" in sw.line
+
+
+def test_stock_klipper_of_unknown_kinematics_gets_no_x_y_gating_and_says_how_to_get_it(tmp_path):
+    # a Klipper file (PRINT_START) naming no printer: on a corexy machine, gated X/Y would be
+    # stepped by the other axis's moves before Klipper re-enables them (a layer shift, measured
+    # in Klipper's host on Cura's own Voron 2 profile), so nothing is gated by default; the line
+    # says what gates them (the printer.cfg's kinematics, or --motors X,Y on a cartesian printer)
+    prog = gatesopt.parse(square(";FLAVOR:RepRap", start="PRINT_START"))
+    c = printer.choose(prog)
+    assert c.firmware == "klipper" and c.options is None and c.motors == ()
+    assert "kinematics unknown" in c.line and "--motors X,Y" in c.line and "--printer-config" in c.line
+    asked = printer.choose(prog, motors=("X", "Y"))
+    assert asked.motors == ("X", "Y") and asked.options is not None
+    assert printer.choose(prog, motors=("E",)).motors == ("E",)
+    assert printer.choose(prog, printer=_cfg(tmp_path)).motors == ("X", "Y")
+    assert printer.choose(prog, "klipper").motors == ()
+    # a cartesian model the slicer names: gated, and said
+    ender = printer.choose(gatesopt.parse(square("; printer_model = ENDER3V2", start="PRINT_START")))
+    assert ender.motors == ("X", "Y") and "cartesian kinematics (printer model" in ender.line
+    # Marlin enables the motors a move needs before it steps: unknown kinematics stays gated
+    assert printer.choose(gatesopt.parse(square(";FLAVOR:Marlin"))).motors == ("X", "Y")
 
 
 def test_solve_on_a_corexy_file_writes_no_motor_line(tmp_path, capsys):

@@ -267,7 +267,7 @@ def test_verify_cli_detects_the_output_dialect(tmp_path, capsys):
     for fw in ("klipper", "marlin", "3dgates"):
         out = tmp_path / f"{fw}.gcode"
         assert main(["solve", str(src), "-o", str(out), "--firmware", fw, "--max-added-time-pct", "1",
-                     "--rotate", "none", "--no-order"]) == 0
+                     "--rotate", "none", "--no-order", "--motors", "X,Y"]) == 0
         capsys.readouterr()
         assert main(["verify", str(src), str(out)]) == 0
         assert f"(firmware: {fw})" in capsys.readouterr().out

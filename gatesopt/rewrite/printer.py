@@ -190,6 +190,23 @@ def choose(program, requested: str = "auto", *, force: bool = False, max_added_t
     if motors is None:
         motors = tuple(m for m in ("X", "Y") if m in fw.allowed_motors) or tuple(
             m for m in ("X", "Y", "Z", "E") if m in fw.allowed_motors)
+        if kin is None and name in kinematics.UNKNOWN_KINEMATICS_UNSAFE:
+            # stock Klipper re-enables a motor only after a move has begun stepping it: on a
+            # corexy printer (most Klipper machines: Voron, RatRig, K1) a gated X or Y motor would
+            # be stepped by the other axis's move (a layer shift; measured in Klipper's own host,
+            # docs/RESULTS.md "Klipper replay: X/Y gating on a corexy printer"), so X/Y are gated
+            # only where the kinematics is known
+            kept = tuple(m for m in motors if m not in "XY")
+            said += ("; kinematics unknown (no --printer-config, no printer model gatesopt knows): "
+                     f"{','.join(m for m in motors if m in 'XY')} not gated (on a corexy printer "
+                     "Klipper re-enables a motor after the other axis's move has begun stepping "
+                     "it: a layer shift); --printer-config printer.cfg reads its [printer] "
+                     "kinematics, --motors X,Y gates them on a cartesian printer")
+            motors = kept
+            if not motors:
+                return FirmwareChoice(name, requested, None, False, (), facts, said)
+        elif kin is not None and name in kinematics.UNKNOWN_KINEMATICS_UNSAFE and not coupled:
+            said += f"; {kin.name} kinematics ({kin.source})"
         if any(m in coupled for m in motors):
             # gating models one motor per axis; on these printers it would switch off a motor the
             # other axis's next move steps (with an input shaper Klipper's automatic re-enable
