@@ -229,6 +229,20 @@ def _sort_lines(w: Writer, p: Program, line_sets) -> _GapLines:
                      early_push, fw_lines, fw_net, fw_boundary, fw_retracted)
 
 
+#: a slicer's travel that climbs more than this above both its ends and the file's hop is a
+#: clearance lift, which a rebuilt travel keeps (``rebuilt_gap``)
+CLEARANCE_EPS_MM = 1e-3
+
+
+def gap_top_z(p: Program, lay: Layout, lines) -> float:
+    """The highest Z (machine mm) the slicer's moves among ``lines`` reach (-inf: no move)."""
+    if not len(lines):
+        return -math.inf
+    steps = lay.step_of_line[np.asarray(lines, np.int64)]
+    steps = steps[steps >= 0]
+    return float(p.end_mm[steps, 2].max()) if len(steps) else -math.inf
+
+
 def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets, c: int,
                 target, layer: int = -1, limits=None, wipe=None) -> None:
     """One rebuilt travel into curve c, with the non-motion lines of the given original gaps.
@@ -293,6 +307,7 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
     (tx, ty, tz), (x0, y0, z0) = target.tolist(), (float(v) for v in w.xyz)
     dist = math.hypot(tx - x0, ty - y0)
     moving = dist > 1e-9 or abs(tz - z0) > 1e-9
+    top_z = gap_top_z(p, lay, gap)
     # the boundary gap's own retraction length where it retracted (a layer change may retract
     # more), else the file's median: a link inside a group costs the same whichever curve it
     # enters, which keeps the time objective's costs symmetric there (cost.py)
@@ -331,6 +346,11 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
             z_up = max(z_now, z_to) + style.hop_mm
         else:
             z_up = max(z_now, z_to)
+        if top_z > max(z_now, z_to) + style.hop_mm + CLEARANCE_EPS_MM:
+            # the slicer's travel climbed higher than a hop: a lift over what is printed (a
+            # one-at-a-time print leaving an object, Cura's "G0 X.. Y.. Z10"): ours flies no
+            # lower (dropped, the head crossed the object's top at its own height)
+            z_up = max(z_up, top_z)
         if z_up > z_now + 1e-9:
             w.move_xyz([x_now, y_now, z_up], style.z_feed_mm_s, "G1", off)
         z_now = float(w.xyz[2])

@@ -419,6 +419,49 @@ def check_limits(original: Program, output: Program, *, max_findings: int = 3,
 SHARED_CHECKS = ("extrusion", "commands")
 
 
+#: a layer change that climbs more than this (mm) above both layers is a clearance lift (a
+#: one-at-a-time print leaving an object, Cura's ``G0 X.. Y.. Z10``): the output's must climb as
+#: high (``check_clearance``; z-hops are a few tenths of a millimetre)
+CLEARANCE_LIFT_MM = 1.0
+
+
+def _layer_change_tops(program: Program) -> dict:
+    """Per change between extruding layers (a, b): (the highest Z of the steps after a's last
+    extruding step up to b's first, the higher of the two layers' Z, b's first step)."""
+    ext = np.flatnonzero(program.extruding & (program.layer >= 0))
+    if len(ext) < 2:
+        return {}
+    lay = program.layer[ext]
+    at = np.flatnonzero(np.diff(lay) != 0)
+    last, first = ext[at], ext[at + 1]
+    z = program.end_mm[:, 2]
+    # max over z[last:first + 1] per change (a sentinel after the last step keeps first + 1 a
+    # valid index; the spans between changes are reduced too, and dropped)
+    top = (np.maximum.reduceat(np.append(z, -np.inf), np.stack([last, first + 1], 1).ravel())[::2]
+           if len(at) else np.zeros(0))
+    return {(int(lay[i]), int(lay[i + 1])): (float(t), max(float(z[a]), float(z[b])), int(b))
+            for i, t, a, b in zip(at.tolist(), top.tolist(), last.tolist(), first.tolist())}
+
+
+def check_clearance(original: Program, output: Program, *, tol_mm: float = 1e-3) -> list[Finding]:
+    """Each layer change where the original lifts over what is printed (more than
+    ``CLEARANCE_LIFT_MM`` above both layers) climbs as high in the output: a travel re-built
+    lower would cross the object just printed at its top's height."""
+    want, got = _layer_change_tops(original), _layer_change_tops(output)
+    out = []
+    for key, (top, z, _) in want.items():
+        if top - z <= CLEARANCE_LIFT_MM:
+            continue
+        have = got.get(key)
+        if have is None or have[0] < top - tol_mm:
+            line = int(output.line[have[2]]) + 1 if have is not None else None
+            out.append(Finding("clearance", line,
+                               f"layer {key[0]} -> {key[1]}: the original lifts to Z{top:g} over "
+                               f"what is printed, the output only to "
+                               f"Z{have[0] if have else float('nan'):g}"))
+    return out
+
+
 def check_moves(original: Program, output: Program) -> list[Finding]:
     """The re-ordering's own checks, move by move: ``check`` without ``SHARED_CHECKS`` (for
     ``verify``, which has run those: one finding per fault)."""
@@ -426,7 +469,8 @@ def check_moves(original: Program, output: Program) -> list[Finding]:
     lays = (layout(original), layout(output))
     return (check_geometry(original, output, keys=keys) + check_fan(original, output, keys=keys)
             + check_limits(original, output, keys=keys)
-            + check_barriers(original, output, lays=lays) + check_objects(original, output, lays=lays))
+            + check_barriers(original, output, lays=lays) + check_objects(original, output, lays=lays)
+            + check_clearance(original, output))
 
 
 def check(original: Program, output: Program, original_layout: Layout | None = None) -> list[Finding]:
@@ -439,4 +483,5 @@ def check(original: Program, output: Program, original_layout: Layout | None = N
             # check_commands would check too: one finding per fault, the stricter one
             + check_commands(original, output, reordered=True, fan_duty=False)
             + check_fan(original, output, keys=keys) + check_limits(original, output, keys=keys)
-            + check_barriers(original, output, lays=lays) + check_objects(original, output, lays=lays))
+            + check_barriers(original, output, lays=lays) + check_objects(original, output, lays=lays)
+            + check_clearance(original, output))
