@@ -167,3 +167,21 @@ def test_auto_is_never_slower_than_greedy_under_a_budget_that_leaves_groups_out(
     assert greedy.text == again.text
     assert (auto.summary["print_time_after_s"]
             <= greedy.summary["print_time_after_s"] + 1e-6)
+
+
+def test_passing_many_small_groups_is_charged_per_group():
+    # a plate of many one-island groups (safe mode's pin plates: ~0.35 ms a group to pass
+    # whatever its size): a budget that pays the per-curve rates but not the per-group one funds
+    # no group, one that pays both funds every group. Before, a Cura pin plate of 4,966 groups
+    # was charged 0.1 s for passing them and its greedy pass ran 6 s on a 4.6 s budget
+    from conftest import random_line_layers
+    from gatesopt.ordering.polylines import from_polylines
+    prob = from_polylines(random_line_layers([14] * 300, seed=9), options=OrderingOptions(mode="free"))
+    per_curve = (budget.WORK_PASS_S_PER_CURVE + budget.WORK_TAIL_S_PER_CURVE) * prob.n_curves
+    per_group = budget.WORK_PASS_S_PER_GROUP * prob.n_groups
+    est = budget.WorkPlan(prob, 1e9).est_s
+    assert per_group > 0.05
+    short = budget.WorkPlan(prob, per_curve + 0.9 * per_group)
+    assert not any(short.funds(g) for g in range(prob.n_groups) if prob.group_reorderable[g])
+    enough = budget.WorkPlan(prob, per_curve + per_group + est.sum() + 1e-9)
+    assert all(enough.funds(g) for g in range(prob.n_groups))

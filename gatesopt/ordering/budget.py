@@ -47,6 +47,9 @@ MATRIX_S_PER_LINK = 3.3e-7
 #: took 0.38 s CPU (load 8; docs/BENCHMARKS.md, "Link-cost build")
 OVERHEAD_S_PER_CURVE = 8e-6
 TAIL_S_PER_CURVE = 6e-6
+#: and per group, whatever its size (``WORK_PASS_S_PER_GROUP``, measured on the greedy pass): what
+#: a file of thousands of one-island groups (safe mode's pin plates) takes to pass its groups
+OVERHEAD_S_PER_GROUP = 3.5e-4
 STOP_HELPER_S = 0.05
 #: what a group takes beyond its limit (the greedy path and the cheap bound run whatever the
 #: limit; model building; a last ILS kick), per curve. The reserve for the groups to come is the
@@ -208,9 +211,18 @@ class BudgetPlan:
 #: safe and free; docs/BENCHMARKS.md, "Greedy pass work units"), each scaled so that the modelled
 #: total is the measured one.
 #: per curve of the file, building its group and passing it (every group, fixed too: measured
-#: 5.8e-6), and the chain's end (``chain.pick_paths``, travel totals)
-WORK_PASS_S_PER_CURVE = 6e-6
+#: 5.8e-6), and the chain's end (``chain.pick_paths``, travel totals); and per group, what
+#: passing a group costs whatever its size (building it, its start and end links, settling it
+#: in the chain). Measured again (the greedy pass without a budget, one worker, wall seconds
+#: outside the groups' solves, thirteenth session): 2.0 s on a Cura pin plate of 4,966 groups
+#: and 10,057 curves (safe mode: one group per island), 2.1 s on prusa25_bunny_triangles15_lh01
+#: safe (5,583 / 9,201), 2.3 s on pins__prusa_mk3s safe (4,939 / 4,939), 3.2 s on
+#: pins__cura_mk3 safe (7,271 / 12,922), 2.0 s on the Cura bunny safe (2,446 / 67,356): ~0.35 ms
+#: a group and ~1.5e-5 s a curve with the tail; the per-curve rates alone had charged the pin
+#: plate 0.1 s, and its greedy pass ran 6 s on a 4.6 s budget (the whole run 16 s)
+WORK_PASS_S_PER_CURVE = 1.1e-5
 WORK_TAIL_S_PER_CURVE = 4e-6
+WORK_PASS_S_PER_GROUP = 3.5e-4
 #: making a group's time-objective link matrix, per link (m^2 for m candidates): measured 3.33e-7
 #: (measured / modelled over the groups above 1 ms: p10 0.90, p50 0.96, p90 1.24)
 WORK_MATRIX_S_PER_LINK = 3.3e-7
@@ -291,7 +303,8 @@ class WorkPlan:
                               0.0)
         self.time_objective = problem.pricer is not None
         self.budget_s = float(budget_s)
-        self.left_s = (self.budget_s - (WORK_PASS_S_PER_CURVE + WORK_TAIL_S_PER_CURVE)
+        self.left_s = (self.budget_s - WORK_PASS_S_PER_GROUP * problem.n_groups
+                       - (WORK_PASS_S_PER_CURVE + WORK_TAIL_S_PER_CURVE)
                        * float(problem.n_curves))
         self.order = np.flatnonzero(decided)[np.argsort(self.est_s[decided], kind="stable")]
         self.rank = np.full(problem.n_groups, -1, np.int64)

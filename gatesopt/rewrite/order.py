@@ -20,7 +20,7 @@ from ..ordering.groups import build
 from ..ordering.layers import solve, solve_greedy
 from ..ordering.problem import OrderingOptions, OrderingProblem, OrderingSolution
 from ..ordering.repair import can_repair, planner_priced, repaired_status_counts, resolve_layers
-from ..ordering.budget import OVERHEAD_S_PER_CURVE, TAIL_S_PER_CURVE
+from ..ordering.budget import OVERHEAD_S_PER_CURVE, OVERHEAD_S_PER_GROUP, TAIL_S_PER_CURVE
 from ..ordering.runner import OUT_OF_TIME, OUT_OF_TIME_GREEDY
 from ..ordering.travel_stats import runs, travel_mask
 from ..program import Program
@@ -282,7 +282,8 @@ def reorder(program: Program, options: OrderingOptions | None = None, *,
     spent = time.perf_counter() - t0 - _jit.compile_s_since(t0)
     solve_budget = solve_budget_s(budget_s, program.n_lines, spent, finish_slow)
     # what passing every group takes with no time to search them (the runner's priors)
-    pass_s = (slow or 1.0) * (OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
+    pass_s = (slow or 1.0) * ((OVERHEAD_S_PER_CURVE + TAIL_S_PER_CURVE) * problem.n_curves
+                              + OVERHEAD_S_PER_GROUP * problem.n_groups)
     if slow is not None and solve_budget is not None:
         if solve_budget < pass_s:
             raise NoTimeToOrder(solve_budget, pass_s, problem.n_groups)
