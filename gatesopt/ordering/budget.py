@@ -219,7 +219,10 @@ class BudgetPlan:
 #: safe (5,583 / 9,201), 2.3 s on pins__prusa_mk3s safe (4,939 / 4,939), 3.2 s on
 #: pins__cura_mk3 safe (7,271 / 12,922), 2.0 s on the Cura bunny safe (2,446 / 67,356): ~0.35 ms
 #: a group and ~1.5e-5 s a curve with the tail; the per-curve rates alone had charged the pin
-#: plate 0.1 s, and its greedy pass ran 6 s on a 4.6 s budget (the whole run 16 s)
+#: plate 0.1 s, and its greedy pass ran 6 s on a 4.6 s budget (the whole run 16 s). With these,
+#: `gatesopt order` (10 s, two workers, alternating with the code before, two runs each): the
+#: Cura bunny safe 13.3 / 18.7 s -> 12.3 / 12.4 s, 200 -> 259 groups left unsearched, print
+#: time after 44,908 -> 44,990 s (of 45,305); pins__cura_mk3 safe and lh01 free unchanged
 WORK_PASS_S_PER_CURVE = 1.1e-5
 WORK_TAIL_S_PER_CURVE = 4e-6
 WORK_PASS_S_PER_GROUP = 3.5e-4
