@@ -501,6 +501,20 @@ def test_sequential_print_is_not_rotated():
     assert not q.notes and math.isclose(solve(q, "dp").rotation_deg % 90.0, 73.0, abs_tol=0.01)
 
 
+def test_a_whole_run_refuses_the_angle_at_the_inputs_line_before_ordering(monkeypatch):
+    # ``rewrite.pipeline.run`` checks an explicit angle on the file as given: the line named is
+    # the user's (after the ordering it was a line of the re-ordered text, under the input's
+    # name: a CuraEngine one-at-a-time slice said :1826 for its drop at 1883) and no ordering
+    # runs first
+    from gatesopt.parse import parse
+    from gatesopt.rewrite import pipeline
+    prog = parse(sequential_squares_gcode(), source="seq.gcode")
+    line = next(i for i, t in enumerate(prog.lines()) if t.startswith("G1 Z10")) + 1 + 4
+    monkeypatch.setattr(pipeline, "_order_curves", lambda *a, **k: pytest.fail("ordered first"))
+    with pytest.raises(InfeasibleError, match=rf"seq\.gcode:{line}: objects are printed one at a time"):
+        pipeline.run(prog, GatingOptions(rotate=73.0, bed_size_mm=(220, 220)))
+
+
 def test_rotation_sweep_refuses_a_sequential_print(tmp_path):
     """``gatesopt report --sweep`` (the paper's Fig. 14) on a print of objects one at a time: one
     angle is no sweep, and the user is told why instead of getting a figure with a single point."""

@@ -213,6 +213,21 @@ def sequential_drop(program: Program, lo: int, hi: int):
     return int(ext[i]), float(z[i]), float(high[i - 1])
 
 
+def refuse_sequential_angle(program: Program, rotate) -> None:
+    """Raise ``InfeasibleError`` (at the line of ``program`` where the print goes back down) for an
+    explicit angle other than 0 on a print of objects one at a time (``sequential_drop``). Run
+    on the file as given, before it is re-ordered (``rewrite.pipeline.run``): the line is then
+    the user's, and no time goes to an ordering the rotation would refuse."""
+    if rotate in ("auto", "none") or float(rotate) % 360.0 == 0.0:
+        return
+    lo, hi = rotated_rows(program)
+    drop = sequential_drop(program, lo, hi)
+    if drop is not None:
+        raise InfeasibleError(f"{_where(program, drop[0])}: {_sequential_words(drop)}; "
+                              f"rotating it by {float(rotate):g} deg could drive the print head into "
+                              f"an object already printed: use --rotate none")
+
+
 def _sequential_words(drop) -> str:
     return (f"objects are printed one at a time (the print goes back down to Z={drop[1]:g} "
             f"after Z={drop[2]:g})")

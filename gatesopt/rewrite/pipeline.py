@@ -40,7 +40,7 @@ from ..kinematics import check_gateable
 from ..gating.emit import EmitResult, emit_result, render
 from ..gating.options import GatingOptions
 from ..gating.problem import build
-from ..gating.rotation import clearance_mm, print_outline
+from ..gating.rotation import clearance_mm, print_outline, refuse_sequential_angle
 from ..gating.solution import GatingSolution
 from ..gating.solve import solve
 from ..ordering.problem import OrderingOptions
@@ -475,6 +475,7 @@ def run(program: Program, options: GatingOptions | None = None, *, formulation: 
     if gating:
         # corexy: X, Y are not one motor each (``choose`` never picks them; options made by hand may)
         check_gateable(program.data, o.motors, o.printer, program.source)
+        refuse_sequential_angle(program, o.rotate)      # (at the input's line, before ordering)
     notes = []
     times = Stages()
     times.add("read_s", time.perf_counter() - t0)
