@@ -17,6 +17,7 @@ import sys
 import time
 from pathlib import Path
 
+from _interleaved import best_of_two  # bench/_interleaved.py
 from _markdown import publish  # bench/_markdown.py
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,34 +40,23 @@ def main() -> None:
     import ordering_proof_rate as opr
     from gatesopt._native import run_highs, run_lp
     from gatesopt.ordering import auto, symmetric
-    from gatesopt.solvers import Status
 
     def with_callbacks(h, deadline=None):
         return run_highs(h, deadline)
     runners = {"run_lp": run_lp, "run_highs": with_callbacks}
+
+    def runner(name):
+        def put():
+            symmetric.run_lp = runners[name]
+        return put
     auto.warm_up()
     rows, worst_diff = [], 0.0
     for spec in a.specs:
         file, mode = spec.split(":")
         groups = [g for _, g in opr.file_groups(file, mode, 13) if g.n_curves < 80][:a.max_groups]
-        cpu = dict.fromkeys(runners, 0.0)
-        proven = dict.fromkeys(runners, 0)
-        for grp in groups:
-            grp.arc_cost()                      # the matrix is made before either timing
-            got = {}
-            for name in list(runners) * 2:
-                symmetric.run_lp = runners[name]
-                t = time.thread_time()
-                gs = auto.solve(grp, time_limit_s=a.limit)
-                took = time.thread_time() - t
-                prev = got.get(name)
-                got[name] = (min(took, prev[0]) if prev else took, gs)
-            for name in runners:
-                cpu[name] += got[name][0]
-                proven[name] += got[name][1].status == Status.OPTIMAL
-            lean, full = got["run_lp"][1], got["run_highs"][1]
-            if lean.status == full.status == Status.OPTIMAL:
-                worst_diff = max(worst_diff, abs(lean.objective - full.objective))
+        cpu, proven, diff = best_of_two(groups, {name: runner(name) for name in runners},
+                                        lambda grp: auto.solve(grp, time_limit_s=a.limit))
+        worst_diff = max(worst_diff, diff)
         symmetric.run_lp = run_lp
         rows.append((file, mode, len(groups), cpu["run_lp"], cpu["run_highs"], proven["run_lp"],
                      proven["run_highs"]))

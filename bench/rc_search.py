@@ -21,6 +21,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+from _interleaved import best_of_two  # bench/_interleaved.py
 from _markdown import publish  # bench/_markdown.py
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,7 +46,6 @@ def main() -> None:
     import ordering_proof_rate as opr
     from gatesopt.ordering import auto, rc_search
     from gatesopt.ordering.problem import OPTIMAL_ABS_TOL
-    from gatesopt.solvers import Status
     calls = defaultdict(lambda: [0, 0])         # (size band) -> [calls, proven]
     search = rc_search.search
 
@@ -60,26 +60,17 @@ def main() -> None:
     auto.warm_up()
     rows = []
     worst_diff = 0.0
+
+    def enabled(on):
+        def put():
+            rc_search.ENABLED = on
+        return put
     for spec in a.specs:
         file, mode = spec.split(":")
         groups = [g for _, g in opr.file_groups(file, mode, 13) if g.n_curves < 80][:a.max_groups]
-        cpu = {True: 0.0, False: 0.0}
-        proven = {True: 0, False: 0}
-        for grp in groups:
-            grp.arc_cost()                      # the matrix is made before either timing
-            got = {}
-            for on in (True, False, True, False):
-                rc_search.ENABLED = on
-                t = time.thread_time()
-                gs = auto.solve(grp, time_limit_s=a.limit)
-                took = time.thread_time() - t
-                prev = got.get(on)
-                got[on] = (min(took, prev[0]) if prev else took, gs)
-            for on in (True, False):
-                cpu[on] += got[on][0]
-                proven[on] += got[on][1].status == Status.OPTIMAL
-            if got[True][1].status == got[False][1].status == Status.OPTIMAL:
-                worst_diff = max(worst_diff, abs(got[True][1].objective - got[False][1].objective))
+        cpu, proven, diff = best_of_two(groups, {True: enabled(True), False: enabled(False)},
+                                        lambda grp: auto.solve(grp, time_limit_s=a.limit))
+        worst_diff = max(worst_diff, diff)
         rc_search.ENABLED = True
         rows.append((file, mode, len(groups), cpu[True], cpu[False], proven[True], proven[False]))
         print(rows[-1], flush=True)

@@ -70,6 +70,22 @@ class HighsRun:
         return self.ran
 
 
+def _time_left(h, deadline: float | None) -> bool:
+    """Give HiGHS instance ``h`` the time left to ``deadline`` (a ``time.perf_counter()`` value;
+    None: its own time limit); False where none is left."""
+    import time
+    if deadline is None:
+        return True
+    left = deadline - time.perf_counter()
+    if left <= 0:
+        return False
+    # HiGHS's time_limit is checked against the run time the instance has accumulated over all
+    # its runs (getRunTime), not this run's: a model solved again and again (cuts, node LPs)
+    # would otherwise stop at "time limit" long before the deadline
+    h.setOptionValue("time_limit", float(h.getRunTime() + left))
+    return True
+
+
 def run_highs(h, deadline: float | None = None, start=None, stop_when=None) -> HighsRun:
     """Run the HiGHS model ``h`` with native stdout on stderr: until ``deadline`` (a
     ``time.perf_counter()`` value; None: the model's own time limit), from the start solution
@@ -83,16 +99,9 @@ def run_highs(h, deadline: float | None = None, start=None, stop_when=None) -> H
     will report (``gating.milp``). The callbacks run in this thread between HiGHS's own steps,
     which is also where a pending Ctrl-C reaches Python (``stop_scope``'s handler only records
     it; a second one is raised after the call, ``native_call``)."""
-    import time
     run = HighsRun(False)
-    if deadline is not None:
-        left = deadline - time.perf_counter()
-        if left <= 0:
-            return run
-        # HiGHS's time_limit is checked against the run time the instance has accumulated over
-        # all its runs (getRunTime), not this run's: a model solved again and again (cuts, node
-        # LPs) would otherwise stop at "time limit" long before the deadline
-        h.setOptionValue("time_limit", float(h.getRunTime() + left))
+    if not _time_left(h, deadline):
+        return run
     if start is not None:
         import highspy
         sol = highspy.HighsSolution()
@@ -146,16 +155,12 @@ def run_lp(h, deadline: float | None = None) -> HighsRun:
     callbacks"); a run this short ends a millisecond or two after the request. Native stdout
     still goes to stderr; a second Ctrl-C waits for HiGHS to return (``native_call``). Falsy,
     without running, where the deadline has passed or a stop was requested (``stopped`` set)."""
-    import time
     run = HighsRun(False)
     if stop_requested():
         run.stopped = Stopped.INTERRUPTED
         return run
-    if deadline is not None:
-        left = deadline - time.perf_counter()
-        if left <= 0:
-            return run
-        h.setOptionValue("time_limit", float(h.getRunTime() + left))   # (as ``run_highs``)
+    if not _time_left(h, deadline):
+        return run
     run.ran = True
     with native_call(), native_stdout_to_stderr():
         h.run()

@@ -218,10 +218,17 @@ def refuse_sequential_angle(program: Program, rotate) -> None:
     explicit angle other than 0 on a print of objects one at a time (``sequential_drop``). Run
     on the file as given, before it is re-ordered (``rewrite.pipeline.run``): the line is then
     the user's, and no time goes to an ordering the rotation would refuse."""
-    if rotate in ("auto", "none") or float(rotate) % 360.0 == 0.0:
-        return
-    lo, hi = rotated_rows(program)
-    drop = sequential_drop(program, lo, hi)
+    if _explicit_angle(rotate):
+        _refuse_angle(program, sequential_drop(program, *rotated_rows(program)), rotate)
+
+
+def _explicit_angle(rotate) -> bool:
+    """An angle other than 0 asked for by number (not "auto", "none")."""
+    return rotate not in ("auto", "none") and float(rotate) % 360.0 != 0.0
+
+
+def _refuse_angle(program: Program, drop, rotate) -> None:
+    """Raise ``InfeasibleError`` at ``drop`` (``sequential_drop``; None: nothing) for ``rotate``."""
     if drop is not None:
         raise InfeasibleError(f"{_where(program, drop[0])}: {_sequential_words(drop)}; "
                               f"rotating it by {float(rotate):g} deg could drive the print head into "
@@ -380,10 +387,8 @@ def _kept_unrotated(program: Program, options, lo: int, hi: int, notes: list) ->
     An explicit angle other than 0 raises ``InfeasibleError`` at that line; "auto" gets a note."""
     o = options
     drop = sequential_drop(program, lo, hi)
-    if drop is not None and o.rotate not in ("auto", "none") and float(o.rotate) % 360.0 != 0.0:
-        raise InfeasibleError(f"{_where(program, drop[0])}: {_sequential_words(drop)}; "
-                              f"rotating it by {float(o.rotate):g} deg could drive the print head into "
-                              f"an object already printed: use --rotate none")
+    if _explicit_angle(o.rotate):
+        _refuse_angle(program, drop, o.rotate)
     if drop is not None and o.rotate == "auto":
         notes.append(f"rotation kept at 0 deg: {_sequential_words(drop)} "
                      f"({_where(program, drop[0])}); rotated, the print head could hit an object "

@@ -307,7 +307,6 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
     (tx, ty, tz), (x0, y0, z0) = target.tolist(), (float(v) for v in w.xyz)
     dist = math.hypot(tx - x0, ty - y0)
     moving = dist > 1e-9 or abs(tz - z0) > 1e-9
-    top_z = gap_top_z(p, lay, gap)
     # the boundary gap's own retraction length where it retracted (a layer change may retract
     # more), else the file's median: a link inside a group costs the same whichever curve it
     # enters, which keeps the time objective's costs symmetric there (cost.py)
@@ -346,6 +345,7 @@ def rebuilt_gap(w: Writer, p: Program, lay: Layout, rule: TravelRule, line_sets,
             z_up = max(z_now, z_to) + style.hop_mm
         else:
             z_up = max(z_now, z_to)
+        top_z = gap_top_z(p, lay, gap)
         if top_z > max(z_now, z_to) + style.hop_mm + CLEARANCE_EPS_MM:
             # the slicer's travel climbed higher than a hop: a lift over what is printed (a
             # one-at-a-time print leaving an object, Cura's "G0 X.. Y.. Z10"): ours flies no
