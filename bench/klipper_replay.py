@@ -1062,12 +1062,22 @@ def read_gcode(path: Path) -> str:
 SCHEDULED = ("klipper-gating",)
 
 
+def _model_kinematics(path: Path):
+    """``kinematics.model_kinematics`` of the file at ``path`` (gzip read as the CLI reads it)."""
+    import gzip
+    from gatesopt.kinematics import model_kinematics
+    raw = path.read_bytes()
+    return model_kinematics(gzip.decompress(raw) if path.name.endswith(".gz") else raw)
+
+
 def solve(path: Path, firmware: str, extra: list[str], out_dir: Path, tag_extra: str = "") -> tuple[Path, dict]:
     """``gatesopt solve`` from this worktree (its installed package, the same Python): the
     output file and its JSON report."""
-    if firmware == "klipper" and not any(w in extra for w in ("--printer-config", "--motors")):
+    if (firmware == "klipper" and not any(w in extra for w in ("--printer-config", "--motors"))
+            and _model_kinematics(path) is None):
         # the replay's printer is cartesian: said, as a user without the printer.cfg says it
-        # (of unknown kinematics stock Klipper gates no X/Y by default: ``rewrite.printer``)
+        # (of unknown kinematics stock Klipper gates no X/Y by default: ``rewrite.printer``; a
+        # model the file names decides as before, a corexy one gating nothing)
         extra = [*extra, "--motors", "X,Y"]
     words = [w for w in extra if not w.endswith(".cfg")] + ([tag_extra] if tag_extra else [])
     tag = re.sub(r"[^A-Za-z0-9]+", "_", " ".join(words)).strip("_") or "default"
